@@ -1,0 +1,265 @@
+"""Compiled scalar NURBS kernel for the contact hot loop.
+
+Patches of any number of shapes are packed into flat arrays (a :class:`PatchPool`) so that
+compiled code — and later a GPU kernel — can evaluate any patch with no Python object in
+the loop. The algorithms are those of :mod:`nurbsdem.geometry.nurbs` (The NURBS Book A2.1,
+A2.3 and the rational quotient rule), written once more as scalar loops over a caller-owned
+workspace so that an evaluation allocates nothing.
+
+Units: control points in metres, parameters dimensionless.
+
+Pool layout (P patches):
+
+* ``deg[P, 2]``   degrees (p, q)
+* ``ncp[P, 2]``   control-point counts (n_u, n_v)
+* ``koff[P, 2]``  offsets of each patch's u and v knot vectors in ``knots``
+* ``coff[P]``     offset of each patch's control net in ``cpw`` (row-major, index i * n_v + j)
+* ``knots[K]``    all knot vectors, concatenated
+* ``cpw[C, 4]``   homogeneous control points (w x, w y, w z, w)
+* ``dom[P, 4]``   parameter rectangles (u_min, u_max, v_min, v_max)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+
+from .nurbs import Patch
+
+#: Highest degree the compiled kernel supports (workspace size).
+MAX_DEGREE = 9
+_WS_ROWS = (MAX_DEGREE + 1) + 16
+
+
+def make_workspace() -> np.ndarray:
+    """A workspace for :func:`patch_derivs` (one per thread)."""
+    return np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+
+
+@njit(cache=True)
+def find_span(knots, k0, n, p, t):
+    """Span index (relative to the patch's knot vector at offset k0) with n control points.
+
+    The NURBS Book A2.1: knots[k] <= t < knots[k+1]; t at or beyond the end maps to n - 1.
+    """
+    if t >= knots[k0 + n]:
+        return n - 1
+    if t <= knots[k0 + p]:
+        return p
+    low = p
+    high = n
+    mid = (low + high) // 2
+    while t < knots[k0 + mid] or t >= knots[k0 + mid + 1]:
+        if t < knots[k0 + mid]:
+            high = mid
+        else:
+            low = mid
+        mid = (low + high) // 2
+    return mid
+
+
+@njit(cache=True)
+def basis_ders(knots, k0, span, p, t, nd, ndu, a, left, right, ders):
+    """Non-zero basis functions and derivatives up to ``nd`` (The NURBS Book A2.3).
+
+    Writes ders[k, r] = d^k/dt^k N_{span-p+r, p}(t) for k <= nd; rows k > p are zero.
+    ``ndu`` (p+1, p+1), ``a`` (2, p+1), ``left``/``right`` (p+1,) are scratch.
+    """
+    ndu[0, 0] = 1.0
+    for j in range(1, p + 1):
+        left[j] = t - knots[k0 + span + 1 - j]
+        right[j] = knots[k0 + span + j] - t
+        saved = 0.0
+        for r in range(j):
+            ndu[j, r] = right[r + 1] + left[j - r]
+            temp = ndu[r, j - 1] / ndu[j, r]
+            ndu[r, j] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        ndu[j, j] = saved
+    for j in range(p + 1):
+        ders[0, j] = ndu[j, p]
+    for k in range(1, nd + 1):
+        for j in range(p + 1):
+            ders[k, j] = 0.0
+    ndmax = nd if nd < p else p
+    for r in range(p + 1):
+        s1 = 0
+        s2 = 1
+        a[0, 0] = 1.0
+        for k in range(1, ndmax + 1):
+            d = 0.0
+            rk = r - k
+            pk = p - k
+            if r >= k:
+                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                d = a[s2, 0] * ndu[rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else p - r
+            for j in range(j1, j2 + 1):
+                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
+                d += a[s2, j] * ndu[rk + j, pk]
+            if r <= pk:
+                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                d += a[s2, k] * ndu[r, pk]
+            ders[k, r] = d
+            s1, s2 = s2, s1
+    fac = p
+    for k in range(1, ndmax + 1):
+        for j in range(p + 1):
+            ders[k, j] *= fac
+        fac *= p - k
+
+
+@njit(cache=True)
+def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
+    """Point and partial derivatives of patch ``ip`` of a pool at (u, v).
+
+    Writes ``out[0:k]`` (k = 1, 3, 6 for order 0, 1, 2) in the order
+    S, S_u, S_v, S_uu, S_uv, S_vv (metres per unit parameter^k). ``ws`` from
+    :func:`make_workspace`. Parameters outside the domain are clamped to it.
+    """
+    p = deg[ip, 0]
+    q = deg[ip, 1]
+    nu = ncp[ip, 0]
+    nv = ncp[ip, 1]
+    ku = koff[ip, 0]
+    kv = koff[ip, 1]
+    c0 = coff[ip]
+    m = MAX_DEGREE + 1
+    ndu = ws[0:m]
+    a = ws[m:m + 2]
+    left = ws[m + 2]
+    right = ws[m + 3]
+    Nu = ws[m + 4:m + 7]
+    Nv = ws[m + 7:m + 10]
+    umin = knots[ku + p]
+    umax = knots[ku + nu]
+    vmin = knots[kv + q]
+    vmax = knots[kv + nv]
+    if u < umin:
+        u = umin
+    elif u > umax:
+        u = umax
+    if v < vmin:
+        v = vmin
+    elif v > vmax:
+        v = vmax
+    su = find_span(knots, ku, nu, p, u)
+    sv = find_span(knots, kv, nv, q, v)
+    basis_ders(knots, ku, su, p, u, order, ndu, a, left, right, Nu)
+    basis_ders(knots, kv, sv, q, v, order, ndu, a, left, right, Nv)
+    # homogeneous sums A[k] for (k,l) in (0,0),(1,0),(0,1),(2,0),(1,1),(0,2)
+    A00 = ws[m + 10]
+    A10 = ws[m + 11]
+    A01 = ws[m + 12]
+    A20 = ws[m + 13]
+    A11 = ws[m + 14]
+    A02 = ws[m + 15]
+    for c in range(4):
+        A00[c] = 0.0
+        A10[c] = 0.0
+        A01[c] = 0.0
+        A20[c] = 0.0
+        A11[c] = 0.0
+        A02[c] = 0.0
+    for i in range(p + 1):
+        row = c0 + (su - p + i) * nv + (sv - q)
+        for j in range(q + 1):
+            idx = row + j
+            n00 = Nu[0, i] * Nv[0, j]
+            for c in range(4):
+                A00[c] += n00 * cpw[idx, c]
+            if order >= 1:
+                n10 = Nu[1, i] * Nv[0, j]
+                n01 = Nu[0, i] * Nv[1, j]
+                for c in range(4):
+                    A10[c] += n10 * cpw[idx, c]
+                    A01[c] += n01 * cpw[idx, c]
+            if order >= 2:
+                n20 = Nu[2, i] * Nv[0, j]
+                n11 = Nu[1, i] * Nv[1, j]
+                n02 = Nu[0, i] * Nv[2, j]
+                for c in range(4):
+                    A20[c] += n20 * cpw[idx, c]
+                    A11[c] += n11 * cpw[idx, c]
+                    A02[c] += n02 * cpw[idx, c]
+    w = A00[3]
+    for c in range(3):
+        out[0, c] = A00[c] / w
+    if order >= 1:
+        wu = A10[3]
+        wv = A01[3]
+        for c in range(3):
+            out[1, c] = (A10[c] - wu * out[0, c]) / w
+            out[2, c] = (A01[c] - wv * out[0, c]) / w
+        if order >= 2:
+            wuu = A20[3]
+            wuv = A11[3]
+            wvv = A02[3]
+            for c in range(3):
+                out[3, c] = (A20[c] - 2.0 * wu * out[1, c] - wuu * out[0, c]) / w
+                out[4, c] = (A11[c] - wu * out[2, c] - wv * out[1, c] - wuv * out[0, c]) / w
+                out[5, c] = (A02[c] - 2.0 * wv * out[2, c] - wvv * out[0, c]) / w
+
+
+@njit(cache=True)
+def patch_derivs_many(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, out):
+    """Loop of :func:`patch_derivs` over arrays u, v (for benchmarks and tests); out (m, 6, 3)."""
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    for k in range(u.shape[0]):
+        patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u[k], v[k], order, ws, out[k])
+
+
+@dataclass
+class PatchPool:
+    """Flat-array storage of many patches (see module docstring for the layout)."""
+
+    deg: np.ndarray
+    ncp: np.ndarray
+    koff: np.ndarray
+    coff: np.ndarray
+    knots: np.ndarray
+    cpw: np.ndarray
+    dom: np.ndarray
+
+    @classmethod
+    def from_patches(cls, patches: Sequence[Patch]) -> "PatchPool":
+        """Pack patches (validated beforehand) into flat arrays, in the given order."""
+        for pt in patches:
+            if max(pt.degree_u, pt.degree_v) > MAX_DEGREE:
+                raise ValueError(f"degree above {MAX_DEGREE} is not supported by the compiled kernel")
+        P = len(patches)
+        deg = np.zeros((P, 2), np.int64)
+        ncp = np.zeros((P, 2), np.int64)
+        koff = np.zeros((P, 2), np.int64)
+        coff = np.zeros(P, np.int64)
+        dom = np.zeros((P, 4))
+        knots, cpw = [], []
+        k = c = 0
+        for i, pt in enumerate(patches):
+            deg[i] = pt.degree_u, pt.degree_v
+            ncp[i] = pt.shape
+            koff[i] = k, k + len(pt.knots_u)
+            knots += [pt.knots_u, pt.knots_v]
+            k += len(pt.knots_u) + len(pt.knots_v)
+            coff[i] = c
+            cpw.append(pt.homogeneous.reshape(-1, 4))
+            c += pt.shape[0] * pt.shape[1]
+            dom[i] = pt.domain
+        return cls(deg, ncp, koff, coff, np.concatenate(knots) if knots else np.zeros(0),
+                   np.concatenate(cpw) if cpw else np.zeros((0, 4)), dom)
+
+    @property
+    def arrays(self) -> tuple:
+        """(deg, ncp, koff, coff, knots, cpw): the leading arguments of :func:`patch_derivs`."""
+        return self.deg, self.ncp, self.koff, self.coff, self.knots, self.cpw
+
+    def evaluate(self, ip: int, u, v, order: int = 2) -> np.ndarray:
+        """Compiled evaluation at many points of patch ``ip``: array (m, 6, 3) (unused slots zero)."""
+        u = np.ascontiguousarray(np.atleast_1d(u), dtype=float)
+        v = np.ascontiguousarray(np.atleast_1d(v), dtype=float)
+        out = np.zeros((u.size, 6, 3))
+        patch_derivs_many(*self.arrays, ip, u, v, order, out)
+        return out

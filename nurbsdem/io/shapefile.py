@@ -1,0 +1,199 @@
+"""Shape files: YAML, SI units (metres).
+
+::
+
+    name: A                      # optional
+    patches:
+      - degree_u: 3
+        degree_v: 3
+        knots_u: [0, 0, 0, 0, 0.667, 1.333, 2, 2, 2, 2]
+        knots_v: [...]
+        control_points:          # n_u rows of n_v [x, y, z]
+          - [[x, y, z], [x, y, z], ...]
+        weights:                 # optional, n_u rows of n_v numbers, default 1
+          - [1, 1, ...]
+
+The loader is strict where PyYAML's default is lax: every float notation (``1e-3``,
+``.5``, ``1E+3``) loads as a float, and a duplicate key is an error naming the line.
+Writing uses ``repr`` of each float, so a write/read round trip is exact.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ..errors import InputError
+from ..geometry.nurbs import Patch
+
+_FLOAT_RE = re.compile(r"""^[-+]?(?:
+      (?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    | \.[0-9_]+(?:[eE][-+]?[0-9]+)?
+    | [0-9][0-9_]*[eE][-+]?[0-9]+
+    | \.(?:inf|Inf|INF)
+    | \.(?:nan|NaN|NAN))$""", re.X)
+
+
+class StrictLoader(yaml.SafeLoader):
+    """SafeLoader that reads every float notation as float and rejects duplicate keys."""
+
+
+StrictLoader.yaml_implicit_resolvers = {
+    k: [r for r in v if r[0] != "tag:yaml.org,2002:float"]
+    for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+StrictLoader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_RE,
+                                   list("-+0123456789."))
+
+
+def _construct_mapping(loader: StrictLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
+    loader.flatten_mapping(node)
+    out: dict = {}
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in out:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark)
+        out[key] = loader.construct_object(value_node, deep=deep)
+    return out
+
+
+StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def load_yaml(path: str | Path) -> Any:
+    """Parse a YAML file strictly; errors are :class:`InputError` with file and line."""
+    path = str(path)
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise InputError(f"cannot read file: {exc.strerror}", path=path) from None
+    try:
+        return yaml.load(text, Loader=StrictLoader)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark is not None else None
+        msg = exc.problem or str(exc)
+        if exc.context and "duplicate" not in msg:
+            msg = f"{exc.context}, {msg}"
+        raise InputError(msg, path=path, line=line) from None
+    except yaml.YAMLError as exc:
+        raise InputError(f"invalid YAML: {exc}", path=path) from None
+
+
+def _number_array(value: Any, path: str, where: str, field: str, ndim: int) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{field} must contain only numbers", path=path, where=where) from None
+    if arr.ndim != ndim:
+        raise InputError(f"{field} must be a {ndim}-level nested list of numbers "
+                         f"(got {arr.ndim} levels)", path=path, where=where)
+    return arr
+
+
+_PATCH_KEYS = {"degree_u", "degree_v", "knots_u", "knots_v", "control_points", "weights"}
+
+
+def patches_from_data(data: Any, path: str) -> tuple[list[Patch], str | None]:
+    """Build patches from parsed YAML data (see module docstring); validates each patch."""
+    if not isinstance(data, dict) or "patches" not in data:
+        raise InputError("a shape file must be a mapping with a 'patches' list", path=path)
+    unknown = set(data) - {"patches", "name"}
+    if unknown:
+        raise InputError(f"unknown key {sorted(unknown)[0]!r} (expected 'name', 'patches')", path=path)
+    name = data.get("name")
+    if name is not None and not isinstance(name, (str, int)):
+        raise InputError("name must be a string", path=path)
+    plist = data["patches"]
+    if not isinstance(plist, list) or not plist:
+        raise InputError("'patches' must be a non-empty list", path=path)
+    patches = []
+    for i, pd in enumerate(plist):
+        where = f"patch {i}"
+        if not isinstance(pd, dict):
+            raise InputError("a patch must be a mapping", path=path, where=where)
+        missing = sorted(_PATCH_KEYS - {"weights"} - set(pd))
+        if missing:
+            raise InputError(f"missing key {missing[0]!r}", path=path, where=where)
+        extra = sorted(set(pd) - _PATCH_KEYS)
+        if extra:
+            raise InputError(f"unknown key {extra[0]!r}", path=path, where=where)
+        for key in ("degree_u", "degree_v"):
+            if not isinstance(pd[key], int) or isinstance(pd[key], bool):
+                raise InputError(f"{key} must be an integer, got {pd[key]!r}", path=path, where=where)
+        cp = _number_array(pd["control_points"], path, where, "control_points", 3)
+        w = None
+        if pd.get("weights") is not None:
+            w = _number_array(pd["weights"], path, where, "weights", 2)
+        patch = Patch(pd["degree_u"], pd["degree_v"],
+                      _number_array(pd["knots_u"], path, where, "knots_u", 1),
+                      _number_array(pd["knots_v"], path, where, "knots_v", 1), cp, w)
+        patch.validate(path, i)
+        patches.append(patch)
+    return patches, (str(name) if name is not None else None)
+
+
+def read_patches(path: str | Path) -> tuple[list[Patch], str | None]:
+    """Read the patches and name of a shape file (no closedness/convexity check)."""
+    return patches_from_data(load_yaml(path), str(path))
+
+
+def load_shape(path: str | Path, check: bool = True):
+    """Load a shape file into a :class:`~nurbsdem.geometry.shape.Shape`.
+
+    Errors (syntax, bad patch data, open or non-convex shape) are :class:`InputError`
+    naming the file and the line or patch.
+    """
+    from ..geometry.shape import Shape
+
+    patches, name = read_patches(path)
+    return Shape(patches, name=name, source=str(path), check=check)
+
+
+def _floats(arr: np.ndarray) -> Any:
+    """Nested lists of Python floats (repr round-trips exactly)."""
+    return np.asarray(arr, dtype=float).tolist()
+
+
+def shape_to_data(patches, name: str | None = None) -> dict:
+    """The YAML-ready mapping of a list of patches."""
+    data: dict = {}
+    if name is not None:
+        data["name"] = name
+    data["patches"] = []
+    for p in patches:
+        pd = {"degree_u": int(p.degree_u), "degree_v": int(p.degree_v),
+              "knots_u": _floats(p.knots_u), "knots_v": _floats(p.knots_v),
+              "control_points": _floats(p.control_points)}
+        if not np.all(p.weights == 1.0):
+            pd["weights"] = _floats(p.weights)
+        data["patches"].append(pd)
+    return data
+
+
+class _FlowDumper(yaml.SafeDumper):
+    """Dumper that writes innermost lists (points, knot vectors) on one line."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list):
+    flow = all(not isinstance(x, (list, dict)) for x in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_FlowDumper.add_representer(list, _represent_list)
+
+
+def save_shape(path: str | Path, patches_or_shape, name: str | None = None) -> None:
+    """Write a shape file (atomically: a temporary file renamed into place)."""
+    from .atomic import atomic_write_text
+
+    patches = getattr(patches_or_shape, "patches", patches_or_shape)
+    if name is None:
+        name = getattr(patches_or_shape, "name", None)
+    text = yaml.dump(shape_to_data(patches, name), Dumper=_FlowDumper, sort_keys=False,
+                     width=200)
+    atomic_write_text(path, text)
