@@ -1,0 +1,105 @@
+"""NURBS kernel: vectorised and compiled paths against each other and finite differences."""
+import numpy as np
+import pytest
+
+from nurbsdem.geometry.kernel import PatchPool, make_workspace, patch_derivs
+from nurbsdem.geometry.nurbs import Patch, basis_functions_derivs
+from nurbsdem.geometry.generators import (ellipsoid_patches, single_patch_sphere_patches,
+                                          sphere_patches)
+
+
+def random_patch(rng, p, q, nu, nv, rational=True):
+    def knots(deg, n):
+        inner = np.sort(rng.uniform(0.0, 2.0, n - deg - 1))
+        return np.r_[[0.0] * (deg + 1), inner, [2.0] * (deg + 1)]
+    w = rng.uniform(0.3, 3.0, (nu, nv)) if rational else None
+    return Patch(p, q, knots(p, nu), knots(q, nv), rng.normal(size=(nu, nv, 3)), w)
+
+
+PATCHES = [(3, 3, 6, 6), (2, 4, 5, 7), (1, 1, 2, 2), (1, 3, 3, 5), (4, 4, 5, 5), (5, 2, 9, 4)]
+
+
+@pytest.mark.parametrize("pq", PATCHES)
+def test_compiled_equals_vectorised(pq):
+    rng = np.random.default_rng(hash(pq) % 2**32)
+    patch = random_patch(rng, *pq)
+    patch.validate()
+    u = rng.uniform(0, 2, 500)
+    v = rng.uniform(0, 2, 500)
+    vec = patch.evaluate(u, v, 2)
+    comp = PatchPool.from_patches([patch]).evaluate(0, u, v, 2)
+    scale = np.abs(vec).max()
+    assert np.abs(vec - comp).max() <= 1e-12 * scale
+
+
+@pytest.mark.parametrize("pq", PATCHES)
+def test_derivatives_against_finite_differences(pq):
+    """First and second derivatives against central differences of the lower order (1e-7 rel)."""
+    rng = np.random.default_rng(7 + sum(pq))
+    patch = random_patch(rng, *pq)
+    # stay away from knots (derivatives jump there) by evaluating mid-span
+    ku = np.unique(patch.knots_u)
+    kv = np.unique(patch.knots_v)
+    u = 0.5 * (ku[:-1] + ku[1:])
+    v = 0.5 * (kv[:-1] + kv[1:])
+    U, V = [a.ravel() for a in np.meshgrid(u, v, indexing="ij")]
+    h = 1e-5
+    d = patch.evaluate(U, V, 2)
+    du = (patch.evaluate(U + h, V, 1) - patch.evaluate(U - h, V, 1)) / (2 * h)
+    dv = (patch.evaluate(U, V + h, 1) - patch.evaluate(U, V - h, 1)) / (2 * h)
+    pairs = [(du[:, 0], d[:, 1]), (dv[:, 0], d[:, 2]), (du[:, 1], d[:, 3]),
+             (dv[:, 1], d[:, 4]), (du[:, 2], d[:, 4]), (dv[:, 2], d[:, 5])]
+    for fd, exact in pairs:
+        scale = max(np.abs(exact).max(), 1.0)
+        assert np.abs(fd - exact).max() <= 1e-7 * scale
+
+
+def test_basis_partition_of_unity_and_derivative_sum():
+    rng = np.random.default_rng(3)
+    knots = np.r_[[0.0] * 4, np.sort(rng.uniform(0, 1, 5)), [1.0] * 4]
+    t = rng.uniform(0, 1, 100)
+    _, ders = basis_functions_derivs(knots, 3, t, 2)
+    assert np.allclose(ders[:, 0].sum(1), 1.0, atol=1e-14)
+    assert np.allclose(ders[:, 1].sum(1), 0.0, atol=1e-11)
+    assert np.allclose(ders[:, 2].sum(1), 0.0, atol=1e-9)
+
+
+def test_endpoints_are_evaluated_on_the_last_span():
+    patch = random_patch(np.random.default_rng(5), 3, 3, 6, 6)
+    corner = patch.points(2.0, 2.0)
+    w = patch.weights[-1, -1]
+    assert np.allclose(corner, patch.control_points[-1, -1], atol=1e-14 / w)
+    comp = PatchPool.from_patches([patch]).evaluate(0, [2.0], [2.0], 0)[0, 0]
+    assert np.allclose(comp, corner, atol=1e-14)
+
+
+def test_scalar_kernel_clamps_outside_parameters():
+    patch = random_patch(np.random.default_rng(9), 3, 3, 6, 6)
+    pool = PatchPool.from_patches([patch])
+    ws, out = make_workspace(), np.zeros((6, 3))
+    patch_derivs(*pool.arrays, 0, -0.5, 2.5, 2, ws, out)
+    assert np.allclose(out[0], patch.points(0.0, 2.0), atol=1e-13)
+
+
+@pytest.mark.parametrize("radius", [1e-3, 1.0, 37.0])
+def test_exact_sphere_points_at_radius(radius):
+    rng = np.random.default_rng(11)
+    for patches in (sphere_patches(radius), single_patch_sphere_patches(radius)):
+        for p in patches:
+            u0, u1, v0, v1 = p.domain
+            x = p.points(rng.uniform(u0, u1, 4000), rng.uniform(v0, v1, 4000))
+            assert np.abs(np.linalg.norm(x, axis=1) / radius - 1).max() < 1e-12
+
+
+def test_exact_ellipsoid_points_and_outward_normals():
+    rng = np.random.default_rng(12)
+    a = np.array([0.03, 0.02, 0.011])
+    for p in ellipsoid_patches(*a):
+        u, v = rng.uniform(0, 1, 3000), rng.uniform(0, 1, 3000)
+        d = p.evaluate(u, v, 1)
+        x = d[:, 0]
+        assert np.abs(np.linalg.norm(x / a, axis=1) - 1).max() < 1e-12
+        n = np.cross(d[:, 1], d[:, 2])
+        grad = x / a**2  # outward normal of the implicit surface
+        cosang = np.einsum("ij,ij->i", n, grad) / np.linalg.norm(n, axis=1) / np.linalg.norm(grad, axis=1)
+        assert cosang.min() > 1 - 1e-12
