@@ -1,12 +1,227 @@
-"""The ``nurbsdem`` command line (placeholder: commands are being added)."""
+"""The ``nurbsdem`` command line.
+
+Commands here: ``info``, ``shape``, ``import-giraffe``, ``import-3dm``. More are added to
+the group :data:`main` elsewhere.
+
+Error handling: every error that is the user's fault (:class:`~nurbsdem.errors.NurbsdemError`,
+and :class:`OSError` for files) is printed as one line
+``nurbsdem: error: <file>:<line or patch>: <message>`` on stderr with exit status 2 and no
+traceback. The group class :class:`NurbsdemGroup` does this for every subcommand (so
+``@main.command()`` is all a new command needs); :func:`handles_errors` is the same wrapper
+as a decorator for code outside the group (put it directly above the ``def``).
+"""
 from __future__ import annotations
 
+import functools
+import sys
+from typing import Any, Callable, NoReturn
+
 import click
+import numpy as np
 
 from . import __version__
+from .errors import NurbsdemError
+
+#: Exit status for errors that are the user's fault.
+EXIT_USER_ERROR = 2
 
 
-@click.group()
+def error_message(exc: BaseException) -> str:
+    """The one-line text of a user error (without the ``nurbsdem: error:`` prefix)."""
+    if isinstance(exc, OSError) and not isinstance(exc, NurbsdemError):
+        name = exc.filename
+        what = exc.strerror or str(exc)
+        return f"{name}: {what}" if name is not None else what
+    return " ".join(str(exc).split("\n"))
+
+
+def fail(message: str) -> NoReturn:
+    """Print ``nurbsdem: error: message`` on stderr and exit with status 2."""
+    click.echo(f"nurbsdem: error: {message}", err=True)
+    raise click.exceptions.Exit(EXIT_USER_ERROR)
+
+
+def warn(message: str) -> None:
+    """Print ``nurbsdem: warning: message`` on stderr."""
+    click.echo(f"nurbsdem: warning: {message}", err=True)
+
+
+def handles_errors(func: Callable) -> Callable:
+    """Decorator: turn :class:`NurbsdemError` and :class:`OSError` into one-line errors
+    (exit status 2, no traceback)."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except (NurbsdemError, OSError) as exc:
+            fail(error_message(exc))
+
+    return wrapper
+
+
+class NurbsdemGroup(click.Group):
+    """A click group whose subcommands all report user errors as one line (exit 2)."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except (NurbsdemError, OSError) as exc:
+            fail(error_message(exc))
+
+
+@click.group(cls=NurbsdemGroup)
 @click.version_option(__version__, prog_name="nurbsdem")
 def main() -> None:
     """nurbsdem: DEM with exact convex NURBS particles."""
+
+
+# ---------------------------------------------------------------------- info
+def _fmt_vec(v) -> str:
+    return "[" + ", ".join(f"{x:.9g}" for x in np.asarray(v).ravel()) + "]"
+
+
+@main.command()
+@click.argument("shape_file", metavar="SHAPE.yaml")
+@click.option("--density", type=float, default=None,
+              help="Also print mass (kg) and mass inertia (kg m^2) for this density (kg/m^3).")
+def info(shape_file: str, density: float | None) -> None:
+    """Print a shape's patches, mass properties and checks."""
+    from .geometry.connectivity import check_shape
+    from .io.shapefile import load_shape
+
+    shape = load_shape(shape_file, check=False)
+    conn = shape.connectivity
+    out = click.echo
+    out(f"shape: {shape.name or '(unnamed)'}  ({shape_file})")
+    out(f"patches: {len(shape.patches)}")
+    for i, p in enumerate(shape.patches):
+        nu, nv = p.shape
+        spans_u = len(np.unique(p.knots_u)) - 1
+        spans_v = len(np.unique(p.knots_v)) - 1
+        rational = "rational" if not np.all(p.weights == p.weights.flat[0]) else "polynomial"
+        out(f"  patch {i}: degrees ({p.degree_u}, {p.degree_v}), control points {nu} x {nv}, "
+            f"knot spans {spans_u} x {spans_v}, domain {_fmt_vec(p.domain)}, {rational}")
+    npole = int(np.sum(conn.neighbours[:, :, 0] == -2))
+    nseam = sum(1 for i in range(len(shape.patches)) for e in range(4)
+                if conn.neighbours[i, e, 0] == i)
+    out(f"connectivity: {len(conn.corners)} corner nodes (3+ patches), {npole} pole edges, "
+        f"{nseam} seam edges")
+    out(f"volume: {shape.volume:.9g} m^3")
+    out(f"centroid: {_fmt_vec(shape.centroid)} m")
+    out("inertia tensor about the centroid (volume, m^5):")
+    for row in shape.inertia:
+        out("  " + _fmt_vec(row))
+    moments, axes = np.linalg.eigh(shape.inertia)
+    out(f"principal moments (m^5): {_fmt_vec(moments)}")
+    out("principal axes (columns):")
+    for row in axes:
+        out("  " + _fmt_vec(row))
+    if density is not None:
+        out(f"mass: {density * shape.volume:.9g} kg  (density {density:g} kg/m^3)")
+        out(f"principal moments (kg m^2): {_fmt_vec(density * moments)}")
+    out(f"bounding radius: {shape.bounding_radius:.9g} m")
+    closed = conn.closed
+    out(f"closed: {'yes' if closed else 'no'}")
+    try:
+        check_shape(shape, source=shape_file)
+    except NurbsdemError:
+        out("convex, outward oriented: no")
+        raise
+    out("convex, outward oriented: yes")
+
+
+# ---------------------------------------------------------------------- shape
+_KINDS = ("sphere", "ellipsoid", "single-patch-sphere", "particle")
+
+
+@main.command()
+@click.argument("kind", type=click.Choice(_KINDS))
+@click.option("-o", "--output", required=True, metavar="FILE.yaml", help="Shape file to write.")
+@click.option("--radius", type=float, help="Radius (m) for sphere and single-patch-sphere.")
+@click.option("--semi-axes", type=(float, float, float), default=None, metavar="A B C",
+              help="Semi-axes along x, y, z (m) for ellipsoid.")
+@click.option("--kind", "particle_kind", type=click.Choice(["A", "B", "C"]),
+              help="Which of the paper's particles, for particle.")
+@click.option("--name", default=None, help="Name stored in the file.")
+def shape(kind: str, output: str, radius: float | None, semi_axes, particle_kind: str | None,
+          name: str | None) -> None:
+    """Generate a shape file: KIND is sphere (--radius), ellipsoid (--semi-axes A B C),
+    single-patch-sphere (--radius) or particle (--kind A|B|C)."""
+    from .geometry import generators as gen
+    from .geometry.shape import Shape
+    from .io.shapefile import save_shape
+
+    def need(value, opt: str):
+        if value is None:
+            raise NurbsdemError(f"shape {kind}: {opt} is required")
+        return value
+
+    try:
+        if kind == "sphere":
+            patches = gen.sphere_patches(need(radius, "--radius"))
+            default = f"sphere r={radius:g}"
+        elif kind == "single-patch-sphere":
+            patches = gen.single_patch_sphere_patches(need(radius, "--radius"))
+            default = f"single-patch sphere r={radius:g}"
+        elif kind == "ellipsoid":
+            a, b, c = need(semi_axes, "--semi-axes A B C")
+            patches = gen.ellipsoid_patches(a, b, c)
+            default = f"ellipsoid {a:g}x{b:g}x{c:g}"
+        else:
+            from .geometry.particles import paper_particle
+            patches = paper_particle(need(particle_kind, "--kind A|B|C"))
+            default = str(particle_kind)
+    except ValueError as exc:  # bad radius / semi-axes
+        raise NurbsdemError(f"shape {kind}: {exc}") from None
+    sh = Shape(patches, name=name if name is not None else default)
+    save_shape(output, sh)
+    click.echo(f"wrote {output}: {sh.name}, {len(sh.patches)} patches, "
+               f"volume {sh.volume:.9g} m^3")
+
+
+# ---------------------------------------------------------------------- imports
+def _finish_import(sh, output: str, scale: float) -> None:
+    from .io.shapefile import save_shape
+
+    if scale != 1.0:
+        if not scale > 0:
+            raise NurbsdemError(f"--scale must be > 0, got {scale}")
+        sh = sh.scaled(scale)
+    save_shape(output, sh)
+    click.echo(f"wrote {output}: {sh.name}, {len(sh.patches)} patches, "
+               f"volume {sh.volume:.9g} m^3")
+
+
+@main.command("import-giraffe")
+@click.argument("cad_file", metavar="FILE")
+@click.option("-o", "--output", required=True, metavar="SHAPE.yaml", help="Shape file to write.")
+@click.option("--name", default=None, help="Name stored in the file (default: file stem).")
+@click.option("--scale", type=float, default=1.0, show_default=True,
+              help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
+def import_giraffe_cmd(cad_file: str, output: str, name: str | None, scale: float) -> None:
+    """Convert a Giraffe CAD file (one record per patch) to a shape file."""
+    from .io.giraffe import import_giraffe
+
+    sh, warnings = import_giraffe(cad_file, name=name)
+    for w in warnings:
+        warn(f"{cad_file}: {w}")
+    _finish_import(sh, output, scale)
+
+
+@main.command("import-3dm")
+@click.argument("cad_file", metavar="FILE.3dm")
+@click.option("-o", "--output", required=True, metavar="SHAPE.yaml", help="Shape file to write.")
+@click.option("--name", default=None, help="Name stored in the file (default: file stem).")
+@click.option("--scale", type=float, default=1.0, show_default=True,
+              help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
+def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float) -> None:
+    """Convert the NURBS surfaces and Brep faces of a Rhino .3dm file to a shape file
+    (needs the optional package rhino3dm)."""
+    from .io.rhino import import_3dm
+
+    _finish_import(import_3dm(cad_file, name=name), output, scale)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

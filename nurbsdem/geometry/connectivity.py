@@ -181,7 +181,8 @@ class Connectivity:
     @property
     def closed(self) -> bool:
         """True when every edge has a neighbour or is a pole, and no edge is ambiguous."""
-        return not self.open_edges and not self.overlaps and not np.any(self.neighbours[:, :, 0] == OPEN)
+        return (not self.open_edges and not self.overlaps
+                and not np.any(self.neighbours[:, :, 0] == OPEN))
 
     def map_to_neighbour(self, i: int, e: int, s: float) -> tuple[int, float, float]:
         """The neighbour across edge e of patch i and its parameters (u, v) of the point with

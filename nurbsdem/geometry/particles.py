@@ -13,12 +13,14 @@ mass properties:
 
    a sphere perturbed by the lowest cubic harmonic; ε < 0 pushes the cube's corners out
    (a slightly "boxy" sphere). Unlike a superellipsoid with exponent > 2 it has no flat
-   (zero-curvature) points, so the spline fit cannot make it locally concave.
+   (zero-curvature) points, so the spline fit does not make it locally concave.
 2. **Cube-sphere fit.** Six faces of the cube [-1, 1]^3, each parameter t in [0, 2] mapped to
    the cube coordinate tan(π/4 (t - 1)) (equi-angular), projected radially onto the base
    surface. The distinct control points of the six faces (8 corners, 4 per cube edge, 16 per
    face interior: 152 points) are fitted *together* by linear least squares to samples of
-   the base surface, bicubic with knots [0,0,0,0,2/3,4/3,2,2,2,2] both ways. Every control
+   the base surface, bicubic with knots [0,0,0,0,2/3,4/3,2,2,2,2] both ways, subject to
+   linear smoothness constraints (C1 across the middle span of every edge, a common tangent
+   plane at every corner; see :func:`_constraints`). Every control
    point is computed once, in one table, and the faces index into it, so patches that share
    an edge share bit-identical boundary control points and the edges coincide exactly.
    Face orientation: face with outward normal n uses cube tangents a (along u) and b (along
@@ -33,10 +35,14 @@ mass properties:
 4. **B and C** are A scaled by 0.8 and 0.6 about the centroid (the paper's Table 1 values are
    consistent with that to its printed digits).
 
-The result is a smooth-looking, slightly irregular, roughly ellipsoidal convex body with
-semi-axes ≈ 3.2 × 2.9 × 2.5 cm. The patches meet with exact positional continuity and
-small (convex) tangent-plane kinks along the cube's edges (the least-squares fit is not
-constrained to be G1).
+The result is a slightly irregular, roughly ellipsoidal, strictly convex body (principal
+curvature radii below ~9 cm) about 5.7 × 4.7 × 5.8 cm across. The patches meet with exact
+positional continuity (bit-identical shared control points), tangent-plane continuity on
+the middle third of every edge and at the corners, and small convex kinks (at most ~3.4°
+between the two patches' normals) on the end spans of the edges next to the corners: a
+valence-3 corner admits no C1 bicubic joint of this simple kind. (An unconstrained fit has
+kinks that are *concave* in places; the opposite sign of ε gives smaller kinks but nearly
+flat spots.)
 """
 from __future__ import annotations
 
@@ -67,7 +73,7 @@ TABLE1 = {
 }
 #: Cubic-harmonic amplitude of the base body (dimensionless), tuned by :func:`tune_epsilon`
 #: so that det(M2) / V^5 of the fitted NURBS equals that of particle A.
-EPSILON = -0.06226226960458001
+EPSILON = -0.18632821568495775
 
 DEGREE = 3
 N_CP = 6
@@ -147,12 +153,76 @@ def _fit_matrix() -> tuple[np.ndarray, np.ndarray]:
     return A, np.concatenate(dirs)
 
 
-def _base_points(epsilon: float) -> np.ndarray:
-    """The fitted control-point table (N, 3) of the base body (dimensionless)."""
+@lru_cache(maxsize=1)
+def _constraints() -> np.ndarray:
+    """Linear constraints C x = 0 on the flattened control-point table x (3 N,).
+
+    * Along every cube edge, at the 4 edge points that are not corners: the edge point is the
+      midpoint of its two cross-boundary neighbours (one on each face). The cross-boundary
+      derivatives of the two patches are then opposite wherever the corner points' basis
+      functions vanish (the middle knot span of every edge): the surface is C1 there.
+    * At every corner: the three edge points next to it lie in the plane through the corner
+      normal to the cube diagonal (the base body's normal there, by symmetry), so the three
+      patches share the tangent plane at the corner.
+
+    What is left is a small convex tangent-plane kink on the end spans of each edge
+    (a valence-3 corner does not admit C1 bicubic patches with constant ratio).
+    """
+    ids, keys = _control_point_table()
+    index = {tuple(k): i for i, k in enumerate(keys.tolist())}
+    m = N_CP - 1
+    rows = []
+    for i, k in enumerate(keys):
+        on = np.flatnonzero(np.abs(k) == m)
+        if len(on) == 2:  # edge point (not a corner)
+            nb = []
+            for ax in on:
+                kk = k.copy()
+                kk[ax] -= 2 * np.sign(k[ax])
+                nb.append(index[tuple(kk.tolist())])
+            for c in range(3):
+                r = np.zeros(3 * len(keys))
+                r[3 * i + c] = 2.0
+                r[3 * nb[0] + c] -= 1.0
+                r[3 * nb[1] + c] -= 1.0
+                rows.append(r)
+        elif len(on) == 3:  # corner
+            normal = np.sign(k) / np.sqrt(3.0)
+            for ax in range(3):
+                kk = k.copy()
+                kk[ax] -= 2 * np.sign(k[ax])
+                j = index[tuple(kk.tolist())]
+                r = np.zeros(3 * len(keys))
+                r[3 * j: 3 * j + 3] = normal
+                r[3 * i: 3 * i + 3] -= normal
+                rows.append(r)
+    return np.array(rows)
+
+
+@lru_cache(maxsize=1)
+def _fit_system() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(Z, Zᵀ G Z, Aᵀ, sample directions) with Z a basis of the constraints' null space and G the normal matrix."""
+    from scipy.linalg import null_space
+
     A, dirs = _fit_matrix()
-    X = _base_surface(dirs, epsilon)
-    sol, *_ = np.linalg.lstsq(A, X, rcond=None)
-    return sol
+    Z = null_space(_constraints())
+    G = np.kron(A.T @ A, np.eye(3))
+    return Z, Z.T @ G @ Z, A.T, dirs
+
+
+@lru_cache(maxsize=8)
+def _base_points(epsilon: float) -> np.ndarray:
+    """The control-point table (N, 3) of the base body (dimensionless, radius ~ 1).
+
+    Least-squares fit of :func:`_base_surface` at N_FIT² samples per face, subject to the
+    linear smoothness constraints of :func:`_constraints`.
+    """
+    Z, H, At, dirs = _fit_system()
+    rhs = Z.T @ (At @ _base_surface(dirs, epsilon)).ravel()
+    y = np.linalg.solve(H, rhs)
+    out = (Z @ y).reshape(-1, 3)
+    out.setflags(write=False)
+    return out
 
 
 def _patches_from_table(points: np.ndarray) -> list[Patch]:
@@ -188,7 +258,7 @@ def build_particle(epsilon: float = EPSILON, inertia: np.ndarray = INERTIA_A,
 
     Parameters
     ----------
-    epsilon: cubic-harmonic amplitude of the base body (dimensionless, |ε| < ~0.15).
+    epsilon: cubic-harmonic amplitude of the base body (dimensionless, about -0.3 .. 0.1).
     inertia: target mass inertia tensor about the centroid, kg m^2 (file frame); it fixes
         L, and the volume follows from ε (right when ε comes from :func:`tune_epsilon`).
     density: kg/m^3.
@@ -227,7 +297,7 @@ def tune_epsilon(volume: float = VOLUME_A, inertia: np.ndarray = INERTIA_A,
         v, _, j = mass_properties(_patches_from_table(_base_points(eps)))
         return affine_invariant(v, second_moment_from_inertia(j)) / target - 1.0
 
-    return float(brentq(f, -0.15, 0.05, xtol=1e-15, rtol=1e-15))
+    return float(brentq(f, -0.3, -0.1, xtol=1e-15, rtol=1e-15))
 
 
 # ---------------------------------------------------------------------- public API

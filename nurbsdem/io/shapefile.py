@@ -84,11 +84,23 @@ def load_yaml(path: str | Path) -> Any:
         raise InputError(f"invalid YAML: {exc}", path=path) from None
 
 
+def _all_numbers(value: Any) -> bool:
+    """True if every leaf of a nested list is an int or float (not bool)."""
+    if isinstance(value, list):
+        return all(_all_numbers(v) for v in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 def _number_array(value: Any, path: str, where: str, field: str, ndim: int) -> np.ndarray:
+    if not _all_numbers(value):
+        # strings such as '1' and booleans would otherwise be converted silently
+        raise InputError(f"{field} must contain only numbers", path=path, where=where)
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(f"{field} must contain only numbers", path=path, where=where) from None
+        raise InputError(f"{field} has rows of different lengths (it must be a "
+                         f"{ndim}-level nested list of equal-length rows)",
+                         path=path, where=where) from None
     if arr.ndim != ndim:
         raise InputError(f"{field} must be a {ndim}-level nested list of numbers "
                          f"(got {arr.ndim} levels)", path=path, where=where)

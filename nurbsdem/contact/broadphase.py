@@ -1,0 +1,437 @@
+"""Global contact search, level 1 of the paper (Section 3.1): bounding spheres.
+
+Every particle is wrapped in the sphere centred at its centroid whose radius reaches the
+farthest control point (valid because all weights are positive). Two particles are a
+candidate pair when their spheres overlap, i.e. when (paper Eq. 3)
+
+    delta = r_A + r_B - dist_G > 0,
+
+here with an optional Verlet-like ``margin`` (m): a pair is kept when
+``|c_i - c_j| < r_i + r_j + margin``, so a list built with ``margin > 0`` stays valid while
+no body moves more than ``margin / 2``.
+
+Neighbour search: linked cells over a *hashed* uniform grid (no dense array over the
+bounding box, so very spread-out domains cost nothing extra). Polydisperse sets are split
+into size levels whose radii differ by at most a factor 2; each level has its own grid with
+cell size ``2 R_L + margin`` (R_L the level's largest radius). A particle searches its own
+level (pairs i < j) and the coarser levels (every pair found once, by its smaller member),
+so each query visits at most 3 x 3 x 3 cells per level and the cost is ~linear in N.
+
+Flat walls: :func:`sphere_wall_pairs` tests each bounding sphere against each wall
+rectangle (exact sphere-vs-rectangle distance).
+
+Units: metres. Arrays are float64 / int64. Hot kernels are numba ``@njit(cache=True)``
+functions (``*_jit``) that can be called from other compiled code; the public wrappers
+check and convert their input.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: At most this many size levels (radius ratio 2 per level); smaller radii share level 0.
+MAX_LEVELS = 8
+
+#: Radius ratio between consecutive size levels (within a level radii differ by less).
+LEVEL_RATIO = 4.0
+
+_EMPTY = -1
+
+
+# --------------------------------------------------------------------------- hashing
+@njit(cache=True)
+def _hash4(lv, ix, iy, iz, mask):
+    """Slot of the cell (level, ix, iy, iz) in an open-addressing table of size mask + 1."""
+    h = (ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791) ^ (lv * 2654435761)
+    h ^= h >> 29
+    return h & mask
+
+
+@njit(cache=True)
+def _lookup(table, ckey, lv, ix, iy, iz, mask):
+    """Cell id of (lv, ix, iy, iz) in the hash table, or -1 when the cell is empty."""
+    s = _hash4(lv, ix, iy, iz, mask)
+    while True:
+        c = table[s]
+        if c == _EMPTY:
+            return -1
+        if ckey[c, 0] == lv and ckey[c, 1] == ix and ckey[c, 2] == iy and ckey[c, 3] == iz:
+            return c
+        s = (s + 1) & mask
+
+
+@njit(cache=True)
+def _push(buf, n, a, b):
+    """Append (a, b) to the growing pair buffer; returns the (possibly new) buffer."""
+    if n >= buf.shape[0]:
+        nb = np.empty((2 * buf.shape[0], 2), dtype=np.int64)
+        nb[:n] = buf[:n]
+        buf = nb
+    buf[n, 0] = a
+    buf[n, 1] = b
+    return buf
+
+
+@njit(cache=True)
+def _sort_pairs(buf, n, nmax):
+    """The first n pairs sorted lexicographically (key a * nmax + b)."""
+    keys = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        keys[k] = buf[k, 0] * nmax + buf[k, 1]
+    keys.sort()
+    out = np.empty((n, 2), dtype=np.int64)
+    for k in range(n):
+        out[k, 0] = keys[k] // nmax
+        out[k, 1] = keys[k] % nmax
+    return out
+
+
+# --------------------------------------------------------------------------- level 1
+@njit(cache=True)
+def sphere_pairs_jit(centers, radii, margin):
+    """Compiled core of :func:`sphere_pairs` (no input checks). Returns int64 (K, 2)."""
+    n = centers.shape[0]
+    if n < 2:
+        return np.empty((0, 2), dtype=np.int64)
+
+    # ---- size levels: level k holds radii in [rb 2^k, rb 2^(k+1)), rb = rmax 2^-(L-1)
+    rmax = 0.0
+    rmin = np.inf
+    for i in range(n):
+        rmax = max(rmax, radii[i])
+        rmin = min(rmin, radii[i])
+    nlev = 1
+    if rmin > 0.0:
+        while nlev < MAX_LEVELS and rmax > rmin * LEVEL_RATIO ** nlev:
+            nlev += 1
+    else:
+        nlev = MAX_LEVELS if rmax > 0.0 else 1
+    rb = rmax * LEVEL_RATIO ** (1 - nlev)
+    level = np.zeros(n, dtype=np.int64)
+    lev_rmax = np.zeros(nlev)
+    for i in range(n):
+        k = 0
+        if rb > 0.0:
+            while k < nlev - 1 and radii[i] >= rb * LEVEL_RATIO ** (k + 1):
+                k += 1
+        level[i] = k
+        lev_rmax[k] = max(lev_rmax[k], radii[i])
+
+    # ---- per-level cell size; integer cell coordinates relative to the lower corner
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for d in range(3):
+        lo[d] = centers[0, d]
+        hi[d] = centers[0, d]
+    for i in range(1, n):
+        for d in range(3):
+            lo[d] = min(lo[d], centers[i, d])
+            hi[d] = max(hi[d], centers[i, d])
+    ext = max(hi[0] - lo[0], max(hi[1] - lo[1], hi[2] - lo[2]))
+    h = np.empty(nlev)
+    for k in range(nlev):
+        hk = 2.0 * lev_rmax[k] + margin
+        # any positive size is correct; keep the coordinates well inside int64
+        h[k] = max(hk, ext * 1e-15, 1e-300)
+    inv_h = 1.0 / h
+
+    # ---- cells: hash table (level, ix, iy, iz) -> cell id, ids in order of appearance
+    pcell = np.empty((n, 3), dtype=np.int64)
+    cell_of = np.empty(n, dtype=np.int64)
+    tsize = 1
+    while tsize < 2 * n:
+        tsize *= 2
+    mask = tsize - 1
+    table = np.full(tsize, _EMPTY, dtype=np.int64)
+    ckey = np.empty((n, 4), dtype=np.int64)
+    ncell = 0
+    for i in range(n):
+        k = level[i]
+        ix = np.int64(np.floor((centers[i, 0] - lo[0]) * inv_h[k]))
+        iy = np.int64(np.floor((centers[i, 1] - lo[1]) * inv_h[k]))
+        iz = np.int64(np.floor((centers[i, 2] - lo[2]) * inv_h[k]))
+        pcell[i, 0] = ix
+        pcell[i, 1] = iy
+        pcell[i, 2] = iz
+        s = _hash4(k, ix, iy, iz, mask)
+        while True:
+            c = table[s]
+            if c == _EMPTY:
+                table[s] = ncell
+                ckey[ncell, 0] = k
+                ckey[ncell, 1] = ix
+                ckey[ncell, 2] = iy
+                ckey[ncell, 3] = iz
+                cell_of[i] = ncell
+                ncell += 1
+                break
+            if ckey[c, 0] == k and ckey[c, 1] == ix and ckey[c, 2] == iy and ckey[c, 3] == iz:
+                cell_of[i] = c
+                break
+            s = (s + 1) & mask
+
+    # ---- renumber cells in (level, z, y, x) order when that key fits in int64 (locality)
+    mx = np.zeros(3, dtype=np.int64)
+    for c in range(ncell):
+        for d in range(3):
+            mx[d] = max(mx[d], ckey[c, d + 1] + 1)
+    span = float(mx[0]) * float(mx[1]) * float(mx[2]) * float(nlev)
+    if span < 4.0e18:
+        skey = np.empty(ncell, dtype=np.int64)
+        for c in range(ncell):
+            skey[c] = ((ckey[c, 0] * mx[2] + ckey[c, 3]) * mx[1] + ckey[c, 2]) * mx[0] + ckey[c, 1]
+        corder = np.argsort(skey)
+        rank = np.empty(ncell, dtype=np.int64)
+        for q in range(ncell):
+            rank[corder[q]] = q
+        ck2 = np.empty((ncell, 4), dtype=np.int64)
+        for c in range(ncell):
+            ck2[rank[c]] = ckey[c]
+        ckey = ck2
+        for s in range(tsize):
+            if table[s] != _EMPTY:
+                table[s] = rank[table[s]]
+        for i in range(n):
+            cell_of[i] = rank[cell_of[i]]
+
+    # ---- linked cells: particles sorted by cell (stable counting sort), data copied in order
+    start = np.zeros(ncell + 1, dtype=np.int64)
+    for i in range(n):
+        start[cell_of[i] + 1] += 1
+    for c in range(ncell):
+        start[c + 1] += start[c]
+    fill = start[:ncell].copy()
+    sidx = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        c = cell_of[i]
+        sidx[fill[c]] = i
+        fill[c] += 1
+    sc = np.empty((n, 3))
+    sr = np.empty(n)
+    for q in range(n):
+        i = sidx[q]
+        sc[q, 0] = centers[i, 0]
+        sc[q, 1] = centers[i, 1]
+        sc[q, 2] = centers[i, 2]
+        sr[q] = radii[i] + 0.5 * margin
+    lev_used = np.zeros(nlev, dtype=np.bool_)
+    for i in range(n):
+        lev_used[level[i]] = True
+
+    # ---- per cell: own level by the half shell (13 neighbours + itself), coarser levels by
+    #      the cells that the cell's inflated bounding box reaches
+    buf = np.empty((max(16, 4 * n), 2), dtype=np.int64)
+    npair = 0
+    for c in range(ncell):
+        kc = ckey[c, 0]
+        cx = ckey[c, 1]
+        cy = ckey[c, 2]
+        cz = ckey[c, 3]
+        p0 = start[c]
+        p1 = start[c + 1]
+        for dz in range(-1, 2):
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    if dz < 0 or (dz == 0 and (dy < 0 or (dy == 0 and dx < 0))):
+                        continue
+                    same = dx == 0 and dy == 0 and dz == 0
+                    if same:
+                        nc = c
+                    else:
+                        nc = _lookup(table, ckey, kc, cx + dx, cy + dy, cz + dz, mask)
+                        if nc < 0:
+                            continue
+                    for a in range(p0, p1):
+                        b0 = a + 1 if same else start[nc]
+                        for b in range(b0, start[nc + 1]):
+                            ex = sc[b, 0] - sc[a, 0]
+                            ey = sc[b, 1] - sc[a, 1]
+                            ez = sc[b, 2] - sc[a, 2]
+                            t = sr[a] + sr[b]
+                            if t > 0.0 and ex * ex + ey * ey + ez * ez < t * t:
+                                i = sidx[a]
+                                j = sidx[b]
+                                if i < j:
+                                    buf = _push(buf, npair, i, j)
+                                else:
+                                    buf = _push(buf, npair, j, i)
+                                npair += 1
+        if kc == nlev - 1:
+            continue
+        # bounding box of the cell's inflated spheres
+        b_lo0 = np.inf
+        b_lo1 = np.inf
+        b_lo2 = np.inf
+        b_hi0 = -np.inf
+        b_hi1 = -np.inf
+        b_hi2 = -np.inf
+        for a in range(p0, p1):
+            b_lo0 = min(b_lo0, sc[a, 0] - sr[a])
+            b_lo1 = min(b_lo1, sc[a, 1] - sr[a])
+            b_lo2 = min(b_lo2, sc[a, 2] - sr[a])
+            b_hi0 = max(b_hi0, sc[a, 0] + sr[a])
+            b_hi1 = max(b_hi1, sc[a, 1] + sr[a])
+            b_hi2 = max(b_hi2, sc[a, 2] + sr[a])
+        for k in range(kc + 1, nlev):
+            if not lev_used[k]:
+                continue
+            w = lev_rmax[k] + 0.5 * margin
+            x0 = np.int64(np.floor((b_lo0 - w - lo[0]) * inv_h[k]))
+            x1 = np.int64(np.floor((b_hi0 + w - lo[0]) * inv_h[k]))
+            y0 = np.int64(np.floor((b_lo1 - w - lo[1]) * inv_h[k]))
+            y1 = np.int64(np.floor((b_hi1 + w - lo[1]) * inv_h[k]))
+            z0 = np.int64(np.floor((b_lo2 - w - lo[2]) * inv_h[k]))
+            z1 = np.int64(np.floor((b_hi2 + w - lo[2]) * inv_h[k]))
+            for iz in range(z0, z1 + 1):
+                for iy in range(y0, y1 + 1):
+                    for ix in range(x0, x1 + 1):
+                        nc = _lookup(table, ckey, k, ix, iy, iz, mask)
+                        if nc < 0:
+                            continue
+                        for a in range(p0, p1):
+                            for b in range(start[nc], start[nc + 1]):
+                                ex = sc[b, 0] - sc[a, 0]
+                                ey = sc[b, 1] - sc[a, 1]
+                                ez = sc[b, 2] - sc[a, 2]
+                                t = sr[a] + sr[b]
+                                if t > 0.0 and ex * ex + ey * ey + ez * ez < t * t:
+                                    i = sidx[a]
+                                    j = sidx[b]
+                                    if i < j:
+                                        buf = _push(buf, npair, i, j)
+                                    else:
+                                        buf = _push(buf, npair, j, i)
+                                    npair += 1
+    return _sort_pairs(buf, npair, n)
+
+
+def _as_centers_radii(centers, radii) -> tuple[np.ndarray, np.ndarray]:
+    c = np.ascontiguousarray(centers, dtype=np.float64).reshape(-1, 3) if np.size(centers) \
+        else np.zeros((0, 3))
+    r = np.ascontiguousarray(radii, dtype=np.float64).reshape(-1)
+    if c.shape[0] != r.shape[0]:
+        raise ValueError(f"centers has {c.shape[0]} rows but radii has {r.shape[0]} entries")
+    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(r))):
+        raise ValueError("centers and radii must be finite")
+    if np.any(r < 0):
+        raise ValueError("radii must be >= 0")
+    return c, r
+
+
+def sphere_pairs(centers: np.ndarray, radii: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Candidate body pairs of the first global level (bounding spheres, paper Eq. 3).
+
+    Parameters
+    ----------
+    centers: (N, 3) sphere centres (m), i.e. the bodies' world centroids.
+    radii: (N,) bounding radii (m), ``Shape.bounding_radius``.
+    margin: Verlet-like skin (m), >= 0: pairs with ``|c_i - c_j| < r_i + r_j + margin``
+        (Eq. 3 with ``delta + margin > 0``) are returned.
+
+    Returns
+    -------
+    int64 array (K, 2) of pairs (i, j), i < j, sorted lexicographically (deterministic,
+    independent of the input order of equal keys).
+    """
+    c, r = _as_centers_radii(centers, radii)
+    margin = float(margin)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise ValueError("margin must be finite and >= 0")
+    return sphere_pairs_jit(c, r, margin)
+
+
+def sphere_pairs_brute(centers: np.ndarray, radii: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """O(N^2) reference of :func:`sphere_pairs` (same comparison), for tests and small N."""
+    c, r = _as_centers_radii(centers, radii)
+    n = c.shape[0]
+    if n < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    i, j = np.triu_indices(n, 1)
+    d = c[j] - c[i]
+    s = r[i] + r[j] + margin
+    keep = (s > 0) & (np.einsum("ij,ij->i", d, d) < s * s)
+    return np.stack([i[keep], j[keep]], axis=1).astype(np.int64)
+
+
+# --------------------------------------------------------------------------- walls
+def wall_geometry(patch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre, frame and half sizes of a flat rectangular wall patch (degree 1, 2x2 points,
+    as made by :func:`nurbsdem.shapes.flat_wall`).
+
+    Returns
+    -------
+    center: (3,) m.  axes: (3, 3) with columns (t1, t2, n): t1 along u, t2 in plane with
+    t1 x t2 = n, n the unit normal ``S_u x S_v`` (the wall's active side).
+    half: (2,) half lengths along t1 and t2 (m).
+    """
+    P = np.asarray(patch.control_points, dtype=float)
+    if P.shape[:2] != (2, 2):
+        raise ValueError("a flat wall must have 2 x 2 control points")
+    center = P.reshape(-1, 3).mean(0)
+    eu = 0.5 * ((P[1, 0] - P[0, 0]) + (P[1, 1] - P[0, 1]))
+    ev = 0.5 * ((P[0, 1] - P[0, 0]) + (P[1, 1] - P[1, 0]))
+    n = np.cross(eu, ev)
+    n /= np.linalg.norm(n)
+    t1 = eu / np.linalg.norm(eu)
+    t2 = np.cross(n, t1)
+    half = np.array([0.5 * np.linalg.norm(eu), 0.5 * abs(ev @ t2)])
+    return center, np.stack([t1, t2, n], axis=1), half
+
+
+@njit(cache=True)
+def sphere_wall_pairs_jit(centers, radii, wall_centers, wall_axes, wall_half, margin):
+    """Compiled core of :func:`sphere_wall_pairs` (no input checks). Returns int64 (K, 2)."""
+    n = centers.shape[0]
+    nw = wall_centers.shape[0]
+    buf = np.empty((max(16, 2 * n), 2), dtype=np.int64)
+    npair = 0
+    for i in range(n):
+        for k in range(nw):
+            du = 0.0
+            dv = 0.0
+            dn = 0.0
+            for d in range(3):
+                x = centers[i, d] - wall_centers[k, d]
+                du += x * wall_axes[k, d, 0]
+                dv += x * wall_axes[k, d, 1]
+                dn += x * wall_axes[k, d, 2]
+            eu = max(abs(du) - wall_half[k, 0], 0.0)
+            ev = max(abs(dv) - wall_half[k, 1], 0.0)
+            s = radii[i] + margin
+            if s > 0.0 and dn * dn + eu * eu + ev * ev < s * s:
+                buf = _push(buf, npair, i, k)
+                npair += 1
+    return buf[:npair].copy()
+
+
+def sphere_wall_pairs(centers: np.ndarray, radii: np.ndarray, wall_centers: np.ndarray,
+                      wall_axes: np.ndarray, wall_half: np.ndarray,
+                      margin: float = 0.0) -> np.ndarray:
+    """Body-vs-flat-wall candidates of the first global level (paper Eq. 3 with a wall).
+
+    Body i is near wall k when its bounding sphere reaches the wall rectangle (inflated by
+    ``margin``): the distance from ``c_i`` to the rectangle (exact closest point, both sides
+    of the plane) is ``< r_i + margin``.
+
+    Parameters
+    ----------
+    centers: (N, 3) m.  radii: (N,) m.
+    wall_centers: (W, 3) rectangle centres (m).
+    wall_axes: (W, 3, 3), columns (t1, t2, n) orthonormal (see :func:`wall_geometry`).
+    wall_half: (W, 2) half lengths along t1, t2 (m); a third column (thickness) is ignored.
+    margin: skin (m), >= 0.
+
+    Returns
+    -------
+    int64 (K, 2) of (body i, wall k), sorted by i then k (wall index local, 0..W-1).
+    """
+    c, r = _as_centers_radii(centers, radii)
+    wc = np.ascontiguousarray(wall_centers, dtype=np.float64).reshape(-1, 3)
+    wa = np.ascontiguousarray(wall_axes, dtype=np.float64).reshape(-1, 3, 3)
+    wh = np.ascontiguousarray(np.asarray(wall_half, dtype=np.float64).reshape(wc.shape[0], -1)[:, :2])
+    if wa.shape[0] != wc.shape[0] or wh.shape[1] != 2:
+        raise ValueError("wall_centers (W,3), wall_axes (W,3,3), wall_half (W,2) disagree")
+    margin = float(margin)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise ValueError("margin must be finite and >= 0")
+    return sphere_wall_pairs_jit(c, r, wc, wa, wh, margin)

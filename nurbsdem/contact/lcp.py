@@ -1,0 +1,389 @@
+"""Compiled local contact problem (LCP) of two convex multi-patch NURBS bodies (paper 3.2).
+
+The LCP is solved as one minimisation over unit directions ``d`` (world frame) of
+
+    phi(d) = h_A(d) + h_B(-d),        h_X(d) = max_{x in X} d · x   (support functions)
+
+i.e. the support function of the configuration space obstacle CSO = A − B (paper Eq. 7–8).
+
+* Overlapping bodies: min phi = maximum penetration depth (> 0), attained at the normal d*
+  (paper stage 2, Eq. 6–9).
+* Separated bodies: min phi = −distance (< 0) (``distance = max_d −h_CSO(d)``); the support
+  points p_A(d*), p_B(−d*) are then exactly the closest points, i.e. the minimiser of the
+  paper's f1 (Eq. 5): at the minimum of f1 the gap is parallel to both surface normals,
+  which is the same first-order condition. One formula covers both regimes, and the
+  separated case is even better conditioned (Riemannian Hessian = curvature + distance).
+
+So ``signed_distance = −min phi`` and the gap (Eq. 4) is ``g = p_A − p_B = phi · d``.
+
+**Equivalence with the paper's f2** (Eq. 6): f2(d) = ½ |p_A(d) − p_B(−d)|² with the support
+points of Eq. 8–9. By Danskin's theorem grad phi = p_A(d) − p_B(−d) = map_CSO(d) (Eq. 7);
+its tangential part vanishes exactly when map_CSO(d) is parallel to d, i.e. when map_CSO(d) is
+the boundary point of the CSO whose outward normal points back at the origin — the
+stationarity condition of f2 as well (the CSO point nearest to / deepest from the origin,
+where |map_CSO| = |phi|). Both functions have the same minimiser; phi has the simpler
+derivatives (first derivative: the support points; second: the support Hessians).
+
+**Newton on the sphere.** Each iteration uses a *local chart re-centred on the current
+direction*, d(a, b) = normalize(d0 + a t1 + b t2) with (t1, t2) an orthonormal tangent
+basis: no pole singularity. In that chart
+
+    grad = Tᵀ (p_A − p_B),      Hess = Tᵀ (H_A + H_B) T − phi I,
+
+with H_A = R_A M_A R_Aᵀ, H_B = R_B M_B R_Bᵀ the Hessians of the support functions, from the
+implicit differentiation of the support conditions (the paper's A x = b, reduced by P_s for
+degenerated parameters, Eq. 14–15; see :mod:`.support`), and −phi I the curvature of the unit
+sphere. The step is the exact trust-region step (eigen-decomposition of the 2×2 Hessian,
+shift when indefinite), trust radius in radians, ratio test with eta = 0.1. The support
+points for the trial direction start from the first-order prediction
+u + (du/de) (e' − e), so each support mapping takes 1–2 Newton iterations near convergence.
+Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale.
+
+Result rows (``resF`` float, ``resI`` int) use the column constants below. Lengths in metres.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .support import CREASE, dot3, norm3, seed_start, support_map, tr_step2
+
+# float result columns
+F_SD = 0          # signed distance (m): < 0 penetration depth, > 0 separation
+F_N = 1           # 1:4 unit normal (world), outward from A towards B
+F_PA = 4          # 4:7 point on A (world, m)
+F_PB = 7          # 7:10 point on B (world, m)
+F_PAR = 10        # 10:14 params (uA, vA, uB, vB)
+F_GRAD = 14       # tangential gradient norm at exit (m)
+NF = 16
+# int result columns
+I_ACTIVE = 0
+I_PA = 1          # patch of A (local index in its shape)
+I_PB = 2          # patch of B
+I_DEG = 3         # degeneration level (number of fixed parameters)
+I_IT = 4          # outer Newton iterations
+I_FAIL = 5        # 1 = not converged / fallback
+I_VALID = 6       # 1 = holds a solution usable as warm start
+I_NEV = 7         # patch evaluations spent
+I_BROAD = 8       # 1 = rejected by the bounding spheres (Eq. 3), no LCP solved
+NI = 10
+
+MAX_OUTER_IT = 60
+ANGLE_TOL = 1e-11
+WORK_ROWS = 48
+
+# rows of the float work array (rows of 3)
+_PA, _MA, _GA, _PB, _MB, _GB = 0, 1, 4, 6, 7, 10
+_TRIAL = 12
+_EV, _EV2, _TMP, _EA, _EB, _D, _T1, _T2, _DT, _H = 24, 30, 36, 37, 38, 39, 40, 41, 42, 43
+
+
+def make_work() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-thread work arrays of :func:`solve_pair`: (float rows (48, 3), int states (4, 4),
+    float states (4, 3))."""
+    return np.zeros((WORK_ROWS, 3)), np.zeros((4, 4), np.int64), np.zeros((4, 3))
+
+
+@njit(cache=True)
+def _tangent_basis(d, t1, t2):
+    """Orthonormal t1, t2 with t1 × t2 = d (d unit)."""
+    ax = abs(d[0])
+    ay = abs(d[1])
+    az = abs(d[2])
+    if ax <= ay and ax <= az:
+        a0, a1, a2 = 1.0, 0.0, 0.0
+    elif ay <= az:
+        a0, a1, a2 = 0.0, 1.0, 0.0
+    else:
+        a0, a1, a2 = 0.0, 0.0, 1.0
+    # t1 = normalize(a - (a.d) d)
+    ad = a0 * d[0] + a1 * d[1] + a2 * d[2]
+    t1[0] = a0 - ad * d[0]
+    t1[1] = a1 - ad * d[1]
+    t1[2] = a2 - ad * d[2]
+    n = norm3(t1)
+    for c in range(3):
+        t1[c] /= n
+    t2[0] = d[1] * t1[2] - d[2] * t1[1]
+    t2[1] = d[2] * t1[0] - d[0] * t1[2]
+    t2[2] = d[0] * t1[1] - d[1] * t1[0]
+
+
+@njit(cache=True)
+def _rot_t(R, d, sign, out):
+    """out = sign * Rᵀ d (world direction to file frame)."""
+    for a in range(3):
+        out[a] = sign * (R[0, a] * d[0] + R[1, a] * d[1] + R[2, a] * d[2])
+
+
+@njit(cache=True)
+def _to_world(pos, R, p, out):
+    """out = pos + R p."""
+    for a in range(3):
+        out[a] = pos[a] + R[a, 0] * p[0] + R[a, 1] * p[1] + R[a, 2] * p[2]
+
+
+@njit(cache=True)
+def _quad_world(R, M, x, y):
+    """xᵀ (R M Rᵀ) y."""
+    s = 0.0
+    for a in range(3):
+        rx = R[0, a] * x[0] + R[1, a] * x[1] + R[2, a] * x[2]
+        for b in range(3):
+            ry = R[0, b] * y[0] + R[1, b] * y[1] + R[2, b] * y[2]
+            s += rx * M[a, b] * ry
+    return s
+
+
+@njit(cache=True)
+def _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, base, ws, sA, sB):
+    """Both support mappings for the world direction d into rows ``base`` (0: current,
+    _TRIAL: trial) of the work arrays; states in wi/wfs rows sA, sB. Returns (phi, nev, ok)."""
+    ev = wf[_EV:_EV + 6]
+    ev2 = wf[_EV2:_EV2 + 6]
+    tmp = wf[_TMP]
+    eA = wf[_EA]
+    eB = wf[_EB]
+    _rot_t(RA, d, 1.0, eA)
+    _rot_t(RB, d, -1.0, eB)
+    okA, nA = support_map(tabA, eA, wi[sA], wfs[sA], scA, ws, ev, ev2, tmp,
+                          wf[base + _PA], wf[base + _MA:base + _MA + 3], wf[base + _GA:base + _GA + 2])
+    okB, nB = support_map(tabB, eB, wi[sB], wfs[sB], scB, ws, ev, ev2, tmp,
+                          wf[base + _PB], wf[base + _MB:base + _MB + 3], wf[base + _GB:base + _GB + 2])
+    # phi = d . (posA + RA pA) - d . (posB + RB pB)
+    pA = wf[base + _PA]
+    pB = wf[base + _PB]
+    phi = dot3(d, posA) - dot3(d, posB) + dot3(eA, pA) + dot3(eB, pB)
+    return phi, nA + nB, okA and okB
+
+
+@njit(cache=True)
+def _predict(wf, wfs, base, sA, sB, tA, tB, RA, RB, dnew):
+    """First-order prediction of the trial parameters: u' = u + G (e' − e)."""
+    eA = wf[_EA]
+    eB = wf[_EB]
+    GA = wf[base + _GA:base + _GA + 2]
+    GB = wf[base + _GB:base + _GB + 2]
+    for a in range(2):
+        sa = 0.0
+        sb = 0.0
+        for c in range(3):
+            ea = RA[0, c] * dnew[0] + RA[1, c] * dnew[1] + RA[2, c] * dnew[2]
+            eb = -(RB[0, c] * dnew[0] + RB[1, c] * dnew[1] + RB[2, c] * dnew[2])
+            sa += GA[a, c] * (ea - eA[c])
+            sb += GB[a, c] * (eb - eB[c])
+        wfs[tA, a] = wfs[sA, a] + sa
+        wfs[tB, a] = wfs[sB, a] + sb
+    wfs[tA, 2] = wfs[sA, 2]
+    wfs[tB, 2] = wfs[sB, 2]
+
+
+@njit(cache=True)
+def _copy_trial(wf, wi, wfs):
+    """Make the trial rows/states current."""
+    for r in range(12):
+        for c in range(3):
+            wf[r, c] = wf[_TRIAL + r, c]
+    for c in range(4):
+        wi[0, c] = wi[2, c]
+        wi[1, c] = wi[3, c]
+    for c in range(3):
+        wfs[0, c] = wfs[2, c]
+        wfs[1, c] = wfs[3, c]
+
+
+@njit(cache=True)
+def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
+               posA, RA, posB, RB, prevF, prevI, maskA, maskB, seedsA, seedsB,
+               ws, wf, wi, wfs, resF, resI):
+    """Solve the LCP of one body pair (module docstring); writes ``resF``/``resI`` rows.
+
+    Parameters
+    ----------
+    tabA, tabB: (deg, ncp, koff, coff, knots, cpw, dom, nbr) packed tables.
+    infoA, infoB: int64 (4,) (first patch, patch count, first seed, seed count) in the tables.
+    cenA, cenB: centroid (file frame, m) and scA, scB bounding radius (m, paper Eq. 3).
+    posA, RA, posB, RB: poses (x_world = pos + R x_file).
+    prevF, prevI: previous result rows (warm start when prevI[I_VALID] == 1).
+    maskA, maskB: bool per patch, allowed starting patches (empty: all).
+    seedsA, seedsB: (x (S, 3), patch (S,), uv (S, 2)) surface samples for cold starts.
+    ws, wf, wi, wfs: per-thread workspaces (kernel.make_workspace, make_work()).
+    """
+    for k in range(resF.shape[0]):
+        resF[k] = 0.0
+    for k in range(resI.shape[0]):
+        resI[k] = 0
+    d = wf[_D]
+    t1 = wf[_T1]
+    t2 = wf[_T2]
+    dt = wf[_DT]
+    # ---- global level 1: bounding spheres (paper Eq. 3)
+    cA = wf[_H]
+    cB = wf[_H + 1]
+    _to_world(posA, RA, cenA, cA)
+    _to_world(posB, RB, cenB, cB)
+    dist = 0.0
+    for c in range(3):
+        d[c] = cB[c] - cA[c]
+        dist += d[c] * d[c]
+    dist = math.sqrt(dist)
+    if dist > 0.0:
+        for c in range(3):
+            d[c] /= dist
+    else:
+        d[0] = 0.0
+        d[1] = 0.0
+        d[2] = 1.0
+    if dist > scA + scB:
+        resF[F_SD] = dist - scA - scB
+        for c in range(3):
+            resF[F_N + c] = d[c]
+            resF[F_PA + c] = cA[c] + scA * d[c]
+            resF[F_PB + c] = cB[c] - scB * d[c]
+        resI[I_PA] = -1
+        resI[I_PB] = -1
+        resI[I_BROAD] = 1
+        return
+    pA0 = infoA[0]
+    pB0 = infoB[0]
+    scale = scA + scB
+    warm = prevI[I_VALID] == 1
+    if warm:
+        nn = norm3(prevF[F_N:F_N + 3])
+        if not nn > 0.0:
+            warm = False
+    if warm:
+        for c in range(3):
+            d[c] = prevF[F_N + c] / nn
+        wi[0, 0] = pA0 + prevI[I_PA]
+        wi[1, 0] = pB0 + prevI[I_PB]
+        wfs[0, 0] = prevF[F_PAR]
+        wfs[0, 1] = prevF[F_PAR + 1]
+        wfs[1, 0] = prevF[F_PAR + 2]
+        wfs[1, 1] = prevF[F_PAR + 3]
+        delta = 0.1
+    else:
+        eA = wf[_EA]
+        eB = wf[_EB]
+        _rot_t(RA, d, 1.0, eA)
+        _rot_t(RB, d, -1.0, eB)
+        ka = seed_start(seedsA[0], seedsA[1], seedsA[2], infoA[2], infoA[3], maskA, pA0, eA)
+        kb = seed_start(seedsB[0], seedsB[1], seedsB[2], infoB[2], infoB[3], maskB, pB0, eB)
+        wi[0, 0] = seedsA[1][ka]
+        wfs[0, 0] = seedsA[2][ka, 0]
+        wfs[0, 1] = seedsA[2][ka, 1]
+        wi[1, 0] = seedsB[1][kb]
+        wfs[1, 0] = seedsB[2][kb, 0]
+        wfs[1, 1] = seedsB[2][kb, 1]
+        delta = 0.5
+    wfs[0, 2] = 0.0
+    wfs[1, 2] = 0.0
+    phi, nev, ok = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, 0, ws, 0, 1)
+    converged = False
+    it = 0
+    gnorm = 0.0
+    for it in range(1, MAX_OUTER_IT + 1):
+        _tangent_basis(d, t1, t2)
+        # gradient G = pA_w - pB_w (world); tangential components
+        g1 = 0.0
+        g2 = 0.0
+        for c in range(3):
+            pa = posA[c] + RA[c, 0] * wf[_PA, 0] + RA[c, 1] * wf[_PA, 1] + RA[c, 2] * wf[_PA, 2]
+            pb = posB[c] + RB[c, 0] * wf[_PB, 0] + RB[c, 1] * wf[_PB, 1] + RB[c, 2] * wf[_PB, 2]
+            g1 += t1[c] * (pa - pb)
+            g2 += t2[c] * (pa - pb)
+        gnorm = math.sqrt(g1 * g1 + g2 * g2)
+        if gnorm <= 1e-15 * scale:
+            converged = True
+            break
+        MA = wf[_MA:_MA + 3]
+        MB = wf[_MB:_MB + 3]
+        k11 = _quad_world(RA, MA, t1, t1) + _quad_world(RB, MB, t1, t1) - phi
+        k12 = _quad_world(RA, MA, t1, t2) + _quad_world(RB, MB, t1, t2)
+        k22 = _quad_world(RA, MA, t2, t2) + _quad_world(RB, MB, t2, t2) - phi
+        x1, x2, mval = tr_step2(k11, k12, k22, g1, g2, delta)
+        xn = math.sqrt(x1 * x1 + x2 * x2)
+        if xn <= ANGLE_TOL:
+            converged = True
+            break
+        nd = 0.0
+        for c in range(3):
+            dt[c] = d[c] + x1 * t1[c] + x2 * t2[c]
+            nd += dt[c] * dt[c]
+        nd = math.sqrt(nd)
+        for c in range(3):
+            dt[c] /= nd
+        # trial states: same patches, predicted parameters
+        for c in range(4):
+            wi[2, c] = wi[0, c]
+            wi[3, c] = wi[1, c]
+        _predict(wf, wfs, 0, 0, 1, 2, 3, RA, RB, dt)
+        phin, ne, okn = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, dt, wf, wi, wfs,
+                                       _TRIAL, ws, 2, 3)
+        nev += ne
+        actual = phi - phin
+        pred = -mval
+        noise = 1e-15 * scale
+        if pred > noise:
+            rho = actual / pred
+        else:
+            rho = 1.0 if actual >= -4.0 * noise else -1.0
+        if rho > 0.1 and phin == phin:
+            _copy_trial(wf, wi, wfs)
+            for c in range(3):
+                d[c] = dt[c]
+            phi = phin
+            ok = okn
+            if rho > 0.75 and xn >= 0.9 * delta:
+                delta = min(2.0 * delta, 1.0)
+        if rho < 0.25:
+            delta = 0.25 * xn
+            if delta < 1e-14:
+                break
+    # ---- result
+    for c in range(3):
+        resF[F_N + c] = d[c]
+    _to_world(posA, RA, wf[_PA], resF[F_PA:F_PA + 3])
+    _to_world(posB, RB, wf[_PB], resF[F_PB:F_PB + 3])
+    resF[F_SD] = -phi
+    resF[F_PAR] = wfs[0, 0]
+    resF[F_PAR + 1] = wfs[0, 1]
+    resF[F_PAR + 2] = wfs[1, 0]
+    resF[F_PAR + 3] = wfs[1, 1]
+    resF[F_GRAD] = gnorm
+    resI[I_PA] = wi[0, 0] - pA0
+    resI[I_PB] = wi[1, 0] - pB0
+    deg = 0
+    for r in range(2):
+        if wi[r, 1] == CREASE:
+            deg += 1
+        if wi[r, 2] == CREASE:
+            deg += 1
+    resI[I_DEG] = deg
+    resI[I_IT] = it
+    resI[I_NEV] = nev
+    finite = True
+    for k in range(14):
+        if not (resF[k] == resF[k]) or abs(resF[k]) == np.inf:
+            finite = False
+    if not finite:
+        if prevI[I_VALID] == 1:
+            for k in range(resF.shape[0]):
+                resF[k] = prevF[k]
+            for k in range(resI.shape[0]):
+                resI[k] = prevI[k]
+        else:
+            resF[F_SD] = dist - scA - scB
+            for k in range(1, 14):
+                resF[k] = 0.0
+            for c in range(3):
+                resF[F_N + c] = (cB[c] - cA[c]) / dist if dist > 0.0 else 0.0
+        resI[I_FAIL] = 1
+        resI[I_VALID] = 0
+        resI[I_ACTIVE] = 0
+        return
+    resI[I_FAIL] = 0 if converged else 1
+    resI[I_VALID] = 1
+    resI[I_ACTIVE] = 1 if phi > 0.0 else 0

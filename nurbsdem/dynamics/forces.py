@@ -1,0 +1,295 @@
+"""Penalty contact forces (paper Eq. 16–17) over the K contacts of a ContactSet.
+
+Conventions (DEVNOTES): ``normal`` n is the unit normal from body A towards body B, ``depth``
+d >= 0 the penetration.  The force acts at the contact point ``p = (point_a + point_b) / 2`` (the
+midpoint of the two surface points: symmetric in A and B, and the points differ by only d·n).
+``F`` below is the force on **B**; A receives ``-F``.  Torques are about each centroid (Eq. 16
+applied at p): ``tau_B += (p - x_B) × F``, ``tau_A -= (p - x_A) × F``.
+
+Relative velocity of B with respect to A at p:
+``w = (v_B + ω_B × (p - x_B)) - (v_A + ω_A × (p - x_A))``; the approach (depth) rate is
+``ḋ = -n·w`` and the tangential velocity ``w_t = w - (n·w) n``.
+
+Normal force (Eq. 16)::
+
+    f_n = εn d + cn ḋ,        clipped at 0 (no tension): f_n = max(f_n, 0)
+
+The clip is a choice: a dashpot may not glue separating bodies.  While the clip is active the
+elastic part εn d is cancelled by the damper, whose dissipation is then (f_n − εn d) ḋ >= 0.  The
+damped-oscillator verification compares with the linear damped oscillator *with the force
+clipped at 0* (tests/test_dynamics_contact.py).
+
+Tangential force (Eq. 17) with an elastic spring with history ``s`` (the tangential relative
+displacement accumulated while the contact persists).  Each evaluation (time increment h):
+
+1. rotate the previous spring into the current tangent plane, keeping its length:
+   ``s' = |s| (s - (s·n)n) / |s - (s·n)n|``;
+2. trial ``s* = s' + h w_t``; trial force on B ``f_t* = -εt s* - ct w_t``;
+3. Coulomb return mapping: stick when ``|f_t*| <= μ f_n`` (f_t = f_t*, s = s*); otherwise slip:
+   ``α = μ f_n / |f_t*|``, ``f_t = α f_t*`` and the spring is scaled the same way, ``s = α s*``
+   (so ``|f_t| = μ f_n`` exactly and the force stays on the Coulomb cone).  The slip (friction)
+   work of the step is the elastic force times the spring truncation,
+   ``εt α |s*| · (1 − α)|s*|`` (J).
+
+History is keyed by ``ContactSet.key``: a new contact starts with s = 0, a contact absent from
+the set drops its history (:func:`match_history`).
+
+Contact laws are per interface: a dense table ``law[mat_a, mat_b] = (εn, cn, εt, ct, μ)`` (see
+:class:`InterfaceTable`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..errors import InputError
+
+#: column indices of the interface table
+EN, CN, ET, CT, MU = 0, 1, 2, 3, 4
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """Penalty law of one interface (paper Eq. 16–17; the example: 1e5, 1e2, 1e4, 0, 0.5).
+
+    en: normal penalty εn (N/m); cn: normal damping (N s/m); et: tangential penalty εt (N/m);
+    ct: tangential damping (N s/m); mu: Coulomb friction coefficient (-).
+    """
+
+    en: float
+    cn: float = 0.0
+    et: float = 0.0
+    ct: float = 0.0
+    mu: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("en", "cn", "et", "ct", "mu"):
+            val = getattr(self, name)
+            if not (math.isfinite(val) and val >= 0):
+                raise InputError(f"contact law: {name} must be finite and >= 0, got {val}")
+        if self.en <= 0:
+            raise InputError(f"contact law: normal penalty en must be > 0, got {self.en}")
+
+    def as_row(self) -> np.ndarray:
+        return np.array([self.en, self.cn, self.et, self.ct, self.mu], dtype=float)
+
+
+class InterfaceTable:
+    """Contact laws per pair of material ids (symmetric), a small dense table ``(M, M, 5)``.
+
+    ``table.set(0, 1, law)`` sets the interface between materials 0 and 1 (both orders);
+    ``table.default`` is used for pairs never set (None: such a pair is an input error).
+    """
+
+    def __init__(self, default: ContactLaw | None = None) -> None:
+        self.default = default
+        self.laws: dict[tuple[int, int], ContactLaw] = {}
+
+    def set(self, mat_a: int, mat_b: int, law: ContactLaw) -> None:
+        self.laws[(min(mat_a, mat_b), max(mat_a, mat_b))] = law
+
+    def get(self, mat_a: int, mat_b: int) -> ContactLaw:
+        key = (min(mat_a, mat_b), max(mat_a, mat_b))
+        if key in self.laws:
+            return self.laws[key]
+        if self.default is None:
+            raise InputError(f"no contact interface defined between materials {mat_a} and {mat_b}")
+        return self.default
+
+    def as_array(self, n_materials: int) -> np.ndarray:
+        """Dense (M, M, 5) float table; rows for undefined pairs are NaN (and raise on use)."""
+        tab = np.full((n_materials, n_materials, 5), np.nan)
+        for i in range(n_materials):
+            for j in range(n_materials):
+                key = (min(i, j), max(i, j))
+                law = self.laws.get(key, self.default)
+                if law is not None:
+                    tab[i, j] = law.as_row()
+        return tab
+
+
+def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Springs (K,3) for the current contacts: the stored one for a persisting key, 0 for a new one.
+
+    prev_keys must be sorted ascending (as stored by :func:`store_history`).
+    """
+    k = keys.shape[0]
+    out = np.zeros((k, 3))
+    if k == 0 or prev_keys.shape[0] == 0:
+        return out
+    idx = np.searchsorted(prev_keys, keys)
+    idx_c = np.minimum(idx, prev_keys.shape[0] - 1)
+    hit = prev_keys[idx_c] == keys
+    out[hit] = prev_springs[idx_c[hit]]
+    return out
+
+
+def store_history(keys: np.ndarray, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted copy (keys, springs) of the current contacts' springs; ended contacts are dropped
+    simply by not being in ``keys``.  Raises ValueError on duplicate keys (one contact per pair)."""
+    order = np.argsort(keys, kind="stable")
+    k = keys[order]
+    if k.shape[0] > 1 and np.any(k[1:] == k[:-1]):
+        raise ValueError("ContactSet has duplicate keys: one contact per body pair expected")
+    return k.copy(), springs[order].copy()
+
+
+@njit(cache=True)
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
+                   point_b: np.ndarray, normal: np.ndarray, depth: np.ndarray,
+                   pos: np.ndarray, vel: np.ndarray, omg: np.ndarray, material: np.ndarray,
+                   table: np.ndarray, spring: np.ndarray, h: float,
+                   force: np.ndarray, torque: np.ndarray,
+                   point: np.ndarray, f_total: np.ndarray, f_damp_n: np.ndarray,
+                   f_damp_t: np.ndarray, fn_out: np.ndarray, e_el: np.ndarray,
+                   stick: np.ndarray) -> float:
+    """Evaluate Eq. 16–17 for K contacts and accumulate loads on the bodies.
+
+    Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
+    angular velocity; material (B,) ids; table (M,M,5); spring (K,3) history from the previous
+    evaluation (updated **in place** to the new spring); h (s) the time since that evaluation
+    (0 for the initial evaluation: no spring increment).
+
+    Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
+    f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts
+    (normal: (f_n − εn d) n, includes the clip), fn_out (K,) f_n (N), e_el (K,2) elastic energies
+    ½ εn d² and ½ εt |s|² (J), stick (K,) 1 stick / 0 slip.  Returns the slip work (J).
+    """
+    slip_work = 0.0
+    K = body_a.shape[0]
+    for c in range(K):
+        a = body_a[c]
+        b = body_b[c]
+        law = table[material[a], material[b]]
+        en, cn, et, ct, mu = law[0], law[1], law[2], law[3], law[4]
+        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
+        p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
+        p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
+        p2 = 0.5 * (point_a[c, 2] + point_b[c, 2])
+        point[c, 0], point[c, 1], point[c, 2] = p0, p1, p2
+        ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
+        rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
+        wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
+        wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
+        w0 = vel[b, 0] + wb0 - vel[a, 0] - wa0
+        w1 = vel[b, 1] + wb1 - vel[a, 1] - wa1
+        w2 = vel[b, 2] + wb2 - vel[a, 2] - wa2
+        wn = w0 * n0 + w1 * n1 + w2 * n2
+        d = depth[c]
+        ddot = -wn
+        fel = en * d
+        fn = fel + cn * ddot
+        if fn < 0.0:
+            fn = 0.0
+        fdn = fn - fel
+        # tangential spring: rotate into the current tangent plane, keep length
+        s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
+        smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        sn = s0 * n0 + s1 * n1 + s2 * n2
+        s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
+        spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        if spm > 0.0:
+            sc = smag / spm
+            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
+        wt0, wt1, wt2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
+        s0, s1, s2 = s0 + h * wt0, s1 + h * wt1, s2 + h * wt2
+        fe0, fe1, fe2 = -et * s0, -et * s1, -et * s2
+        fd0, fd1, fd2 = -ct * wt0, -ct * wt1, -ct * wt2
+        ft0, ft1, ft2 = fe0 + fd0, fe1 + fd1, fe2 + fd2
+        ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
+        flim = mu * fn
+        stick[c] = 1
+        if ftm > flim:
+            stick[c] = 0
+            alpha = flim / ftm if ftm > 0.0 else 0.0
+            smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+            slip_work += et * alpha * smag2 * (1.0 - alpha) * smag2
+            s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
+            fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
+            ft0, ft1, ft2 = alpha * ft0, alpha * ft1, alpha * ft2
+        spring[c, 0], spring[c, 1], spring[c, 2] = s0, s1, s2
+        F0, F1, F2 = fn * n0 + ft0, fn * n1 + ft1, fn * n2 + ft2
+        f_total[c, 0], f_total[c, 1], f_total[c, 2] = F0, F1, F2
+        f_damp_n[c, 0], f_damp_n[c, 1], f_damp_n[c, 2] = fdn * n0, fdn * n1, fdn * n2
+        f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
+        fn_out[c] = fn
+        e_el[c, 0] = 0.5 * en * d * d
+        e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
+        force[b, 0] += F0
+        force[b, 1] += F1
+        force[b, 2] += F2
+        force[a, 0] -= F0
+        force[a, 1] -= F1
+        force[a, 2] -= F2
+        tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
+        ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
+        torque[b, 0] += tb0
+        torque[b, 1] += tb1
+        torque[b, 2] += tb2
+        torque[a, 0] -= ta0
+        torque[a, 1] -= ta1
+        torque[a, 2] -= ta2
+    return slip_work
+
+
+@njit(cache=True)
+def contact_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                       pos: np.ndarray, vel: np.ndarray, omg: np.ndarray) -> np.ndarray:
+    """(K,3) velocity of B relative to A at each contact point (m/s)."""
+    K = body_a.shape[0]
+    out = np.empty((K, 3))
+    for c in range(K):
+        a = body_a[c]
+        b = body_b[c]
+        ra0, ra1, ra2 = point[c, 0] - pos[a, 0], point[c, 1] - pos[a, 1], point[c, 2] - pos[a, 2]
+        rb0, rb1, rb2 = point[c, 0] - pos[b, 0], point[c, 1] - pos[b, 1], point[c, 2] - pos[b, 2]
+        wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
+        wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
+        out[c, 0] = vel[b, 0] + wb0 - vel[a, 0] - wa0
+        out[c, 1] = vel[b, 1] + wb1 - vel[a, 1] - wa1
+        out[c, 2] = vel[b, 2] + wb2 - vel[a, 2] - wa2
+    return out
+
+
+@njit(cache=True)
+def kick_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
+              w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
+              f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
+              hk: float, acc: np.ndarray, wall_work: np.ndarray) -> None:
+    """Exact discrete work of the contact impulses of one half-kick (length hk, s).
+
+    A kick changes velocities linearly at fixed positions, so the kinetic energy change due to an
+    impulse J at a contact equals J · (mean of the relative contact velocities before and after).
+    Accumulates into acc: [0] normal damping dissipation, [1] tangential damping dissipation,
+    [2] external work by walls (J); wall_work (W,) per wall.  The wall velocity enters through the
+    relative velocity; its share J·u is the work done by the wall (external work).
+    """
+    K = body_a.shape[0]
+    for c in range(K):
+        m0 = 0.5 * (w_before[c, 0] + w_after[c, 0])
+        m1 = 0.5 * (w_before[c, 1] + w_after[c, 1])
+        m2 = 0.5 * (w_before[c, 2] + w_after[c, 2])
+        acc[0] -= hk * (f_damp_n[c, 0] * m0 + f_damp_n[c, 1] * m1 + f_damp_n[c, 2] * m2)
+        acc[1] -= hk * (f_damp_t[c, 0] * m0 + f_damp_t[c, 1] * m1 + f_damp_t[c, 2] * m2)
+        a = body_a[c]
+        b = body_b[c]
+        if a >= n_particles:   # wall A pushes B with F: work on the particles F·u_A
+            k = a - n_particles
+            wk = hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
+                       + f_total[c, 2] * wall_vel[k, 2])
+            acc[2] += wk
+            wall_work[k] += wk
+        if b >= n_particles:   # wall B pushes A with -F
+            k = b - n_particles
+            wk = -hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
+                        + f_total[c, 2] * wall_vel[k, 2])
+            acc[2] += wk
+            wall_work[k] += wk

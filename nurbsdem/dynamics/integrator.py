@@ -1,0 +1,133 @@
+"""Explicit symplectic splitting for rigid bodies: velocity Verlet + DLM free-rigid-body rotation.
+
+One internal step of length h (s), the kick–drift–kick (Störmer–Verlet) splitting of
+``H = T_trans + T_rot + V``::
+
+    v += (h/2) F/m ;  L += (h/2) τ                       half kick (forces of the previous eval.)
+    x += h v                                             translational drift
+    q  ← free rigid body flow over h (DLM splitting)      rotational drift, L (world) fixed
+    F, τ ← forces(x, q, v, ω)                            one contact evaluation per step
+    v += (h/2) F/m ;  L += (h/2) τ                       half kick
+
+Why this scheme
+---------------
+* Translation is velocity Verlet: symplectic, second order, time reversible, and **exact for a
+  constant force** (free fall: x = x0 + v0 t + g t²/2 to round-off).
+* Rotation: the torque-free motion of an asymmetric body (I1 < I2 < I3) is integrated by the
+  Dullweber–Leimkuhler–McLachlan (J. Chem. Phys. 107, 5840, 1997) splitting of the kinetic energy
+  in the principal frame, ``T = π1²/2I1 + π2²/2I2 + π3²/2I3`` (π = Qᵀ L the body angular
+  momentum).  Each term's flow is an *exact* rotation about one principal axis by the angle
+  h πi / Ii, composed symmetrically ``R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2)``.  Hence: the
+  orientation stays a rotation (unit quaternion), the spatial angular momentum L is conserved
+  exactly (we store L in the world frame and only the body frame moves), the kinetic energy has no
+  drift (bounded O(h²) error, symplectic), and the intermediate-axis instability is reproduced.
+  Torques enter as kicks of the world L, so the whole scheme is a symplectic splitting for
+  conservative forces.  (Explicit Euler or an RK on ω with a non-diagonal inertia would drift in
+  energy and in |L|.)
+* Velocity-dependent (damping) forces are evaluated with the half-step velocities v(n+1/2),
+  ω from L(n+1/2) at the new positions — the usual DEM choice (LAMMPS/LIGGGHTS).  Its stability
+  limit for a spring–dashpot is the digest's Δt_cr = (2/ω)(√(1+ζ²) − ζ), used by the time-step
+  control in :mod:`nurbsdem.dynamics.system`.
+
+All kernels are numba functions over (N,·) arrays, sequential, hence deterministic.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .rigid import quat_mul
+
+
+@njit(cache=True)
+def half_kick(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np.ndarray,
+              inv_mass: np.ndarray, hk: float) -> None:
+    """v += hk F/m, L += hk τ (in place) for the N particles (force/torque rows 0..N-1)."""
+    n = v.shape[0]
+    for i in range(n):
+        for k in range(3):
+            v[i, k] += hk * force[i, k] * inv_mass[i]
+            L[i, k] += hk * torque[i, k]
+
+
+@njit(cache=True)
+def _rotate_about_axis(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, axis: int, h: float,
+                       tmp: np.ndarray, out: np.ndarray) -> None:
+    """Exact flow of T_axis = π_axis²/(2 I_axis) over h: q ← q ⊗ exp(θ/2 e_axis), θ = h π_axis/I_axis.
+
+    π_axis = (Q e_axis)·L is the body-frame component of the world angular momentum L.
+    """
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    # column `axis` of Q(q)
+    if axis == 0:
+        c0, c1, c2 = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)
+    elif axis == 1:
+        c0, c1, c2 = 2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)
+    else:
+        c0, c1, c2 = 2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)
+    pi_k = c0 * L[0] + c1 * L[1] + c2 * L[2]
+    half = 0.5 * h * pi_k * inv_I[axis]
+    tmp[0] = math.cos(half)
+    tmp[1] = 0.0
+    tmp[2] = 0.0
+    tmp[3] = 0.0
+    tmp[1 + axis] = math.sin(half)
+    quat_mul(q, tmp, out)
+    q[0], q[1], q[2], q[3] = out[0], out[1], out[2], out[3]
+
+
+@njit(cache=True)
+def free_rotation(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float) -> None:
+    """DLM symmetric splitting R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2) for every body (in place);
+    the quaternion is renormalised afterwards (round-off only)."""
+    tmp = np.empty(4)
+    out = np.empty(4)
+    for i in range(q.shape[0]):
+        qi = q[i]
+        _rotate_about_axis(qi, L[i], inv_I[i], 0, 0.5 * h, tmp, out)
+        _rotate_about_axis(qi, L[i], inv_I[i], 1, 0.5 * h, tmp, out)
+        _rotate_about_axis(qi, L[i], inv_I[i], 2, h, tmp, out)
+        _rotate_about_axis(qi, L[i], inv_I[i], 1, 0.5 * h, tmp, out)
+        _rotate_about_axis(qi, L[i], inv_I[i], 0, 0.5 * h, tmp, out)
+        nrm = math.sqrt(qi[0] * qi[0] + qi[1] * qi[1] + qi[2] * qi[2] + qi[3] * qi[3])
+        for k in range(4):
+            qi[k] /= nrm
+
+
+@njit(cache=True)
+def drift(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, inv_I: np.ndarray,
+          h: float) -> None:
+    """x += h v and the free rotation over h (in place)."""
+    n = x.shape[0]
+    for i in range(n):
+        for k in range(3):
+            x[i, k] += h * v[i, k]
+    free_rotation(q, L, inv_I, h)
+
+
+@njit(cache=True)
+def kinetic_energies(mass: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray,
+                     inv_I: np.ndarray) -> tuple[float, float]:
+    """Translational ½ m v² and rotational ½ πᵀ I⁻¹ π (π = Qᵀ L) kinetic energies (J)."""
+    et = 0.0
+    er = 0.0
+    for i in range(v.shape[0]):
+        et += 0.5 * mass[i] * (v[i, 0] ** 2 + v[i, 1] ** 2 + v[i, 2] ** 2)
+        w, x, y, z = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
+        # π_k = column k of Q · L
+        p0 = (1.0 - 2.0 * (y * y + z * z)) * L[i, 0] + 2.0 * (x * y + w * z) * L[i, 1] \
+            + 2.0 * (x * z - w * y) * L[i, 2]
+        p1 = 2.0 * (x * y - w * z) * L[i, 0] + (1.0 - 2.0 * (x * x + z * z)) * L[i, 1] \
+            + 2.0 * (y * z + w * x) * L[i, 2]
+        p2 = 2.0 * (x * z + w * y) * L[i, 0] + 2.0 * (y * z - w * x) * L[i, 1] \
+            + (1.0 - 2.0 * (x * x + y * y)) * L[i, 2]
+        er += 0.5 * (p0 * p0 * inv_I[i, 0] + p1 * p1 * inv_I[i, 1] + p2 * p2 * inv_I[i, 2])
+    return et, er
+
+
+def state_is_finite(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray) -> bool:
+    """True when every state array is finite."""
+    return bool(np.isfinite(x).all() and np.isfinite(v).all() and np.isfinite(q).all()
+                and np.isfinite(L).all())

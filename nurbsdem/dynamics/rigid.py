@@ -1,0 +1,303 @@
+"""Rigid bodies (particles) and prescribed-motion bodies (walls, a lid).
+
+Particles
+---------
+State arrays over N bodies (SI units):
+
+* ``x`` (N,3) m — centroid position in the world frame;
+* ``q`` (N,4) — unit quaternion (w, x, y, z) of the *principal* frame: it maps principal-frame
+  vectors to the world, ``Q = quat_to_matrix(q)``;
+* ``v`` (N,3) m/s — centroid velocity;
+* ``L`` (N,3) kg m^2/s — angular momentum about the centroid in the world frame (the integrator's
+  rotational variable; the world angular velocity is ``omega = Q diag(1/I) Q^T L``).
+
+Mass data: ``mass`` (N,) kg; ``J0`` (N,3,3) kg m^2 — inertia about the centroid in the body's
+*file* frame (shape volume inertia × density, or given by the deck); it is diagonalised once,
+``J0 = P diag(I) P^T`` with ``I`` ascending and ``P`` a proper rotation (columns = principal axes
+in the file frame).  The file-frame rotation of the body (the pose's ``R``, DEVNOTES) is then
+``R = Q P^T``, and its pose position is ``x - R @ c`` with ``c`` the centroid in the file frame.
+
+Prescribed-motion bodies
+------------------------
+A wall moves by a translation ``d(t)`` (m) with velocity ``u(t)`` (m/s) given by a function of
+time (:class:`PrescribedMotion`); a fixed wall has ``d = u = 0``.  Walls do not rotate.  The
+solver computes the contact forces on them; the force that holds a wall on its path (its
+*reaction*) is minus the sum of the contact forces the particles exert on it, and the work done by
+it on the system is ``∫ reaction · u dt`` (see :mod:`nurbsdem.dynamics.energy`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from numba import njit
+
+from ..errors import InputError
+
+
+# --------------------------------------------------------------------------- quaternions
+@njit(cache=True)
+def quat_mul(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """Hamilton product ``out = a ⊗ b`` of quaternions (w, x, y, z); ``out`` may not alias."""
+    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
+    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
+    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
+    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+
+
+@njit(cache=True)
+def quat_to_matrix(q: np.ndarray, out: np.ndarray) -> None:
+    """Rotation matrix (3,3) of the unit quaternion q = (w, x, y, z) into ``out``."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[0, 1] = 2.0 * (x * y - w * z)
+    out[0, 2] = 2.0 * (x * z + w * y)
+    out[1, 0] = 2.0 * (x * y + w * z)
+    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[1, 2] = 2.0 * (y * z - w * x)
+    out[2, 0] = 2.0 * (x * z - w * y)
+    out[2, 1] = 2.0 * (y * z + w * x)
+    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
+def quats_to_matrices(q: np.ndarray) -> np.ndarray:
+    """(N,4) unit quaternions -> (N,3,3) rotation matrices."""
+    n = q.shape[0]
+    out = np.empty((n, 3, 3))
+    for i in range(n):
+        quat_to_matrix(q[i], out[i])
+    return out
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a proper rotation matrix (Shepperd's method)."""
+    R = np.asarray(R, dtype=float)
+    tr = np.trace(R)
+    q = np.empty(4)
+    if tr > 0:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q[:] = (0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s)
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q[:] = ((R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s)
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q[:] = ((R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q[:] = ((R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s)
+    if q[0] < 0:
+        q = -q
+    return q / np.linalg.norm(q)
+
+
+def principal_frame(J0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonalise a symmetric positive-definite inertia tensor: ``J0 = P diag(I) P^T``.
+
+    Returns ``I`` (3,) ascending (kg m^2) and ``P`` (3,3), a proper rotation (det +1) whose columns
+    are the principal axes in the file frame.  Raises InputError when J0 is not symmetric
+    positive definite.
+    """
+    J0 = np.asarray(J0, dtype=float)
+    if J0.shape != (3, 3) or not np.all(np.isfinite(J0)):
+        raise InputError(f"inertia tensor must be a finite 3x3 matrix, got shape {J0.shape}")
+    scale = float(np.max(np.abs(J0)))
+    if scale <= 0 or np.max(np.abs(J0 - J0.T)) > 1e-8 * scale:
+        raise InputError("inertia tensor must be symmetric and non-zero")
+    J0 = 0.5 * (J0 + J0.T)
+    I, P = np.linalg.eigh(J0)
+    if I[0] <= 0:
+        raise InputError(f"inertia tensor is not positive definite (eigenvalues {I})")
+    if I[0] + I[1] < I[2] * (1 - 1e-9):
+        raise InputError(f"principal moments {I} violate the triangle inequality")
+    if np.linalg.det(P) < 0:
+        P[:, 2] = -P[:, 2]
+    return I, P
+
+
+# --------------------------------------------------------------------------- particles
+class RigidBodies:
+    """Arrays over the N particles (see the module docstring for the meaning of each array)."""
+
+    def __init__(self) -> None:
+        self.mass = np.zeros(0)
+        self.J0 = np.zeros((0, 3, 3))
+        self.I = np.zeros((0, 3))          # principal moments, ascending (kg m^2)
+        self.P = np.zeros((0, 3, 3))       # principal axes in the file frame (columns)
+        self.centroid_file = np.zeros((0, 3))
+        self.material = np.zeros(0, dtype=np.int64)
+        self.radius = np.zeros(0)          # bounding radius about the centroid (m); 0 = unknown
+        self.x = np.zeros((0, 3))
+        self.q = np.zeros((0, 4))
+        self.v = np.zeros((0, 3))
+        self.L = np.zeros((0, 3))
+
+    @property
+    def n(self) -> int:
+        """Number of particles."""
+        return int(self.mass.shape[0])
+
+    def add(self, mass: float, J0: np.ndarray, x: np.ndarray, R: np.ndarray | None = None,
+            v: np.ndarray | None = None, omega: np.ndarray | None = None, material: int = 0,
+            centroid_file: np.ndarray | None = None, radius: float = 0.0) -> int:
+        """Append one particle; returns its index.
+
+        mass (kg); J0 (3,3) inertia about the centroid in the file frame (kg m^2);
+        x (3,) centroid in the world (m); R (3,3) file->world rotation (default identity);
+        v (3,) m/s; omega (3,) rad/s world angular velocity; material id; centroid_file (3,) m
+        (the centroid in the file frame; default 0); radius (m) bounding radius about the centroid
+        (used only by the time-step estimate).
+        """
+        if not (mass > 0 and math.isfinite(mass)):
+            raise InputError(f"particle mass must be positive, got {mass}")
+        I, P = principal_frame(J0)
+        R = np.eye(3) if R is None else np.asarray(R, dtype=float)
+        if abs(np.linalg.det(R) - 1) > 1e-6 or np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6:
+            raise InputError("particle rotation R must be a proper rotation matrix")
+        Q = R @ P                                  # principal -> world
+        q = matrix_to_quat(Q)
+        Qm = np.empty((3, 3))
+        quat_to_matrix(q, Qm)
+        omega = np.zeros(3) if omega is None else np.asarray(omega, dtype=float)
+        L = Qm @ (I * (Qm.T @ omega))
+        self.mass = np.append(self.mass, float(mass))
+        self.J0 = np.concatenate([self.J0, 0.5 * (np.asarray(J0, float) + np.asarray(J0, float).T)[None]])
+        self.I = np.concatenate([self.I, I[None]])
+        self.P = np.concatenate([self.P, P[None]])
+        c = np.zeros(3) if centroid_file is None else np.asarray(centroid_file, dtype=float)
+        self.centroid_file = np.concatenate([self.centroid_file, c[None]])
+        self.material = np.append(self.material, np.int64(material))
+        self.radius = np.append(self.radius, float(radius))
+        self.x = np.concatenate([self.x, np.asarray(x, dtype=float).reshape(1, 3)])
+        self.q = np.concatenate([self.q, q[None]])
+        self.v = np.concatenate([self.v, (np.zeros(3) if v is None else np.asarray(v, float)).reshape(1, 3)])
+        self.L = np.concatenate([self.L, L[None]])
+        return self.n - 1
+
+    # ---------------------------------------------------------------- derived kinematics
+    def principal_rotations(self) -> np.ndarray:
+        """(N,3,3) principal->world rotations Q."""
+        return quats_to_matrices(self.q)
+
+    def rotations(self) -> np.ndarray:
+        """(N,3,3) file->world rotations R = Q P^T (the pose rotation of DEVNOTES)."""
+        return np.einsum("nij,nkj->nik", self.principal_rotations(), self.P)
+
+    def pose_positions(self, R: np.ndarray | None = None) -> np.ndarray:
+        """(N,3) pose positions x - R c (m): where the file-frame origin is in the world."""
+        R = self.rotations() if R is None else R
+        return self.x - np.einsum("nij,nj->ni", R, self.centroid_file)
+
+    def omega(self) -> np.ndarray:
+        """(N,3) world angular velocity (rad/s) from L: omega = Q diag(1/I) Q^T L."""
+        return omega_world(self.q, self.L, 1.0 / self.I)
+
+    def world_inertia(self) -> np.ndarray:
+        """(N,3,3) inertia about the centroid in the world frame, Q diag(I) Q^T (kg m^2)."""
+        Q = self.principal_rotations()
+        return np.einsum("nij,nj,nkj->nik", Q, self.I, Q)
+
+
+@njit(cache=True)
+def omega_world(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray) -> np.ndarray:
+    """World angular velocity omega = Q diag(1/I) Q^T L for (N,4) q, (N,3) L, (N,3) 1/I."""
+    n = q.shape[0]
+    out = np.empty((n, 3))
+    Q = np.empty((3, 3))
+    for i in range(n):
+        quat_to_matrix(q[i], Q)
+        p0 = Q[0, 0] * L[i, 0] + Q[1, 0] * L[i, 1] + Q[2, 0] * L[i, 2]
+        p1 = Q[0, 1] * L[i, 0] + Q[1, 1] * L[i, 1] + Q[2, 1] * L[i, 2]
+        p2 = Q[0, 2] * L[i, 0] + Q[1, 2] * L[i, 1] + Q[2, 2] * L[i, 2]
+        w0, w1, w2 = p0 * inv_I[i, 0], p1 * inv_I[i, 1], p2 * inv_I[i, 2]
+        for k in range(3):
+            out[i, k] = Q[k, 0] * w0 + Q[k, 1] * w1 + Q[k, 2] * w2
+    return out
+
+
+# --------------------------------------------------------------------------- walls
+MotionFunction = Callable[[float], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass
+class PrescribedMotion:
+    """Translation of a wall as a function of time: ``f(t) -> (d (3,) m, u (3,) m/s)``.
+
+    Use :meth:`fixed`, :meth:`linear` or :meth:`piecewise_linear`, or pass any callable (it must
+    be deterministic and consistent: u = dd/dt).
+    """
+
+    function: MotionFunction | None = None
+
+    def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.function is None:
+            return np.zeros(3), np.zeros(3)
+        d, u = self.function(float(t))
+        return np.asarray(d, dtype=float).reshape(3), np.asarray(u, dtype=float).reshape(3)
+
+    @staticmethod
+    def fixed() -> "PrescribedMotion":
+        """A wall that does not move."""
+        return PrescribedMotion(None)
+
+    @staticmethod
+    def linear(velocity: np.ndarray, t0: float = 0.0) -> "PrescribedMotion":
+        """d = u (t - t0) for t > t0 (0 before), constant velocity u (m/s) after t0."""
+        u = np.asarray(velocity, dtype=float).reshape(3)
+
+        def f(t: float):
+            if t <= t0:
+                return np.zeros(3), np.zeros(3)
+            return u * (t - t0), u.copy()
+        return PrescribedMotion(f)
+
+    @staticmethod
+    def piecewise_linear(times, displacements) -> "PrescribedMotion":
+        """Displacement interpolated linearly between (time, displacement (3,)) knots; held
+        constant outside (velocity 0).  E.g. the paper's lid: [0, 1, 2] s, [0, -0.08 ez, 0]."""
+        ts = np.asarray(times, dtype=float)
+        ds = np.asarray(displacements, dtype=float).reshape(len(ts), 3)
+        if np.any(np.diff(ts) <= 0):
+            raise InputError("piecewise-linear motion: times must increase")
+
+        def f(t: float):
+            if t <= ts[0]:
+                return ds[0].copy(), np.zeros(3)
+            if t >= ts[-1]:
+                return ds[-1].copy(), np.zeros(3)
+            k = int(np.searchsorted(ts, t, side="right")) - 1
+            s = (t - ts[k]) / (ts[k + 1] - ts[k])
+            u = (ds[k + 1] - ds[k]) / (ts[k + 1] - ts[k])
+            return ds[k] + s * (ds[k + 1] - ds[k]), u
+        return PrescribedMotion(f)
+
+
+class Walls:
+    """W prescribed-motion bodies, global indices N..N+W-1 in a ContactSet."""
+
+    def __init__(self) -> None:
+        self.motions: list[PrescribedMotion] = []
+        self.material = np.zeros(0, dtype=np.int64)
+        self.names: list[str] = []
+
+    @property
+    def n(self) -> int:
+        return len(self.motions)
+
+    def add(self, motion: PrescribedMotion | None = None, material: int = 0, name: str = "") -> int:
+        """Append a wall (fixed when motion is None); returns its wall index (0-based)."""
+        self.motions.append(motion if motion is not None else PrescribedMotion.fixed())
+        self.material = np.append(self.material, np.int64(material))
+        self.names.append(name or f"wall{self.n - 1}")
+        return self.n - 1
+
+    def kinematics(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(W,3) displacements (m) and (W,3) velocities (m/s) at time t (s)."""
+        d = np.zeros((self.n, 3))
+        u = np.zeros((self.n, 3))
+        for k, m in enumerate(self.motions):
+            d[k], u[k] = m(t)
+        return d, u

@@ -1,0 +1,403 @@
+"""The simulation model read from an input deck (see :mod:`nurbsdem.io.deck`).
+
+Plain dataclasses, SI units throughout (m, kg, s, N). Every entry remembers the deck
+line it came from (``line``) so later stages (placement, the solver) can raise
+:class:`~nurbsdem.errors.InputError` pointing at it: ``model.error(msg, line)``.
+
+Identifiers
+-----------
+* Particle ids are body numbers: ``Particle 15`` is body 15; ``Random 1 ... Counts 5 3 6``
+  makes bodies 1..14 (its id is the id of its first body, then consecutive, in the order of
+  its ``Shapes`` list). Ids never overlap.
+* Wall ids likewise: ``Box 1`` makes walls 1..5 (``bottom, x_min, x_max, y_min, y_max``;
+  6 with ``Top yes``: ``top``), ``Wall 6 Name lid`` is wall 6. Walls are referred to by name.
+
+Mass properties
+---------------
+A body of shape S and material M has mass ``density * volume`` and mass inertia about its
+centroid ``density * S.inertia`` (file frame) unless the shape entry overrides them:
+``Volume V`` (m^3) replaces the volume; ``Inertia Jxx Jyy Jzz Jxy Jxz Jyz`` gives the MASS
+inertia tensor in kg m^2 about the centroid, file frame, as tensor components (the matrix
+``[[Jxx, Jxy, Jxz], [Jxy, Jyy, Jyz], [Jxz, Jyz, Jzz]]``, i.e. products of inertia already
+carry their minus sign, like the paper's Table 1). An ``Inertia`` override is used as is
+for every body of that shape, whatever its material (it is a property of the physical
+particle, like the companion file of the authors' code).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .errors import InputError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .geometry.nurbs import Patch
+    from .geometry.shape import Shape
+    from .placement import Bodies
+
+#: Pair kinds a contact interface may be restricted to.
+PAIR_KINDS = ("particle-particle", "particle-wall")
+
+
+@dataclass
+class Material:
+    """``Material ID Density RHO``: density in kg/m^3."""
+
+    id: int
+    density: float
+    line: int = 0
+
+
+@dataclass
+class ShapeEntry:
+    """``Shape ID File PATH`` | ``Sphere Radius R`` | ``Ellipsoid SemiAxes A B C`` (m),
+    optionally ``Volume V`` (m^3) and ``Inertia Jxx Jyy Jzz Jxy Jxz Jyz`` (kg m^2, mass
+    inertia about the centroid, file frame; see the module docstring).
+
+    Attributes
+    ----------
+    kind: ``"file"``, ``"sphere"`` or ``"ellipsoid"``.
+    source: the file as written in the deck (``kind == "file"``), else ``None``.
+    file: the resolved file path, else ``None``.
+    params: the generator's parameters (m): ``(R,)`` or ``(A, B, C)``.
+    shape: the loaded :class:`~nurbsdem.geometry.shape.Shape` (file frame).
+    volume_override: m^3 or ``None``.  inertia_override: (3, 3) kg m^2 or ``None``.
+    """
+
+    id: int
+    kind: str
+    shape: "Shape"
+    source: str | None = None
+    file: Path | None = None
+    params: tuple[float, ...] = ()
+    volume_override: float | None = None
+    inertia_override: np.ndarray | None = None
+    line: int = 0
+
+    @property
+    def name(self) -> str:
+        """A label: the shape file's ``name``, else the generator description."""
+        if self.shape.name:
+            return str(self.shape.name)
+        return self.source or self.kind
+
+    @property
+    def volume(self) -> float:
+        """Volume (m^3): the override if given, else the shape's."""
+        return float(self.volume_override if self.volume_override is not None
+                     else self.shape.volume)
+
+    @property
+    def centroid(self) -> np.ndarray:
+        """Centroid in the file frame (m)."""
+        return np.asarray(self.shape.centroid, float)
+
+    @property
+    def bounding_radius(self) -> float:
+        """Bounding-sphere radius about the centroid (m), paper Eq. 3."""
+        return float(self.shape.bounding_radius)
+
+    def mass(self, density: float) -> float:
+        """Mass (kg) of a body of this shape with the given density (kg/m^3)."""
+        return float(density) * self.volume
+
+    def mass_inertia(self, density: float) -> np.ndarray:
+        """Mass inertia tensor (3, 3) about the centroid, file frame, kg m^2.
+
+        The ``Inertia`` override if given (independent of density), else
+        ``density * shape.inertia``, scaled by ``volume_override / shape.volume`` when only
+        the volume is overridden (so mass and inertia stay consistent).
+        """
+        if self.inertia_override is not None:
+            return np.array(self.inertia_override, float)
+        scale = self.volume / float(self.shape.volume)
+        return float(density) * scale * np.asarray(self.shape.inertia, float)
+
+
+@dataclass
+class RandomGroup:
+    """``Random ID Shapes S1 S2.. Counts N1 N2.. Material M Region x0 y0 z0 x1 y1 z1 Seed K``.
+
+    Bodies ``id .. id + total - 1`` are placed at random (see :mod:`nurbsdem.placement`):
+    counts[i] bodies of shape shape_ids[i], in that order. Region in m.
+    """
+
+    id: int
+    shape_ids: tuple[int, ...]
+    counts: tuple[int, ...]
+    material_id: int
+    region_lo: np.ndarray
+    region_hi: np.ndarray
+    seed: int = 0
+    max_attempts: int = 20000
+    line: int = 0
+
+    @property
+    def total(self) -> int:
+        """Number of bodies in the group."""
+        return int(sum(self.counts))
+
+    @property
+    def ids(self) -> range:
+        """The body ids of the group."""
+        return range(self.id, self.id + self.total)
+
+
+@dataclass
+class ParticleSpec:
+    """``Particle ID Shape S Material M Position x y z [Rotation rx ry rz]
+    [Velocity vx vy vz] [AngularVelocity wx wy wz]``.
+
+    position: the centroid in the world (m). rotation: rotation vector (rad) of the file frame
+    relative to the world. velocity (m/s) and angular_velocity (rad/s): world frame.
+    """
+
+    id: int
+    shape_id: int
+    material_id: int
+    position: np.ndarray
+    rotation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    angular_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    line: int = 0
+
+
+@dataclass
+class WallSpec:
+    """One wall: a NURBS patch in the world (its normal S_u x S_v points to the particles side).
+
+    Made by ``Box ID Min x y z Max x y z [Top yes|no]`` (names bottom, x_min, x_max, y_min,
+    y_max [, top]) or ``Wall ID Name N Point x y z Normal nx ny nz Size Lu Lv
+    [Axis ax ay az]`` (a flat rectangle centred at Point, m).
+    """
+
+    id: int
+    name: str
+    patch: "Patch"
+    kind: str = "wall"
+    line: int = 0
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal at the patch's parametric centre (towards the particles)."""
+        u0, u1, v0, v1 = self.patch.domain
+        return np.asarray(self.patch.normals(0.5 * (u0 + u1), 0.5 * (v0 + v1)), float)
+
+    @property
+    def center(self) -> np.ndarray:
+        """Point at the patch's parametric centre (m)."""
+        u0, u1, v0, v1 = self.patch.domain
+        return np.asarray(self.patch.points(0.5 * (u0 + u1), 0.5 * (v0 + v1)), float)
+
+
+@dataclass
+class Interface:
+    """``Interface ID NormalPenalty en [TangentialPenalty et] [NormalDamping cn]
+    [TangentialDamping ct] [Friction mu] [Between particle-particle|particle-wall]
+    [Materials m1 m2 | Materials m]``  (paper Eqs. 16-17).
+
+    normal_penalty (N/m), tangential_penalty (N/m), normal_damping (N s/m),
+    tangential_damping (N s/m), friction (Coulomb coefficient, -).
+    between: ``None`` (all pairs) or one of :data:`PAIR_KINDS`.
+    materials: ``None`` (any), ``(m1, m2)`` (particle-particle pairs of these materials,
+    unordered) or ``(m,)`` (particle-wall pairs whose particle has material m).
+    """
+
+    id: int
+    normal_penalty: float
+    tangential_penalty: float = 0.0
+    normal_damping: float = 0.0
+    tangential_damping: float = 0.0
+    friction: float = 0.0
+    between: str | None = None
+    materials: tuple[int, ...] | None = None
+    line: int = 0
+
+    def applies(self, kind: str, materials: tuple[int, ...]) -> bool:
+        """Whether this interface covers a pair of the given kind and material ids
+        (``(ma, mb)`` for particle-particle, ``(m,)`` for particle-wall)."""
+        if self.between is not None and self.between != kind:
+            return False
+        if self.materials is None:
+            return True
+        if len(self.materials) != len(materials):
+            return False
+        return sorted(self.materials) == sorted(materials)
+
+
+@dataclass
+class Step:
+    """Base of the solution steps (run in deck order). ``kind`` names the step type."""
+
+    id: int
+    line: int
+
+    kind = "step"
+
+    @property
+    def duration_s(self) -> float:
+        """Simulated time the step takes (s); 0 for instantaneous steps."""
+        return float(getattr(self, "duration", 0.0) or 0.0)
+
+
+@dataclass
+class DynamicStep(Step):
+    """``Step ID Dynamic Duration T TimeStep DT``: integrate T seconds with initial step DT (s)."""
+
+    duration: float = 0.0
+    time_step: float = 0.0
+    kind = "dynamic"
+
+
+@dataclass
+class ReplicateStep(Step):
+    """``Step ID Replicate Layers L Height H``: instantaneous; the current particles become
+    layer 0 and copies shifted up by k * H / L (k = 1..L-1) are added; all velocities are
+    zeroed (see :func:`nurbsdem.placement.replicate_layers`). H in m."""
+
+    layers: int = 1
+    height: float = 0.0
+    kind = "replicate"
+
+
+@dataclass
+class MoveWallStep(Step):
+    """``Step ID MoveWall NAME ...`` — two forms:
+
+    * ``ToContact [Gap g] [Direction dx dy dz]``: instantaneous; translate the wall along
+      ``direction`` (default: its normal, i.e. towards the particles) until its distance to
+      the nearest particle is ``gap`` (m, default 0). No time passes.
+    * ``Displacement dx dy dz Duration T TimeStep DT``: the wall translates by the given
+      vector (m) at constant velocity over T seconds while the particles move (a dynamic
+      step with a prescribed wall motion).
+    """
+
+    wall: str = ""
+    to_contact: bool = False
+    gap: float = 0.0
+    direction: np.ndarray | None = None
+    displacement: np.ndarray | None = None
+    duration: float = 0.0
+    time_step: float = 0.0
+    kind = "movewall"
+
+
+@dataclass
+class Output:
+    """``Output`` block, with its defaults.
+
+    directory: results folder (``results`` next to the deck).
+    vtk_every (s), vtk_resolution (quads per patch direction), monitors_every (s),
+    results_every (s; samples of ``results.h5``, default = vtk_every),
+    checkpoint_every (s of simulated time).
+    """
+
+    directory: Path
+    vtk_every: float = 0.01
+    vtk_resolution: int = 8
+    monitors_every: float = 1e-3
+    results_every: float | None = None
+    checkpoint_every: float = 0.1
+
+    @property
+    def results_interval(self) -> float:
+        """Sampling interval of results.h5 (s)."""
+        return float(self.results_every if self.results_every is not None else self.vtk_every)
+
+
+@dataclass
+class Model:
+    """Everything an input deck defines.
+
+    Attributes
+    ----------
+    path: the deck as the user named it (used in error messages).
+    text: the deck's text (stored as an attribute of results.h5).
+    gravity: (3,) m/s^2.
+    materials, shapes: dicts id -> entry.
+    random_groups, particles: particle definitions (ids do not overlap).
+    walls: list of :class:`WallSpec` in id order.
+    interfaces: contact interfaces in deck order (later ones override earlier ones).
+    steps: solution steps in deck order.
+    output: :class:`Output`.
+    bodies: the initial particle state (:class:`nurbsdem.placement.Bodies`), filled by
+        :func:`nurbsdem.io.deck.parse_deck` (``place=True``).
+    """
+
+    path: str
+    text: str
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    materials: dict[int, Material] = field(default_factory=dict)
+    shapes: dict[int, ShapeEntry] = field(default_factory=dict)
+    random_groups: list[RandomGroup] = field(default_factory=list)
+    particles: list[ParticleSpec] = field(default_factory=list)
+    walls: list[WallSpec] = field(default_factory=list)
+    interfaces: list[Interface] = field(default_factory=list)
+    steps: list[Step] = field(default_factory=list)
+    output: Output | None = None
+    bodies: "Bodies | None" = None
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def directory(self) -> Path:
+        """The folder of the deck (relative paths in the deck are relative to it)."""
+        return Path(self.path).resolve().parent
+
+    def error(self, message: str, line: int | None = None) -> InputError:
+        """An :class:`InputError` located in the deck (``raise model.error(...)``)."""
+        return InputError(message, path=self.path, line=line)
+
+    def wall(self, name: str) -> WallSpec:
+        """The wall of that name (KeyError if none)."""
+        for w in self.walls:
+            if w.name == name:
+                return w
+        raise KeyError(name)
+
+    @property
+    def wall_names(self) -> list[str]:
+        """Wall names in id order."""
+        return [w.name for w in self.walls]
+
+    @property
+    def particle_count(self) -> int:
+        """Number of particles defined by the deck (before any Replicate)."""
+        return sum(g.total for g in self.random_groups) + len(self.particles)
+
+    @property
+    def total_time(self) -> float:
+        """Simulated time of all steps (s)."""
+        return float(sum(s.duration_s for s in self.steps))
+
+    def interface(self, kind: str, materials: tuple[int, ...] = ()) -> Interface | None:
+        """The contact interface of a pair: the last entry that applies.
+
+        kind: ``"particle-particle"`` (materials = (ma, mb)) or ``"particle-wall"``
+        (materials = (m,) of the particle). ``None`` if no entry applies.
+        """
+        if kind not in PAIR_KINDS:
+            raise ValueError(f"kind must be one of {PAIR_KINDS}")
+        found = None
+        for itf in self.interfaces:
+            if itf.applies(kind, tuple(materials)):
+                found = itf
+        return found
+
+    def particle_materials(self) -> set[int]:
+        """Material ids used by particles."""
+        return {g.material_id for g in self.random_groups} | {p.material_id for p in self.particles}
+
+    # ------------------------------------------------------------------ summary
+    def summary(self) -> str:
+        """A human-readable description (printed by ``nurbsdem check``)."""
+        from .io.deck import summary_text
+        return summary_text(self)
+
+    def as_dict(self) -> dict[str, Any]:
+        """A few headline numbers (for logs and tests)."""
+        return {"particles": self.particle_count, "walls": len(self.walls),
+                "shapes": len(self.shapes), "steps": len(self.steps),
+                "total_time": self.total_time}

@@ -1,0 +1,452 @@
+"""Initial particle placement, layer replication, and the body-state container.
+
+* :class:`Bodies` — arrays over N particles: deck id, shape id, material id, centroid
+  position (m, world), orientation quaternion, velocity (m/s), angular velocity (rad/s).
+* :func:`initial_bodies` — the deck's ``Particle`` and ``Random`` entries as a
+  :class:`Bodies` (sorted by id).
+* :func:`place_random_group` — ``Random`` groups: uniform positions inside the region (the
+  whole bounding sphere inside the region box), uniform random orientations, no two
+  bounding spheres overlapping (conservative), reproducible from the seed
+  (``numpy.random.default_rng(seed)``), largest bodies first.
+* :func:`replicate_layers` — the ``Replicate`` step.
+
+Orientation convention: unit quaternion ``q = (w, x, y, z)`` (scalar first) whose rotation
+matrix ``R`` maps the shape's file frame to the world; a body's surface point is
+``x_world = position + R @ (x_file - centroid_file)`` where ``position`` is the centroid in
+the world (see docs/DEVNOTES.md: pose position = position - R @ centroid_file).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+import weakref
+from typing import TYPE_CHECKING, Mapping, Sequence
+
+import numpy as np
+
+from .errors import InputError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .geometry.shape import Shape
+    from .model import Model, RandomGroup, ReplicateStep, ShapeEntry
+
+# ---------------------------------------------------------------------------- rotations
+
+
+def quat_from_rotvec(rv: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) (w, x, y, z) of rotation vectors (..., 3) (rad)."""
+    rv = np.asarray(rv, float)
+    angle = np.linalg.norm(rv, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    # sin(a/2)/a, with its series near 0
+    k = np.where(angle > 1e-8, np.sin(half) / np.where(angle > 1e-8, angle, 1.0),
+                 0.5 - angle ** 2 / 48.0)
+    return np.concatenate([np.cos(half), k * rv], axis=-1)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) (w, x, y, z); normalised first."""
+    q = np.asarray(q, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) (w, x, y, z), w >= 0, of rotation matrices (..., 3, 3)."""
+    R = np.asarray(R, float)
+    flat = R.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for i, m in enumerate(flat):
+        tr = m[0, 0] + m[1, 1] + m[2, 2]
+        if tr > 0:
+            s = 2.0 * np.sqrt(tr + 1.0)
+            q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+        elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+            s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+            q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+        elif m[1, 1] > m[2, 2]:
+            s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+            q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+        else:
+            s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+            q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+        q = np.array(q)
+        q /= np.linalg.norm(q)
+        out[i] = q if q[0] >= 0 else -q
+    return out.reshape(R.shape[:-2] + (4,))
+
+
+def random_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n uniformly distributed random rotations (Haar measure) as unit quaternions (n, 4):
+    normalised 4-D standard normal vectors, sign fixed so that w >= 0."""
+    q = rng.standard_normal((n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 0] < 0] *= -1.0
+    return q
+
+
+# ---------------------------------------------------------------------------- bodies
+
+
+@dataclass
+class Bodies:
+    """The state of N particles (arrays, row i = one body).
+
+    id, shape_id, material_id, line: int64 (N,) — deck body id, shape id, material id, and
+    the deck line that defined it. position: (N, 3) centroid, world, m. quaternion: (N, 4)
+    (w, x, y, z). velocity: (N, 3) m/s, angular_velocity: (N, 3) rad/s, world frame.
+    """
+
+    id: np.ndarray
+    shape_id: np.ndarray
+    material_id: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    line: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("id", "shape_id", "material_id", "line"):
+            setattr(self, name, np.asarray(getattr(self, name), np.int64).reshape(-1))
+        for name, k in (("position", 3), ("quaternion", 4), ("velocity", 3),
+                        ("angular_velocity", 3)):
+            setattr(self, name, np.asarray(getattr(self, name), float).reshape(-1, k))
+
+    def __len__(self) -> int:
+        return int(self.id.shape[0])
+
+    @classmethod
+    def empty(cls) -> "Bodies":
+        """No bodies."""
+        z = np.zeros(0, np.int64)
+        return cls(z, z, z, np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)),
+                   np.zeros((0, 3)), z)
+
+    def rotation_matrices(self) -> np.ndarray:
+        """(N, 3, 3) file-to-world rotation matrices."""
+        return quat_to_matrix(self.quaternion) if len(self) else np.zeros((0, 3, 3))
+
+    def copy(self) -> "Bodies":
+        """A deep copy."""
+        return Bodies(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    def take(self, index) -> "Bodies":
+        """The bodies at ``index`` (array of indices or boolean mask)."""
+        return Bodies(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    @staticmethod
+    def concatenate(parts: Sequence["Bodies"]) -> "Bodies":
+        """All bodies of ``parts``, in order."""
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Bodies.empty()
+        return Bodies(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                         for f in fields(Bodies)})
+
+    def sorted_by_id(self) -> "Bodies":
+        """The bodies in increasing id order."""
+        return self.take(np.argsort(self.id, kind="stable"))
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        """The arrays by field name (e.g. for a checkpoint)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, np.ndarray]) -> "Bodies":
+        """Inverse of :meth:`as_dict`."""
+        return cls(**{f.name: np.asarray(d[f.name]) for f in fields(cls)})
+
+
+# ---------------------------------------------------------------------------- overlap test
+
+_SAMPLES_PER_PATCH_DIRECTION = 8
+
+
+@dataclass
+class _Sampled:
+    """A shape's surface samples and their convex hull, file frame, relative to the centroid."""
+
+    points: np.ndarray      # (M, 3)
+    equations: np.ndarray   # (F, 4): n . x + d <= 0 inside
+    radius: float           # bounding radius (m)
+
+
+_SAMPLE_CACHE: "weakref.WeakKeyDictionary[Shape, _Sampled]" = weakref.WeakKeyDictionary()
+
+
+def _sampled(shape: "Shape") -> _Sampled:
+    """Surface samples and hull of a shape (cached per Shape object)."""
+    hit = _SAMPLE_CACHE.get(shape)
+    if hit is not None:
+        return hit
+    from scipy.spatial import ConvexHull
+
+    try:
+        from .geometry.tessellate import tessellate_shape
+        pts, _, _ = tessellate_shape(shape, _SAMPLES_PER_PATCH_DIRECTION)
+    except ImportError:  # pragma: no cover - fallback: uniform parameter grid
+        pts = _grid_samples(shape, _SAMPLES_PER_PATCH_DIRECTION)
+    pts = np.asarray(pts, float) - np.asarray(shape.centroid, float)
+    pts = np.unique(np.round(pts, 15), axis=0)
+    hull = ConvexHull(pts)
+    out = _Sampled(pts, hull.equations, float(shape.bounding_radius))
+    _SAMPLE_CACHE[shape] = out
+    return out
+
+
+def _grid_samples(shape: "Shape", n: int) -> np.ndarray:
+    out = []
+    for p in shape.patches:
+        u0, u1, v0, v1 = p.domain
+        U, V = np.meshgrid(np.linspace(u0, u1, n + 1), np.linspace(v0, v1, n + 1), indexing="ij")
+        out.append(p.points(U, V).reshape(-1, 3))
+    return np.concatenate(out)
+
+
+def _points_inside(points: np.ndarray, equations: np.ndarray, tol: float) -> bool:
+    """Whether any point lies strictly inside the hull (by more than tol)."""
+    d = points @ equations[:, :3].T + equations[:, 3]
+    return bool(np.any(np.all(d < -tol, axis=1)))
+
+
+def bodies_overlap(shape_a: "Shape", pos_a, R_a, shape_b: "Shape", pos_b, R_b) -> bool:
+    """Whether two bodies overlap, by surface samples: a sampled point of one strictly inside
+    the convex hull of the other's samples (that hull lies inside the convex body, so there
+    are no false alarms; overlaps shallower than the sampling's chord error may be missed).
+
+    pos_*: centroids in the world (m); R_*: (3, 3) file-to-world rotations.
+    """
+    sa, sb = _sampled(shape_a), _sampled(shape_b)
+    pos_a, pos_b = np.asarray(pos_a, float), np.asarray(pos_b, float)
+    if np.linalg.norm(pos_a - pos_b) >= sa.radius + sb.radius:
+        return False
+    tol = 1e-9 * max(sa.radius, sb.radius)
+    wa = pos_a + sa.points @ np.asarray(R_a).T
+    wb = pos_b + sb.points @ np.asarray(R_b).T
+    in_b = (wa - pos_b) @ np.asarray(R_b)   # A's samples in B's centroid frame
+    if _points_inside(in_b, sb.equations, tol):
+        return True
+    in_a = (wb - pos_a) @ np.asarray(R_a)
+    return _points_inside(in_a, sa.equations, tol)
+
+
+def first_overlap(bodies: Bodies, shapes: Mapping[int, "Shape"],
+                  candidates: Sequence[int] | None = None,
+                  others: Sequence[int] | None = None) -> tuple[int, int] | None:
+    """The first pair (i, j) of overlapping bodies (indices into ``bodies``), or None.
+
+    candidates, others: restrict the test to pairs (i in candidates, j in others, i != j);
+    by default all pairs i < j.
+    """
+    R = bodies.rotation_matrices()
+    n = len(bodies)
+    if others is None:
+        cand = range(n) if candidates is None else candidates
+        pairs = ((i, j) for i in cand for j in range(i + 1, n))
+    else:
+        cand = range(n) if candidates is None else candidates
+        pairs = ((i, j) for i in cand for j in others if j != i)
+    for i, j in pairs:
+        if bodies_overlap(shapes[int(bodies.shape_id[i])], bodies.position[i], R[i],
+                          shapes[int(bodies.shape_id[j])], bodies.position[j], R[j]):
+            return int(i), int(j)
+    return None
+
+
+# ---------------------------------------------------------------------------- placement
+
+
+def _shape_map(model: "Model") -> dict[int, "Shape"]:
+    return {sid: e.shape for sid, e in model.shapes.items()}
+
+
+def explicit_bodies(model: "Model") -> Bodies:
+    """The deck's ``Particle`` entries as :class:`Bodies` (deck order)."""
+    ps = model.particles
+    if not ps:
+        return Bodies.empty()
+    return Bodies(
+        id=[p.id for p in ps], shape_id=[p.shape_id for p in ps],
+        material_id=[p.material_id for p in ps],
+        position=np.array([p.position for p in ps]),
+        quaternion=quat_from_rotvec(np.array([p.rotation for p in ps])),
+        velocity=np.array([p.velocity for p in ps]),
+        angular_velocity=np.array([p.angular_velocity for p in ps]),
+        line=[p.line for p in ps])
+
+
+def check_explicit_overlaps(model: "Model", bodies: Bodies) -> None:
+    """Raise ``deck:LINE: particle I overlaps particle J`` for the first overlapping pair
+    of explicit bodies (LINE is the later of the two entries)."""
+    hit = first_overlap(bodies, _shape_map(model))
+    if hit is None:
+        return
+    i, j = hit
+    a, b = (i, j) if bodies.line[i] >= bodies.line[j] else (j, i)
+    raise model.error(f"particle {bodies.id[a]} overlaps particle {bodies.id[b]}",
+                      int(bodies.line[a]))
+
+
+def place_random_group(model: "Model", group: "RandomGroup",
+                       obstacles: tuple[np.ndarray, np.ndarray]) -> Bodies:
+    """Place one ``Random`` group.
+
+    Parameters
+    ----------
+    obstacles: (centres (K, 3), radii (K,)) of bounding spheres already placed (m).
+
+    Each body is tried up to ``group.max_attempts`` times at a uniform position with its
+    bounding sphere inside the region and clear of every bounding sphere placed so far;
+    larger bodies are placed first. Bodies get ids ``group.id ..`` in ``Shapes`` order,
+    velocities zero. Raises :class:`InputError` at the group's line when that fails.
+    """
+    rng = np.random.default_rng(group.seed)
+    shape_ids = np.repeat(np.array(group.shape_ids, np.int64), group.counts)
+    n = len(shape_ids)
+    radii = np.array([model.shapes[int(s)].bounding_radius for s in shape_ids])
+    lo, hi = np.asarray(group.region_lo, float), np.asarray(group.region_hi, float)
+    for sid, r in zip(group.shape_ids, [model.shapes[s].bounding_radius for s in group.shape_ids]):
+        if np.any(hi - lo < 2 * r):
+            raise model.error(f"Random {group.id}: the region is too small for shape {sid} "
+                              f"(bounding radius {r:.4g} m needs at least {2 * r:.4g} m in "
+                              f"each direction)", group.line)
+    centres = list(np.asarray(obstacles[0], float).reshape(-1, 3))
+    rads = list(np.asarray(obstacles[1], float).reshape(-1))
+    position = np.zeros((n, 3))
+    quats = random_quaternions(rng, n)
+    order = np.argsort(-radii, kind="stable")
+    for placed, k in enumerate(order):
+        r = radii[k]
+        C = np.array(centres).reshape(-1, 3)
+        Rs = np.array(rads)
+        for _ in range(group.max_attempts):
+            c = rng.uniform(lo + r, hi - r)
+            if C.shape[0] == 0 or np.all(np.linalg.norm(C - c, axis=1) >= Rs + r):
+                break
+        else:
+            raise model.error(
+                f"Random {group.id}: could not place particle {group.id + k} (shape "
+                f"{shape_ids[k]}) without overlap after {group.max_attempts} attempts "
+                f"({placed} of {n} placed); enlarge Region or reduce Counts", group.line)
+        position[k] = c
+        centres.append(c)
+        rads.append(r)
+    z = np.zeros((n, 3))
+    return Bodies(id=np.arange(group.id, group.id + n), shape_id=shape_ids,
+                  material_id=np.full(n, group.material_id), position=position,
+                  quaternion=quats, velocity=z, angular_velocity=z.copy(),
+                  line=np.full(n, group.line))
+
+
+def initial_bodies(model: "Model") -> Bodies:
+    """All particles of the deck, sorted by id: explicit ``Particle`` bodies (checked for
+    overlap with each other by :func:`bodies_overlap`), then each ``Random`` group placed
+    around them (bounding spheres). Raises :class:`InputError` with the deck line."""
+    explicit = explicit_bodies(model)
+    check_explicit_overlaps(model, explicit)
+    parts = [explicit]
+    centres = explicit.position.copy()
+    radii = np.array([model.shapes[int(s)].bounding_radius for s in explicit.shape_id])
+    for g in model.random_groups:
+        b = place_random_group(model, g, (centres, radii))
+        parts.append(b)
+        centres = np.concatenate([centres, b.position])
+        radii = np.concatenate([radii, [model.shapes[int(s)].bounding_radius for s in b.shape_id]])
+    return Bodies.concatenate(parts).sorted_by_id()
+
+
+# ---------------------------------------------------------------------------- replicate
+
+
+def replicate_layers(bodies: Bodies, layers: int, height: float,
+                     axis: Sequence[float] = (0.0, 0.0, 1.0)) -> Bodies:
+    """Stack copies of the current particles (the ``Replicate`` step).
+
+    The current bodies are layer 0 and stay where they are; layer k = 1 .. layers-1 is a
+    copy shifted by ``k * height / layers`` along ``axis`` (default +z): the stack occupies
+    ``height`` (m), one slot of ``height / layers`` per layer. Copies keep the orientations
+    and shapes; their ids continue after the largest current id, layer by layer in the
+    current body order. All velocities (including layer 0's) are zeroed. So 14 bodies with
+    layers = 8 become 112.
+    """
+    if layers < 1:
+        raise ValueError("layers must be >= 1")
+    dz = float(height) / layers
+    ax = np.asarray(axis, float)
+    ax = ax / np.linalg.norm(ax)
+    n = len(bodies)
+    base = bodies.copy()
+    base.velocity[:] = 0.0
+    base.angular_velocity[:] = 0.0
+    parts = [base]
+    next_id = int(base.id.max()) + 1 if n else 1
+    for k in range(1, layers):
+        c = base.copy()
+        c.position = c.position + k * dz * ax
+        c.id = np.arange(next_id, next_id + n, dtype=np.int64)
+        next_id += n
+        parts.append(c)
+    return Bodies.concatenate(parts)
+
+
+def layer_thickness(bodies: Bodies, shapes: Mapping[int, "Shape"],
+                    axis: Sequence[float] = (0.0, 0.0, 1.0)) -> float:
+    """Extent (m) of the bodies along ``axis``, from their sampled surfaces."""
+    if not len(bodies):
+        return 0.0
+    ax = np.asarray(axis, float) / np.linalg.norm(axis)
+    R = bodies.rotation_matrices()
+    lo, hi = np.inf, -np.inf
+    for i in range(len(bodies)):
+        s = _sampled(shapes[int(bodies.shape_id[i])])
+        h = bodies.position[i] @ ax + s.points @ (R[i].T @ ax)
+        lo, hi = min(lo, h.min()), max(hi, h.max())
+    return float(hi - lo)
+
+
+def replicate_step(model: "Model", bodies: Bodies, step: "ReplicateStep") -> Bodies:
+    """:func:`replicate_layers` for a deck step, refusing copies that would overlap.
+
+    Layer 0 is tested against every copy (translation makes every other pair of layers a
+    repeat of those); an overlap raises ``deck:LINE: Step ID: ...`` at the step's line.
+    """
+    out = replicate_layers(bodies, step.layers, step.height)
+    n = len(bodies)
+    if n == 0 or step.layers == 1:
+        return out
+    shapes = _shape_map(model)
+    hit = first_overlap(out, shapes, candidates=range(n), others=range(n, len(out)))
+    if hit is not None:
+        t = layer_thickness(bodies, shapes)
+        i, j = hit
+        raise model.error(
+            f"Step {step.id}: replicated layers overlap (particle {out.id[j]} of layer "
+            f"{j // n} overlaps particle {out.id[i]}): the layer is {t:.4g} m thick but "
+            f"Height / Layers = {step.height / step.layers:.4g} m; use Height >= "
+            f"{t * step.layers:.4g} m", step.line)
+    return out
+
+
+def bounding_sphere_overlaps(bodies: Bodies, radii: np.ndarray) -> list[tuple[int, int]]:
+    """Pairs (i < j) whose bounding spheres overlap (for tests and diagnostics)."""
+    d = np.linalg.norm(bodies.position[:, None] - bodies.position[None], axis=-1)
+    rr = radii[:, None] + radii[None]
+    i, j = np.nonzero(np.triu(d < rr, 1))
+    return list(zip(i.tolist(), j.tolist()))
+
+
+__all__ = ["Bodies", "initial_bodies", "place_random_group", "explicit_bodies",
+           "check_explicit_overlaps", "replicate_layers", "replicate_step", "layer_thickness",
+           "bodies_overlap", "first_overlap", "quat_from_rotvec", "quat_to_matrix",
+           "matrix_to_quat", "random_quaternions", "InputError"]
