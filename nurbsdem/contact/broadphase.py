@@ -48,14 +48,35 @@ def _hash4(lv, ix, iy, iz, mask):
 
 
 @njit(cache=True)
-def _lookup(table, ckey, lv, ix, iy, iz, mask):
-    """Cell id of (lv, ix, iy, iz) in the hash table, or -1 when the cell is empty."""
+def _insert(tab, mask, lv, ix, iy, iz, cid):
+    """Put cell id cid under the key (lv, ix, iy, iz) into the open-addressing table tab
+    (rows: key, key, key, key, value)."""
+    s = _hash4(lv, ix, iy, iz, mask)
+    while tab[s, 4] != _EMPTY:
+        s = (s + 1) & mask
+    tab[s, 0] = lv
+    tab[s, 1] = ix
+    tab[s, 2] = iy
+    tab[s, 3] = iz
+    tab[s, 4] = cid
+
+
+@njit(cache=True)
+def _lookup(dense, dmap, dbase, dn, tab, mask, lv, ix, iy, iz):
+    """Cell id of (lv, ix, iy, iz), or -1 when that cell is empty.
+
+    Dense mode: direct index into dmap (per level a box of dn[lv] cells from dbase[lv]).
+    Otherwise: the hash table tab (keys stored inline, one probe is one memory line)."""
+    if dense:
+        if ix < 0 or iy < 0 or iz < 0 or ix >= dn[lv, 0] or iy >= dn[lv, 1] or iz >= dn[lv, 2]:
+            return -1
+        return dmap[dbase[lv] + (iz * dn[lv, 1] + iy) * dn[lv, 0] + ix]
     s = _hash4(lv, ix, iy, iz, mask)
     while True:
-        c = table[s]
+        c = tab[s, 4]
         if c == _EMPTY:
             return -1
-        if ckey[c, 0] == lv and ckey[c, 1] == ix and ckey[c, 2] == iy and ckey[c, 3] == iz:
+        if tab[s, 0] == lv and tab[s, 1] == ix and tab[s, 2] == iy and tab[s, 3] == iz:
             return c
         s = (s + 1) & mask
 
@@ -136,13 +157,12 @@ def sphere_pairs_jit(centers, radii, margin):
     inv_h = 1.0 / h
 
     # ---- cells: hash table (level, ix, iy, iz) -> cell id, ids in order of appearance
-    pcell = np.empty((n, 3), dtype=np.int64)
     cell_of = np.empty(n, dtype=np.int64)
     tsize = 1
     while tsize < 2 * n:
         tsize *= 2
     mask = tsize - 1
-    table = np.full(tsize, _EMPTY, dtype=np.int64)
+    tab = np.full((tsize, 5), _EMPTY, dtype=np.int64)
     ckey = np.empty((n, 4), dtype=np.int64)
     ncell = 0
     for i in range(n):
@@ -150,14 +170,15 @@ def sphere_pairs_jit(centers, radii, margin):
         ix = np.int64(np.floor((centers[i, 0] - lo[0]) * inv_h[k]))
         iy = np.int64(np.floor((centers[i, 1] - lo[1]) * inv_h[k]))
         iz = np.int64(np.floor((centers[i, 2] - lo[2]) * inv_h[k]))
-        pcell[i, 0] = ix
-        pcell[i, 1] = iy
-        pcell[i, 2] = iz
         s = _hash4(k, ix, iy, iz, mask)
         while True:
-            c = table[s]
+            c = tab[s, 4]
             if c == _EMPTY:
-                table[s] = ncell
+                tab[s, 0] = k
+                tab[s, 1] = ix
+                tab[s, 2] = iy
+                tab[s, 3] = iz
+                tab[s, 4] = ncell
                 ckey[ncell, 0] = k
                 ckey[ncell, 1] = ix
                 ckey[ncell, 2] = iy
@@ -165,21 +186,37 @@ def sphere_pairs_jit(centers, radii, margin):
                 cell_of[i] = ncell
                 ncell += 1
                 break
-            if ckey[c, 0] == k and ckey[c, 1] == ix and ckey[c, 2] == iy and ckey[c, 3] == iz:
+            if tab[s, 0] == k and tab[s, 1] == ix and tab[s, 2] == iy and tab[s, 3] == iz:
                 cell_of[i] = c
                 break
             s = (s + 1) & mask
 
-    # ---- renumber cells in (level, z, y, x) order when that key fits in int64 (locality)
-    mx = np.zeros(3, dtype=np.int64)
+    # ---- per-level extents in cells; a dense map when all levels' boxes hold few cells
+    dn = np.zeros((nlev, 3), dtype=np.int64)
     for c in range(ncell):
         for d in range(3):
-            mx[d] = max(mx[d], ckey[c, d + 1] + 1)
-    span = float(mx[0]) * float(mx[1]) * float(mx[2]) * float(nlev)
-    if span < 4.0e18:
+            dn[ckey[c, 0], d] = max(dn[ckey[c, 0], d], ckey[c, d + 1] + 1)
+    total = 0.0
+    for k in range(nlev):
+        total += float(dn[k, 0]) * float(dn[k, 1]) * float(dn[k, 2])
+    dense = total <= 8.0 * n + 4096.0
+    dbase = np.zeros(nlev + 1, dtype=np.int64)
+    if dense:
+        for k in range(nlev):
+            dbase[k + 1] = dbase[k] + dn[k, 0] * dn[k, 1] * dn[k, 2]
+
+    # ---- renumber cells in (level, z, y, x) order (memory locality of neighbours)
+    mxx = dn[:, 0].max()
+    mxy = dn[:, 1].max()
+    mxz = dn[:, 2].max()
+    if dense or float(nlev) * float(mxx) * float(mxy) * float(mxz) < 4.0e18:
         skey = np.empty(ncell, dtype=np.int64)
         for c in range(ncell):
-            skey[c] = ((ckey[c, 0] * mx[2] + ckey[c, 3]) * mx[1] + ckey[c, 2]) * mx[0] + ckey[c, 1]
+            k = ckey[c, 0]
+            if dense:
+                skey[c] = dbase[k] + (ckey[c, 3] * dn[k, 1] + ckey[c, 2]) * dn[k, 0] + ckey[c, 1]
+            else:
+                skey[c] = ((k * mxz + ckey[c, 3]) * mxy + ckey[c, 2]) * mxx + ckey[c, 1]
         corder = np.argsort(skey)
         rank = np.empty(ncell, dtype=np.int64)
         for q in range(ncell):
@@ -188,11 +225,17 @@ def sphere_pairs_jit(centers, radii, margin):
         for c in range(ncell):
             ck2[rank[c]] = ckey[c]
         ckey = ck2
-        for s in range(tsize):
-            if table[s] != _EMPTY:
-                table[s] = rank[table[s]]
         for i in range(n):
             cell_of[i] = rank[cell_of[i]]
+    dmap = np.full(dbase[nlev] if dense else 0, _EMPTY, dtype=np.int64)
+    if dense:
+        for c in range(ncell):
+            k = ckey[c, 0]
+            dmap[dbase[k] + (ckey[c, 3] * dn[k, 1] + ckey[c, 2]) * dn[k, 0] + ckey[c, 1]] = c
+    else:
+        tab[:, 4] = _EMPTY
+        for c in range(ncell):
+            _insert(tab, mask, ckey[c, 0], ckey[c, 1], ckey[c, 2], ckey[c, 3], c)
 
     # ---- linked cells: particles sorted by cell (stable counting sort), data copied in order
     start = np.zeros(ncell + 1, dtype=np.int64)
@@ -238,7 +281,7 @@ def sphere_pairs_jit(centers, radii, margin):
                     if same:
                         nc = c
                     else:
-                        nc = _lookup(table, ckey, kc, cx + dx, cy + dy, cz + dz, mask)
+                        nc = _lookup(dense, dmap, dbase, dn, tab, mask, kc, cx + dx, cy + dy, cz + dz)
                         if nc < 0:
                             continue
                     for a in range(p0, p1):
@@ -285,7 +328,7 @@ def sphere_pairs_jit(centers, radii, margin):
             for iz in range(z0, z1 + 1):
                 for iy in range(y0, y1 + 1):
                     for ix in range(x0, x1 + 1):
-                        nc = _lookup(table, ckey, k, ix, iy, iz, mask)
+                        nc = _lookup(dense, dmap, dbase, dn, tab, mask, k, ix, iy, iz)
                         if nc < 0:
                             continue
                         for a in range(p0, p1):

@@ -240,7 +240,6 @@ class DemSystem:
             for mw in mats_w:
                 pairs.append(((ma, mw, "pw"), ma, mw, True))
         for iface, ma, mb, wall in pairs:
-            law = self.interfaces.get(ma, mb)
             sel_a = b.material == ma
             if wall:
                 mn, mtn = float(b.mass[sel_a].min()), float(m_t[sel_a].min())
@@ -250,6 +249,12 @@ class DemSystem:
                 sel_b = b.material == mb
                 mn = _smallest_pair(b.mass[sel_a], b.mass[sel_b])
                 mtn = _smallest_pair(m_t[sel_a], m_t[sel_b])
+            if not math.isfinite(mn):
+                continue          # no such pair can occur (e.g. a single particle)
+            try:
+                law = self.interfaces.get(ma, mb)
+            except InputError:
+                continue          # undefined interface: an error if such a contact ever occurs
             for mode, k, c, m in (("normal", law.en, law.cn, mn), ("tangential", law.et, law.ct, mtn)):
                 if not math.isfinite(m):
                     continue

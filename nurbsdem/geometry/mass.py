@@ -19,14 +19,16 @@ Gauss–Legendre rule. For a polynomial (non-rational) patch of degrees (p, q) t
 r_i r_j (r·(S_u × S_v)) is a polynomial of degree 5p - 1 in u and 5q - 1 in v on each span, so
 n_u = ceil(5p/2), n_v = ceil(5q/2) points integrate it exactly. A rational patch's integrand
 is a rational function, analytic on the span, for which Gauss rules converge geometrically:
-there the order is raised (by 4 per step) until two successive orders agree to ``rtol``
-relative to the size of the body (V ~ R^3, first moments ~ R^4, second ~ R^5, with R the
-largest distance of a control point from x0). Degenerate edges (poles, where S_u × S_v = 0)
-need no special care: the Gauss points are interior and the integrand is bounded.
+there the rule starts 2 points above the polynomial-exact order and is raised by 4 per
+step until two successive orders agree to ``rtol`` relative to the size of the body
+(V ~ R^3, first moments ~ R^4, second ~ R^5, with R the largest distance of a control point
+from x0, the centre of the control points' bounding box). Degenerate edges (poles, where
+S_u × S_v = 0) need no special care: the Gauss points are interior and the integrand is bounded.
 """
 from __future__ import annotations
 
 import math
+import warnings
 from functools import lru_cache
 from typing import Sequence
 
@@ -36,6 +38,9 @@ from .nurbs import Patch
 
 #: Largest Gauss order per direction and span tried for rational patches.
 MAX_ORDER = 64
+#: Extra Gauss points (per direction) of the first rule tried on a rational patch, above
+#: the order that would be exact for a polynomial patch of the same degrees.
+RATIONAL_EXTRA = 2
 #: Order increment between the successive rules compared for rational patches.
 ORDER_STEP = 4
 
@@ -100,9 +105,10 @@ def _scales(R: float) -> np.ndarray:
 
 def _patch_moments_adaptive(patch: Patch, x0: np.ndarray, R: float, rtol: float) -> np.ndarray:
     n_u, n_v = _exact_orders(patch)
-    m = patch_moments(patch, x0, n_u, n_v)
     if not _is_rational(patch):
-        return m
+        return patch_moments(patch, x0, n_u, n_v)
+    n_u, n_v = n_u + RATIONAL_EXTRA, n_v + RATIONAL_EXTRA
+    m = patch_moments(patch, x0, n_u, n_v)
     scale = _scales(R)
     while max(n_u, n_v) < MAX_ORDER:
         n_u = min(n_u + ORDER_STEP, MAX_ORDER)
@@ -111,7 +117,9 @@ def _patch_moments_adaptive(patch: Patch, x0: np.ndarray, R: float, rtol: float)
         converged = np.all(np.abs(m_new - m) <= rtol * scale)
         m = m_new
         if converged:
-            break
+            return m
+    warnings.warn(f"mass properties: Gauss order {MAX_ORDER} did not reach rtol={rtol:g} on a "
+                  "rational patch (extreme weights?)", RuntimeWarning, stacklevel=3)
     return m
 
 

@@ -201,7 +201,8 @@ def _constraints() -> np.ndarray:
 
 @lru_cache(maxsize=1)
 def _fit_system() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(Z, Zᵀ G Z, Aᵀ, sample directions) with Z a basis of the constraints' null space and G the normal matrix."""
+    """(Z, Zᵀ G Z, Aᵀ, sample directions): Z a basis of the constraints' null space, G the
+    normal matrix of the least-squares fit over the flattened table."""
     from scipy.linalg import null_space
 
     A, dirs = _fit_matrix()
@@ -243,6 +244,7 @@ def _affine(points: np.ndarray, L: np.ndarray, offset: np.ndarray | None = None)
 
 
 def _sym_sqrt(m: np.ndarray) -> np.ndarray:
+    """Symmetric positive square root of a symmetric positive definite matrix."""
     w, q = np.linalg.eigh(0.5 * (m + m.T))
     return (q * np.sqrt(w)) @ q.T
 
@@ -271,7 +273,7 @@ def build_particle(epsilon: float = EPSILON, inertia: np.ndarray = INERTIA_A,
     from .mass import mass_properties, second_moment_from_inertia
 
     base = _base_points(epsilon)
-    vb, cb, jb = mass_properties(_patches_from_table(base))
+    _, cb, jb = mass_properties(_patches_from_table(base))
     base = base - cb
     m2b = second_moment_from_inertia(jb)
     t2 = second_moment_from_inertia(np.asarray(inertia, float) / density)
@@ -291,7 +293,8 @@ def tune_epsilon(volume: float = VOLUME_A, inertia: np.ndarray = INERTIA_A,
 
     from .mass import mass_properties, second_moment_from_inertia
 
-    target = affine_invariant(volume, second_moment_from_inertia(np.asarray(inertia, float) / density))
+    m2 = second_moment_from_inertia(np.asarray(inertia, float) / density)
+    target = affine_invariant(volume, m2)
 
     def f(eps: float) -> float:
         v, _, j = mass_properties(_patches_from_table(_base_points(eps)))

@@ -280,16 +280,28 @@ def _take(arg: Arg, tokens: list[str], pos: int, what: str,
     return tuple(vals), pos
 
 
+def _unknown_first_word(block: str | None, tokens: list[str]) -> str:
+    """The message for a line whose first word is neither a block nor an entry keyword."""
+    word = tokens[0]
+    blocks = list(SCHEMA)
+    if block is None:
+        if len(tokens) == 1:
+            return f"unknown block {word!r}{_suggest(word, blocks)}"
+        return (f"{word!r} outside a block (a block keyword comes first: "
+                f"{', '.join(blocks)})")
+    specs = list(SCHEMA[block])
+    if len(tokens) == 1:
+        return f"unknown block or keyword {word!r}{_suggest(word, blocks + specs)}"
+    return (f"unknown keyword {word!r} in block {block} (expected "
+            f"{' or '.join(specs)}){_suggest(word, specs)}")
+
+
 def parse_entry(block: str, tokens: list[str], line: int) -> Entry:
     """Parse the tokens of one entry line of ``block``."""
     specs = SCHEMA[block]
     kw = _canonical(tokens[0], specs)
     if kw is None:
-        if tokens[0].lower() in _BLOCKS:
-            raise _DeckError(f"block keyword {_BLOCKS[tokens[0].lower()]!r} must be alone on its line")
-        allowed = ", ".join(specs)
-        raise _DeckError(f"unknown keyword {tokens[0]!r} in block {block} "
-                         f"(expected {allowed}){_suggest(tokens[0], list(specs))}")
+        raise _DeckError(_unknown_first_word(block, tokens))
     spec = specs[kw]
     entry = Entry(block, kw, line)
     pos = 1
@@ -300,9 +312,9 @@ def parse_entry(block: str, tokens: list[str], line: int) -> Entry:
         if entry.id < 1:
             raise _DeckError(f"{kw} id must be >= 1, got {entry.id}")
         pos += 1
-        label = f"{kw} {entry.id}"
+        label = f"{kw} {entry.id}: "
     else:
-        label = kw
+        label = f"{kw}: "
     if spec.head is not None:
         entry.head, pos = _take(spec.head, tokens, pos, kw, spec.keys)
     while pos < len(tokens):
@@ -310,12 +322,12 @@ def parse_entry(block: str, tokens: list[str], line: int) -> Entry:
         key = _canonical(tok, spec.keys)
         if key is None:
             if _looks_numeric(tok):
-                raise _DeckError(f"{label}: unexpected number {tok!r}")
-            hint = _suggest(tok, list(spec.keys))
-            raise _DeckError(f"{label}: unknown keyword {tok!r}{hint}")
+                raise _DeckError(f"{label}unexpected number {tok!r}")
+            raise _DeckError(f"{label}unknown keyword {tok!r}{_suggest(tok, list(spec.keys))}")
         if key in entry.values:
-            raise _DeckError(f"{label}: {key} given twice")
-        entry.values[key], pos = _take(spec.keys[key], tokens, pos + 1, key, spec.keys)
+            raise _DeckError(f"{label}{key} given twice")
+        entry.values[key], pos = _take(spec.keys[key], tokens, pos + 1, f"{label}{key}",
+                                       spec.keys)
     return entry
 
 
@@ -329,14 +341,14 @@ def lex_deck(text: str) -> list[Entry]:
             if not tokens:
                 continue
             low = tokens[0].lower()
-            if low in _BLOCKS and len(tokens) == 1:
+            if low in _BLOCKS:
+                if len(tokens) > 1:
+                    raise _DeckError(f"block keyword {_BLOCKS[low]!r} must be alone on its "
+                                     f"line (got {tokens[1]!r} after it)")
                 block = _BLOCKS[low]
                 continue
             if block is None:
-                if low in _BLOCKS:
-                    raise _DeckError(f"block keyword {_BLOCKS[low]!r} must be alone on its line")
-                raise _DeckError(f"{tokens[0]!r} outside a block (blocks: "
-                                 f"{', '.join(SCHEMA)}){_suggest(tokens[0], list(SCHEMA))}")
+                raise _DeckError(_unknown_first_word(None, tokens))
             entries.append(parse_entry(block, tokens, lineno))
         except _DeckError as exc:
             raise _LineError(str(exc), lineno) from None
@@ -709,8 +721,15 @@ class _Builder:
         for kind, mm in pairs:
             if m.interface(kind, mm) is None:
                 what = " and ".join(map(str, mm))
-                self.fail(f"no contact Interface covers {kind} pairs of material{'s' if len(mm) > 1 else ''} {what}",
-                          None)
+                self.fail(f"no contact Interface covers {kind} pairs of "
+                          f"material{'s' if len(mm) > 1 else ''} {what}",
+                          self.first_use(mm[-1]))
+
+    def first_use(self, material: int) -> int:
+        """Line of the first particle entry of that material."""
+        lines = [g.line for g in self.model.random_groups if g.material_id == material]
+        lines += [p.line for p in self.model.particles if p.material_id == material]
+        return min(lines)
 
 
 _HANDLERS: dict[tuple[str, str], Callable[[_Builder, Entry], None]] = {

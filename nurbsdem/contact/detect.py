@@ -1,0 +1,294 @@
+"""Public API of the local contact search (paper Sec. 3.2): one body pair or a batch.
+
+* :func:`detect` — one pair of shapes in given poses -> :class:`ContactResult`
+  (thin wrapper over the compiled kernel :func:`nurbsdem.contact.lcp.solve_pair`).
+* :class:`ContactTable` + :func:`detect_batch` — many pairs of bodies whose shapes are packed
+  in one table; the loop over pairs runs in compiled code, in parallel (numba ``prange``
+  over thread chunks, one workspace per thread). Warm-start state is the previous result
+  row of the same pair.
+
+Poses map the file frame to the world: ``x_world = position + R @ x_file``. Lengths in
+metres. The algorithm is described in :mod:`nurbsdem.contact.lcp` and
+:mod:`nurbsdem.contact.support`.
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+import numba
+from numba import njit, prange
+
+from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace
+from . import lcp
+from .lcp import (F_GRAD, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT,
+                  I_NEV, I_PA, I_PB, I_VALID, NF, NI, make_work, solve_pair)
+from .support import make_seeds
+
+
+# --------------------------------------------------------------------------- result
+@dataclass
+class ContactResult:
+    """Outcome of the LCP of one body pair (see ``docs/DEVNOTES.md``).
+
+    Attributes
+    ----------
+    active: the bodies penetrate (signed_distance < 0).
+    signed_distance: m; < 0: minus the maximum penetration depth, > 0: separation. For pairs
+        rejected by the bounding spheres (paper Eq. 3) it is the sphere gap, a lower bound.
+    normal: unit vector, outward normal of A at its contact point, pointing towards B.
+    point_a, point_b: contact points on A and B (world, m).
+    gap: point_a − point_b (paper Eq. 4); normal · gap = −signed_distance.
+    patch_a, patch_b: patch indices (−1 when no LCP was solved).
+    params: (ζA, θA, ζB, θB) surface parameters of the contact points.
+    degenerated: degeneration level (number of fixed parameters, paper Eq. 10–11), 0 = none.
+    iterations: Newton iterations on the direction sphere.
+    failed: the LCP did not converge (the best iterate, or the previous solution, is returned).
+    evaluations: patch evaluations spent (cost measure).
+    broad_rejected: the bounding spheres do not overlap; nothing else was computed.
+    row_f, row_i: the raw result rows; pass the result back as ``previous`` for a warm start.
+    """
+
+    active: bool
+    signed_distance: float
+    normal: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    gap: np.ndarray
+    patch_a: int
+    patch_b: int
+    params: np.ndarray
+    degenerated: int
+    iterations: int
+    failed: bool
+    evaluations: int = 0
+    broad_rejected: bool = False
+    row_f: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    row_i: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+
+    @property
+    def depth(self) -> float:
+        """Penetration depth (m), 0 when separated."""
+        return max(0.0, -self.signed_distance)
+
+    @classmethod
+    def from_rows(cls, rf: np.ndarray, ri: np.ndarray) -> "ContactResult":
+        """Build from the kernel's result rows (copies)."""
+        rf = np.array(rf, dtype=float)
+        ri = np.array(ri, dtype=np.int64)
+        pa = rf[F_PA:F_PA + 3].copy()
+        pb = rf[F_PB:F_PB + 3].copy()
+        return cls(active=bool(ri[I_ACTIVE]), signed_distance=float(rf[F_SD]),
+                   normal=rf[F_N:F_N + 3].copy(), point_a=pa, point_b=pb, gap=pa - pb,
+                   patch_a=int(ri[I_PA]), patch_b=int(ri[I_PB]), params=rf[F_PAR:F_PAR + 4].copy(),
+                   degenerated=int(ri[I_DEG]), iterations=int(ri[I_IT]), failed=bool(ri[I_FAIL]),
+                   evaluations=int(ri[lcp.I_NEV]), broad_rejected=bool(ri[I_BROAD]),
+                   row_f=rf, row_i=ri)
+
+
+# --------------------------------------------------------------------------- packed shapes
+class ContactTable:
+    """Shapes packed for the compiled LCP: one pool of patches with global indices.
+
+    Attributes
+    ----------
+    tab: (deg, ncp, koff, coff, knots, cpw, dom, nbr) — the pool arrays
+        (:class:`~nurbsdem.geometry.kernel.PatchPool`) and the connectivity with global
+        patch indices.
+    info: int64 (S, 4) per shape (first patch, patch count, first seed, seed count).
+    centroid: (S, 3) file-frame centroids (m).  radius: (S,) bounding radii (m, Eq. 3).
+    seeds: (x (N, 3), patch (N,), uv (N, 2)) surface samples for cold starts.
+    """
+
+    def __init__(self, shapes: Sequence) -> None:
+        shapes = list(shapes)
+        pools = [s.pool for s in shapes]
+        deg, ncp, koff, coff, dom, nbr = [], [], [], [], [], []
+        knots, cpw = [], []
+        sx, sp, suv = [], [], []
+        info = np.zeros((len(shapes), 4), np.int64)
+        kofs = cofs = pofs = sofs = 0
+        for k, (s, pl) in enumerate(zip(shapes, pools)):
+            P = pl.deg.shape[0]
+            deg.append(pl.deg)
+            ncp.append(pl.ncp)
+            koff.append(pl.koff + kofs)
+            coff.append(pl.coff + cofs)
+            knots.append(pl.knots)
+            cpw.append(pl.cpw)
+            dom.append(pl.dom)
+            nb = np.array(s.connectivity.neighbours, dtype=np.int64, copy=True)
+            nb[:, :, 0] = np.where(nb[:, :, 0] >= 0, nb[:, :, 0] + pofs, nb[:, :, 0])
+            nbr.append(nb)
+            x, p, uv = make_seeds(s)
+            sx.append(x)
+            sp.append(p + pofs)
+            suv.append(uv)
+            info[k] = pofs, P, sofs, len(p)
+            kofs += pl.knots.shape[0]
+            cofs += pl.cpw.shape[0]
+            pofs += P
+            sofs += len(p)
+        cat = lambda a, dt: np.ascontiguousarray(np.concatenate(a).astype(dt))  # noqa: E731
+        self.tab = (cat(deg, np.int64), cat(ncp, np.int64), cat(koff, np.int64),
+                    cat(coff, np.int64), cat(knots, float), cat(cpw, float), cat(dom, float),
+                    cat(nbr, np.int64))
+        self.info = info
+        self.centroid = np.ascontiguousarray([np.asarray(s.centroid, float) for s in shapes]).reshape(-1, 3)
+        self.radius = np.array([float(s.bounding_radius) for s in shapes])
+        self.seeds = (cat(sx, float), cat(sp, np.int64), cat(suv, float))
+        self.shapes = shapes
+
+    def __len__(self) -> int:
+        return len(self.shapes)
+
+
+_TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def table_of(shape) -> ContactTable:
+    """The (cached) single-shape :class:`ContactTable` of a shape."""
+    t = _TABLES.get(shape)
+    if t is None:
+        t = ContactTable([shape])
+        _TABLES[shape] = t
+    return t
+
+
+_WORK: dict = {}
+
+
+def _work():
+    """Workspaces of the single-pair path (one set per process)."""
+    if not _WORK:
+        _WORK["ws"] = make_workspace()
+        _WORK["w"] = make_work()
+    return _WORK["ws"], _WORK["w"]
+
+
+def _pose(pose) -> tuple[np.ndarray, np.ndarray]:
+    pos, R = pose
+    return (np.ascontiguousarray(np.asarray(pos, dtype=float).reshape(3)),
+            np.ascontiguousarray(np.asarray(R, dtype=float).reshape(3, 3)))
+
+
+def _mask(P: int, patches: Iterable[int] | None) -> np.ndarray:
+    if patches is None:
+        return np.zeros(0, np.bool_)
+    m = np.zeros(P, np.bool_)
+    for p in patches:
+        if 0 <= int(p) < P:
+            m[int(p)] = True
+    return m if m.any() else np.zeros(0, np.bool_)
+
+
+def _prev_rows(previous: ContactResult | None) -> tuple[np.ndarray, np.ndarray]:
+    if previous is None or previous.row_f is None or previous.failed or previous.broad_rejected:
+        return np.zeros(NF), np.zeros(NI, np.int64)
+    return (np.ascontiguousarray(previous.row_f, dtype=float),
+            np.ascontiguousarray(previous.row_i, dtype=np.int64))
+
+
+def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = None,
+           candidates: Sequence[tuple[int, int]] | None = None) -> ContactResult:
+    """Maximum penetration (or distance) of two convex NURBS bodies (paper Sec. 3.2).
+
+    Parameters
+    ----------
+    shape_a, shape_b: :class:`~nurbsdem.geometry.shape.Shape` (closed, convex).
+    pose_a, pose_b: (position (3,) m, rotation matrix (3, 3)); x_world = position + R x_file.
+    previous: the result of the same pair at the last step (warm start), or None.
+    candidates: optional (patch_a, patch_b) pairs from the patch-box test (paper 3.1); their
+        patches are the only ones used to pick the starting points of a cold start.
+
+    Returns
+    -------
+    :class:`ContactResult`. Never raises on a numerical failure: ``failed`` is set instead.
+    """
+    ta, tb = table_of(shape_a), table_of(shape_b)
+    pa, Ra = _pose(pose_a)
+    pb, Rb = _pose(pose_b)
+    ma = mb = np.zeros(0, np.bool_)
+    if candidates is not None:
+        cand = list(candidates)
+        ma = _mask(ta.info[0, 1], [c[0] for c in cand])
+        mb = _mask(tb.info[0, 1], [c[1] for c in cand])
+    pf, pi = _prev_rows(previous)
+    rf = np.zeros(NF)
+    ri = np.zeros(NI, np.int64)
+    ws, (wf, wi, wfs) = _work()
+    try:
+        solve_pair(ta.tab, ta.info[0], ta.centroid[0], float(ta.radius[0]),
+                   tb.tab, tb.info[0], tb.centroid[0], float(tb.radius[0]),
+                   pa, Ra, pb, Rb, pf, pi, ma, mb, ta.seeds, tb.seeds, ws, wf, wi, wfs, rf, ri)
+    except Exception:  # pragma: no cover - never abort the simulation
+        if previous is not None and previous.row_f is not None:
+            rf, ri = np.array(previous.row_f), np.array(previous.row_i)
+        ri[I_FAIL] = 1
+        ri[I_VALID] = 0
+    return ContactResult.from_rows(rf, ri)
+
+
+# --------------------------------------------------------------------------- batch
+@njit(cache=True, parallel=True)
+def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
+                  prev_f, prev_i, res_f, res_i):
+    K = sa.shape[0]
+    nt = numba.get_num_threads()
+    if nt > K:
+        nt = max(K, 1)
+    chunk = (K + nt - 1) // nt
+    empty = np.zeros(0, np.bool_)
+    for t in prange(nt):
+        ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+        wf = np.zeros((lcp.WORK_ROWS, 3))
+        wi = np.zeros((4, 4), np.int64)
+        wfs = np.zeros((4, 3))
+        for k in range(t * chunk, min(K, (t + 1) * chunk)):
+            a = sa[k]
+            b = sb[k]
+            solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
+                       pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
+                       empty, empty, seeds, seeds, ws, wf, wi, wfs, res_f[k], res_i[k])
+
+
+def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,
+                 shape_b: np.ndarray, pos_b: np.ndarray, rot_b: np.ndarray,
+                 prev_f: np.ndarray | None = None, prev_i: np.ndarray | None = None,
+                 out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """LCPs of K body pairs in compiled code (parallel over pairs).
+
+    Parameters
+    ----------
+    table: the packed shapes.
+    shape_a, shape_b: int64 (K,) shape index (into ``table``) of each pair's bodies.
+    pos_a, pos_b: (K, 3) positions (m); rot_a, rot_b: (K, 3, 3) rotation matrices.
+    prev_f, prev_i: previous result rows of the same pairs (K, NF), (K, NI) for warm starts
+        (rows with ``prev_i[:, I_VALID] == 0`` start cold); None: all cold.
+    out: optional preallocated (res_f, res_i).
+
+    Returns
+    -------
+    (res_f (K, NF), res_i (K, NI)); columns: :mod:`nurbsdem.contact.lcp` constants
+    (``F_SD`` signed distance, ``F_N`` normal, ``F_PA``/``F_PB`` points, ``F_PAR`` params,
+    ``I_ACTIVE``, ``I_PA``/``I_PB`` patches, ``I_DEG``, ``I_IT``, ``I_FAIL``, ``I_VALID``).
+    """
+    K = len(shape_a)
+    sa = np.ascontiguousarray(shape_a, dtype=np.int64)
+    sb = np.ascontiguousarray(shape_b, dtype=np.int64)
+    pos_a = np.ascontiguousarray(pos_a, dtype=float).reshape(K, 3)
+    pos_b = np.ascontiguousarray(pos_b, dtype=float).reshape(K, 3)
+    rot_a = np.ascontiguousarray(rot_a, dtype=float).reshape(K, 3, 3)
+    rot_b = np.ascontiguousarray(rot_b, dtype=float).reshape(K, 3, 3)
+    if prev_f is None or prev_i is None:
+        prev_f = np.zeros((K, NF))
+        prev_i = np.zeros((K, NI), np.int64)
+    if out is None:
+        out = (np.zeros((K, NF)), np.zeros((K, NI), np.int64))
+    _batch_kernel(table.tab, table.info, table.centroid, table.radius, table.seeds,
+                  sa, pos_a, rot_a, sb, pos_b, rot_b,
+                  np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
+                  out[0], out[1])
+    return out

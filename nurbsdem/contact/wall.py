@@ -1,0 +1,3 @@
+"""placeholder"""
+def detect_wall(*a, **k):
+    raise NotImplementedError

@@ -1,0 +1,674 @@
+"""Result writers. File names are fixed so that scripts can rely on them.
+
+In the output directory (``Output Directory``, default ``results`` next to the deck)::
+
+    particles.pvd  walls.pvd  contacts.pvd     ParaView time collections of ...
+    vtk/particles_000000.vtu ...               ... one .vtu per sample (meshio, zlib binary)
+    monitors/energy.csv                        time,kinetic,potential,elastic,dissipated,
+                                               external_work,mechanical,balance_error
+    monitors/contacts.csv                      time,monitored,active,degenerated,failed
+    monitors/wall_<name>.csv                   time,displacement_x,displacement_y,
+                                               displacement_z,reaction_x,reaction_y,reaction_z
+    results.h5                                 every sample's body states (see ResultsWriter)
+
+Crash safety: every .vtu, the .pvd files and results.h5 are replaced atomically (temporary
+file, fsync, rename), so a run killed at any moment leaves each of them complete (old or
+new) or absent. CSV rows are appended and flushed one whole line at a time; on a restart
+(``restart_time=t``) every writer drops what lies after t (samples, rows, an incomplete last
+line) and carries on, so the files continue seamlessly from the checkpoint.
+
+A fresh start (``restart_time=None``) empties the series, monitors and results.h5.
+
+Typical use by the solver (see :class:`OutputWriters`)::
+
+    out = OutputWriters(model, restart_time=None)
+    out.paraview.write(t, bodies, wall_displacement=dW, contacts=c)   # every VTK Every
+    out.monitors.energy(t, kinetic=..., potential=..., elastic=..., dissipated=...,
+                        external_work=...)                              # every Monitors Every
+    out.monitors.contacts(t, monitored, active, degenerated, failed)
+    out.monitors.wall("lid", t, displacement, reaction)
+    out.results.append(t, bodies)                                       # every Results Every
+    out.sync()          # before writing a checkpoint: results.h5 flushed, CSVs fsynced
+    out.close()
+"""
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+import numpy as np
+
+from .atomic import atomic_path, atomic_write_text
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..geometry.nurbs import Patch
+    from ..geometry.shape import Shape
+    from ..model import Model, WallSpec
+    from ..placement import Bodies
+
+#: Column names of the monitor files (fixed).
+ENERGY_COLUMNS = ("time", "kinetic", "potential", "elastic", "dissipated", "external_work",
+                  "mechanical", "balance_error")
+CONTACT_COLUMNS = ("time", "monitored", "active", "degenerated", "failed")
+WALL_COLUMNS = ("time", "displacement_x", "displacement_y", "displacement_z",
+                "reaction_x", "reaction_y", "reaction_z")
+#: Series names (``<name>.pvd``, ``vtk/<name>_NNNNNN.vtu``).
+SERIES = ("particles", "walls", "contacts")
+RESULTS_NAME = "results.h5"
+MONITOR_DIR = "monitors"
+VTK_DIR = "vtk"
+
+VTK_QUAD = 9
+VTK_VERTEX = 1
+
+
+def _time_tol(t: float) -> float:
+    """Tolerance (s) for comparing sample times with a restart time."""
+    return 1e-9 * max(1.0, abs(t))
+
+
+def _fmt(x: Any) -> str:
+    """A CSV field: integers as integers, floats by repr (shortest exact round trip)."""
+    if isinstance(x, (int, np.integer)) and not isinstance(x, bool):
+        return str(int(x))
+    return repr(float(x))
+
+
+# ---------------------------------------------------------------------------- tessellation
+
+
+def tessellate(patch: "Patch", n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points (M, 3) and quads (K, 4) of a patch (n quads per direction, about)."""
+    try:
+        from ..geometry.tessellate import tessellate_patch
+    except ImportError:  # pragma: no cover - local uniform grid fallback
+        return _grid_tessellation(patch, n)
+    return tessellate_patch(patch, n)
+
+
+def _grid_tessellation(patch: "Patch", n: int) -> tuple[np.ndarray, np.ndarray]:
+    u0, u1, v0, v1 = patch.domain
+    U, V = np.meshgrid(np.linspace(u0, u1, n + 1), np.linspace(v0, v1, n + 1), indexing="ij")
+    pts = patch.points(U, V).reshape(-1, 3)
+    m = n + 1
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n), np.arange(n), indexing="ij"))
+    quads = np.stack([i * m + j, (i + 1) * m + j, (i + 1) * m + j + 1, i * m + j + 1], 1)
+    return pts, quads.astype(np.int64)
+
+
+def tessellate_patches(patches: Sequence["Patch"], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (M, 3), quads (K, 4) and the patch index of each quad (K,) of several patches."""
+    P, Q, ids = [], [], []
+    off = 0
+    for ip, p in enumerate(patches):
+        pts, quads = tessellate(p, n)
+        P.append(np.asarray(pts, float))
+        Q.append(np.asarray(quads, np.int64) + off)
+        ids.append(np.full(len(quads), ip, np.int64))
+        off += len(pts)
+    if not P:
+        return np.zeros((0, 3)), np.zeros((0, 4), np.int64), np.zeros(0, np.int64)
+    return np.concatenate(P), np.concatenate(Q), np.concatenate(ids)
+
+
+# ---------------------------------------------------------------------------- vtu files
+
+
+def _empty_vtu(point_data: Mapping[str, int]) -> str:
+    """An UnstructuredGrid with no points (meshio cannot write one that it can read back).
+    point_data: name -> number of components (declared, empty)."""
+    arrays = "".join(f'<DataArray type="Float64" Name="{name}" NumberOfComponents="{k}" '
+                     f'format="ascii"></DataArray>\n' for name, k in point_data.items())
+    return ('<?xml version="1.0"?>\n'
+            '<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">\n'
+            '<UnstructuredGrid>\n<Piece NumberOfPoints="0" NumberOfCells="0">\n'
+            '<Points>\n<DataArray type="Float64" NumberOfComponents="3" format="ascii">'
+            '</DataArray>\n</Points>\n<Cells>\n'
+            '<DataArray type="Int64" Name="connectivity" format="ascii"></DataArray>\n'
+            '<DataArray type="Int64" Name="offsets" format="ascii"></DataArray>\n'
+            '<DataArray type="UInt8" Name="types" format="ascii"></DataArray>\n</Cells>\n'
+            f'<PointData>\n{arrays}</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n')
+
+
+def write_vtu(path: str | Path, points: np.ndarray, cells: list[tuple[str, np.ndarray]],
+              point_data: Mapping[str, np.ndarray] | None = None,
+              cell_data: Mapping[str, list[np.ndarray]] | None = None) -> None:
+    """Write an unstructured grid atomically with meshio (an empty grid by hand)."""
+    import meshio
+
+    point_data = dict(point_data or {})
+    points = np.asarray(points, float).reshape(-1, 3)
+    if points.shape[0] == 0:
+        comps = {k: (1 if np.ndim(v) < 2 else int(np.shape(v)[1])) for k, v in point_data.items()}
+        atomic_write_text(path, _empty_vtu(comps))
+        return
+    mesh = meshio.Mesh(points, cells, point_data=point_data, cell_data=dict(cell_data or {}))
+    with atomic_path(path) as tmp:
+        meshio.write(str(tmp), mesh, file_format="vtu")
+
+
+def pvd_text(entries: Sequence[tuple[float, str]]) -> str:
+    """The XML of a ParaView collection of (time, relative file) entries."""
+    lines = ['<?xml version="1.0"?>',
+             '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+             "  <Collection>"]
+    for t, f in entries:
+        lines.append(f'    <DataSet timestep="{float(t)!r}" group="" part="0" file="{f}"/>')
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    return "\n".join(lines)
+
+
+def read_pvd(path: str | Path) -> list[tuple[float, str]]:
+    """The (time, file) entries of a .pvd file (files relative to its folder)."""
+    root = ET.parse(str(path)).getroot()
+    return [(float(ds.get("timestep")), ds.get("file")) for ds in root.iter("DataSet")]
+
+
+class PvdSeries:
+    """One time series ``<outdir>/<name>.pvd`` of ``<outdir>/vtk/<name>_NNNNNN.vtu`` files.
+
+    restart_time: ``None`` for a fresh series (old files of this name are removed), else
+    the entries after that time (s) are dropped (and their files deleted).
+    """
+
+    def __init__(self, outdir: str | Path, name: str, restart_time: float | None = None) -> None:
+        self.outdir = Path(outdir)
+        self.name = name
+        self.pvd = self.outdir / f"{name}.pvd"
+        self.vtkdir = self.outdir / VTK_DIR
+        self.vtkdir.mkdir(parents=True, exist_ok=True)
+        self.entries: list[tuple[float, str]] = []
+        if restart_time is not None and self.pvd.exists():
+            kept = [(t, f) for t, f in read_pvd(self.pvd) if t <= restart_time + _time_tol(restart_time)]
+            keep_files = {f for _, f in kept}
+            for _, f in read_pvd(self.pvd):
+                if f not in keep_files:
+                    (self.outdir / f).unlink(missing_ok=True)
+            self.entries = kept
+        else:
+            for old in self.vtkdir.glob(f"{name}_*.vtu"):
+                old.unlink()
+        self._next = 1 + max((self._index(f) for _, f in self.entries), default=-1)
+        atomic_write_text(self.pvd, pvd_text(self.entries))
+
+    def _index(self, rel: str) -> int:
+        stem = Path(rel).stem
+        try:
+            return int(stem.rsplit("_", 1)[1])
+        except (IndexError, ValueError):
+            return len(self.entries)
+
+    def next_path(self) -> tuple[Path, str]:
+        """(absolute path, path relative to outdir) of the next sample's .vtu."""
+        rel = f"{VTK_DIR}/{self.name}_{self._next:06d}.vtu"
+        return self.outdir / rel, rel
+
+    def commit(self, time: float, rel: str) -> None:
+        """Record a written sample and rewrite the .pvd atomically."""
+        self.entries.append((float(time), rel))
+        self._next += 1
+        atomic_write_text(self.pvd, pvd_text(self.entries))
+
+    def write(self, time: float, points, cells, point_data=None, cell_data=None) -> Path:
+        """Write one sample (see :func:`write_vtu`) and add it to the collection."""
+        path, rel = self.next_path()
+        write_vtu(path, points, cells, point_data, cell_data)
+        self.commit(time, rel)
+        return path
+
+
+class ParaViewWriter:
+    """The three ParaView series: particles, walls, contacts.
+
+    Parameters
+    ----------
+    outdir: output directory.
+    shapes: shape id -> :class:`~nurbsdem.geometry.shape.Shape` (file frame).
+    walls: the walls (objects with ``.name``, ``.id`` and ``.patch`` in the world at their
+        initial place, e.g. ``model.walls``).
+    resolution: quads per patch direction for the particles (walls of degree 1 use 1).
+    restart_time: see :class:`PvdSeries`.
+
+    Point data of ``particles``: ``particle_id``, ``shape_id`` (ints), ``velocity`` (m/s,
+    the body's centroid velocity), ``angular_velocity`` (rad/s) — constant over a body;
+    cell data ``patch_id``. ``walls``: point data ``wall_id``, ``displacement`` (m); cell
+    data ``wall_id``. ``contacts``: one vertex per active contact at the midpoint of its two
+    contact points, point data ``force_normal``, ``force_tangential`` (N, force on body A),
+    ``penetration`` (m), ``degenerated`` (level), ``body_a``, ``body_b``.
+    """
+
+    def __init__(self, outdir: str | Path, shapes: Mapping[int, "Shape"],
+                 walls: Sequence["WallSpec"] = (), resolution: int = 8,
+                 restart_time: float | None = None) -> None:
+        self.outdir = Path(outdir)
+        self.resolution = int(resolution)
+        self.series = {name: PvdSeries(self.outdir, name, restart_time) for name in SERIES}
+        self._shape_mesh: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        for sid, shape in shapes.items():
+            pts, quads, pid = tessellate_patches(shape.patches, self.resolution)
+            self._shape_mesh[int(sid)] = (pts - np.asarray(shape.centroid, float), quads, pid)
+        self.walls = list(walls)
+        self._wall_mesh = self._mesh_walls()
+
+    def _mesh_walls(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        P, Q, wid, pw = [], [], [], []
+        off = 0
+        for k, w in enumerate(self.walls):
+            n = 1 if (w.patch.degree_u == 1 and w.patch.degree_v == 1) else self.resolution
+            pts, quads = tessellate(w.patch, n)
+            P.append(pts)
+            Q.append(np.asarray(quads, np.int64) + off)
+            wid.append(np.full(len(quads), w.id, np.int64))
+            pw.append(np.full(len(pts), k, np.int64))
+            off += len(pts)
+        if not P:
+            z = np.zeros(0, np.int64)
+            return np.zeros((0, 3)), np.zeros((0, 4), np.int64), z, z
+        return np.concatenate(P), np.concatenate(Q), np.concatenate(wid), np.concatenate(pw)
+
+    # -- particles ---------------------------------------------------------------
+    def particle_mesh(self, bodies: "Bodies") -> tuple[np.ndarray, np.ndarray, dict, dict]:
+        """World points, quads, point data and cell data of all particles."""
+        R = bodies.rotation_matrices()
+        P, Q, pd, cd = [], [], {k: [] for k in ("particle_id", "shape_id", "velocity",
+                                                "angular_velocity")}, []
+        off = 0
+        for i in range(len(bodies)):
+            rel, quads, pid = self._shape_mesh[int(bodies.shape_id[i])]
+            m = len(rel)
+            P.append(bodies.position[i] + rel @ R[i].T)
+            Q.append(quads + off)
+            cd.append(pid)
+            pd["particle_id"].append(np.full(m, bodies.id[i], np.int64))
+            pd["shape_id"].append(np.full(m, bodies.shape_id[i], np.int64))
+            pd["velocity"].append(np.broadcast_to(bodies.velocity[i], (m, 3)))
+            pd["angular_velocity"].append(np.broadcast_to(bodies.angular_velocity[i], (m, 3)))
+            off += m
+        if not P:
+            return (np.zeros((0, 3)), np.zeros((0, 4), np.int64),
+                    {"particle_id": np.zeros(0), "shape_id": np.zeros(0),
+                     "velocity": np.zeros((0, 3)), "angular_velocity": np.zeros((0, 3))}, {})
+        point_data = {k: np.concatenate(v) for k, v in pd.items()}
+        return np.concatenate(P), np.concatenate(Q), point_data, {"patch_id": [np.concatenate(cd)]}
+
+    def write_particles(self, time: float, bodies: "Bodies") -> Path:
+        """One sample of ``particles.pvd`` (time in s)."""
+        pts, quads, pd, cd = self.particle_mesh(bodies)
+        return self.series["particles"].write(time, pts, [("quad", quads)], pd, cd)
+
+    # -- walls -------------------------------------------------------------------
+    def write_walls(self, time: float, displacement: np.ndarray | None = None) -> Path:
+        """One sample of ``walls.pvd``; displacement (W, 3) m of each wall from its deck
+        position (walls translate only), in ``walls`` order."""
+        pts, quads, wid, pw = self._wall_mesh
+        disp = np.zeros((len(self.walls), 3)) if displacement is None else np.asarray(displacement, float).reshape(-1, 3)
+        d = disp[pw] if len(pw) else np.zeros((0, 3))
+        ids = np.array([w.id for w in self.walls], np.int64)
+        pd = {"wall_id": ids[pw] if len(pw) else np.zeros(0, np.int64), "displacement": d}
+        return self.series["walls"].write(time, pts + d, [("quad", quads)], pd, {"wall_id": [wid]})
+
+    # -- contacts ----------------------------------------------------------------
+    def write_contacts(self, time: float, contacts: Mapping[str, np.ndarray] | None) -> Path:
+        """One sample of ``contacts.pvd``.
+
+        contacts: mapping (or object with attributes) with ``point`` (K, 3) or both
+        ``point_a``, ``point_b`` (K, 3) (world, m); ``force_normal``, ``force_tangential``
+        (K, 3) N; ``penetration`` (K,) m; ``degenerated`` (K,) int; optional ``body_a``,
+        ``body_b`` (K,) int. ``None``: no contacts.
+        """
+        c = contacts
+        if c is None or (_get(c, "point") is None and _get(c, "point_a") is None):
+            pts = np.zeros((0, 3))
+        elif _get(c, "point") is not None:
+            pts = np.asarray(_get(c, "point"), float).reshape(-1, 3)
+        else:
+            pts = 0.5 * (np.asarray(_get(c, "point_a"), float) + np.asarray(_get(c, "point_b"), float)).reshape(-1, 3)
+        k = len(pts)
+        pd = {"force_normal": _arr(c, "force_normal", (k, 3), float),
+              "force_tangential": _arr(c, "force_tangential", (k, 3), float),
+              "penetration": _arr(c, "penetration", (k,), float),
+              "degenerated": _arr(c, "degenerated", (k,), np.int64),
+              "body_a": _arr(c, "body_a", (k,), np.int64),
+              "body_b": _arr(c, "body_b", (k,), np.int64)}
+        cells = [("vertex", np.arange(k, dtype=np.int64).reshape(-1, 1))]
+        return self.series["contacts"].write(time, pts, cells, pd)
+
+    def write(self, time: float, bodies: "Bodies", wall_displacement: np.ndarray | None = None,
+              contacts: Mapping[str, np.ndarray] | None = None) -> None:
+        """One sample of all three series."""
+        self.write_particles(time, bodies)
+        self.write_walls(time, wall_displacement)
+        self.write_contacts(time, contacts)
+
+
+def _get(obj: Any, key: str) -> Any:
+    if obj is None:
+        return None
+    if isinstance(obj, Mapping):
+        return obj.get(key)
+    return getattr(obj, key, None)
+
+
+def _arr(obj: Any, key: str, shape: tuple[int, ...], dtype) -> np.ndarray:
+    v = _get(obj, key)
+    if v is None:
+        return np.zeros(shape, dtype)
+    return np.asarray(v, dtype).reshape(shape)
+
+
+# ---------------------------------------------------------------------------- CSV monitors
+
+
+class CsvMonitor:
+    """A CSV file with a fixed header, one row per sample, each row flushed when written.
+
+    restart_time: ``None`` (fresh file, header only) or a time (s): rows after it, and an
+    incomplete or malformed trailing row, are removed (atomic rewrite) before appending.
+    """
+
+    def __init__(self, path: str | Path, columns: Sequence[str],
+                 restart_time: float | None = None) -> None:
+        self.path = Path(path)
+        self.columns = tuple(columns)
+        self.header = ",".join(self.columns)
+        rows: list[str] = []
+        if restart_time is not None and self.path.exists():
+            rows = self._kept_rows(restart_time)
+        atomic_write_text(self.path, "".join(line + "\n" for line in [self.header] + rows))
+        self.rows_at_start = [list(map(float, r.split(","))) for r in rows]
+        self._fh = open(self.path, "a", newline="")
+
+    def _kept_rows(self, restart_time: float) -> list[str]:
+        text = self.path.read_text()
+        lines = text.split("\n")
+        if not lines or lines[0].strip() != self.header:
+            return []
+        complete = lines[1:-1] if not text.endswith("\n") else lines[1:]
+        kept = []
+        limit = restart_time + _time_tol(restart_time)
+        for line in complete:
+            parts = line.split(",")
+            if len(parts) != len(self.columns):
+                break
+            try:
+                vals = [float(p) for p in parts]
+            except ValueError:
+                break
+            if vals[0] > limit:
+                break
+            kept.append(line)
+        return kept
+
+    def append(self, values: Sequence[Any]) -> None:
+        """Write one row (len(columns) values; time first) and flush it."""
+        if len(values) != len(self.columns):
+            raise ValueError(f"{self.path.name}: expected {len(self.columns)} values, got {len(values)}")
+        self._fh.write(",".join(_fmt(v) for v in values) + "\n")
+        self._fh.flush()
+
+    def sync(self) -> None:
+        """Flush and fsync (call before writing a checkpoint)."""
+        if not self._fh.closed:
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self.sync()
+            self._fh.close()
+
+
+class MonitorWriter:
+    """``monitors/energy.csv``, ``monitors/contacts.csv`` and ``monitors/wall_<name>.csv``.
+
+    Energies in J, times in s, displacements in m, reactions in N (the total force the
+    particles exert on the wall, world frame).
+    """
+
+    def __init__(self, outdir: str | Path, wall_names: Sequence[str] = (),
+                 restart_time: float | None = None) -> None:
+        self.dir = Path(outdir) / MONITOR_DIR
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.energy_csv = CsvMonitor(self.dir / "energy.csv", ENERGY_COLUMNS, restart_time)
+        self.contacts_csv = CsvMonitor(self.dir / "contacts.csv", CONTACT_COLUMNS, restart_time)
+        self.wall_csv = {name: CsvMonitor(self.dir / f"wall_{name}.csv", WALL_COLUMNS, restart_time)
+                         for name in wall_names}
+        self._reference: float | None = None
+        if self.energy_csv.rows_at_start:
+            r = self.energy_csv.rows_at_start[0]
+            # balance_error = mechanical + dissipated - external_work - reference
+            self._reference = r[6] + r[4] - r[5] - r[7]
+
+    def energy(self, time: float, kinetic: float, potential: float, elastic: float,
+               dissipated: float, external_work: float,
+               balance_error: float | None = None) -> float:
+        """Append an energy row; returns the balance error written.
+
+        kinetic (translational + rotational), potential (gravity), elastic (contact springs),
+        dissipated (cumulative, >= 0), external_work (cumulative work done on the system by
+        moving walls and anything else external, e.g. energy added by a Replicate step).
+        mechanical = kinetic + potential + elastic. balance_error, unless given, is
+        ``mechanical + dissipated - external_work`` minus its value at the first row.
+        """
+        mech = float(kinetic) + float(potential) + float(elastic)
+        total = mech + float(dissipated) - float(external_work)
+        if balance_error is None:
+            if self._reference is None:
+                self._reference = total
+            balance_error = total - self._reference
+        self.energy_csv.append([time, kinetic, potential, elastic, dissipated, external_work,
+                                mech, balance_error])
+        return float(balance_error)
+
+    def contacts(self, time: float, monitored: int, active: int, degenerated: int,
+                 failed: int) -> None:
+        """Append a contact-count row (numbers of monitored LCPs, active, degenerated and
+        failed contacts, paper Fig. 5)."""
+        self.contacts_csv.append([time, int(monitored), int(active), int(degenerated), int(failed)])
+
+    def wall(self, name: str, time: float, displacement: Sequence[float],
+             reaction: Sequence[float]) -> None:
+        """Append a row to ``wall_<name>.csv``: displacement from the deck position (m) and
+        reaction (N)."""
+        d = np.asarray(displacement, float).reshape(3)
+        r = np.asarray(reaction, float).reshape(3)
+        self.wall_csv[name].append([time, *d, *r])
+
+    def _all(self) -> list[CsvMonitor]:
+        return [self.energy_csv, self.contacts_csv, *self.wall_csv.values()]
+
+    def sync(self) -> None:
+        for m in self._all():
+            m.sync()
+
+    def close(self) -> None:
+        for m in self._all():
+            m.close()
+
+
+# ---------------------------------------------------------------------------- results.h5
+
+RESULTS_FIELDS = {"particle_id": ((), np.int64), "shape_id": ((), np.int64),
+                  "position": ((3,), np.float64), "quaternion": ((4,), np.float64),
+                  "velocity": ((3,), np.float64), "angular_velocity": ((3,), np.float64)}
+
+
+class ResultsWriter:
+    """``results.h5``: every sample's body states, ragged by sample (N may change).
+
+    Layout::
+
+        attrs: deck (text), deck_path, nurbsdem_version, format = "nurbsdem-results-1",
+               conventions (str)
+        time        (S,)   float64  sample times, s
+        count       (S,)   int64    bodies in each sample
+        offset      (S+1,) int64    sample k's rows are offset[k]:offset[k+1]
+        particle_id (R,)   int64    deck body id
+        shape_id    (R,)   int64
+        position    (R, 3) float64  centroid, world, m
+        quaternion  (R, 4) float64  (w, x, y, z), file frame -> world
+        velocity    (R, 3) float64  m/s
+        angular_velocity (R, 3) float64 rad/s, world frame
+
+    Samples are buffered and written ``flush_every`` at a time (and by :meth:`flush`,
+    :meth:`close`): each flush copies the file, appends, fsyncs and renames it into place,
+    so the file is always complete. Read with :func:`read_results_sample`.
+    """
+
+    def __init__(self, path: str | Path, deck_text: str = "", deck_path: str = "",
+                 restart_time: float | None = None, flush_every: int = 20) -> None:
+        self.path = Path(path)
+        self.flush_every = int(flush_every)
+        self._pending: list[tuple[float, dict[str, np.ndarray]]] = []
+        if restart_time is not None and self.path.exists():
+            self._truncate(restart_time)
+        else:
+            self._create(deck_text, deck_path)
+
+    def _create(self, deck_text: str, deck_path: str) -> None:
+        import h5py
+
+        from .. import __version__
+        with atomic_path(self.path) as tmp:
+            with h5py.File(tmp, "w") as f:
+                f.attrs["deck"] = deck_text
+                f.attrs["deck_path"] = str(deck_path)
+                f.attrs["nurbsdem_version"] = __version__
+                f.attrs["format"] = "nurbsdem-results-1"
+                f.attrs["conventions"] = ("SI units; position = centroid in the world; "
+                                          "quaternion (w, x, y, z) maps the shape file frame "
+                                          "to the world; velocities in the world frame; "
+                                          "sample k = rows offset[k]:offset[k+1]")
+                f.create_dataset("time", (0,), np.float64, maxshape=(None,), chunks=(1024,))
+                f.create_dataset("count", (0,), np.int64, maxshape=(None,), chunks=(1024,))
+                f.create_dataset("offset", data=np.zeros(1, np.int64), maxshape=(None,),
+                                 chunks=(1024,))
+                for name, (tail, dt) in RESULTS_FIELDS.items():
+                    f.create_dataset(name, (0, *tail), dt, maxshape=(None, *tail),
+                                     chunks=(4096, *tail))
+
+    def _rewrite(self, edit) -> None:
+        """Copy the file, apply ``edit(h5file)``, fsync, rename into place."""
+        import h5py
+
+        with atomic_path(self.path) as tmp:
+            shutil.copyfile(self.path, tmp)
+            with h5py.File(tmp, "r+") as f:
+                edit(f)
+
+    def _truncate(self, restart_time: float) -> None:
+        def edit(f) -> None:
+            t = f["time"][:]
+            s = int(np.searchsorted(t, restart_time + _time_tol(restart_time), side="right"))
+            r = int(f["offset"][s])
+            f["time"].resize((s,))
+            f["count"].resize((s,))
+            f["offset"].resize((s + 1,))
+            for name in RESULTS_FIELDS:
+                f[name].resize((r, *f[name].shape[1:]))
+        self._rewrite(edit)
+
+    def append(self, time: float, bodies: "Bodies") -> None:
+        """Queue one sample (time in s) of the bodies' state; flushes every ``flush_every``."""
+        data = {"particle_id": bodies.id, "shape_id": bodies.shape_id,
+                "position": bodies.position, "quaternion": bodies.quaternion,
+                "velocity": bodies.velocity, "angular_velocity": bodies.angular_velocity}
+        self._pending.append((float(time), {k: np.array(v, RESULTS_FIELDS[k][1])
+                                            for k, v in data.items()}))
+        if len(self._pending) >= self.flush_every:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the queued samples (atomic replace of the file)."""
+        if not self._pending:
+            return
+        pending = self._pending
+
+        def edit(f) -> None:
+            s0 = f["time"].shape[0]
+            r0 = int(f["offset"][s0])
+            counts = np.array([len(d["particle_id"]) for _, d in pending], np.int64)
+            s1, r1 = s0 + len(pending), r0 + int(counts.sum())
+            f["time"].resize((s1,))
+            f["time"][s0:s1] = [t for t, _ in pending]
+            f["count"].resize((s1,))
+            f["count"][s0:s1] = counts
+            f["offset"].resize((s1 + 1,))
+            f["offset"][s0 + 1:s1 + 1] = r0 + np.cumsum(counts)
+            for name in RESULTS_FIELDS:
+                ds = f[name]
+                ds.resize((r1, *ds.shape[1:]))
+                if r1 > r0:
+                    ds[r0:r1] = np.concatenate([d[name] for _, d in pending])
+        self._rewrite(edit)
+        self._pending = []
+
+    def close(self) -> None:
+        self.flush()
+
+
+def read_results_times(path: str | Path) -> np.ndarray:
+    """Sample times (s) of a results.h5."""
+    import h5py
+    with h5py.File(path, "r") as f:
+        return f["time"][:]
+
+
+def read_results_sample(path: str | Path, k: int) -> dict[str, Any]:
+    """Sample k (negative counts from the end) of a results.h5: ``time`` and the arrays of
+    :data:`RESULTS_FIELDS`."""
+    import h5py
+    with h5py.File(path, "r") as f:
+        s = f["time"].shape[0]
+        if k < 0:
+            k += s
+        if not 0 <= k < s:
+            raise IndexError(f"sample {k} out of range ({s} samples)")
+        a, b = int(f["offset"][k]), int(f["offset"][k + 1])
+        out: dict[str, Any] = {"time": float(f["time"][k])}
+        for name in RESULTS_FIELDS:
+            out[name] = f[name][a:b]
+        return out
+
+
+# ---------------------------------------------------------------------------- bundle
+
+
+class OutputWriters:
+    """All writers of a run, from the model's ``Output`` block.
+
+    restart_time: ``None`` for a fresh run, or the checkpoint's time (s) on a restart.
+    Attributes: ``directory``, ``paraview`` (:class:`ParaViewWriter`), ``monitors``
+    (:class:`MonitorWriter`), ``results`` (:class:`ResultsWriter`).
+    """
+
+    def __init__(self, model: "Model", restart_time: float | None = None,
+                 flush_every: int = 20) -> None:
+        assert model.output is not None
+        self.directory = Path(model.output.directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        shapes = {sid: e.shape for sid, e in model.shapes.items()}
+        self.paraview = ParaViewWriter(self.directory, shapes, model.walls,
+                                       model.output.vtk_resolution, restart_time)
+        self.monitors = MonitorWriter(self.directory, model.wall_names, restart_time)
+        self.results = ResultsWriter(self.directory / RESULTS_NAME, model.text, model.path,
+                                     restart_time, flush_every)
+
+    def sync(self) -> None:
+        """Make everything written so far durable (call before saving a checkpoint)."""
+        self.results.flush()
+        self.monitors.sync()
+
+    def close(self) -> None:
+        self.results.close()
+        self.monitors.close()
+
+
+def is_multiple(t: float, every: float, tol: float = 1e-9) -> bool:
+    """Whether time t (s) falls on a multiple of ``every`` (s), within tol * every."""
+    k = round(t / every)
+    return math.isclose(t, k * every, rel_tol=0.0, abs_tol=tol * every)
