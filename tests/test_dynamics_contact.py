@@ -94,7 +94,7 @@ def test_frictionless_undamped_spheres_in_a_box_conserve_energy():
     rng = np.random.default_rng(7)
     n, r, m, L = 6, 0.02, 0.1, 0.2
     law = ContactLaw(en=1e5)
-    s = DemSystem(dt=1e-4, gravity=(0, 0, -9.81), interfaces=InterfaceTable(default=law))
+    s = DemSystem(dt=5e-5, gravity=(0, 0, -9.81), interfaces=InterfaceTable(default=law))
     grid = np.array([[x, y, z] for x in (0.05, 0.15) for y in (0.05, 0.15) for z in (0.05, 0.15)])
     for i in range(n):
         s.add_particle(m, sphere_inertia(m, r), grid[i], v=rng.uniform(-1, 1, 3), radius=r)
@@ -110,11 +110,11 @@ def test_frictionless_undamped_spheres_in_a_box_conserve_energy():
     ncontacts = 0
     drift = 0.0
     for _ in range(50):
-        s.advance(100)
+        s.advance(200)
         ncontacts += len(s.c_a)
         drift = max(drift, abs(s.energy().mechanical - e0) / e0)
     assert s.energy().dissipated == 0.0
-    assert ncontacts > 0 or s.ledger.dissipated_normal == 0
+    assert ncontacts > 0                             # collisions did happen
     assert drift < 1e-3
 
 
@@ -130,8 +130,7 @@ def _incline(alpha_deg, mu, T=0.4, dt=5e-5):
     s.advance(int(round(T / dt)))
     t2, v2 = s.time, s.bodies.v[0, 0]
     acc = (v2 - v1) / (t2 - t1)
-    spin = -s.bodies.omega()[0, 1] * r     # rolling in +x: omega_y > 0 ... v = omega_y r
-    return acc, v2, s.bodies.omega()[0, 1] * r, g, a, s
+    return acc, v2, s.bodies.omega()[0, 1] * r, g, a, s   # rolling in +x: v = omega_y r
 
 
 def test_sphere_on_incline_rolls_without_slip_below_threshold():

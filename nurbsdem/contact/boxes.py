@@ -31,7 +31,7 @@ SAT_EPS = 1e-9
 
 
 # --------------------------------------------------------------------------- SAT core
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _relative(axes_a, axes_b, R, AbsR):
     """R = A^T B (B's axes in A's frame) and AbsR = |R| + SAT_EPS, in place."""
     for i in range(3):
@@ -43,7 +43,7 @@ def _relative(axes_a, axes_b, R, AbsR):
             AbsR[i, j] = abs(s) + SAT_EPS
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _sat(t, R, AbsR, ha, hb):
     """Separating-axis test of two boxes given in A's frame.
 

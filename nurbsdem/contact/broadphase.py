@@ -10,12 +10,15 @@ here with an optional Verlet-like ``margin`` (m): a pair is kept when
 ``|c_i - c_j| < r_i + r_j + margin``, so a list built with ``margin > 0`` stays valid while
 no body moves more than ``margin / 2``.
 
-Neighbour search: linked cells over a *hashed* uniform grid (no dense array over the
-bounding box, so very spread-out domains cost nothing extra). Polydisperse sets are split
-into size levels whose radii differ by at most a factor 2; each level has its own grid with
-cell size ``2 R_L + margin`` (R_L the level's largest radius). A particle searches its own
-level (pairs i < j) and the coarser levels (every pair found once, by its smaller member),
-so each query visits at most 3 x 3 x 3 cells per level and the cost is ~linear in N.
+Neighbour search: linked cells over a *hashed* uniform grid (cells are keyed by their
+integer coordinates in an open-addressing table sized by N, never a dense array over the
+bounding box, so very spread-out domains cost nothing extra); particles are sorted by cell
+(cells in (z, y, x) order for memory locality). Polydisperse sets are split into size
+levels (radius ratio ``LEVEL_RATIO`` = 4 between levels, at most ``MAX_LEVELS``); each level
+has its own grid with cell size ``2 R_L + margin`` (R_L the level's largest radius). A cell
+meets its own level through the half shell (itself + 13 neighbours, each pair once) and the
+coarser levels through the cells its spheres' bounding box reaches (each cross-level pair is
+found once, from its smaller member). The cost is ~linear in N.
 
 Flat walls: :func:`sphere_wall_pairs` tests each bounding sphere against each wall
 rectangle (exact sphere-vs-rectangle distance).
@@ -29,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-#: At most this many size levels (radius ratio 2 per level); smaller radii share level 0.
+#: At most this many size levels; radii below the smallest level share level 0.
 MAX_LEVELS = 8
 
 #: Radius ratio between consecutive size levels (within a level radii differ by less).
@@ -62,15 +65,9 @@ def _insert(tab, mask, lv, ix, iy, iz, cid):
 
 
 @njit(cache=True)
-def _lookup(dense, dmap, dbase, dn, tab, mask, lv, ix, iy, iz):
-    """Cell id of (lv, ix, iy, iz), or -1 when that cell is empty.
-
-    Dense mode: direct index into dmap (per level a box of dn[lv] cells from dbase[lv]).
-    Otherwise: the hash table tab (keys stored inline, one probe is one memory line)."""
-    if dense:
-        if ix < 0 or iy < 0 or iz < 0 or ix >= dn[lv, 0] or iy >= dn[lv, 1] or iz >= dn[lv, 2]:
-            return -1
-        return dmap[dbase[lv] + (iz * dn[lv, 1] + iy) * dn[lv, 0] + ix]
+def _lookup(tab, mask, lv, ix, iy, iz):
+    """Cell id of (lv, ix, iy, iz) in the hash table tab, or -1 when that cell is empty
+    (keys stored inline: one probe reads one memory line)."""
     s = _hash4(lv, ix, iy, iz, mask)
     while True:
         c = tab[s, 4]
@@ -191,32 +188,15 @@ def sphere_pairs_jit(centers, radii, margin):
                 break
             s = (s + 1) & mask
 
-    # ---- per-level extents in cells; a dense map when all levels' boxes hold few cells
-    dn = np.zeros((nlev, 3), dtype=np.int64)
+    # ---- renumber cells in (level, z, y, x) order (memory locality of neighbours)
+    mx = np.zeros(3, dtype=np.int64)
     for c in range(ncell):
         for d in range(3):
-            dn[ckey[c, 0], d] = max(dn[ckey[c, 0], d], ckey[c, d + 1] + 1)
-    total = 0.0
-    for k in range(nlev):
-        total += float(dn[k, 0]) * float(dn[k, 1]) * float(dn[k, 2])
-    dense = total <= 8.0 * n + 4096.0
-    dbase = np.zeros(nlev + 1, dtype=np.int64)
-    if dense:
-        for k in range(nlev):
-            dbase[k + 1] = dbase[k] + dn[k, 0] * dn[k, 1] * dn[k, 2]
-
-    # ---- renumber cells in (level, z, y, x) order (memory locality of neighbours)
-    mxx = dn[:, 0].max()
-    mxy = dn[:, 1].max()
-    mxz = dn[:, 2].max()
-    if dense or float(nlev) * float(mxx) * float(mxy) * float(mxz) < 4.0e18:
+            mx[d] = max(mx[d], ckey[c, d + 1] + 1)
+    if float(nlev) * float(mx[0]) * float(mx[1]) * float(mx[2]) < 4.0e18:
         skey = np.empty(ncell, dtype=np.int64)
         for c in range(ncell):
-            k = ckey[c, 0]
-            if dense:
-                skey[c] = dbase[k] + (ckey[c, 3] * dn[k, 1] + ckey[c, 2]) * dn[k, 0] + ckey[c, 1]
-            else:
-                skey[c] = ((k * mxz + ckey[c, 3]) * mxy + ckey[c, 2]) * mxx + ckey[c, 1]
+            skey[c] = ((ckey[c, 0] * mx[2] + ckey[c, 3]) * mx[1] + ckey[c, 2]) * mx[0] + ckey[c, 1]
         corder = np.argsort(skey)
         rank = np.empty(ncell, dtype=np.int64)
         for q in range(ncell):
@@ -227,12 +207,6 @@ def sphere_pairs_jit(centers, radii, margin):
         ckey = ck2
         for i in range(n):
             cell_of[i] = rank[cell_of[i]]
-    dmap = np.full(dbase[nlev] if dense else 0, _EMPTY, dtype=np.int64)
-    if dense:
-        for c in range(ncell):
-            k = ckey[c, 0]
-            dmap[dbase[k] + (ckey[c, 3] * dn[k, 1] + ckey[c, 2]) * dn[k, 0] + ckey[c, 1]] = c
-    else:
         tab[:, 4] = _EMPTY
         for c in range(ncell):
             _insert(tab, mask, ckey[c, 0], ckey[c, 1], ckey[c, 2], ckey[c, 3], c)
@@ -281,7 +255,7 @@ def sphere_pairs_jit(centers, radii, margin):
                     if same:
                         nc = c
                     else:
-                        nc = _lookup(dense, dmap, dbase, dn, tab, mask, kc, cx + dx, cy + dy, cz + dz)
+                        nc = _lookup(tab, mask, kc, cx + dx, cy + dy, cz + dz)
                         if nc < 0:
                             continue
                     for a in range(p0, p1):
@@ -328,7 +302,7 @@ def sphere_pairs_jit(centers, radii, margin):
             for iz in range(z0, z1 + 1):
                 for iy in range(y0, y1 + 1):
                     for ix in range(x0, x1 + 1):
-                        nc = _lookup(dense, dmap, dbase, dn, tab, mask, k, ix, iy, iz)
+                        nc = _lookup(tab, mask, k, ix, iy, iz)
                         if nc < 0:
                             continue
                         for a in range(p0, p1):

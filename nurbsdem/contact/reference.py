@@ -38,7 +38,7 @@ def _chart(d0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t1, np.cross(d0, t1)
 
 
-def minimise_on_sphere(phi_grad, d0: np.ndarray, scale: float, rounds: int = 3) -> np.ndarray:
+def minimise_on_sphere(phi_grad, d0: np.ndarray, scale: float, rounds: int = 1) -> np.ndarray:
     """Minimise phi over unit vectors from d0 (BFGS in a tangent chart re-centred each round).
 
     ``phi_grad(d) -> (phi, euclidean gradient (3,))``."""
@@ -56,7 +56,7 @@ def minimise_on_sphere(phi_grad, d0: np.ndarray, scale: float, rounds: int = 3) 
             return f, gx
 
         res = minimize(fun, np.zeros(2), jac=True, method="BFGS",
-                       options={"gtol": 1e-15 * scale, "maxiter": 200})
+                       options={"gtol": 1e-13 * scale, "maxiter": 100})
         y = d + res.x[0] * t1 + res.x[1] * t2
         d = y / np.linalg.norm(y)
     return d
@@ -101,6 +101,32 @@ def ellipsoid_pair(axes_a, pose_a, axes_b, pose_b, n_dirs: int = 4000):
 
 
 # --------------------------------------------------------------------------- NURBS bodies
+def _newton_polish(pt, e: np.ndarray, x: np.ndarray, iters: int = 3) -> np.ndarray:
+    """A few projected Newton steps on max e·s(u, v) over the patch rectangle, after the
+    L-BFGS-B solution (which stalls near machine precision): parameters at a bound with the
+    gradient pointing out stay fixed."""
+    u0, u1, v0, v1 = pt.domain
+    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    x = np.array(x, float)
+    for _ in range(iters):
+        ev = pt.evaluate(np.array([x[0]]), np.array([x[1]]), 2)[0]
+        g = np.array([ev[1] @ e, ev[2] @ e])
+        H = np.array([[ev[3] @ e, ev[4] @ e], [ev[4] @ e, ev[5] @ e]])
+        free = ~(((x <= lo) & (g < 0)) | ((x >= hi) & (g > 0)))
+        if not free.any():
+            break
+        idx = np.flatnonzero(free)
+        Hf = H[np.ix_(idx, idx)]
+        if np.any(np.linalg.eigvalsh(Hf) >= 0):
+            break
+        step = np.zeros(2)
+        step[idx] = -np.linalg.solve(Hf, g[idx])
+        if np.linalg.norm(step) > 0.05 * max(u1 - u0, v1 - v0):
+            break
+        x = np.clip(x + step, lo, hi)
+    return x
+
+
 class SampledBody:
     """A NURBS shape in a pose with a dense surface sample, for reference support mappings.
 
@@ -140,7 +166,10 @@ class SampledBody:
             k = np.flatnonzero(m)[int(np.argmax(vals[m]))]
             order.append((vals[k], i, k))
         order.sort(reverse=True)
-        for _, i, k in order[:n_patches]:
+        # patches whose best sample is close to the overall best (a support point near an
+        # edge or a corner can lie on any of them); the others cannot hold the maximum
+        close = [o for o in order[:n_patches] if o[0] >= order[0][0] - 2e-3 * self.scale]
+        for _, i, k in close:
             pt = self.shape.patches[i]
             u0, u1, v0, v1 = pt.domain
 
@@ -150,11 +179,13 @@ class SampledBody:
 
             res = minimize(fun, self.uv[k], jac=True, method="L-BFGS-B",
                            bounds=[(u0, u1), (v0, v1)],
-                           options={"ftol": 1e-16, "gtol": 1e-15, "maxiter": 500})
-            h = -res.fun
+                           options={"ftol": 1e-14, "gtol": 1e-11 * self.scale, "maxiter": 200})
+            x = _newton_polish(pt, e, res.x)
+            ev = pt.evaluate(np.array([x[0]]), np.array([x[1]]), 0)[0, 0]
+            h = float(ev @ e)
             if h > best_h:
                 best_h = h
-                best_p = pt.evaluate(np.array([res.x[0]]), np.array([res.x[1]]), 0)[0, 0]
+                best_p = ev
         p = self.pos + self.R @ best_p
         return float(self.pos @ d + best_h), p
 

@@ -7,8 +7,10 @@ Per sample (:class:`EnergySample`):
   with g = (0, 0, −9.81) it is Σ m 9.81 z);
 * ``elastic_normal`` Σ ½ εn d², ``elastic_tangential`` Σ ½ εt |s|² over the active contacts;
 * ``dissipated_normal`` / ``dissipated_tangential``: work removed by the normal / tangential
-  dashpots (incl. the no-tension clip of the normal force), ``dissipated_friction``: slip work of
-  the Coulomb return mapping (see :mod:`nurbsdem.dynamics.forces`);
+  dashpots (incl. the no-tension clip of the normal force), ``dissipated_friction``: work done on
+  the tangential springs minus the tangential elastic energy still stored (slip of the Coulomb
+  return mapping, and springs dropped loaded when a contact ends; see
+  :mod:`nurbsdem.dynamics.forces`);
 * ``external_work``: work done on the particles by the prescribed-motion walls, ∫ reaction·u dt;
 * ``mechanical`` = kinetic + potential + elastic;
 * ``balance_error`` = mechanical − mechanical(0) − external_work + dissipated (→ 0).
@@ -16,10 +18,11 @@ Per sample (:class:`EnergySample`):
 Consistency with the integrator: the dashpot dissipation and the wall work are accumulated as
 the *exact discrete work* of the corresponding impulses in each velocity-Verlet half kick
 (:func:`nurbsdem.dynamics.forces.kick_work`), so they carry no quadrature error of their own.
-What remains in ``balance_error`` is the difference between the discrete work of the conservative
-forces (springs, gravity) and the change of their potentials, plus the DLM free-rotation energy
-error and the slip-work estimate of a stick↔slip transition: all of the Verlet kind, bounded and
-**second order, O(h²)** in the internal step h (measured in tests/test_dynamics_energy.py and
+The friction dissipation is defined from the exact discrete work on the tangential springs, so it
+adds no error either.  What remains in ``balance_error`` is the difference between the discrete
+work of the normal springs and gravity and the change of their potentials, plus the DLM
+free-rotation energy error: of the Verlet kind, bounded and **second order, O(h²)** in the
+internal step h (measured in tests/test_dynamics_energy.py and
 benchmarks/bench_dynamics.py).  Free fall has zero balance error (to round-off).
 """
 from __future__ import annotations
@@ -85,13 +88,13 @@ class EnergyLedger:
 
     dissipated_normal: float = 0.0
     dissipated_tangential: float = 0.0
-    dissipated_friction: float = 0.0
+    tangential_spring_work: float = 0.0   # work done on the tangential springs (J)
     external_work: float = 0.0
     initial_mechanical: float = float("nan")
 
     def to_array(self) -> np.ndarray:
         return np.array([self.dissipated_normal, self.dissipated_tangential,
-                         self.dissipated_friction, self.external_work, self.initial_mechanical])
+                         self.tangential_spring_work, self.external_work, self.initial_mechanical])
 
     @staticmethod
     def from_array(a: np.ndarray) -> "EnergyLedger":

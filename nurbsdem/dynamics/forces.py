@@ -27,9 +27,12 @@ displacement accumulated while the contact persists).  Each evaluation (time inc
 2. trial ``s* = s' + h w_t``; trial force on B ``f_t* = -εt s* - ct w_t``;
 3. Coulomb return mapping: stick when ``|f_t*| <= μ f_n`` (f_t = f_t*, s = s*); otherwise slip:
    ``α = μ f_n / |f_t*|``, ``f_t = α f_t*`` and the spring is scaled the same way, ``s = α s*``
-   (so ``|f_t| = μ f_n`` exactly and the force stays on the Coulomb cone).  The slip (friction)
-   work of the step is the elastic force times the spring truncation,
-   ``εt α |s*| · (1 − α)|s*|`` (J).
+   (so ``|f_t| = μ f_n`` exactly and the force stays on the Coulomb cone).
+
+Friction dissipation (energy ledger) is *not* estimated from the return mapping: it is the exact
+discrete work done on the tangential springs by the relative motion (:func:`kick_work`) minus the
+tangential elastic energy still stored, so it includes slip and the spring energy lost when a
+contact ends with a loaded spring, and adds no error of its own to the energy balance.
 
 History is keyed by ``ContactSet.key``: a new contact starts with s = 0, a contact absent from
 the set drops its history (:func:`match_history`).
@@ -149,8 +152,8 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
                    table: np.ndarray, spring: np.ndarray, h: float,
                    force: np.ndarray, torque: np.ndarray,
                    point: np.ndarray, f_total: np.ndarray, f_damp_n: np.ndarray,
-                   f_damp_t: np.ndarray, fn_out: np.ndarray, e_el: np.ndarray,
-                   stick: np.ndarray) -> float:
+                   f_damp_t: np.ndarray, f_el_t: np.ndarray, fn_out: np.ndarray,
+                   e_el: np.ndarray, stick: np.ndarray) -> float:
     """Evaluate Eq. 16–17 for K contacts and accumulate loads on the bodies.
 
     Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
@@ -160,8 +163,10 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
 
     Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
     f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts
-    (normal: (f_n − εn d) n, includes the clip), fn_out (K,) f_n (N), e_el (K,2) elastic energies
-    ½ εn d² and ½ εt |s|² (J), stick (K,) 1 stick / 0 slip.  Returns the slip work (J).
+    (normal: (f_n − εn d) n, includes the clip), f_el_t (K,3) its tangential elastic (spring)
+    part, fn_out (K,) f_n (N), e_el (K,2) elastic energies
+    ½ εn d² and ½ εt |s|² (J), stick (K,) 1 stick / 0 slip.  Returns the return mapping's
+    slip-work estimate (J) (a diagnostic; the energy ledger uses the exact spring work instead).
     """
     slip_work = 0.0
     K = body_a.shape[0]
@@ -214,12 +219,14 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
             slip_work += et * alpha * smag2 * (1.0 - alpha) * smag2
             s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
             fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
+            fe0, fe1, fe2 = alpha * fe0, alpha * fe1, alpha * fe2
             ft0, ft1, ft2 = alpha * ft0, alpha * ft1, alpha * ft2
         spring[c, 0], spring[c, 1], spring[c, 2] = s0, s1, s2
         F0, F1, F2 = fn * n0 + ft0, fn * n1 + ft1, fn * n2 + ft2
         f_total[c, 0], f_total[c, 1], f_total[c, 2] = F0, F1, F2
         f_damp_n[c, 0], f_damp_n[c, 1], f_damp_n[c, 2] = fdn * n0, fdn * n1, fdn * n2
         f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
+        f_el_t[c, 0], f_el_t[c, 1], f_el_t[c, 2] = fe0, fe1, fe2
         fn_out[c] = fn
         e_el[c, 0] = 0.5 * en * d * d
         e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
@@ -263,13 +270,13 @@ def contact_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
 def kick_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
               w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
               f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
-              hk: float, acc: np.ndarray, wall_work: np.ndarray) -> None:
+              f_el_t: np.ndarray, hk: float, acc: np.ndarray, wall_work: np.ndarray) -> None:
     """Exact discrete work of the contact impulses of one half-kick (length hk, s).
 
     A kick changes velocities linearly at fixed positions, so the kinetic energy change due to an
     impulse J at a contact equals J · (mean of the relative contact velocities before and after).
     Accumulates into acc: [0] normal damping dissipation, [1] tangential damping dissipation,
-    [2] external work by walls (J); wall_work (W,) per wall.  The wall velocity enters through the
+    [2] external work by walls, [3] work done on the tangential springs (J); wall_work (W,) per wall.  The wall velocity enters through the
     relative velocity; its share J·u is the work done by the wall (external work).
     """
     K = body_a.shape[0]
@@ -279,6 +286,7 @@ def kick_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
         m2 = 0.5 * (w_before[c, 2] + w_after[c, 2])
         acc[0] -= hk * (f_damp_n[c, 0] * m0 + f_damp_n[c, 1] * m1 + f_damp_n[c, 2] * m2)
         acc[1] -= hk * (f_damp_t[c, 0] * m0 + f_damp_t[c, 1] * m1 + f_damp_t[c, 2] * m2)
+        acc[3] -= hk * (f_el_t[c, 0] * m0 + f_el_t[c, 1] * m1 + f_el_t[c, 2] * m2)
         a = body_a[c]
         b = body_b[c]
         if a >= n_particles:   # wall A pushes B with F: work on the particles F·u_A

@@ -137,7 +137,7 @@ def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
 
 
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
-               "c_a", "c_b", "c_point", "c_ftot", "c_fdn", "c_fdt", "c_fn", "c_eel", "c_stick",
+               "c_a", "c_b", "c_point", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn", "c_eel", "c_stick",
                "c_key", "wall_d", "wall_u", "wall_work", "ledger")
 
 
@@ -321,10 +321,11 @@ class DemSystem:
                           wall_displacement=self.wall_d.copy(), wall_velocity=self.wall_u.copy(),
                           n_particles=b.n, n_bodies=self.n_bodies)
 
-    def _all_kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _all_kinematics(self, wall_u: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         b = self.bodies
         pos = np.concatenate([b.x, self.wall_d])
-        vel = np.concatenate([b.v, self.wall_u])
+        vel = np.concatenate([b.v, self.wall_u if wall_u is None else wall_u])
         omg = np.concatenate([omega_world(b.q, b.L, self._inv_I), np.zeros((self.walls.n, 3))])
         return pos, vel, omg
 
@@ -346,43 +347,52 @@ class DemSystem:
         ftot = np.empty((K, 3))
         fdn = np.empty((K, 3))
         fdt = np.empty((K, 3))
+        fet = np.empty((K, 3))
         fn = np.empty(K)
         eel = np.empty((K, 2))
         stick = np.empty(K, dtype=np.int64)
         pos, vel, omg = self._all_kinematics()
         slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
-                              spring, h, force, torque, point, ftot, fdn, fdt, fn, eel, stick)
-        self.ledger.dissipated_friction += slip
+                              spring, h, force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick)
+        self.last_slip_work = slip
         self.hist_keys, self.hist_springs = store_history(key, spring)
         force[: b.n] += b.mass[:, None] * self.gravity[None, :]
         self.force, self.torque = force, torque
         self.c_a, self.c_b, self.c_point, self.c_ftot = a, bb, point, ftot
+        self.c_fet = fet
         self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
 
-    def _kick(self, hk: float) -> None:
-        """Half kick with the stored loads, accumulating the exact discrete work of the impulses."""
+    def _kick(self, hk: float, wall_u: np.ndarray) -> None:
+        """Half kick with the stored loads, accumulating the exact discrete work of the impulses.
+
+        wall_u (W,3): the walls' mean velocity over the current internal step, (d(t+h) − d(t))/h,
+        so that the external work adds up to force × the walls' exact displacement (trapezoidal
+        in the force, no error at kinks of a piecewise-linear motion)."""
         b = self.bodies
         K = self.c_a.shape[0]
         if K:
-            pos, vel, omg = self._all_kinematics()
+            pos, vel, omg = self._all_kinematics(wall_u)
             w0 = contact_velocities(self.c_a, self.c_b, self.c_point, pos, vel, omg)
         half_kick(b.v, b.L, self.force, self.torque, self._inv_mass, hk)
         if K:
-            pos, vel, omg = self._all_kinematics()
+            pos, vel, omg = self._all_kinematics(wall_u)
             w1 = contact_velocities(self.c_a, self.c_b, self.c_point, pos, vel, omg)
-            acc = np.zeros(3)
-            kick_work(self.c_a, self.c_b, b.n, w0, w1, self.wall_u, self.c_ftot, self.c_fdn,
-                      self.c_fdt, hk, acc, self.wall_work)
+            acc = np.zeros(4)
+            kick_work(self.c_a, self.c_b, b.n, w0, w1, wall_u, self.c_ftot, self.c_fdn,
+                      self.c_fdt, self.c_fet, hk, acc, self.wall_work)
             self.ledger.dissipated_normal += acc[0]
             self.ledger.dissipated_tangential += acc[1]
             self.ledger.external_work += acc[2]
+            self.ledger.tangential_spring_work += acc[3]
 
     def _internal_step(self, t_new: float, h: float) -> None:
         b = self.bodies
-        self._kick(0.5 * h)
+        d_new, _ = self.walls.kinematics(t_new)
+        u_mean = (d_new - self.wall_d) / h
+        self._kick(0.5 * h, u_mean)
         drift(b.x, b.v, b.q, b.L, self._inv_I, h)
         self._evaluate(t_new, h)
-        self._kick(0.5 * h)
+        self._kick(0.5 * h, u_mean)
 
     # ------------------------------------------------------------------ stepping
     def step(self) -> EnergySample:
@@ -446,6 +456,7 @@ class DemSystem:
         b = self.bodies
         et, er = kinetic_energies(b.mass, b.v, b.q, b.L, self._inv_I)
         eel = self.c_eel.sum(axis=0) if self.c_eel.shape[0] else np.zeros(2)
+        eel = [float(eel[0]), float(eel[1])]
         lg = self.ledger
         return EnergySample(time=self.time, kinetic_translational=float(et),
                             kinetic_rotational=float(er),
@@ -453,7 +464,7 @@ class DemSystem:
                             elastic_normal=float(eel[0]), elastic_tangential=float(eel[1]),
                             dissipated_normal=lg.dissipated_normal,
                             dissipated_tangential=lg.dissipated_tangential,
-                            dissipated_friction=lg.dissipated_friction,
+                            dissipated_friction=lg.tangential_spring_work - float(eel[1]),
                             external_work=lg.external_work, initial_mechanical=lg.initial_mechanical)
 
     @property

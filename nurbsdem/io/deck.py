@@ -262,7 +262,7 @@ def _take(arg: Arg, tokens: list[str], pos: int, what: str,
     vals = []
     numeric = arg.kind in ("float", "int")
     for _ in range(arg.count):
-        if pos >= len(tokens) or (numeric and not _looks_numeric(tokens[pos])
+        if pos >= len(tokens) or (not _looks_numeric(tokens[pos])
                                   and _canonical(tokens[pos], keys) is not None):
             if arg.count == 1:
                 raise _DeckError(f"{what} needs a value")
@@ -796,7 +796,7 @@ def parse_deck(path: str | Path, place: bool = True) -> Model:
 
 
 def _vec(v) -> str:
-    return " ".join(f"{x:g}" for x in np.asarray(v, float))
+    return " ".join(f"{x + 0.0:g}" for x in np.asarray(v, float))  # + 0.0: no "-0"
 
 
 def summary_text(model: Model) -> str:
