@@ -305,7 +305,6 @@ def _tet(W, lam, scale):
         (e1x * e2y - e1y * e2x) * e3z
     flat = abs(vol) <= 1e-13 * scale * scale * scale
     best = np.inf
-    inside = not flat
     for f in range(4):
         i, j, k, m = faces[f]
         abx = W[j, 0] - W[i, 0]
@@ -320,7 +319,6 @@ def _tet(W, lam, scale):
         sp = -(nx * W[i, 0] + ny * W[i, 1] + nz * W[i, 2])
         sm = nx * (W[m, 0] - W[i, 0]) + ny * (W[m, 1] - W[i, 1]) + nz * (W[m, 2] - W[i, 2])
         if flat or sp * sm < 0.0:
-            inside = False if not flat else inside
             li, lj, lk = _tri(W, i, j, k)
             d = _d2(W, i, li, j, lj, k, lk)
             if d < best:
@@ -735,8 +733,10 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
             if VIA[q] == ia and VIB[q] == ib:
                 dup = True
                 break
-        if dup or nv >= capv:
-            converged = not dup is False
+        if dup:
+            converged = True  # w is already a vertex: the face lies on the CSO boundary
+            break
+        if nv >= capv:
             break
         # flood fill of the faces visible from w, starting at the face being refined
         stamp = epa_it
@@ -779,11 +779,8 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
                 if cnt != 1:
                     ok = False
                     break
-        if not ok or nfree + (nf - 0) + nh > capf + nvis and nf + nh - nvis > capf:
-            status = ST_APPROX
-            # undo the marks' effect is unnecessary: we stop here with the best face
-            epa_it = epa_it
-            break
+        if not ok or nh > nfree + nvis + (capf - nf):
+            break  # broken horizon (rounding) or out of room: keep the best face so far
         # new vertex
         for r in range(3):
             VA[nv, r] = sa[r]
@@ -828,8 +825,7 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
                 if ADJ[h, e2] == g and F[h, e2] == b:
                     ADJ[h, e2] = fn
             hor_new[q] = fn
-        if full:
-            status = ST_APPROX
+        if full:  # cannot happen (room checked above); stop with the best face
             break
         # link the new faces around the apex: edge 1 (b, w) meets edge 2 (w, b) of the next
         for q in range(nh):
