@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import sys
+from pathlib import Path
 from typing import Any, Callable, NoReturn
 
 import click
@@ -225,3 +226,49 @@ def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float) -
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
+
+
+# --------------------------------------------------------------------------- the solver
+def _setup_logging(quiet: bool, verbose: bool) -> None:
+    import logging
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    logger = logging.getLogger("nurbsdem")
+    logger.setLevel(level)
+    if not logger.handlers:
+        h = logging.StreamHandler()
+        h.setFormatter(logging.Formatter("nurbsdem: %(levelname)s: %(message)s"))
+        logger.addHandler(h)
+    logger.propagate = False
+
+
+@main.command()
+@click.argument("deck", metavar="CASE.inp")
+def check(deck: str) -> None:
+    """Parse and validate a deck without solving; print a model summary."""
+    from .io.deck import parse_deck
+    model = parse_deck(deck)
+    click.echo(model.summary())
+    click.echo(f"{deck}: OK")
+
+
+@main.command()
+@click.argument("deck", metavar="CASE.inp")
+@click.option("--output", "output", default=None, metavar="DIR",
+              help="Results directory (default: the deck's Output Directory).")
+@click.option("--restart", default=None, metavar="FILE",
+              help="Continue from a checkpoint (e.g. results/checkpoint.h5).")
+@click.option("--quiet", is_flag=True, help="No progress display and no log messages.")
+@click.option("--verbose", is_flag=True, help="Debug log messages.")
+def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbose: bool) -> None:
+    """Run the solution steps of a deck and write the results."""
+    from .io.deck import parse_deck
+    from .solver import Solver
+    _setup_logging(quiet, verbose)
+    model = parse_deck(deck)
+    if restart is not None and not Path(restart).is_file():
+        fail(f"{restart}: no such checkpoint file")
+    solver = Solver(model, output=output, restart=restart, quiet=quiet)
+    summary = solver.run()
+    if not quiet:
+        click.echo(summary.text())
+        click.echo(f"results in {solver.outdir}")

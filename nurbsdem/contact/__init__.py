@@ -2,7 +2,8 @@
 
 * global search: :mod:`.broadphase` (bounding spheres, Eq. 3) and patch boxes;
 * local search (LCP, Sec. 3.2): :func:`detect` (one pair), :func:`detect_batch` (many pairs,
-  compiled and parallel), :func:`detect_wall` (body against a flat wall patch).
+  compiled and parallel), :func:`detect_wall` / :func:`detect_wall_batch` (body against a
+  flat wall patch).
 """
 from .detect import ContactResult, ContactTable, detect, detect_batch, table_of  # noqa: F401
-from .wall import detect_wall  # noqa: F401
+from .wall import detect_wall, detect_wall_batch, wall_frame  # noqa: F401

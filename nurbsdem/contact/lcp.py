@@ -37,7 +37,9 @@ sphere. The step is the exact trust-region step (eigen-decomposition of the 2×2
 shift when indefinite), trust radius in radians, ratio test with eta = 0.1. The support
 points for the trial direction start from the first-order prediction
 u + (du/de) (e' − e), so each support mapping takes 1–2 Newton iterations near convergence.
-Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale.
+Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale; a last Newton step
+below 1e-7 rad is taken by a Taylor update (points moved by dp/de, depth by the quadratic
+model) instead of two more support mappings — its error is second order (~1e-14).
 
 Result rows (``resF`` float, ``resI`` int) use the column constants below. Lengths in metres.
 """
@@ -72,6 +74,8 @@ NI = 10
 
 MAX_OUTER_IT = 60
 ANGLE_TOL = 1e-11
+#: A final Newton step on the sphere shorter than this (rad) is taken by a Taylor update.
+TAYLOR_ANGLE = 1e-7
 WORK_ROWS = 48
 
 # rows of the float work array (rows of 3)
@@ -178,6 +182,38 @@ def _predict(wf, wfs, base, sA, sB, tA, tB, RA, RB, dnew):
         wfs[tB, a] = wfs[sB, a] + sb
     wfs[tA, 2] = wfs[sA, 2]
     wfs[tB, 2] = wfs[sB, 2]
+
+
+@njit(cache=True)
+def _taylor_finish(wf, wfs, RA, RB, d, x1, x2):
+    """Take a final Newton step of angle <= TAYLOR_ANGLE without new support mappings:
+    d' = normalize(d + x1 t1 + x2 t2), p' = p + M (e' − e), u' = u + G (e' − e).
+    The remaining errors are second order in the step (<= 1e-14 relative)."""
+    t1 = wf[_T1]
+    t2 = wf[_T2]
+    dt = wf[_DT]
+    nd = 0.0
+    for c in range(3):
+        dt[c] = d[c] + x1 * t1[c] + x2 * t2[c]
+        nd += dt[c] * dt[c]
+    nd = math.sqrt(nd)
+    for c in range(3):
+        dt[c] = dt[c] / nd - d[c]          # delta d
+    for body in range(2):
+        R = RA if body == 0 else RB
+        sg = 1.0 if body == 0 else -1.0
+        P = _PA if body == 0 else _PB
+        Mr = _MA if body == 0 else _MB
+        Gr = _GA if body == 0 else _GB
+        de0 = sg * (R[0, 0] * dt[0] + R[1, 0] * dt[1] + R[2, 0] * dt[2])
+        de1 = sg * (R[0, 1] * dt[0] + R[1, 1] * dt[1] + R[2, 1] * dt[2])
+        de2 = sg * (R[0, 2] * dt[0] + R[1, 2] * dt[1] + R[2, 2] * dt[2])
+        for a in range(3):
+            wf[P, a] += wf[Mr + a, 0] * de0 + wf[Mr + a, 1] * de1 + wf[Mr + a, 2] * de2
+        for a in range(2):
+            wfs[body, a] += wf[Gr + a, 0] * de0 + wf[Gr + a, 1] * de1 + wf[Gr + a, 2] * de2
+    for c in range(3):
+        d[c] += dt[c]
 
 
 @njit(cache=True)
@@ -305,7 +341,13 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         k22 = _quad_world(RA, MA, t2, t2) + _quad_world(RB, MB, t2, t2) - phi
         x1, x2, mval = tr_step2(k11, k12, k22, g1, g2, delta)
         xn = math.sqrt(x1 * x1 + x2 * x2)
-        if xn <= ANGLE_TOL:
+        newton = xn < 0.99 * delta          # the step is the (positive definite) Newton step
+        if newton and xn <= ANGLE_TOL:
+            converged = True
+            break
+        if newton and xn <= TAYLOR_ANGLE:
+            _taylor_finish(wf, wfs, RA, RB, d, x1, x2)
+            phi += mval
             converged = True
             break
         nd = 0.0

@@ -699,7 +699,9 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
     free = np.empty(capf, np.int64)
     nfree = 0
     hor_f = np.empty(capf, np.int64)   # visible face of each horizon edge
-    hor_e = np.empty(capf, np.int64)   # its edge index
+    hor_a = np.empty(capf, np.int64)   # edge start / end vertex
+    hor_b = np.empty(capf, np.int64)
+    hor_h = np.empty(capf, np.int64)   # the hidden face across the edge
     hor_new = np.empty(capf, np.int64)
     stack = np.empty(capf, np.int64)
     vis_list = np.empty(capf, np.int64)
@@ -765,16 +767,17 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
                         continue
                     MARK[h] = -stamp
                 hor_f[nh] = g
-                hor_e[nh] = e
+                hor_a[nh] = F[g, e]
+                hor_b[nh] = F[g, (e + 1) % 3]
+                hor_h[nh] = h
                 nh += 1
         # the horizon must be one closed loop: each edge end starts exactly one other edge
         ok = nh >= 3
         if ok:
             for q in range(nh):
-                b = F[hor_f[q], (hor_e[q] + 1) % 3]
                 cnt = 0
                 for p in range(nh):
-                    if F[hor_f[p], hor_e[p]] == b:
+                    if hor_a[p] == hor_b[q]:
                         cnt += 1
                 if cnt != 1:
                     ok = False
@@ -810,10 +813,9 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
                 fn = nf
                 nf += 1
             g = hor_f[q]
-            e = hor_e[q]
-            a = F[g, e]
-            b = F[g, (e + 1) % 3]
-            h = ADJ[g, e]
+            a = hor_a[q]
+            b = hor_b[q]
+            h = hor_h[q]
             F[fn, 0] = a
             F[fn, 1] = b
             F[fn, 2] = wi

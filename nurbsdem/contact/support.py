@@ -60,6 +60,9 @@ COS_TOL = 1e-13
 MAX_CURVATURE_RADIUS = 1e6
 #: Samples along a collapsed edge when looking for the meridian out of a pole.
 POLE_SAMPLES = 16
+#: Newton steps shorter than this (relative to the parameter range) are taken without a new
+#: evaluation (second-order Taylor update; the remaining error is ~ step^2).
+TAYLOR_STEP = 1e-6
 
 
 @njit(cache=True)
@@ -354,6 +357,7 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
     fixv = FREE
     nmig = 0
     npole = 0
+    nretest = 0
     evaluate(tab, ip, u, v, 2, ws, ev)
     nev = 1
     f = dot3(e, ev[0])
@@ -427,6 +431,8 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         hv = dot3(e, ev[5])
         xu = 0.0
         xv = 0.0
+        mval = 0.0
+        finish = False
         if fixu == FREE and fixv == FREE:
             xu, xv, mval = tr_step2(-hu, -huv, -hv, -gu, -gv, delta)
         elif fixu == FREE:
@@ -434,17 +440,61 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         elif fixv == FREE:
             xv, mval = tr_step1(-hv, -gv, delta)
         else:
-            converged = True
-            break
-        un = min(max(u + xu, u0), u1)
-        vn = min(max(v + xv, v0), v1)
-        xu = un - u
-        xv = vn - v
-        lx = 0.0
-        for c in range(3):
-            t = ev[1, c] * xu + ev[2, c] * xv
-            lx += t * t
-        if math.sqrt(lx) <= xtol:
+            finish = True
+        if not finish:
+            un = min(max(u + xu, u0), u1)
+            vn = min(max(v + xv, v0), v1)
+            clamped = un != u + xu or vn != v + xv
+            xu = un - u
+            xv = vn - v
+            lx = 0.0
+            for c in range(3):
+                t = ev[1, c] * xu + ev[2, c] * xv
+                lx += t * t
+            xn = math.sqrt(xu * xu + xv * xv)
+            if math.sqrt(lx) <= xtol:
+                finish = True
+            elif (xn <= TAYLOR_STEP * width and xn < 0.99 * delta and not clamped
+                  and hu * hv - huv * huv > 0.0 and hu < 0.0):
+                # quadratic-convergence region: the Newton step leaves an error ~|x|^2;
+                # take it without re-evaluating (second-order Taylor for the point)
+                for c in range(3):
+                    ev[0, c] += (ev[1, c] * xu + ev[2, c] * xv
+                                 + 0.5 * (ev[3, c] * xu * xu + 2.0 * ev[4, c] * xu * xv
+                                          + ev[5, c] * xv * xv))
+                u = un
+                v = vn
+                f = dot3(e, ev[0])
+                finish = True
+        if finish:
+            # a parameter fixed at a crease is re-tested at the final point: the crease
+            # decision was taken where the point first reached the edge
+            if (fixu == CREASE or fixv == CREASE) and nmig < MAX_MIGRATIONS and nretest < 4:
+                nretest += 1
+                edge = -1
+                if fixu == CREASE:
+                    edge = 0 if u <= u0 else 1
+                    code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+                    nev += 1
+                    if code != 0 and fixv == CREASE:
+                        edge = 2 if v <= v0 else 3
+                        code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+                        nev += 1
+                else:
+                    edge = 2 if v <= v0 else 3
+                    code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+                    nev += 1
+                if code == 0:
+                    nmig += 1
+                    ip = j
+                    u = uj
+                    v = vj
+                    fixu = FREE
+                    fixv = FREE
+                    evaluate(tab, ip, u, v, 2, ws, ev)
+                    nev += 1
+                    f = dot3(e, ev[0])
+                    continue
             converged = True
             break
         pred = gu * xu + gv * xv + 0.5 * (hu * xu * xu + 2.0 * huv * xu * xv + hv * xv * xv)
@@ -452,7 +502,6 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         nev += 1
         fn = dot3(e, ev2[0])
         actual = fn - f
-        xn = math.sqrt(xu * xu + xv * xv)
         noise = 1e-15 * scale
         if pred > noise:
             rho = actual / pred
@@ -470,8 +519,7 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         if rho < 0.25:
             delta = 0.25 * xn
             if delta < 1e-14 * max(u1 - u0, v1 - v0):
-                converged = True   # cannot improve any further within rounding
-                break
+                break   # cannot improve any further within rounding: not converged
     ist[0] = ip
     ist[1] = fixu
     ist[2] = fixv

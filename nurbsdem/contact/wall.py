@@ -1,3 +1,218 @@
-"""placeholder"""
-def detect_wall(*a, **k):
-    raise NotImplementedError
+"""Fast path for a convex body against a flat wall (degree-1 patch with 2×2 control points).
+
+The deepest point of body A below the plane of a wall with unit normal n (pointing to the
+side where the particles are) is the support point of A along −n (paper Eq. 8 with
+d = −n): one support mapping, no direction search. Then
+
+    signed_distance = n · (p_A − o)        (o: a corner of the wall),
+
+point_b is the projection of p_A onto the plane, and the contact is active only when that
+projection falls inside the wall's parallelogram o + α a + β b, 0 <= α, β <= 1 (a, b the
+wall's edge vectors along u and v). The contact normal (from A towards the wall, DEVNOTES)
+is −n, and gap = point_a − point_b satisfies normal · gap = −signed_distance.
+
+Curved walls: use the general :func:`nurbsdem.contact.detect` with the wall as a closed
+convex body; a single open curved patch is not supported as body B.
+
+Lengths in metres. Result rows use the column constants of :mod:`nurbsdem.contact.lcp`;
+``I_BROAD`` = 1 when the bounding sphere does not reach the plane, 2 when the deepest point
+projects outside the wall rectangle.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numba
+from numba import njit, prange
+
+from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
+from . import lcp
+from .detect import ContactResult, _pose, _prev_rows, _work, table_of
+from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
+                  I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP, _rot_t,
+                  _to_world)
+from .support import CREASE, seed_start, support_map
+
+
+@njit(cache=True)
+def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, prevI,
+               ws, wf, wi, wfs, resF, resI):
+    """One body against one flat wall (module docstring); writes ``resF``/``resI`` rows.
+
+    ``origin`` (3,) wall corner (u_min, v_min), ``a``/``b`` (3,) edge vectors along u and v
+    (a × b along the wall normal, towards the particles), ``wdom`` the wall's parameter
+    rectangle (u_min, u_max, v_min, v_max)."""
+    for k in range(resF.shape[0]):
+        resF[k] = 0.0
+    for k in range(resI.shape[0]):
+        resI[k] = 0
+    n0 = a[1] * b[2] - a[2] * b[1]
+    n1 = a[2] * b[0] - a[0] * b[2]
+    n2 = a[0] * b[1] - a[1] * b[0]
+    nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    n0 /= nn
+    n1 /= nn
+    n2 /= nn
+    c = wf[_EV2]
+    _to_world(pos, R, cen, c)
+    sc = n0 * (c[0] - origin[0]) + n1 * (c[1] - origin[1]) + n2 * (c[2] - origin[2])
+    resF[F_N] = -n0
+    resF[F_N + 1] = -n1
+    resF[F_N + 2] = -n2
+    if sc > rad:
+        resF[F_SD] = sc - rad
+        resI[I_BROAD] = 1
+        resI[I_PA] = -1
+        resI[I_PB] = -1
+        return
+    p0 = info[0]
+    d = wf[lcp._H]
+    d[0] = -n0
+    d[1] = -n1
+    d[2] = -n2
+    e = wf[_EA]
+    _rot_t(R, d, 1.0, e)
+    if prevI[I_VALID] == 1:
+        wi[0, 0] = p0 + prevI[I_PA]
+        wfs[0, 0] = prevF[F_PAR]
+        wfs[0, 1] = prevF[F_PAR + 1]
+    else:
+        empty = np.zeros(0, np.bool_)
+        k = seed_start(seeds[0], seeds[1], seeds[2], info[2], info[3], empty, p0, e)
+        wi[0, 0] = seeds[1][k]
+        wfs[0, 0] = seeds[2][k, 0]
+        wfs[0, 1] = seeds[2][k, 1]
+    wfs[0, 2] = 0.0
+    ok, nev = support_map(tab, e, wi[0], wfs[0], rad, ws, wf[_EV:_EV + 6], wf[_EV2:_EV2 + 6],
+                          wf[_TMP], wf[_PA], wf[_MA:_MA + 3], wf[_GA:_GA + 2])
+    pa = resF[F_PA:F_PA + 3]
+    _to_world(pos, R, wf[_PA], pa)
+    sd = n0 * (pa[0] - origin[0]) + n1 * (pa[1] - origin[1]) + n2 * (pa[2] - origin[2])
+    resF[F_SD] = sd
+    resF[F_PB] = pa[0] - sd * n0
+    resF[F_PB + 1] = pa[1] - sd * n1
+    resF[F_PB + 2] = pa[2] - sd * n2
+    # position in the wall parallelogram
+    r0 = resF[F_PB] - origin[0]
+    r1 = resF[F_PB + 1] - origin[1]
+    r2 = resF[F_PB + 2] - origin[2]
+    aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
+    ar = a[0] * r0 + a[1] * r1 + a[2] * r2
+    br = b[0] * r0 + b[1] * r1 + b[2] * r2
+    det = aa * bb - ab * ab
+    al = (bb * ar - ab * br) / det
+    be = (aa * br - ab * ar) / det
+    resF[F_PAR] = wfs[0, 0]
+    resF[F_PAR + 1] = wfs[0, 1]
+    resF[F_PAR + 2] = wdom[0] + al * (wdom[1] - wdom[0])
+    resF[F_PAR + 3] = wdom[2] + be * (wdom[3] - wdom[2])
+    resI[I_PA] = wi[0, 0] - p0
+    resI[I_PB] = 0
+    deg = 0
+    if wi[0, 1] == CREASE:
+        deg += 1
+    if wi[0, 2] == CREASE:
+        deg += 1
+    resI[I_DEG] = deg
+    resI[I_IT] = 1
+    resI[I_NEV] = nev
+    finite = sd == sd and abs(sd) < np.inf
+    resI[I_FAIL] = 0 if (ok and finite) else 1
+    resI[I_VALID] = 1 if finite else 0
+    inside = al >= 0.0 and al <= 1.0 and be >= 0.0 and be <= 1.0
+    if not inside:
+        resI[I_BROAD] = 2
+    resI[I_ACTIVE] = 1 if (finite and inside and sd < 0.0) else 0
+
+
+def wall_frame(wall) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(origin, a, b, dom) of a flat wall patch (degree 1, 2×2 control points, world frame)."""
+    cp = np.asarray(wall.control_points, float)
+    if cp.shape[:2] != (2, 2):
+        raise ValueError("detect_wall needs a flat wall patch with 2×2 control points")
+    o = cp[0, 0].copy()
+    return o, cp[1, 0] - o, cp[0, 1] - o, np.asarray(wall.domain, float)
+
+
+def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> ContactResult:
+    """Contact of a convex body (A) with a flat wall (B).
+
+    Parameters
+    ----------
+    shape: the body's :class:`~nurbsdem.geometry.shape.Shape`; pose: (position, R).
+    wall: a flat wall :class:`~nurbsdem.geometry.nurbs.Patch` in world coordinates (degree 1,
+        2×2 control points, S_u × S_v pointing to the particles' side), e.g. from
+        :func:`nurbsdem.shapes.flat_wall`; or a tuple (origin, a, b) of its corner and edge
+        vectors.
+    previous: the last result of the same body/wall (warm start).
+
+    Returns
+    -------
+    :class:`ContactResult` with A = the body, B = the wall (patch_b = 0; params zB, θB the
+    wall parameters of point_b); normal from the body to the wall.
+    """
+    if isinstance(wall, tuple):
+        o, a, b = (np.asarray(x, float) for x in wall)
+        wdom = np.array([0.0, 1.0, 0.0, 1.0])
+    else:
+        o, a, b, wdom = wall_frame(wall)
+    t = table_of(shape)
+    pos, R = _pose(pose)
+    pf, pi = _prev_rows(previous)
+    rf = np.zeros(NF)
+    ri = np.zeros(NI, np.int64)
+    ws, (wf, wi, wfs) = _work()
+    try:
+        solve_wall(t.tab, t.info[0], t.centroid[0], float(t.radius[0]), t.seeds, pos, R,
+                   np.ascontiguousarray(o), np.ascontiguousarray(a), np.ascontiguousarray(b),
+                   wdom, pf, pi, ws, wf, wi, wfs, rf, ri)
+    except Exception:  # pragma: no cover - never abort the simulation
+        ri[I_FAIL] = 1
+        ri[I_VALID] = 0
+    return ContactResult.from_rows(rf, ri)
+
+
+@njit(cache=True, parallel=True)
+def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
+                       prev_f, prev_i, res_f, res_i):
+    K = sid.shape[0]
+    nt = numba.get_num_threads()
+    if nt > K:
+        nt = max(K, 1)
+    chunk = (K + nt - 1) // nt
+    for t in prange(nt):
+        ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+        wf = np.zeros((lcp.WORK_ROWS, 3))
+        wi = np.zeros((4, 4), np.int64)
+        wfs = np.zeros((4, 3))
+        for k in range(t * chunk, min(K, (t + 1) * chunk)):
+            s = sid[k]
+            solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
+                       wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, res_f[k], res_i[k])
+
+
+def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=None, prev_i=None):
+    """K body/flat-wall contacts in compiled code (parallel).
+
+    ``table``: :class:`~nurbsdem.contact.detect.ContactTable`; ``shape_id`` (K,) shapes of the
+    bodies, ``pos`` (K, 3), ``rot`` (K, 3, 3) their poses; ``origin``, ``a``, ``b`` (K, 3) the
+    walls' corners and edge vectors (:func:`wall_frame`), ``dom`` (K, 4) their parameter
+    rectangles (default unit square). Returns (res_f (K, NF), res_i (K, NI))."""
+    K = len(shape_id)
+    f = lambda x, shp: np.ascontiguousarray(np.asarray(x, float).reshape(shp))  # noqa: E731
+    if dom is None:
+        dom = np.tile([0.0, 1.0, 0.0, 1.0], (K, 1))
+    if prev_f is None or prev_i is None:
+        prev_f = np.zeros((K, NF))
+        prev_i = np.zeros((K, NI), np.int64)
+    res_f = np.zeros((K, NF))
+    res_i = np.zeros((K, NI), np.int64)
+    _wall_batch_kernel(table.tab, table.info, table.centroid, table.radius, table.seeds,
+                       np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
+                       f(rot, (K, 3, 3)), f(origin, (K, 3)), f(a, (K, 3)), f(b, (K, 3)),
+                       f(dom, (K, 4)), np.ascontiguousarray(prev_f, dtype=float),
+                       np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i)
+    return res_f, res_i

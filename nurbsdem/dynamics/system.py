@@ -185,6 +185,8 @@ class DemSystem:
         self.last_contacts: Any = None
         self._initialized = False
         self._peak = 0.0
+        #: (keys, springs) of tangential springs to start from (set before initialize()).
+        self.initial_history: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ set-up
     def add_particle(self, mass: float, J0: np.ndarray, x, R=None, v=None, omega=None,
@@ -304,6 +306,9 @@ class DemSystem:
         self._scale_floor = max(float(np.sum(b.mass * np.linalg.norm(self.gravity) * ell)), 1e-300)
         self.hist_keys = np.zeros(0, dtype=np.int64)
         self.hist_springs = np.zeros((0, 3))
+        if self.initial_history is not None:   # tangential springs carried over from a previous step
+            self.hist_keys = np.array(self.initial_history[0], dtype=np.int64)
+            self.hist_springs = np.array(self.initial_history[1], dtype=float).reshape(-1, 3)
         self.wall_work = np.zeros(self.walls.n)
         self.ledger = EnergyLedger()
         self._initialized = True
@@ -517,6 +522,7 @@ class DemSystem:
             setattr(self, k, np.array(st[k], copy=True))
         self.ledger = EnergyLedger.from_array(st["ledger"])
         self.step_count = int(st["counters"][0])
+        self.t0 = float(st["scalars"][0])
         if float(st["scalars"][1]) != self.dt:
             raise InputError("checkpoint was written with a different deck time step")
         self._peak = float(st["scalars"][2])

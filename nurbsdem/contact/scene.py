@@ -1,0 +1,225 @@
+"""Contact detection for a whole scene: the hierarchy of paper Section 3 for N bodies and W
+flat walls, as a *contact provider* of :class:`nurbsdem.dynamics.DemSystem`.
+
+Per force evaluation (:meth:`SceneContacts.__call__`):
+
+1. level 0/1 — bounding spheres (paper Eq. 3) on a cell grid
+   (:func:`~nurbsdem.contact.broadphase.sphere_pairs`), bodies against wall rectangles
+   (:func:`~nurbsdem.contact.broadphase.sphere_wall_pairs`);
+2. level 2 — oriented patch boxes by the separating-axis test
+   (:func:`~nurbsdem.contact.boxes.candidate_patch_pairs_batch`); a body pair with no
+   overlapping patch boxes cannot touch and is dropped;
+3. the LCP of every remaining pair in compiled code, in parallel
+   (:func:`~nurbsdem.contact.detect_batch`, :func:`~nurbsdem.contact.detect_wall_batch`),
+   warm-started from the same pair's previous solution.
+
+The counters follow the paper's Fig. 5: ``monitored`` = LCPs solved (pairs left by the global
+search), ``active`` = penetrating pairs, ``degenerated`` = active pairs solved with the
+degeneration technique (Eq. 10–15), ``failed`` = LCPs that did not converge (their previous
+solution is kept when there is one, the run goes on, and each pair is warned about once).
+
+Units: metres, seconds. Global body indices: particles 0..N-1, walls N..N+W-1 (DEVNOTES).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
+from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
+from .detect import ContactTable, detect_batch
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_VALID, NF, NI
+from .wall import detect_wall_batch, wall_frame
+
+log = logging.getLogger("nurbsdem")
+
+
+@dataclass
+class ContactSet:
+    """Active contacts of one evaluation (DEVNOTES): arrays over K contacts, plus counters."""
+
+    body_a: np.ndarray
+    body_b: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+    key: np.ndarray
+    degenerated: np.ndarray
+    monitored: int = 0
+    active: int = 0
+    degenerated_count: int = 0
+    failed: int = 0
+
+    @classmethod
+    def empty(cls) -> "ContactSet":
+        z = np.zeros(0, np.int64)
+        e3 = np.zeros((0, 3))
+        return cls(z, z.copy(), e3, e3.copy(), e3.copy(), np.zeros(0), z.copy(), z.copy())
+
+
+@dataclass
+class SceneTimers:
+    """Wall-clock seconds spent in each part of the contact search."""
+
+    global_search: float = 0.0
+    lcp: float = 0.0
+    calls: int = 0
+    lcps: int = 0
+
+    def as_dict(self) -> dict[str, float]:
+        return {"global_search": self.global_search, "lcp": self.lcp,
+                "calls": float(self.calls), "lcps": float(self.lcps)}
+
+
+class SceneContacts:
+    """Contact provider for N particles of given shapes and W flat walls.
+
+    Parameters
+    ----------
+    shapes: the distinct shapes (index = shape index used in ``body_shape``).
+    body_shape: int (N,) shape index of each particle.
+    walls: W flat wall patches (degree 1, 2×2 control points) in the world at zero
+        displacement; their displacements come with the kinematics.
+    margin: skin added to the bounding volumes (m).
+    """
+
+    def __init__(self, shapes: Sequence, body_shape: np.ndarray, walls: Sequence = (),
+                 margin: float = 0.0) -> None:
+        self.shapes = list(shapes)
+        self.table = ContactTable(self.shapes)
+        self.boxes, self.box_offsets = pack_boxes(self.shapes)
+        self.body_shape = np.ascontiguousarray(body_shape, dtype=np.int64)
+        self.radius = np.asarray(self.table.radius, float)[self.body_shape]
+        self.margin = float(margin)
+        self.n = int(self.body_shape.shape[0])
+        self.walls = list(walls)
+        W = len(self.walls)
+        self.wall_center = np.zeros((W, 3))
+        self.wall_axes = np.zeros((W, 3, 3))
+        self.wall_half = np.zeros((W, 2))
+        self.wall_origin = np.zeros((W, 3))
+        self.wall_a = np.zeros((W, 3))
+        self.wall_b = np.zeros((W, 3))
+        self.wall_dom = np.zeros((W, 4))
+        for k, w in enumerate(self.walls):
+            self.wall_center[k], self.wall_axes[k], self.wall_half[k] = wall_geometry(w)
+            self.wall_origin[k], self.wall_a[k], self.wall_b[k], self.wall_dom[k] = wall_frame(w)
+        self.depth_wall = 2.0 * float(self.radius.max()) if self.n else 0.0
+        #: warm-start rows of the last solution of each pair: key -> (row_f, row_i)
+        self.cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.warned: set[int] = set()
+        self.timers = SceneTimers()
+        self.totals = {"monitored": 0, "active": 0, "degenerated": 0, "failed": 0}
+        self.last: ContactSet = ContactSet.empty()
+
+    # ------------------------------------------------------------------ warm starts
+    def _previous(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        K = keys.shape[0]
+        pf = np.zeros((K, NF))
+        pi = np.zeros((K, NI), np.int64)
+        for r, k in enumerate(keys.tolist()):
+            hit = self.cache.get(k)
+            if hit is not None:
+                pf[r], pi[r] = hit
+        return pf, pi
+
+    def _store(self, keys: np.ndarray, rf: np.ndarray, ri: np.ndarray) -> dict:
+        new = {}
+        for r, k in enumerate(keys.tolist()):
+            if ri[r, I_FAIL] and k in self.cache:
+                new[k] = self.cache[k]   # keep the last good solution (never abort)
+            else:
+                new[k] = (rf[r].copy(), ri[r].copy())
+        return new
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The warm-start cache as arrays (for checkpoints: restarts stay bit-for-bit)."""
+        keys = np.array(sorted(self.cache), dtype=np.int64)
+        rf = np.array([self.cache[k][0] for k in keys.tolist()]).reshape(-1, NF)
+        ri = np.array([self.cache[k][1] for k in keys.tolist()], dtype=np.int64).reshape(-1, NI)
+        return {"keys": keys, "rows_f": rf, "rows_i": ri}
+
+    def set_state(self, st: dict) -> None:
+        """Restore :meth:`state`."""
+        self.cache = {int(k): (np.array(f), np.array(i)) for k, f, i in
+                      zip(st["keys"], st["rows_f"], st["rows_i"])}
+
+    # ------------------------------------------------------------------ the provider
+    def __call__(self, kin) -> ContactSet:
+        """Active contacts for the kinematics of a :class:`~nurbsdem.dynamics.DemSystem`."""
+        t0 = time.perf_counter()
+        N = self.n
+        nb = N + len(self.walls)
+        pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
+        # particle pairs: bounding spheres (Eq. 3), then patch boxes (Sec. 3.1)
+        pairs = sphere_pairs(kin.x, self.radius, self.margin) if N > 1 else np.zeros((0, 2), np.int64)
+        if pairs.shape[0]:
+            cand = candidate_patch_pairs_batch(self.boxes, self.box_offsets, self.body_shape,
+                                               pos, R, pairs, self.margin)
+            pairs = pairs[np.unique(cand[:, 0])] if cand.shape[0] else pairs[:0]
+        # particle-wall pairs
+        wpairs = np.zeros((0, 2), np.int64)
+        if self.walls and N:
+            wc = self.wall_center + kin.wall_displacement
+            wpairs = sphere_wall_pairs(kin.x, self.radius, wc, self.wall_axes, self.wall_half,
+                                       self.margin)
+            if wpairs.shape[0]:
+                cand = candidate_patches_wall_batch(self.boxes, self.box_offsets, self.body_shape,
+                                                    pos, R, wc, self.wall_axes, self.wall_half,
+                                                    wpairs, self.margin, self.depth_wall)
+                wpairs = wpairs[np.unique(cand[:, 0])] if cand.shape[0] else wpairs[:0]
+        t1 = time.perf_counter()
+        # LCPs
+        a = pairs[:, 0]
+        b = pairs[:, 1]
+        keys_p = a * nb + b
+        pf, pi = self._previous(keys_p)
+        rf, ri = detect_batch(self.table, self.body_shape[a], pos[a], R[a], self.body_shape[b],
+                              pos[b], R[b], pf, pi)
+        wb_idx = wpairs[:, 1]
+        wa = wpairs[:, 0]
+        keys_w = wa * nb + (N + wb_idx)
+        wf, wi = self._previous(keys_w)
+        d = kin.wall_displacement[wb_idx] if len(self.walls) else np.zeros((0, 3))
+        rwf, rwi = detect_wall_batch(self.table, self.body_shape[wa], pos[wa], R[wa],
+                                     self.wall_origin[wb_idx] + d, self.wall_a[wb_idx],
+                                     self.wall_b[wb_idx], self.wall_dom[wb_idx], wf, wi)
+        t2 = time.perf_counter()
+        cs = self._assemble(np.concatenate([a, wa]), np.concatenate([b, N + wb_idx]),
+                            np.concatenate([keys_p, keys_w]), np.concatenate([rf, rwf]),
+                            np.concatenate([ri, rwi]), pf_all=np.concatenate([pf, wf]),
+                            pi_all=np.concatenate([pi, wi]))
+        self.timers.global_search += t1 - t0
+        self.timers.lcp += t2 - t1
+        self.timers.calls += 1
+        self.timers.lcps += int(keys_p.shape[0] + keys_w.shape[0])
+        self.last = cs
+        return cs
+
+    def _assemble(self, a, b, keys, rf, ri, pf_all, pi_all) -> ContactSet:
+        failed = ri[:, I_FAIL].astype(bool)
+        for r in np.nonzero(failed)[0].tolist():
+            k = int(keys[r])
+            if pi_all[r, I_VALID]:   # keep the last good solution of that pair
+                rf[r], ri[r] = pf_all[r], pi_all[r]
+            if k not in self.warned:
+                self.warned.add(k)
+                log.warning("LCP did not converge for bodies %d-%d; keeping the last good "
+                            "solution (counted as failed in monitors/contacts.csv)",
+                            int(a[r]), int(b[r]))
+        self.cache = self._store(keys, rf, ri)
+        act = (ri[:, I_ACTIVE] == 1) & (ri[:, I_VALID] == 1)
+        sel = np.nonzero(act)[0]
+        deg = ri[sel, I_DEG]
+        cs = ContactSet(body_a=a[sel].astype(np.int64), body_b=b[sel].astype(np.int64),
+                        point_a=rf[sel, F_PA:F_PA + 3].copy(), point_b=rf[sel, F_PB:F_PB + 3].copy(),
+                        normal=rf[sel, F_N:F_N + 3].copy(), depth=-rf[sel, F_SD],
+                        key=keys[sel].astype(np.int64), degenerated=deg.astype(np.int64),
+                        monitored=int(keys.shape[0]), active=int(sel.shape[0]),
+                        degenerated_count=int(np.count_nonzero(deg)), failed=int(failed.sum()))
+        return cs
