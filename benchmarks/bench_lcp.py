@@ -83,7 +83,7 @@ def run(n_pairs: int, n_ref: int, n_time: int, repeats: int, seed: int = 0) -> N
     axes = (0.03, 0.02, 0.012)
     shapes = [sphere(r), ellipsoid(*axes), paper_particle_shape("A")]
     table = ContactTable(shapes)
-    print(f"threads: {numba.get_num_threads()}; pairs per type: {n_pairs}; depths 0..5 % of the radius")
+    print(f"threads: {numba.get_num_threads()}; pairs per type: {n_pairs}; signed distances -5 % .. +1 % of the radius")
     print(f"{'pair':10s} {'cold µs':>8s} {'warm µs':>8s} {'it cold':>8s} {'it warm':>8s} "
           f"{'ev cold':>8s} {'ev warm':>8s} {'|Δsd|/r':>9s} {'normal rad':>10s} {'deg %':>6s} {'fail':>5s}")
     for name, s in (("sphere", 0), ("ellipsoid", 1), ("A-A", 2)):

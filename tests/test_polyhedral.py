@@ -170,6 +170,27 @@ def _ref_distance(A, B):
     return float(np.sqrt(max(r.fun, 0.0)))
 
 
+def _ref_distance_cso(A, B):
+    """Distance of two hulls as the distance from the origin to the explicit Minkowski
+    difference hull: minimum over its triangles of the point-triangle distance (NumPy)."""
+    cso = ConvexHull((A[:, None, :] - B[None, :, :]).reshape(-1, 3))
+    T = cso.points[cso.simplices]  # (F, 3, 3)
+    a, b, c = T[:, 0], T[:, 1], T[:, 2]
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    h = np.einsum("ij,ij->i", a, n)
+    p = h[:, None] * n  # origin projected on each plane
+    inside = np.ones(len(T), bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(v - u, p - u), n) >= 0
+    best = np.where(inside, np.abs(h), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        e = v - u
+        t = np.clip(-np.einsum("ij,ij->i", u, e) / np.einsum("ij,ij->i", e, e), 0, 1)
+        best = np.minimum(best, np.linalg.norm(u + t[:, None] * e, axis=1))
+    return float(best.min())
+
+
 def test_random_hulls_against_scipy_references():
     rng = np.random.default_rng(2024)
     n_pen = n_sep = 0
@@ -192,6 +213,7 @@ def test_random_hulls_against_scipy_references():
             else:
                 n_sep += 1
                 assert sd == pytest.approx(_ref_distance(A, B), rel=1e-6, abs=1e-9)
+                assert sd == pytest.approx(_ref_distance_cso(A, B), rel=1e-10, abs=1e-13)
                 # dual certificate: separating slab of width sd along the normal
                 assert (B @ n).min() - (A @ n).max() == pytest.approx(sd, rel=1e-9, abs=1e-12)
             # witness points lie in the hulls
@@ -215,8 +237,7 @@ def test_fine_polyhedra_against_explicit_minkowski_difference(sphere_polys):
         pen = _ref_penetration(_world(P.vertices, np.zeros(3), Ra), _world(P.vertices, pos_b, Rb))
         assert res[0] == pytest.approx(-pen[0], rel=1e-10)
         assert np.allclose(res[1], pen[1], atol=1e-8)
-        P = sphere_polys[4]
         pos_b = rng.uniform(2.02, 2.3) * u
         res = polyhedral_contact(P, (np.zeros(3), Ra), P, (pos_b, Rb))
-        ref = _ref_distance(_world(P.vertices, np.zeros(3), Ra), _world(P.vertices, pos_b, Rb))
-        assert res[0] == pytest.approx(ref, rel=1e-7)
+        A, B = _world(P.vertices, np.zeros(3), Ra), _world(P.vertices, pos_b, Rb)
+        assert res[0] == pytest.approx(_ref_distance_cso(A, B), rel=1e-10)

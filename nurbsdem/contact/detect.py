@@ -234,9 +234,8 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
 # --------------------------------------------------------------------------- batch
 @njit(cache=True, parallel=True)
 def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                  prev_f, prev_i, res_f, res_i):
+                  prev_f, prev_i, res_f, res_i, nt):
     K = sa.shape[0]
-    nt = numba.get_num_threads()
     if nt > K:
         nt = max(K, 1)
     chunk = (K + nt - 1) // nt
@@ -290,5 +289,5 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     _batch_kernel(table.tab, table.info, table.centroid, table.radius, table.seeds,
                   sa, pos_a, rot_a, sb, pos_b, rot_b,
                   np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
-                  out[0], out[1])
+                  out[0], out[1], numba.get_num_threads())
     return out

@@ -293,12 +293,21 @@ def support_derivatives(tab, ip, u, v, e, fixu, fixv, scale, ws, ev, ev2, out_M,
         b12 = -dot3(e, src[4])
         b22 = -dot3(e, src[5])
         l1, l2, c, s = sym2_eig(b11, b12, b22)
-        jj = dot3(src[1], src[1]) + dot3(src[2], src[2])
-        floor = 0.5 * jj / rmax
-        if l1 < floor:
-            l1 = floor
-        if l2 < floor:
-            l2 = floor
+        # curvature floor per eigen-direction q: radius |J q|^2 / l <= rmax (invariant under
+        # reparametrisation; near a pole one tangent is tiny and a global floor would swamp it)
+        j1 = 0.0
+        j2 = 0.0
+        for a in range(3):
+            t1 = -s * src[1, a] + c * src[2, a]
+            t2 = c * src[1, a] + s * src[2, a]
+            j1 += t1 * t1
+            j2 += t2 * t2
+        fl1 = j1 / rmax + 1e-300
+        fl2 = j2 / rmax + 1e-300
+        if l1 < fl1:
+            l1 = fl1
+        if l2 < fl2:
+            l2 = fl2
         # B^-1 = q1 q1^T / l1 + q2 q2^T / l2, q1 = (-s, c), q2 = (c, s)
         i11 = s * s / l1 + c * c / l2
         i12 = -s * c / l1 + c * s / l2
@@ -370,8 +379,9 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         v1 = dom[ip, 3]
         gu = dot3(e, ev[1])
         gv = dot3(e, ev[2])
-        tu = COS_TOL * norm3(ev[1])
-        tv = COS_TOL * norm3(ev[2])
+        # zero thresholds relative to the longer tangent (at a pole one tangent vanishes)
+        tu = COS_TOL * max(norm3(ev[1]), norm3(ev[2]))
+        tv = tu
         out_u = (u <= u0 and gu < -tu) or (u >= u1 and gu > tu)
         out_v = (v <= v0 and gv < -tv) or (v >= v1 and gv > tv)
         if not out_u:
@@ -425,6 +435,37 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
             f = dot3(e, ev[0])
             delta = max(delta, 0.05 * max(dom[ip, 1] - dom[ip, 0], dom[ip, 3] - dom[ip, 2]))
             continue
+        # ---- near a pole the (u, v) parametrisation is singular and Newton is slow:
+        # after a few iterations, restart from the pole along the best meridian
+        if it == 8 and npole < 3:
+            for edge in range(4):
+                if tab[7][ip, edge, 0] != -2:
+                    continue
+                lo = dom[ip, 0] if edge == 0 else dom[ip, 1]
+                w = u1 - u0
+                pv = u
+                if edge >= 2:
+                    lo = dom[ip, 2] if edge == 2 else dom[ip, 3]
+                    w = v1 - v0
+                    pv = v
+                if abs(pv - lo) < 0.02 * w:
+                    npole += 1
+                    if edge < 2:
+                        uu, vv = lo, v
+                    else:
+                        uu, vv = u, lo
+                    ok, uu, vv = pole_escape(tab, ip, uu, vv, edge, e, ws, ev2, tmp)
+                    nev += POLE_SAMPLES + 2
+                    if ok:
+                        u = uu
+                        v = vv
+                        moved = True
+                    break
+            if moved:
+                evaluate(tab, ip, u, v, 2, ws, ev)
+                nev += 1
+                f = dot3(e, ev[0])
+                continue
         # ---- Newton step on the free parameters (reduced by P_s, Eq. 12-13)
         hu = dot3(e, ev[3])
         huv = dot3(e, ev[4])
@@ -452,6 +493,12 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
                 t = ev[1, c] * xu + ev[2, c] * xv
                 lx += t * t
             xn = math.sqrt(xu * xu + xv * xv)
+            if math.sqrt(lx) <= xtol and clamped:
+                # a tiny step cut by the bound: snap onto the bound (no new evaluation) so
+                # that the next iteration sees the edge (migration / degeneration)
+                u = un
+                v = vn
+                continue
             if math.sqrt(lx) <= xtol:
                 finish = True
             elif (xn <= TAYLOR_STEP * width and xn < 0.99 * delta and not clamped

@@ -177,9 +177,8 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
 
 @njit(cache=True, parallel=True)
 def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                       prev_f, prev_i, res_f, res_i):
+                       prev_f, prev_i, res_f, res_i, nt):
     K = sid.shape[0]
-    nt = numba.get_num_threads()
     if nt > K:
         nt = max(K, 1)
     chunk = (K + nt - 1) // nt
@@ -214,5 +213,6 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
                        np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
                        f(rot, (K, 3, 3)), f(origin, (K, 3)), f(a, (K, 3)), f(b, (K, 3)),
                        f(dom, (K, 4)), np.ascontiguousarray(prev_f, dtype=float),
-                       np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i)
+                       np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i,
+                       numba.get_num_threads())
     return res_f, res_i
