@@ -705,7 +705,7 @@ def contact_kernel(va, pa_ptr, pa_adj, ca, pos_a, Ra, vb, pb_ptr, pb_adj, cb, po
     hor_new = np.empty(capf, np.int64)
     stack = np.empty(capf, np.int64)
     vis_list = np.empty(capf, np.int64)
-    tol = 1e-3 * scale
+    tol = 1e-11 * scale
     eps_vis = 1e-13 * scale
     best = 0
     status = ST_PENETRATING

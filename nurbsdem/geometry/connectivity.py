@@ -428,6 +428,11 @@ def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9) -> None
         scale = np.linalg.norm(Su, axis=-1) * np.linalg.norm(Sv, axis=-1)
         good = nn > 1e-8 * np.maximum(scale, 1e-300)
         good &= scale > 0
+        # a pole (edge collapsed to a point): a derivative vanishes up to round-off and the
+        # cross product has no meaningful direction there
+        nsu = np.linalg.norm(Su, axis=-1)
+        nsv = np.linalg.norm(Sv, axis=-1)
+        good &= (nsu > 1e-7 * nsu.max()) & (nsv > 1e-7 * nsv.max())
         nu = n / np.where(good, nn, 1.0)[:, None]
         # shape operator eigenvalues (principal curvatures, n outward: convex => <= 0)
         E_ = np.einsum("ij,ij->i", Su, Su)
