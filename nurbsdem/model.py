@@ -255,7 +255,7 @@ class DynamicStep(Step):
 @dataclass
 class ReplicateStep(Step):
     """``Step ID Replicate Layers L Height H``: instantaneous; the current particles become
-    layer 0 and copies shifted up by k * H / L (k = 1..L-1) are added; all velocities are
+    layer 0 and copies shifted up by k * H / (L - 1) (k = 1..L-1) are added; all velocities are
     zeroed (see :func:`nurbsdem.placement.replicate_layers`). H in m."""
 
     layers: int = 1

@@ -374,15 +374,16 @@ def replicate_layers(bodies: Bodies, layers: int, height: float,
     """Stack copies of the current particles (the ``Replicate`` step).
 
     The current bodies are layer 0 and stay where they are; layer k = 1 .. layers-1 is a
-    copy shifted by ``k * height / layers`` along ``axis`` (default +z): the stack occupies
-    ``height`` (m), one slot of ``height / layers`` per layer. Copies keep the orientations
+    copy shifted by ``k * height / (layers - 1)`` along ``axis`` (default +z): the layers are
+    spread over ``height`` (m) — the paper's "replicated eight times over a height of 50 cm"
+    — from the original (bottom) layer to the last copy. Copies keep the orientations
     and shapes; their ids continue after the largest current id, layer by layer in the
     current body order. All velocities (including layer 0's) are zeroed. So 14 bodies with
     layers = 8 become 112.
     """
     if layers < 1:
         raise ValueError("layers must be >= 1")
-    dz = float(height) / layers
+    dz = float(height) / (layers - 1) if layers > 1 else 0.0
     ax = np.asarray(axis, float)
     ax = ax / np.linalg.norm(ax)
     n = len(bodies)
@@ -433,8 +434,8 @@ def replicate_step(model: "Model", bodies: Bodies, step: "ReplicateStep") -> Bod
         raise model.error(
             f"Step {step.id}: replicated layers overlap (particle {out.id[j]} of layer "
             f"{j // n} overlaps particle {out.id[i]}): the layer is {t:.4g} m thick but "
-            f"Height / Layers = {step.height / step.layers:.4g} m; use Height >= "
-            f"{t * step.layers:.4g} m", step.line)
+            f"Height / (Layers - 1) = {step.height / (step.layers - 1):.4g} m; use Height >= "
+            f"{t * (step.layers - 1):.4g} m", step.line)
     return out
 
 

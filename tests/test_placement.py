@@ -122,7 +122,7 @@ def test_replicate_14_to_112(deckdir):
     np.testing.assert_array_equal(out.position[:14], b.position)
     for k in range(8):
         layer = out.take(slice(14 * k, 14 * (k + 1)))
-        np.testing.assert_allclose(layer.position, b.position + [0, 0, k * 0.5 / 8])
+        np.testing.assert_allclose(layer.position, b.position + [0, 0, k * 0.5 / 7])
         np.testing.assert_array_equal(layer.quaternion, b.quaternion)
         np.testing.assert_array_equal(layer.shape_id, b.shape_id)
     assert np.all(out.velocity == 0) and np.all(out.angular_velocity == 0)
@@ -131,7 +131,7 @@ def test_replicate_14_to_112(deckdir):
 
 def test_replicate_step_checks_overlap(deckdir):
     m = _model(deckdir, seed=1, height=0.5, name="r1.inp")
-    # the unsettled random layer is ~0.2 m thick: layers 0.0625 m apart overlap
+    # the unsettled random layer is ~0.2 m thick: layers 0.071 m apart overlap
     with pytest.raises(InputError) as info:
         replicate_step(m, m.bodies, m.steps[1])
     msg = str(info.value)
