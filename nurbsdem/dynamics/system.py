@@ -313,6 +313,9 @@ class DemSystem:
         self.ledger = EnergyLedger()
         self._initialized = True
         self._evaluate(self.time, 0.0)
+        if self.initial_history is not None:
+            # carried-over springs bring their stored energy with them: none of it is dissipated
+            self.ledger.tangential_spring_work = float(self.c_eel[:, 1].sum()) if self.c_eel.shape[0] else 0.0
         e = self.energy()
         self.ledger.initial_mechanical = e.mechanical
         self._peak = e.kinetic + e.elastic
