@@ -16,7 +16,8 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/nurbsdem info inputs/shapes/A.yaml
+	$(BIN)/nurbsdem solve inputs/paper/compaction_quick.inp
+	$(BIN)/python postproc/plot_monitors.py inputs/paper/results/quick
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -22,7 +22,7 @@ import numba
 from scipy.spatial.transform import Rotation
 
 from nurbsdem.contact import ContactTable, detect_batch
-from nurbsdem.contact.lcp import F_N, F_SD, I_FAIL, I_IT, I_NEV, I_DEG
+from nurbsdem.contact.lcp import F_IT1, F_N, F_SD, I_FAIL, I_IT, I_NEV, I_DEG, I_STAGE
 from nurbsdem.contact import reference as ref
 from nurbsdem.geometry.generators import ellipsoid, sphere
 
@@ -118,6 +118,12 @@ def run(n_pairs: int, n_ref: int, n_time: int, repeats: int, seed: int = 0) -> N
               f"{100 * np.mean(warm[1][:, I_DEG] > 0):6.2f} {int(cold[1][:, I_FAIL].sum() + warm[1][:, I_FAIL].sum()):5d}")
         same = np.abs(cold[0][:, F_SD] - warm[0][:, F_SD]).max() / size
         print(f"{'':10s} cold vs warm max |Δsd|/r = {same:.1e}")
+        for lab, res in (("cold", cold), ("warm", warm)):
+            st = res[1][:, I_STAGE]
+            sep = res[0][:, F_SD] > 0
+            it1 = res[0][:, F_IT1]
+            print(f"{'':10s} {lab}: stage 1 {100 * np.mean(st == 1):5.1f} % (separated {100 * np.mean(sep):5.1f} %), "
+                  f"stage-1 it median (max) {np.median(it1[it1 > 0]) if (it1 > 0).any() else 0:.0f}({it1.max():.0f})")
 
 
 def main() -> None:

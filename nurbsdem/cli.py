@@ -224,10 +224,6 @@ def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float) -
     _finish_import(import_3dm(cad_file, name=name), output, scale)
 
 
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
-
-
 # --------------------------------------------------------------------------- the solver
 def _setup_logging(quiet: bool, verbose: bool) -> None:
     import logging
@@ -272,3 +268,7 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     if not quiet:
         click.echo(summary.text())
         click.echo(f"results in {solver.outdir}")
+
+
+if __name__ == "__main__":  # pragma: no cover - python -m nurbsdem.cli
+    sys.exit(main())

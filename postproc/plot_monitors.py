@@ -13,8 +13,8 @@ into ``--out`` (default RESULTS_DIR):
 * ``contacts.png`` — monitored LCPs, active, degenerated and failed contacts against time
   (Fig. 5);
 * ``<wall>_reaction.png`` for every wall that moved (``lid_reaction.png`` in the paper's
-  example) — the reaction of the particles on the wall, along the wall's motion and
-  opposing it, against the wall's displacement along its motion (Fig. 7).
+  example) — the particles' resistance to the wall's motion (the monitored reaction, the
+  force that holds the wall on its path, projected on the motion), against the wall's displacement along its motion (Fig. 7).
 
 Needs numpy and matplotlib only (Agg backend, no display).
 """
@@ -120,9 +120,11 @@ def plot_wall(name: str, d: dict[str, np.ndarray], out: Path) -> bool:
     along = disp @ u
     start = continuous_start(along)
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    ax.plot(along[start:] - along[start], -(reac[start:] @ u))
+    # reaction = force holding the wall on its path = minus the particles' push, so the
+    # particles' resistance to the motion u is reaction . u
+    ax.plot(along[start:] - along[start], reac[start:] @ u)
     ax.set_xlabel(f"{name} displacement along its motion ({sign}{axis}), m")
-    ax.set_ylabel(f"{name} reaction opposing the motion, N")
+    ax.set_ylabel(f"{name} reaction (particles resisting the motion), N")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(out, dpi=120)

@@ -23,8 +23,8 @@ from numba import njit, prange
 
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace
 from . import lcp
-from .lcp import (F_GRAD, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT,
-                  I_NEV, I_PA, I_PB, I_VALID, NF, NI, make_work, solve_pair)
+from .lcp import (F_GRAD, F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
+                  I_IT, I_NEV, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, make_work, solve_pair)
 from .support import make_seeds
 
 
@@ -44,10 +44,15 @@ class ContactResult:
     patch_a, patch_b: patch indices (−1 when no LCP was solved).
     params: (ζA, θA, ζB, θB) surface parameters of the contact points.
     degenerated: degeneration level (number of fixed parameters, paper Eq. 10–11), 0 = none.
-    iterations: Newton iterations on the direction sphere.
+    iterations: Newton iterations of both stages (stage-1 trust-region iterations on f1,
+        paper Eq. 5, plus iterations on the direction sphere, Eq. 6–9).
     failed: the LCP did not converge (the best iterate, or the previous solution, is returned).
     evaluations: patch evaluations spent (cost measure).
     broad_rejected: the bounding spheres do not overlap; nothing else was computed.
+    stage: which stage produced the result: 1 = the minimum of f1 (separated; certified by one
+        support mapping per body), 2 = the minimisation over directions (penetration, or a
+        stage-1 fallback), 0 = none (broad phase).
+    stage1_iterations: the stage-1 part of ``iterations``.
     row_f, row_i: the raw result rows; pass the result back as ``previous`` for a warm start.
     """
 
@@ -65,6 +70,8 @@ class ContactResult:
     failed: bool
     evaluations: int = 0
     broad_rejected: bool = False
+    stage: int = 0
+    stage1_iterations: int = 0
     row_f: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     row_i: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
 
@@ -85,7 +92,7 @@ class ContactResult:
                    patch_a=int(ri[I_PA]), patch_b=int(ri[I_PB]), params=rf[F_PAR:F_PAR + 4].copy(),
                    degenerated=int(ri[I_DEG]), iterations=int(ri[I_IT]), failed=bool(ri[I_FAIL]),
                    evaluations=int(ri[lcp.I_NEV]), broad_rejected=bool(ri[I_BROAD]),
-                   row_f=rf, row_i=ri)
+                   stage=int(ri[I_STAGE]), stage1_iterations=int(rf[F_IT1]), row_f=rf, row_i=ri)
 
 
 # --------------------------------------------------------------------------- packed shapes
@@ -218,11 +225,11 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
     pf, pi = _prev_rows(previous)
     rf = np.zeros(NF)
     ri = np.zeros(NI, np.int64)
-    ws, (wf, wi, wfs) = _work()
+    ws, (wf, wi, wfs, w4) = _work()
     try:
         solve_pair(ta.tab, ta.info[0], ta.centroid[0], float(ta.radius[0]),
                    tb.tab, tb.info[0], tb.centroid[0], float(tb.radius[0]),
-                   pa, Ra, pb, Rb, pf, pi, ma, mb, ta.seeds, tb.seeds, ws, wf, wi, wfs, rf, ri)
+                   pa, Ra, pb, Rb, pf, pi, ma, mb, ta.seeds, tb.seeds, ws, wf, wi, wfs, w4, rf, ri)
     except Exception:  # pragma: no cover - never abort the simulation
         if previous is not None and previous.row_f is not None:
             rf, ri = np.array(previous.row_f), np.array(previous.row_i)
@@ -245,12 +252,13 @@ def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b
         wf = np.zeros((lcp.WORK_ROWS, 3))
         wi = np.zeros((4, 4), np.int64)
         wfs = np.zeros((4, 3))
+        w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
         for k in range(t * chunk, min(K, (t + 1) * chunk)):
             a = sa[k]
             b = sb[k]
             solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
                        pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
-                       empty, empty, seeds, seeds, ws, wf, wi, wfs, res_f[k], res_i[k])
+                       empty, empty, seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k])
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,

@@ -50,6 +50,9 @@ import math
 import numpy as np
 from numba import njit
 
+from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, N_OUT as S1_N_OUT, O_GL,
+                     S1_C, S1_G, S1_INTERSECTING, S1_NONE, S1_PAW, S1_PBW, S1_ROW, S1_ROWS,
+                     S1_SEPARATED, W4_COLS, W4_ROWS, nearest_seed, outward_normal, stage1)
 from .support import CREASE, dot3, norm3, seed_start, support_map, tr_step2
 
 # float result columns
@@ -59,6 +62,7 @@ F_PA = 4          # 4:7 point on A (world, m)
 F_PB = 7          # 7:10 point on B (world, m)
 F_PAR = 10        # 10:14 params (uA, vA, uB, vB)
 F_GRAD = 14       # tangential gradient norm at exit (m)
+F_IT1 = 15        # stage-1 trust-region iterations (a count, stored as float)
 NF = 16
 # int result columns
 I_ACTIVE = 0
@@ -70,13 +74,22 @@ I_FAIL = 5        # 1 = not converged / fallback
 I_VALID = 6       # 1 = holds a solution usable as warm start
 I_NEV = 7         # patch evaluations spent
 I_BROAD = 8       # 1 = rejected by the bounding spheres (Eq. 3), no LCP solved
+I_STAGE = 9       # stage that produced the result: 1 = f1 (Eq. 5), 2 = f2/phi (Eq. 6-9), 0 none
 NI = 10
 
 MAX_OUTER_IT = 60
 ANGLE_TOL = 1e-11
 #: A final Newton step on the sphere shorter than this (rad) is taken by a Taylor update.
 TAYLOR_ANGLE = 1e-7
-WORK_ROWS = 48
+WORK_ROWS = 96     # rows 0..47 stage 2, rows S1_ROW.. stage 1 (see .stage1)
+#: row of the (W4_ROWS, 4) work array holding the stage-1 summary
+W4_OUT = 23
+#: stage-2 start modes
+MODE_COLD, MODE_WARM, MODE_S1, MODE_NORMALS = 0, 1, 2, 3
+#: a stage-1 solution counts as certified when the phi polish ends within this many
+#: iterations, at the same distance (relative to the scale) and the same points
+S1_CERT_IT = 3
+S1_CERT_TOL = 1e-9
 
 # rows of the float work array (rows of 3)
 _PA, _MA, _GA, _PB, _MB, _GB = 0, 1, 4, 6, 7, 10
@@ -84,10 +97,38 @@ _TRIAL = 12
 _EV, _EV2, _TMP, _EA, _EB, _D, _T1, _T2, _DT, _H = 24, 30, 36, 37, 38, 39, 40, 41, 42, 43
 
 
-def make_work() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-thread work arrays of :func:`solve_pair`: (float rows (48, 3), int states (4, 4),
-    float states (4, 3))."""
-    return np.zeros((WORK_ROWS, 3)), np.zeros((4, 4), np.int64), np.zeros((4, 3))
+def make_work() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per-thread work arrays of :func:`solve_pair`: (float rows (96, 3), int states (4, 4),
+    float states (4, 3), stage-1 float rows (24, 8))."""
+    return (np.zeros((WORK_ROWS, 3)), np.zeros((4, 4), np.int64), np.zeros((4, 3)),
+            np.zeros((W4_ROWS, W4_COLS)))
+
+
+@njit(cache=True)
+def _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB, wf, wi, wfs):
+    """Cold start of stage 1: the nearest pair of surface samples, approximately — A's sample
+    farthest along the centroid direction d, then alternately the nearest sample of B and of
+    A (three passes over the samples). Writes patches/parameters into wi/wfs rows 0, 1."""
+    eA = wf[_EA]
+    q = wf[_EB]
+    _rot_t(RA, d, 1.0, eA)
+    pA0 = infoA[0]
+    pB0 = infoB[0]
+    ka = seed_start(seedsA[0], seedsA[1], seedsA[2], infoA[2], infoA[3], maskA, pA0, eA)
+    kb = infoB[2]
+    for rep in range(2):
+        _to_world(posA, RA, seedsA[0][ka], q)
+        kb = nearest_seed(seedsB[0], seedsB[1], infoB[2], infoB[3], maskB, pB0, posB, RB, q)
+        if rep == 1:
+            break
+        _to_world(posB, RB, seedsB[0][kb], q)
+        ka = nearest_seed(seedsA[0], seedsA[1], infoA[2], infoA[3], maskA, pA0, posA, RA, q)
+    wi[0, 0] = seedsA[1][ka]
+    wfs[0, 0] = seedsA[2][ka, 0]
+    wfs[0, 1] = seedsA[2][ka, 1]
+    wi[1, 0] = seedsB[1][kb]
+    wfs[1, 0] = seedsB[2][kb, 0]
+    wfs[1, 1] = seedsB[2][kb, 1]
 
 
 @njit(cache=True)
@@ -233,7 +274,7 @@ def _copy_trial(wf, wi, wfs):
 @njit(cache=True)
 def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
                posA, RA, posB, RB, prevF, prevI, maskA, maskB, seedsA, seedsB,
-               ws, wf, wi, wfs, resF, resI):
+               ws, wf, wi, wfs, w4, resF, resI):
     """Solve the LCP of one body pair (module docstring); writes ``resF``/``resI`` rows.
 
     Parameters
@@ -245,7 +286,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     prevF, prevI: previous result rows (warm start when prevI[I_VALID] == 1).
     maskA, maskB: bool per patch, allowed starting patches (empty: all).
     seedsA, seedsB: (x (S, 3), patch (S,), uv (S, 2)) surface samples for cold starts.
-    ws, wf, wi, wfs: per-thread workspaces (kernel.make_workspace, make_work()).
+    ws, wf, wi, wfs, w4: per-thread workspaces (kernel.make_workspace, make_work()).
     """
     for k in range(resF.shape[0]):
         resF[k] = 0.0
@@ -290,7 +331,66 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         nn = norm3(prevF[F_N:F_N + 3])
         if not nn > 0.0:
             warm = False
-    if warm:
+    prev_sep = warm and prevF[F_SD] > 0.0
+    # ---- stage 1 (paper Eq. 5): cold starts and pairs that were separated
+    nev = 0
+    it1 = 0
+    cls = S1_NONE
+    mode = MODE_WARM if warm else MODE_COLD
+    s1 = wf[S1_ROW:S1_ROW + S1_ROWS]
+    s1out = w4[W4_OUT]
+    gl = 0.0
+    if not warm or prev_sep:
+        if warm:
+            wi[0, 0] = pA0 + prevI[I_PA]
+            wi[1, 0] = pB0 + prevI[I_PB]
+            wfs[0, 0] = prevF[F_PAR]
+            wfs[0, 1] = prevF[F_PAR + 1]
+            wfs[1, 0] = prevF[F_PAR + 2]
+            wfs[1, 1] = prevF[F_PAR + 3]
+        else:
+            _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB,
+                       wf, wi, wfs)
+        for r in range(2):
+            wi[r, 1] = 0
+            wi[r, 2] = 0
+            wi[r, 3] = 0
+        cls, it1, ne1 = stage1(tabA, posA, RA, tabB, posB, RB, scale, wi, wfs, S1_MAX_IT,
+                               S1_DELTA0, ws, wf, w4, s1out)
+        nev += ne1
+        gl = s1out[O_GL]
+        fin = gl == gl and abs(gl) < np.inf
+        if fin and cls == S1_SEPARATED and gl > 0.0:
+            mode = MODE_S1
+        elif warm:
+            mode = MODE_WARM
+        elif fin and (cls == S1_INTERSECTING or (cls != S1_NONE and gl <= 1e-8 * scale)):
+            mode = MODE_NORMALS
+        else:
+            mode = MODE_COLD
+    # ---- stage 2 start (or the stage-1 certificate, module docstring)
+    if mode == MODE_NORMALS:
+        # Giraffe's recipe after an intersection: d = nA − nB at the intersection point
+        nA = wf[_TMP]
+        nB = wf[_DT]
+        okA = outward_normal(s1[S1_C], s1[S1_C + 1], s1[S1_PAW], cA, nA)
+        okB = outward_normal(s1[S1_C + 2], s1[S1_C + 3], s1[S1_PBW], cB, nB)
+        nd = 0.0
+        for c in range(3):
+            dt[c] = nA[c] - nB[c]
+            nd += dt[c] * dt[c]
+        nd = math.sqrt(nd)
+        if okA and okB and nd > 0.1:
+            for c in range(3):
+                d[c] = dt[c] / nd
+        else:
+            mode = MODE_COLD
+    if mode == MODE_S1:
+        # d along the stage-1 gap (from A towards B), supports from the stage-1 points
+        for c in range(3):
+            d[c] = -s1[S1_G, c] / gl
+        delta = 0.1
+    elif mode == MODE_WARM:
         for c in range(3):
             d[c] = prevF[F_N + c] / nn
         wi[0, 0] = pA0 + prevI[I_PA]
@@ -301,6 +401,18 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         wfs[1, 1] = prevF[F_PAR + 3]
         delta = 0.1
     else:
+        if mode == MODE_COLD:
+            # centroid direction (d still holds it)
+            for c in range(3):
+                d[c] = cB[c] - cA[c]
+            nd = norm3(d)
+            if nd > 0.0:
+                for c in range(3):
+                    d[c] /= nd
+            else:
+                d[0] = 0.0
+                d[1] = 0.0
+                d[2] = 1.0
         eA = wf[_EA]
         eB = wf[_EB]
         _rot_t(RA, d, 1.0, eA)
@@ -314,9 +426,13 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         wfs[1, 0] = seedsB[2][kb, 0]
         wfs[1, 1] = seedsB[2][kb, 1]
         delta = 0.5
-    wfs[0, 2] = 0.0
-    wfs[1, 2] = 0.0
-    phi, nev, ok = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, 0, ws, 0, 1)
+    for r in range(2):
+        wi[r, 1] = 0
+        wi[r, 2] = 0
+        wi[r, 3] = 0
+        wfs[r, 2] = 0.0
+    phi, ne2, ok = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, 0, ws, 0, 1)
+    nev += ne2
     converged = False
     it = 0
     gnorm = 0.0
@@ -404,8 +520,20 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         if wi[r, 2] == CREASE:
             deg += 1
     resI[I_DEG] = deg
-    resI[I_IT] = it
+    resI[I_IT] = it + it1
     resI[I_NEV] = nev
+    resF[F_IT1] = it1
+    stage = 2
+    if mode == MODE_S1 and converged and it <= S1_CERT_IT and phi < 0.0:
+        # certificate of the stage-1 minimum: the support points along ±n are the stage-1
+        # points and h_A(n) + h_B(-n) = -|g| (a separating slab of width |g|)
+        tol = S1_CERT_TOL * scale
+        dp = 0.0
+        for c in range(3):
+            dp = max(dp, abs(resF[F_PA + c] - s1[S1_PAW, c]), abs(resF[F_PB + c] - s1[S1_PBW, c]))
+        if abs(phi + gl) <= tol and dp <= 1e3 * tol:
+            stage = 1
+    resI[I_STAGE] = stage
     finite = True
     for k in range(14):
         if not (resF[k] == resF[k]) or abs(resF[k]) == np.inf:

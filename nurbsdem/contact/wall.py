@@ -164,7 +164,7 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
     pf, pi = _prev_rows(previous)
     rf = np.zeros(NF)
     ri = np.zeros(NI, np.int64)
-    ws, (wf, wi, wfs) = _work()
+    ws, (wf, wi, wfs, w4) = _work()
     try:
         solve_wall(t.tab, t.info[0], t.centroid[0], float(t.radius[0]), t.seeds, pos, R,
                    np.ascontiguousarray(o), np.ascontiguousarray(a), np.ascontiguousarray(b),

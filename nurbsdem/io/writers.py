@@ -33,8 +33,10 @@ Typical use by the solver (see :class:`OutputWriters`)::
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
+import zlib
 import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -146,9 +148,27 @@ def write_vtu(path: str | Path, points: np.ndarray, cells: list[tuple[str, np.nd
         comps = {k: (1 if np.ndim(v) < 2 else int(np.shape(v)[1])) for k, v in point_data.items()}
         atomic_write_text(path, _empty_vtu(comps))
         return
+    _fast_vtu_compression()
+    # float32 is what ParaView renders with; it halves the bytes to compress and store
+    points = points.astype(np.float32)
+    point_data = {k: (np.asarray(v).astype(np.float32) if np.asarray(v).dtype.kind == "f"
+                      else np.asarray(v)) for k, v in point_data.items()}
     mesh = meshio.Mesh(points, cells, point_data=point_data, cell_data=dict(cell_data or {}))
     with atomic_path(path) as tmp:
         meshio.write(str(tmp), mesh, file_format="vtu")
+
+
+class _Zlib1:
+    """zlib at level 1 for meshio's VTU writer (its compression is the slowest part of a
+    sample: level 1 is ~4x faster than the default level 6 for files ~15 % larger)."""
+
+    compress = staticmethod(functools.partial(zlib.compress, level=1))
+    decompress = staticmethod(zlib.decompress)
+
+
+def _fast_vtu_compression() -> None:
+    import meshio.vtu._vtu as vtu
+    vtu.zlib = _Zlib1
 
 
 def pvd_text(entries: Sequence[tuple[float, str]]) -> str:
@@ -473,7 +493,8 @@ class MonitorWriter:
     def wall(self, name: str, time: float, displacement: Sequence[float],
              reaction: Sequence[float]) -> None:
         """Append a row to ``wall_<name>.csv``: displacement from the deck position (m) and
-        reaction (N)."""
+        reaction (N): the force that holds the wall on its prescribed path, i.e. minus the
+        sum of the contact forces the particles exert on it."""
         d = np.asarray(displacement, float).reshape(3)
         r = np.asarray(reaction, float).reshape(3)
         self.wall_csv[name].append([time, *d, *r])

@@ -1,0 +1,4 @@
+"""python -m nurbsdem: the command line."""
+from .cli import main
+
+main()

@@ -1,0 +1,166 @@
+"""The solver a user runs: CLI, outputs ParaView and scripts read, restart, the paper deck."""
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import meshio
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import nurbsdem
+from nurbsdem.cli import main
+from nurbsdem.io.deck import parse_deck
+from nurbsdem.io.writers import read_pvd, read_results_sample, read_results_times
+from nurbsdem.solver import Solver
+
+ROOT = Path(__file__).resolve().parents[1]
+SHAPES = ROOT / "inputs" / "shapes"
+
+LID_DECK = f"""
+Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 File {SHAPES / 'C.yaml'}
+  Shape 2 Sphere Radius 0.015
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.030 0.030 0.019
+  Particle 2 Shape 1 Material 1 Position 0.075 0.040 0.019 Rotation 0 0 0.5
+  Particle 3 Shape 2 Material 1 Position 0.050 0.080 0.016 Velocity 0.1 0 0
+Walls
+  Box 1 Min 0 0 0 Max 0.11 0.11 0.10
+  Wall 6 Name lid Point 0.055 0.055 0.10 Normal 0 0 -1 Size 0.11 0.11
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.06 TimeStep 1e-3
+  Step 2 MoveWall lid ToContact Gap 0.001
+  Step 3 MoveWall lid Displacement 0 0 -0.003 Duration 0.06 TimeStep 1e-3
+  Step 4 MoveWall lid Displacement 0 0 0.003 Duration 0.04 TimeStep 1e-3
+Output
+  Directory results
+  VTK Every 0.02 Resolution 4
+  Monitors Every 0.002
+  Checkpoint Every 0.03
+"""
+
+
+@pytest.fixture(scope="module")
+def lid_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("lid")
+    deck = d / "case.inp"
+    deck.write_text(LID_DECK)
+    out = d / "out"
+    summary = Solver(parse_deck(deck), output=out, quiet=True).run()
+    return deck, out, summary
+
+
+def test_outputs_are_what_paraview_and_scripts_read(lid_run):
+    deck, out, summary = lid_run
+    for series in ("particles", "walls", "contacts"):
+        entries = read_pvd(out / f"{series}.pvd")
+        assert len(entries) == 9          # t = 0, 0.02, ..., 0.16
+        mesh = meshio.read(out / entries[-1][1])
+        if series == "particles":
+            for name in ("particle_id", "shape_id", "velocity", "angular_velocity"):
+                assert name in mesh.point_data
+            assert set(np.unique(mesh.point_data["particle_id"])) == {1, 2, 3}
+        if series == "contacts":
+            for name in ("force_normal", "force_tangential", "penetration", "degenerated"):
+                assert name in mesh.point_data
+    with open(out / "monitors" / "energy.csv") as fh:
+        assert fh.readline().strip() == ("time,kinetic,potential,elastic,dissipated,"
+                                         "external_work,mechanical,balance_error")
+    with open(out / "monitors" / "contacts.csv") as fh:
+        assert fh.readline().strip() == "time,monitored,active,degenerated,failed"
+    with open(out / "monitors" / "wall_lid.csv") as fh:
+        assert fh.readline().strip() == ("time,displacement_x,displacement_y,displacement_z,"
+                                         "reaction_x,reaction_y,reaction_z")
+    with h5py.File(out / "results.h5") as h5:
+        assert h5.attrs["nurbsdem_version"] == nurbsdem.__version__
+        assert "Step 3 MoveWall lid" in h5.attrs["deck"]
+    assert summary.failed == 0 and summary.steps == 160
+
+
+def test_restart_reaches_the_same_final_state(lid_run, tmp_path, monkeypatch):
+    deck, ref_out, _ = lid_run
+    out = tmp_path / "out"
+
+    class Killed(Exception):
+        pass
+
+    original = Solver._sample
+
+    def dying_sample(self, writers, force=False):
+        original(self, writers, force)
+        if self.time > 0.100:             # mid step 3 (the lid moving), after a checkpoint
+            raise Killed
+    monkeypatch.setattr(Solver, "_sample", dying_sample)
+    with pytest.raises(Killed):
+        Solver(parse_deck(deck), output=out, quiet=True).run()
+    monkeypatch.setattr(Solver, "_sample", original)
+    Solver(parse_deck(deck), output=out, restart=out / "checkpoint.h5", quiet=True).run()
+
+    times = read_results_times(out / "results.h5")
+    np.testing.assert_array_equal(times, read_results_times(ref_out / "results.h5"))
+    a = read_results_sample(out / "results.h5", len(times) - 1)
+    b = read_results_sample(ref_out / "results.h5", len(times) - 1)
+    for key in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(a[key], b[key])          # bit for bit
+    for name in ("energy.csv", "contacts.csv", "wall_lid.csv"):
+        assert (out / "monitors" / name).read_text() == (ref_out / "monitors" / name).read_text()
+
+
+def test_check_prints_a_summary():
+    r = CliRunner().invoke(main, ["check", str(ROOT / "inputs" / "paper" / "compaction.inp")])
+    assert r.exit_code == 0, r.output
+    assert "OK" in r.output
+
+
+@pytest.mark.parametrize("line, message", [
+    ("  Gravity 0 0", "Gravity"),
+    ("  Frobnicate 3", "Frobnicate"),
+])
+def test_bad_deck_is_one_line_error_without_traceback(tmp_path, line, message):
+    deck = tmp_path / "bad.inp"
+    text = LID_DECK.replace("  Gravity 0 0 -9.81", line)
+    deck.write_text(text)
+    res = subprocess.run([sys.executable, "-m", "nurbsdem.cli", "solve", str(deck), "--quiet"],
+                         capture_output=True, text=True)
+    assert res.returncode == 2
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in res.stderr
+    assert err[0].startswith(f"nurbsdem: error: {deck}:3:") and message in err[0]
+
+
+def test_restart_from_a_missing_file_is_a_clean_error(tmp_path):
+    deck = tmp_path / "case.inp"
+    deck.write_text(LID_DECK)
+    r = CliRunner().invoke(main, ["solve", str(deck), "--restart", str(tmp_path / "nope.h5")])
+    assert r.exit_code == 2
+    assert "no such checkpoint" in r.output
+
+
+def test_short_paper_example_runs_all_steps(tmp_path):
+    """A shortened version of inputs/paper/compaction.inp (every step kind, 112 particles)."""
+    text = (ROOT / "inputs" / "paper" / "compaction.inp").read_text()
+    text = text.replace("../shapes/", str(SHAPES) + "/")
+    text = text.replace("Step 1 Dynamic Duration 2.0", "Step 1 Dynamic Duration 0.25")
+    text = text.replace("Step 3 Dynamic Duration 2.5", "Step 3 Dynamic Duration 0.05")
+    text = text.replace("Duration 1.0", "Duration 0.02")
+    text = text.replace("VTK Every 0.01", "VTK Every 0.05")
+    deck = tmp_path / "paper_short.inp"
+    deck.write_text(text)
+    out = tmp_path / "out"
+    summary = Solver(parse_deck(deck), output=out, quiet=True).run()
+    assert summary.particles == 112
+    assert summary.failed == 0
+    with open(out / "monitors" / "wall_lid.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert float(rows[-1]["displacement_z"]) < -0.05      # the lid came down to the pack
