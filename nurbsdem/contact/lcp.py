@@ -1,18 +1,41 @@
-"""Compiled local contact problem (LCP) of two convex multi-patch NURBS bodies (paper 3.2).
+"""Compiled local contact problem (LCP) of two convex multi-patch NURBS bodies (paper 3.2),
+in the paper's two stages.
 
-The LCP is solved as one minimisation over unit directions ``d`` (world frame) of
+**Stage 1** (paper Eq. 4–5, :mod:`.stage1`): minimise f1 = ½|ΓA − ΓB|² over the four surface
+parameters by trust-region Newton with the exact Hessian. A strict positive minimum means
+separated: the distance |g| and the closest points. f1 ≈ 0 means the surfaces intersect.
+
+**Stage 2** (paper Eq. 6–9): one minimisation over unit directions ``d`` (world frame) of
 
     phi(d) = h_A(d) + h_B(-d),        h_X(d) = max_{x in X} d · x   (support functions)
 
 i.e. the support function of the configuration space obstacle CSO = A − B (paper Eq. 7–8).
+Overlapping bodies: min phi = maximum penetration depth (> 0), attained at the normal d*.
+(Separated bodies: min phi = −distance < 0 with the closest points as support points — the
+same first-order condition as the minimum of f1 — which is what makes phi the certificate
+and fallback of stage 1.)
 
-* Overlapping bodies: min phi = maximum penetration depth (> 0), attained at the normal d*
-  (paper stage 2, Eq. 6–9).
-* Separated bodies: min phi = −distance (< 0) (``distance = max_d −h_CSO(d)``); the support
-  points p_A(d*), p_B(−d*) are then exactly the closest points, i.e. the minimiser of the
-  paper's f1 (Eq. 5): at the minimum of f1 the gap is parallel to both surface normals,
-  which is the same first-order condition. One formula covers both regimes, and the
-  separated case is even better conditioned (Riemannian Hessian = curvature + distance).
+**Pipeline** (:func:`solve_pair`):
+
+* cold start (no valid previous row): stage 1 from the nearest pair of surface samples;
+  - separated (strict minimum, f1 > 0): *certificate* — the stage-2 iteration is started at
+    d = −g/|g| with the support mappings warm-started at the stage-1 parameters. For convex
+    bodies the stage-1 points are the answer iff they are the support points along ±d
+    (a separating slab of width |g|); the support mappings confirm this in 1–2 patch
+    evaluations each and the first direction step (usually a Taylor update of < 1e-7 rad)
+    polishes the normal, which |g|'s direction alone fixes poorly for tiny gaps. Certified
+    (≤ 3 direction iterations, h_A(d) + h_B(−d) = −|g| to 1e-9 × scale, points unchanged
+    to 1e-6 × scale): ``I_STAGE`` = 1. Otherwise the stage-2 iteration simply continues
+    (stage-1 fallback, ``I_STAGE`` = 2) — never an abort;
+  - intersecting (or a weak minimum within 1e-8 × scale): stage 2 from d = nA − nB, the
+    outward normals at the intersection point (Giraffe's recipe), supports from the samples;
+  - stage 1 not converged / saddle: stage 2 from the centroid direction (the former start).
+* warm start, previous result separated: stage 1 from the previous parameters (1–3 Newton
+  steps), then as above; if it finds an intersection, stage 2 warm from the previous normal.
+* warm start, previous result penetrating: stage 2 from the previous normal and parameters
+  (if it ends separated, the next call starts with stage 1).
+
+``I_IT`` counts the iterations of both stages, ``F_IT1`` those of stage 1.
 
 So ``signed_distance = −min phi`` and the gap (Eq. 4) is ``g = p_A − p_B = phi · d``.
 
@@ -50,7 +73,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, N_OUT as S1_N_OUT, O_GL,
+from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
                      S1_C, S1_G, S1_INTERSECTING, S1_NONE, S1_PAW, S1_PBW, S1_ROW, S1_ROWS,
                      S1_SEPARATED, W4_COLS, W4_ROWS, nearest_seed, outward_normal, stage1)
 from .support import CREASE, dot3, norm3, seed_start, support_map, tr_step2

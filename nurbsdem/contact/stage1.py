@@ -89,7 +89,6 @@ EIG_TOL = 1e-12       # λ >= EIG_TOL λmax: strictly positive
 REL_TOL = 1e-6        # |∇f1| <= REL_TOL |J| |g|: g normal to both surfaces
 TAYLOR_STEP1 = 1e-6   # last Newton step (patch widths) taken by a Taylor update
 MAX_MIG = 8
-_DEBUG = False
 
 #: first row of stage 1 in the LCP float work array (rows of 3), rows used
 S1_ROW = 48
@@ -627,8 +626,6 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
                     rho = actual / pred
                 else:
                     rho = 1.0 if actual >= -noise else -1.0
-                if _DEBUG:
-                    print(it, f, fn, pred, rho, delta, xs, newton, clamped, gn / lref, lmin / lref, n)
                 if rho > ETA and fn == fn:
                     fst[0, 0] = uA
                     fst[0, 1] = vA
