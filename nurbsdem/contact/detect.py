@@ -239,6 +239,29 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
 
 
 # --------------------------------------------------------------------------- batch
+#: Below this many pairs the batch runs on the calling thread: launching the parallel
+#: region costs more than it saves for a handful of LCPs.
+PARALLEL_MIN_PAIRS = 32
+
+
+@njit(cache=True)
+def _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
+                 prev_f, prev_i, res_f, res_i, k0, k1):
+    """LCPs of pairs k0..k1-1 with one set of workspaces (one thread)."""
+    empty = np.zeros(0, np.bool_)
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    wf = np.zeros((lcp.WORK_ROWS, 3))
+    wi = np.zeros((4, 4), np.int64)
+    wfs = np.zeros((4, 3))
+    w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
+    for k in range(k0, k1):
+        a = sa[k]
+        b = sb[k]
+        solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
+                   pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
+                   empty, empty, seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k])
+
+
 @njit(cache=True, parallel=True)
 def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
                   prev_f, prev_i, res_f, res_i, nt):
@@ -246,19 +269,9 @@ def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b
     if nt > K:
         nt = max(K, 1)
     chunk = (K + nt - 1) // nt
-    empty = np.zeros(0, np.bool_)
     for t in prange(nt):
-        ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
-        wf = np.zeros((lcp.WORK_ROWS, 3))
-        wi = np.zeros((4, 4), np.int64)
-        wfs = np.zeros((4, 3))
-        w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
-        for k in range(t * chunk, min(K, (t + 1) * chunk)):
-            a = sa[k]
-            b = sb[k]
-            solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
-                       pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
-                       empty, empty, seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k])
+        _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
+                     prev_f, prev_i, res_f, res_i, t * chunk, min(K, (t + 1) * chunk))
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,
@@ -294,8 +307,12 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
         prev_i = np.zeros((K, NI), np.int64)
     if out is None:
         out = (np.zeros((K, NF)), np.zeros((K, NI), np.int64))
-    _batch_kernel(table.tab, table.info, table.centroid, table.radius, table.seeds,
-                  sa, pos_a, rot_a, sb, pos_b, rot_b,
-                  np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
-                  out[0], out[1], numba.get_num_threads())
+    args = (table.tab, table.info, table.centroid, table.radius, table.seeds,
+            sa, pos_a, rot_a, sb, pos_b, rot_b,
+            np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
+            out[0], out[1])
+    if K >= PARALLEL_MIN_PAIRS:
+        _batch_kernel(*args, numba.get_num_threads())
+    elif K:
+        _solve_chunk(*args, 0, K)
     return out

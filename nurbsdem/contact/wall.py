@@ -28,7 +28,7 @@ from numba import njit, prange
 
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
 from . import lcp
-from .detect import ContactResult, _pose, _prev_rows, _work, table_of
+from .detect import PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, table_of
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
                   I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP, _rot_t,
                   _to_world)
@@ -175,6 +175,20 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
     return ContactResult.from_rows(rf, ri)
 
 
+@njit(cache=True)
+def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
+                prev_f, prev_i, res_f, res_i, k0, k1):
+    """Body/wall contacts k0..k1-1 with one set of workspaces (one thread)."""
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    wf = np.zeros((lcp.WORK_ROWS, 3))
+    wi = np.zeros((4, 4), np.int64)
+    wfs = np.zeros((4, 3))
+    for k in range(k0, k1):
+        s = sid[k]
+        solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
+                   wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, res_f[k], res_i[k])
+
+
 @njit(cache=True, parallel=True)
 def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
                        prev_f, prev_i, res_f, res_i, nt):
@@ -183,14 +197,8 @@ def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb
         nt = max(K, 1)
     chunk = (K + nt - 1) // nt
     for t in prange(nt):
-        ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
-        wf = np.zeros((lcp.WORK_ROWS, 3))
-        wi = np.zeros((4, 4), np.int64)
-        wfs = np.zeros((4, 3))
-        for k in range(t * chunk, min(K, (t + 1) * chunk)):
-            s = sid[k]
-            solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
-                       wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, res_f[k], res_i[k])
+        _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
+                    prev_f, prev_i, res_f, res_i, t * chunk, min(K, (t + 1) * chunk))
 
 
 def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=None, prev_i=None):
@@ -209,10 +217,13 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
         prev_i = np.zeros((K, NI), np.int64)
     res_f = np.zeros((K, NF))
     res_i = np.zeros((K, NI), np.int64)
-    _wall_batch_kernel(table.tab, table.info, table.centroid, table.radius, table.seeds,
-                       np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
-                       f(rot, (K, 3, 3)), f(origin, (K, 3)), f(a, (K, 3)), f(b, (K, 3)),
-                       f(dom, (K, 4)), np.ascontiguousarray(prev_f, dtype=float),
-                       np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i,
-                       numba.get_num_threads())
+    args = (table.tab, table.info, table.centroid, table.radius, table.seeds,
+            np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
+            f(rot, (K, 3, 3)), f(origin, (K, 3)), f(a, (K, 3)), f(b, (K, 3)),
+            f(dom, (K, 4)), np.ascontiguousarray(prev_f, dtype=float),
+            np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i)
+    if K >= PARALLEL_MIN_PAIRS:
+        _wall_batch_kernel(*args, numba.get_num_threads())
+    elif K:
+        _wall_chunk(*args, 0, K)
     return res_f, res_i
