@@ -246,9 +246,9 @@ PARALLEL_MIN_PAIRS = 32
 
 @njit(cache=True)
 def _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                 prev_f, prev_i, res_f, res_i, k0, k1):
-    """LCPs of pairs k0..k1-1 with one set of workspaces (one thread)."""
-    empty = np.zeros(0, np.bool_)
+                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1):
+    """LCPs of pairs k0..k1-1 with one set of workspaces (one thread). ``mask_a/b`` (K, P)
+    candidate patches per pair for cold starts (P = 0: no candidates given)."""
     ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
     wf = np.zeros((lcp.WORK_ROWS, 3))
     wi = np.zeros((4, 4), np.int64)
@@ -259,25 +259,28 @@ def _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
         b = sb[k]
         solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
                    pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
-                   empty, empty, seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k])
+                   mask_a[k], mask_b[k], seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k])
 
 
 @njit(cache=True, parallel=True)
 def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                  prev_f, prev_i, res_f, res_i, nt):
+                  prev_f, prev_i, mask_a, mask_b, res_f, res_i, nt):
     K = sa.shape[0]
     if nt > K:
         nt = max(K, 1)
     chunk = (K + nt - 1) // nt
     for t in prange(nt):
         _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                     prev_f, prev_i, res_f, res_i, t * chunk, min(K, (t + 1) * chunk))
+                     prev_f, prev_i, mask_a, mask_b, res_f, res_i, t * chunk,
+                     min(K, (t + 1) * chunk))
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,
                  shape_b: np.ndarray, pos_b: np.ndarray, rot_b: np.ndarray,
                  prev_f: np.ndarray | None = None, prev_i: np.ndarray | None = None,
-                 out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 out: tuple[np.ndarray, np.ndarray] | None = None,
+                 mask_a: np.ndarray | None = None, mask_b: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """LCPs of K body pairs in compiled code (parallel over pairs).
 
     Parameters
@@ -288,6 +291,8 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     prev_f, prev_i: previous result rows of the same pairs (K, NF), (K, NI) for warm starts
         (rows with ``prev_i[:, I_VALID] == 0`` start cold); None: all cold.
     out: optional preallocated (res_f, res_i).
+    mask_a, mask_b: optional bool (K, P) candidate patches of each pair from the patch-box
+        test (paper 3.1): a cold start begins on them ("the LCP is directed to them").
 
     Returns
     -------
@@ -307,10 +312,13 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
         prev_i = np.zeros((K, NI), np.int64)
     if out is None:
         out = (np.zeros((K, NF)), np.zeros((K, NI), np.int64))
+    no_mask = np.zeros((K, 0), np.bool_)
+    mask_a = no_mask if mask_a is None else np.ascontiguousarray(mask_a, dtype=np.bool_)
+    mask_b = no_mask if mask_b is None else np.ascontiguousarray(mask_b, dtype=np.bool_)
     args = (table.tab, table.info, table.centroid, table.radius, table.seeds,
             sa, pos_a, rot_a, sb, pos_b, rot_b,
             np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
-            out[0], out[1])
+            mask_a, mask_b, out[0], out[1])
     if K >= PARALLEL_MIN_PAIRS:
         _batch_kernel(*args, numba.get_num_threads())
     elif K:

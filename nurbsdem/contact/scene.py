@@ -149,6 +149,18 @@ class SceneContacts:
         self.cache = {int(k): (np.array(f), np.array(i)) for k, f, i in
                       zip(st["keys"], st["rows_f"], st["rows_i"])}
 
+    def _directed(self, pairs: np.ndarray, cand: np.ndarray):
+        """Keep the body pairs with overlapping patch boxes, and their candidate patches as
+        (K, P) masks that direct the LCP's cold starts (paper 3.1)."""
+        keep = np.unique(cand[:, 0])
+        row = np.searchsorted(keep, cand[:, 0])
+        P = int(np.diff(self.box_offsets).max())
+        mask_a = np.zeros((keep.shape[0], P), np.bool_)
+        mask_b = np.zeros((keep.shape[0], P), np.bool_)
+        mask_a[row, cand[:, 1]] = True
+        mask_b[row, cand[:, 2]] = True
+        return pairs[keep], mask_a, mask_b
+
     # ------------------------------------------------------------------ the provider
     def __call__(self, kin) -> ContactSet:
         """Active contacts for the kinematics of a :class:`~nurbsdem.dynamics.DemSystem`."""
@@ -158,10 +170,11 @@ class SceneContacts:
         pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
         # particle pairs: bounding spheres (Eq. 3), then patch boxes (Sec. 3.1)
         pairs = sphere_pairs(kin.x, self.radius, self.margin) if N > 1 else np.zeros((0, 2), np.int64)
+        mask_a = mask_b = None
         if pairs.shape[0]:
             cand = candidate_patch_pairs_batch(self.boxes, self.box_offsets, self.body_shape,
                                                pos, R, pairs, self.margin)
-            pairs = pairs[np.unique(cand[:, 0])] if cand.shape[0] else pairs[:0]
+            pairs, mask_a, mask_b = self._directed(pairs, cand)
         # particle-wall pairs
         wpairs = np.zeros((0, 2), np.int64)
         if self.walls and N:
@@ -180,7 +193,7 @@ class SceneContacts:
         keys_p = a * nb + b
         pf, pi = self._previous(keys_p)
         rf, ri = detect_batch(self.table, self.body_shape[a], pos[a], R[a], self.body_shape[b],
-                              pos[b], R[b], pf, pi)
+                              pos[b], R[b], pf, pi, mask_a=mask_a, mask_b=mask_b)
         wb_idx = wpairs[:, 1]
         wa = wpairs[:, 0]
         keys_w = wa * nb + (N + wb_idx)
