@@ -164,3 +164,27 @@ def test_short_paper_example_runs_all_steps(tmp_path):
     with open(out / "monitors" / "wall_lid.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert float(rows[-1]["displacement_z"]) < -0.03      # the lid came down to the pack
+
+
+def test_instability_stops_with_a_message_and_the_last_good_state_saved(tmp_path, monkeypatch):
+    """Forced to one sub-step at the paper's Δt = 1e-3 s, the small particles' damped contacts
+    are unstable (C–C: Δt_cr = 4.7e-4 s): the run must stop cleanly, not explode silently."""
+    from nurbsdem.dynamics.system import DemSystem
+    from nurbsdem.errors import NurbsdemError
+    from nurbsdem.io.checkpoint import load_checkpoint
+
+    original = DemSystem._choose_substeps
+
+    def one_substep(self):
+        original(self)
+        self.substeps, self.dt_internal = 1, self.dt
+    monkeypatch.setattr(DemSystem, "_choose_substeps", one_substep)
+    deck = tmp_path / "unstable.inp"
+    deck.write_text(LID_DECK.replace("Step 1 Dynamic Duration 0.06", "Step 1 Dynamic Duration 0.5"))
+    with pytest.raises(NurbsdemError) as info:
+        Solver(parse_deck(deck), output=tmp_path / "out", quiet=True).run()
+    msg = str(info.value)
+    assert "integration unstable" in msg and "\n" not in msg
+    st = load_checkpoint(tmp_path / "out" / "checkpoint.h5")
+    assert 0.0 <= st["time"] < 0.5
+    assert np.all(np.isfinite(st["bodies"]["position"]))
