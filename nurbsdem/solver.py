@@ -56,6 +56,7 @@ class RunSummary:
     degenerated: int = 0
     failed: int = 0
     active_max: int = 0
+    active_total: int = 0
     balance_error: float = 0.0
     balance_scale: float = 0.0
     simulated_time: float = 0.0
@@ -70,8 +71,10 @@ class RunSummary:
         return (f"done: {self.simulated_time:.4g} s simulated, {self.particles} particles, "
                 f"{self.steps} time steps ({self.substeps} internal), wall time "
                 f"{self.wall_time:.1f} s\n"
-                f"contacts: {self.lcps} LCPs solved, at most {self.active_max} active, "
-                f"{self.degenerated} degenerated, {self.failed} failed\n"
+                f"contacts: {self.lcps} LCPs solved, at most {self.active_max} active; over all "
+                f"steps {self.active_total} active contacts, {self.degenerated} of them "
+                f"degenerated ({100 * self.degenerated / max(self.active_total, 1):.2f} %), "
+                f"{self.failed} failed LCPs\n"
                 f"energy balance error: {self.balance_error:.3e} J "
                 f"({rel:.2e} of the energy turned over)\n"
                 f"time split: {split}")
@@ -368,6 +371,7 @@ class Solver:
             self.summary.substeps += sysm.substeps
             cs = self.scene.last
             self.summary.active_max = max(self.summary.active_max, cs.active)
+            self.summary.active_total += cs.active
             self.summary.degenerated += cs.degenerated_count
             self.summary.failed += cs.failed
             self._sample(writers)

@@ -188,3 +188,20 @@ def test_instability_stops_with_a_message_and_the_last_good_state_saved(tmp_path
     st = load_checkpoint(tmp_path / "out" / "checkpoint.h5")
     assert 0.0 <= st["time"] < 0.5
     assert np.all(np.isfinite(st["bodies"]["position"]))
+
+
+@pytest.mark.parametrize("old, new, line, message", [
+    ("Step 3 MoveWall lid Displacement", "Step 3 MoveWall roof Displacement", 21, "roof"),
+    ("  Material 1 Density 2700", "  Material 1 Density abc", 5, "abc"),
+    ("Position 0.075 0.040 0.019", "Position 0.035 0.030 0.019", 11, "overlaps"),
+    ("Shape 2 Sphere Radius 0.015", "Shape 2 File missing.yaml", 8, "missing.yaml"),
+])
+def test_check_reports_mistakes_as_one_line_with_exit_code_2(tmp_path, old, new, line, message):
+    deck = tmp_path / "case.inp"
+    assert old in LID_DECK
+    deck.write_text(LID_DECK.replace(old, new))
+    r = CliRunner().invoke(main, ["check", str(deck)])
+    assert r.exit_code == 2
+    out = r.output.strip().splitlines()
+    assert len(out) == 1 and "Traceback" not in r.output
+    assert out[0].startswith(f"nurbsdem: error: {deck}:{line}:") and message in out[0]
