@@ -131,7 +131,7 @@ def _point_normal(shape, ip: int, u: float, v: float) -> tuple[np.ndarray, np.nd
             e2 = pt.evaluate(np.array([uu]), np.array([vv]), 1)[0]
             m = np.cross(e2[1], e2[2])
             return m / np.linalg.norm(m)
-        n1, n2 = n_at(1e-5), n_at(2e-5)
+        n1, n2 = n_at(1e-6), n_at(2e-6)
         if n1 @ n2 < 0:
             n2 = -n2
         n = 2 * n1 - n2

@@ -270,5 +270,25 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
         click.echo(f"results in {solver.outdir}")
 
 
+@main.command()
+@click.option("--quick", is_flag=True, help="The CI mode (about two minutes on 2 cores).")
+@click.option("--output", default=None, metavar="DIR",
+              help="Folder of verification.md and its figures (default: docs/ of the checkout).")
+def bench(quick: bool, output: str | None) -> None:
+    """Run the benchmarks and write the verification report (docs/verification.md + PNGs).
+
+    Needs a source checkout: the report lives in benchmarks/report.py next to the package."""
+    import runpy
+    script = Path(__file__).resolve().parent.parent / "benchmarks" / "report.py"
+    if not script.is_file():
+        fail(f"{script.parent}: benchmarks folder not found; `nurbsdem bench` needs a source "
+             "checkout (the benchmarks are not part of an installed wheel)")
+    argv = (["--quick"] if quick else []) + (["--output", output] if output else [])
+    ns = runpy.run_path(str(script), run_name="nurbsdem_bench")
+    code = ns["main"](argv)
+    if code:
+        sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover - python -m nurbsdem.cli
     sys.exit(main())
