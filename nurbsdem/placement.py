@@ -27,7 +27,7 @@ from .errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.shape import Shape
-    from .model import Model, RandomGroup, ReplicateStep, ShapeEntry
+    from .model import Model, RandomGroup, ReplicateStep
 
 # ---------------------------------------------------------------------------- rotations
 

@@ -4,11 +4,11 @@
 :class:`~nurbsdem.geometry.shape.Shape` objects; ``.flat_wall`` and ``.box_walls`` return
 patches. See :mod:`nurbsdem.geometry.generators` and :mod:`nurbsdem.geometry.particles`.
 """
-from .geometry.generators import (box_walls, ellipsoid, ellipsoid_patches, flat_wall,  # noqa: F401
+from .geometry.generators import (box_walls, ellipsoid, ellipsoid_patches, flat_wall,
                                   single_patch_sphere, single_patch_sphere_patches, sphere,
                                   sphere_patches)
+from .geometry.particles import paper_particle, paper_particle_shape
 
-try:  # the paper's particles (A, B, C)
-    from .geometry.particles import paper_particle  # noqa: F401
-except ImportError:  # pragma: no cover - module being written
-    pass
+__all__ = ["sphere", "ellipsoid", "single_patch_sphere", "sphere_patches", "ellipsoid_patches",
+           "single_patch_sphere_patches", "flat_wall", "box_walls", "paper_particle",
+           "paper_particle_shape"]

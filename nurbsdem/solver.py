@@ -26,7 +26,6 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -34,7 +33,7 @@ from . import __version__
 from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.system import InstabilityError
-from .errors import InputError, NurbsdemError
+from .errors import InputError
 from .io.checkpoint import load_checkpoint, save_checkpoint
 from .io.writers import OutputWriters
 from .model import DynamicStep, Model, MoveWallStep, ReplicateStep
@@ -124,7 +123,7 @@ class Solver:
     restart: a checkpoint file to continue from.
     quiet: no progress display.
     safety: fraction of the critical time step used by the sub-stepping (0.5).
-    max_time: stop (as if finished) after this much simulated time (s); for short runs.
+    progress_stream: where the progress line goes (default stderr).
     """
 
     def __init__(self, model: Model, output: str | Path | None = None,
@@ -155,7 +154,6 @@ class Solver:
         self.mech0: float | None = None
         self.system: DemSystem | None = None
         self.scene: SceneContacts | None = None
-        self.system_key = None
         self.summary = RunSummary()
         self.timers = {"global search": 0.0, "LCP": 0.0, "forces + integration": 0.0,
                        "output": 0.0, "setup": 0.0}

@@ -5,5 +5,8 @@
   compiled and parallel), :func:`detect_wall` / :func:`detect_wall_batch` (body against a
   flat wall patch).
 """
-from .detect import ContactResult, ContactTable, detect, detect_batch, table_of  # noqa: F401
-from .wall import detect_wall, detect_wall_batch, wall_frame  # noqa: F401
+from .detect import ContactResult, ContactTable, detect, detect_batch, table_of
+from .wall import detect_wall, detect_wall_batch, wall_frame
+
+__all__ = ["ContactResult", "ContactTable", "detect", "detect_batch", "table_of",
+           "detect_wall", "detect_wall_batch", "wall_frame"]

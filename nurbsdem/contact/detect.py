@@ -23,8 +23,8 @@ from numba import njit, prange
 
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace
 from . import lcp
-from .lcp import (F_GRAD, F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
-                  I_IT, I_NEV, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, make_work, solve_pair)
+from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
+                  I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, make_work, solve_pair)
 from .support import make_seeds
 
 
