@@ -116,7 +116,8 @@ def _lcp_table():
 
 def _source_hash() -> str:
     h = hashlib.sha1()
-    for p in sorted((REPO / "nurbsdem").rglob("*.py")):
+    for p in sorted(list((REPO / "nurbsdem" / "contact").rglob("*.py")) +
+                    list((REPO / "nurbsdem" / "geometry").rglob("*.py"))):
         h.update(p.read_bytes())
     return h.hexdigest()[:12]
 
@@ -395,13 +396,18 @@ def section_facets(rep: Report) -> None:
             f"is {best['pen_err_median']:.1e} L (median; {best['pen_err_rel_depth_median']:.1e} of "
             f"the depth) at {best['kernel_us']:.1f} µs per query, against the exact NURBS LCP's "
             f"{nb['pen_err_median']:.1e} L at {nb['kernel_us']:.1f} µs ({nb['method']}).")
+        for nr in nurbs:
+            ch = [r for r in poly if r["kernel_us"] < nr["kernel_us"]]
+            text.append(f"Against {nr['method']} ({nr['kernel_us']:.1f} µs): " +
+                        (f"tessellations up to {max(r['facets'] for r in ch)} facets are cheaper."
+                         if ch else "no tessellation measured is cheaper."))
         if cheaper:
             c = max(cheaper, key=lambda r: r["facets"])
             text.append(
-                f"Polyhedra are cheaper than the NURBS LCP up to {c['facets']} facets "
-                f"(error {c['pen_err_median']:.1e} L, {c['pen_err_rel_depth_median']:.0%} of the "
-                "depth there): below that cost facets win on speed but carry a geometric error "
-                "the exact method does not have.")
+                f"At {c['facets']} facets, the largest tessellation cheaper than the fastest NURBS "
+                f"LCP, the error is {c['pen_err_median']:.1e} L ({c['pen_err_rel_depth_median']:.0%} "
+                "of the depth): where facets win on speed they carry a geometric error the exact "
+                "method does not have.")
         else:
             text.append("No tessellation measured is cheaper than the NURBS LCP.")
         if not as_good:
@@ -819,12 +825,13 @@ def section_cost(rep: Report, workdir: Path) -> None:
                      fmt(per / N * 1e6, ".2f"),
                      " / ".join(f"{100 * t[k] / comp:.0f}" for k in ("global search", "LCP",
                                                                       "forces + integration")),
-                     f"{s.lcps / s.steps:.1f}",
+                     f"{s.lcps / s.steps:.1f}", s.failed,
                      fmt(s.lcps / t["LCP"], ".3g") if s.lcps and t["LCP"] > 0 else "– (no LCP)",
                      fmt(t_parse, ".1f"), fmt(t["setup"], ".1f"), fmt(t["output"], ".2f")])
         pts.append((N, per, per / N))
     rep.add(md_table(["particles", "deck steps", "sub-steps", "ms per step", "µs per "
                       "particle-step", "split % (search / LCP / forces+int.)", "LCPs per step",
+                      "failed LCPs",
                       "LCPs per s of LCP time", "placement s", "set-up s", "output s"], rows) + "\n")
     rep.headline["scaling"] = rows
     if len(pts) >= 2:
