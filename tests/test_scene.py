@@ -48,3 +48,28 @@ def test_separated_bodies_give_no_contacts_and_moving_walls_follow():
     cs = scene(kin)
     assert cs.active == 1 and cs.body_a[0] == 0 and cs.body_b[0] == 2
     assert cs.depth[0] == pytest.approx(5e-4, abs=1e-12)
+
+
+def test_failed_warm_starts_are_retried_cold():
+    from nurbsdem.contact.lcp import F_SD, I_FAIL, I_VALID, NF, NI
+    from nurbsdem.contact.scene import _retry_failed_cold
+
+    calls = []
+
+    def solve(idx, prev_f, prev_i):
+        """Pairs 1 and 2 fail when warm-started; pair 2 fails cold as well."""
+        calls.append((idx.copy(), prev_i[:, I_VALID].copy()))
+        rf = np.zeros((idx.size, NF))
+        ri = np.zeros((idx.size, NI), np.int64)
+        rf[:, F_SD] = -1e-6 * (idx + 1)
+        warm = prev_i[:, I_VALID] == 1
+        ri[:, I_FAIL] = ((idx == 1) & warm) | (idx == 2)
+        return rf, ri
+
+    prev_i = np.zeros((4, NI), np.int64)
+    prev_i[:3, I_VALID] = 1            # pairs 0-2 have a previous solution, pair 3 is new
+    rf, ri = _retry_failed_cold(solve, np.zeros((4, NF)), prev_i)
+    assert ri[:, I_FAIL].tolist() == [0, 0, 1, 0]     # 1 recovered by the cold retry
+    assert len(calls) == 2 and calls[1][0].tolist() == [1, 2]
+    assert not calls[1][1].any()                       # the retry is cold
+    assert rf[1, F_SD] == pytest.approx(-2e-6)

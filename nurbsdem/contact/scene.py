@@ -192,16 +192,24 @@ class SceneContacts:
         b = pairs[:, 1]
         keys_p = a * nb + b
         pf, pi = self._previous(keys_p)
-        rf, ri = detect_batch(self.table, self.body_shape[a], pos[a], R[a], self.body_shape[b],
-                              pos[b], R[b], pf, pi, mask_a=mask_a, mask_b=mask_b)
+        def solve_pairs(k, prev_f, prev_i):
+            return detect_batch(self.table, self.body_shape[a[k]], pos[a[k]], R[a[k]],
+                                self.body_shape[b[k]], pos[b[k]], R[b[k]], prev_f, prev_i,
+                                mask_a=None if mask_a is None else mask_a[k],
+                                mask_b=None if mask_b is None else mask_b[k])
+        rf, ri = _retry_failed_cold(solve_pairs, pf, pi)
         wb_idx = wpairs[:, 1]
         wa = wpairs[:, 0]
         keys_w = wa * nb + (N + wb_idx)
         wf, wi = self._previous(keys_w)
         d = kin.wall_displacement[wb_idx] if len(self.walls) else np.zeros((0, 3))
-        rwf, rwi = detect_wall_batch(self.table, self.body_shape[wa], pos[wa], R[wa],
-                                     self.wall_origin[wb_idx] + d, self.wall_a[wb_idx],
-                                     self.wall_b[wb_idx], self.wall_dom[wb_idx], wf, wi)
+
+        def solve_walls(k, prev_f, prev_i):
+            w = wb_idx[k]
+            return detect_wall_batch(self.table, self.body_shape[wa[k]], pos[wa[k]], R[wa[k]],
+                                     self.wall_origin[w] + d[k], self.wall_a[w], self.wall_b[w],
+                                     self.wall_dom[w], prev_f, prev_i)
+        rwf, rwi = _retry_failed_cold(solve_walls, wf, wi)
         t2 = time.perf_counter()
         cs = self._assemble(np.concatenate([a, wa]), np.concatenate([b, N + wb_idx]),
                             np.concatenate([keys_p, keys_w]), np.concatenate([rf, rwf]),
@@ -236,3 +244,22 @@ class SceneContacts:
                         monitored=int(keys.shape[0]), active=int(sel.shape[0]),
                         degenerated_count=int(np.count_nonzero(deg)), failed=int(failed.sum()))
         return cs
+
+
+def _retry_failed_cold(solve, prev_f: np.ndarray, prev_i: np.ndarray):
+    """Solve all pairs (warm where a previous solution exists); pairs whose warm-started LCP
+    did not converge are solved once more from a cold start before they count as failed.
+
+    ``solve(index, prev_f, prev_i)`` solves the pairs ``index`` (an index array) and returns
+    their result rows. A warm start can stall where a cold one does not (e.g. in the flat
+    valley of a near-touching pair), so the cold retry removes most spurious failures at the
+    cost of one more LCP for the rare failed pair.
+    """
+    K = prev_f.shape[0]
+    rf, ri = solve(np.arange(K), prev_f, prev_i)
+    again = np.nonzero((ri[:, I_FAIL] == 1) & (prev_i[:, I_VALID] == 1))[0]
+    if again.size:
+        cf, ci = solve(again, np.zeros((again.size, NF)), np.zeros((again.size, NI), np.int64))
+        ok = ci[:, I_FAIL] == 0
+        rf[again[ok]], ri[again[ok]] = cf[ok], ci[ok]
+    return rf, ri
