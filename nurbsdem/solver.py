@@ -253,9 +253,8 @@ class Solver:
         t0 = time.perf_counter()
         out = self.model.output
         t = self.time
-        due = lambda name, every: force or _due(t, every)  # noqa: E731
         s = self.system
-        if due("monitors", out.monitors_every):
+        if force or _due(t, out.monitors_every):
             row = self._energy_row()
             writers.monitors.energy(t, row["kinetic"], row["potential"], row["elastic"],
                                     row["dissipated"], row["external_work"], row["balance_error"])
@@ -264,13 +263,15 @@ class Solver:
                 writers.monitors.contacts(t, cs.monitored, cs.active, cs.degenerated_count, cs.failed)
             reaction = s.wall_reaction
             for k, w in enumerate(self.model.walls):
-                writers.monitors.wall(w.name, t, s.wall_displacement[k] + 0.0, reaction[k])
-        if due("vtk", out.vtk_every):
+                writers.monitors.wall(w.name, t, s.wall_displacement[k], reaction[k])
+        vtk = force or _due(t, out.vtk_every)
+        results = force or _due(t, out.results_interval)
+        if vtk or results:
             self._sync_bodies_from_system()
+        if vtk:
             writers.paraview.write(t, self.bodies, wall_displacement=s.wall_displacement,
                                    contacts=self._contact_output())
-        if due("results", out.results_interval):
-            self._sync_bodies_from_system()
+        if results:
             writers.results.append(t, self.bodies)
         self.timers["output"] += time.perf_counter() - t0
 
@@ -349,7 +350,7 @@ class Solver:
         ck_every = self.model.output.checkpoint_every
         while self.step_progress < n_total:
             t_before = time.perf_counter()
-            g0, l0 = self.scene.timers.global_search, self.scene.timers.lcp
+            g0, l0, n0 = self.scene.timers.global_search, self.scene.timers.lcp, self.scene.timers.lcps
             try:
                 sysm.step()
             except InstabilityError:
@@ -366,6 +367,7 @@ class Solver:
             self.step_progress += 1
             self.time = sysm.time
             self.summary.steps += 1
+            self.summary.lcps += self.scene.timers.lcps - n0
             self.summary.substeps += sysm.substeps
             cs = self.scene.last
             self.summary.active_max = max(self.summary.active_max, cs.active)
@@ -499,7 +501,6 @@ class Solver:
         s.wall_time = time.perf_counter() - wall0
         s.simulated_time = self.time
         s.particles = len(self.bodies)
-        s.lcps = self.scene.timers.lcps if self.scene is not None else 0
         s.timers = {k: v for k, v in self.timers.items()}
         row = self._last_energy
         s.balance_error = row.get("balance_error", 0.0)
