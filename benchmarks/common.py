@@ -2,7 +2,7 @@
 
 * :func:`machine_info` — CPU model, cores, nurbsdem / Python / NumPy / numba versions, date:
   the stamp every table and figure of the report carries.
-* :func:`sweep_shapes`, :func:`random_pair_poses` — the randomised pose generator of
+* :func:`sweep_shapes` (with :func:`nurbsdem.contact.reference.random_pair_poses`) — the randomised sweep of
   ``tests/test_contact_sweep.py`` (same shapes, same placement: B translated along the computed
   normal until the signed distance hits a target).
 * :func:`feature_points`, :func:`probe_poses`, :func:`wall_poses` — hard cases with an *exact*
@@ -84,30 +84,6 @@ def sweep_shapes() -> list:
     return [sphere(SWEEP_R), Shape(single_patch_sphere_patches(SWEEP_R), check=False),
             ellipsoid(*SWEEP_AXES), paper_particle_shape("A"), paper_particle_shape("B"),
             paper_particle_shape("C")]
-
-
-def random_pair_poses(table, sa, sb, rng, lo, hi):
-    """Random poses (the generator of ``tests/test_contact_sweep.py``): random orientations,
-    B along a random direction, translated along the computed normal until the signed
-    distance is a target drawn in [lo, hi] × the smaller bounding radius.
-    Returns (pa, Ra, pb, Rb)."""
-    from nurbsdem.contact import detect_batch
-    from nurbsdem.contact.lcp import F_N, F_SD
-    K = len(sa)
-    ra = Rotation.random(K, random_state=rng).as_matrix()
-    rb = Rotation.random(K, random_state=rng).as_matrix()
-    u = rng.normal(size=(K, 3))
-    u /= np.linalg.norm(u, axis=1)[:, None]
-    pa = rng.normal(size=(K, 3)) * 0.01 - np.einsum("kij,kj->ki", ra, table.centroid[sa])
-    ca = pa + np.einsum("kij,kj->ki", ra, table.centroid[sa])
-    r = np.minimum(table.radius[sa], table.radius[sb])
-    pb = ca + 0.9 * (table.radius[sa] + table.radius[sb])[:, None] * u \
-        - np.einsum("kij,kj->ki", rb, table.centroid[sb])
-    target = rng.uniform(lo, hi, K) * r
-    for _ in range(4):
-        f, _ = detect_batch(table, sa, pa, ra, sb, pb, rb)
-        pb = pb + (target - f[:, F_SD])[:, None] * f[:, F_N:F_N + 3]
-    return pa, ra, pb, rb
 
 
 # --------------------------------------------------------------------------- features

@@ -39,6 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 from common import REPO, machine_info, stamp  # noqa: E402
 
+from nurbsdem.contact.reference import random_pair_poses  # noqa: E402
+
 DEFAULT_TOL = "default"
 
 
@@ -169,7 +171,6 @@ class LcpSweep:
     """Poses, the background worker chain (one tolerance after the other), references."""
 
     def __init__(self, quick: bool, workdir: Path) -> None:
-        from scipy.spatial.transform import Rotation  # noqa: F401
         import bench_lcp
         self.quick = quick
         self.workdir = workdir
@@ -296,7 +297,7 @@ def section_lcp(rep: Report, sweep: LcpSweep) -> None:
             rad = float(sweep.shapes[s].bounding_radius)
             e = {}
             for lab in ("c", "w"):
-                f, i = r[f"{t}_f{lab}"], r[f"{t}_i{lab}"]
+                f = r[f"{t}_f{lab}"]
                 e[lab + "sd"] = np.abs(f[:m, F_SD] - sd_ref) / rad
                 e[lab + "n"] = np.linalg.norm(np.cross(f[:m, F_N:F_N + 3], n_ref), axis=1)
             fc, ic = r[f"{t}_fc"], r[f"{t}_ic"]
@@ -478,7 +479,7 @@ def section_robustness(rep: Report) -> None:
     n_rand = int(0.3 * total)
     sa = rng.integers(0, NS, n_rand)
     sb = rng.integers(0, NS, n_rand)
-    pa, Ra, pb, Rb = common.random_pair_poses(table, sa, sb, rng, -0.15, 0.03)
+    pa, Ra, pb, Rb = random_pair_poses(table, sa, sb, rng, -0.15, 0.03)
     solve("random pairs (test generator)", "−15 … +3 %", sa, pa, Ra, sb, pb, Rb)
     # --- (b) features against probe spheres (exact reference by construction)
     regimes = {"normal": lambda k: rng.uniform(-0.05, 0.02, k),

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from nurbsdem.contact import ContactTable, detect_batch
 from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_DEG, I_FAIL
-from nurbsdem.contact.reference import SampledBody, ellipsoid_pair
+from nurbsdem.contact.reference import SampledBody, ellipsoid_pair, random_pair_poses
 from nurbsdem.geometry.generators import ellipsoid, single_patch_sphere_patches, sphere
 from nurbsdem.geometry.particles import paper_particle_shape
 from nurbsdem.geometry.shape import Shape
@@ -32,31 +32,11 @@ def table():
     return ContactTable(shapes)
 
 
-def _poses(table, sa, sb, rng, lo, hi):
-    """Random poses; B placed along a random direction with a target signed distance
-    (relative to the smaller bounding radius) by translating along the computed normal."""
-    K = len(sa)
-    ra = Rotation.random(K, random_state=rng).as_matrix()
-    rb = Rotation.random(K, random_state=rng).as_matrix()
-    u = rng.normal(size=(K, 3))
-    u /= np.linalg.norm(u, axis=1)[:, None]
-    pa = rng.normal(size=(K, 3)) * 0.01 - np.einsum("kij,kj->ki", ra, table.centroid[sa])
-    ca = pa + np.einsum("kij,kj->ki", ra, table.centroid[sa])
-    r = np.minimum(table.radius[sa], table.radius[sb])
-    pb = ca + 0.9 * (table.radius[sa] + table.radius[sb])[:, None] * u \
-        - np.einsum("kij,kj->ki", rb, table.centroid[sb])
-    target = rng.uniform(lo, hi, K) * r
-    for _ in range(4):
-        f, _ = detect_batch(table, sa, pa, ra, sb, pb, rb)
-        pb = pb + (target - f[:, F_SD])[:, None] * f[:, F_N:F_N + 3]
-    return pa, ra, pb, rb
-
-
 def run_sweep(table, n, seed):
     rng = np.random.default_rng(seed)
     sa = rng.integers(0, len(table), n)
     sb = rng.integers(0, len(table), n)
-    pa, ra, pb, rb = _poses(table, sa, sb, rng, -0.15, 0.03)
+    pa, ra, pb, rb = random_pair_poses(table, sa, sb, rng, -0.15, 0.03)
     f, i = detect_batch(table, sa, pa, ra, sb, pb, rb)
     assert np.all(np.isfinite(f))
     # warm start from a pose one step earlier
@@ -68,7 +48,6 @@ def run_sweep(table, n, seed):
     scale = table.radius[sa] + table.radius[sb]
     # cold and warm agree (same local minimum)
     assert np.all(np.abs(f[ok, F_SD] - fw[ok, F_SD]) <= 1e-9 * scale[ok])
-    samples = {}
     nerr = 0
     for k in range(n):
         a, b = sa[k], sb[k]

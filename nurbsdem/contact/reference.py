@@ -219,3 +219,32 @@ def wall_reference(shape, pose, origin, normal, n: int = 40):
     nrm = np.asarray(normal, float)
     h, p = A.support(-nrm)
     return float(nrm @ (p - np.asarray(origin, float))), p
+
+
+def random_pair_poses(table, sa, sb, rng, lo, hi):
+    """Random poses for the seeded sweeps of the tests and the report: random orientations,
+    B along a random direction from A, then translated along the computed normal until the
+    signed distance is a target drawn uniformly in [lo, hi] × the smaller bounding radius.
+
+    table: :class:`~nurbsdem.contact.detect.ContactTable`; sa, sb: int (K,) shape indices;
+    rng: numpy Generator. Returns (pa, Ra, pb, Rb): positions (K, 3) m, rotations (K, 3, 3).
+    """
+    from scipy.spatial.transform import Rotation
+
+    from .detect import detect_batch
+    from .lcp import F_N, F_SD
+    K = len(sa)
+    ra = Rotation.random(K, random_state=rng).as_matrix()
+    rb = Rotation.random(K, random_state=rng).as_matrix()
+    u = rng.normal(size=(K, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    pa = rng.normal(size=(K, 3)) * 0.01 - np.einsum("kij,kj->ki", ra, table.centroid[sa])
+    ca = pa + np.einsum("kij,kj->ki", ra, table.centroid[sa])
+    r = np.minimum(table.radius[sa], table.radius[sb])
+    pb = ca + 0.9 * (table.radius[sa] + table.radius[sb])[:, None] * u \
+        - np.einsum("kij,kj->ki", rb, table.centroid[sb])
+    target = rng.uniform(lo, hi, K) * r
+    for _ in range(4):
+        f, _ = detect_batch(table, sa, pa, ra, sb, pb, rb)
+        pb = pb + (target - f[:, F_SD])[:, None] * f[:, F_N:F_N + 3]
+    return pa, ra, pb, rb
