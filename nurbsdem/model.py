@@ -25,18 +25,18 @@ particle, like the companion file of the authors' code).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from .errors import InputError
+from .geometry.rotation import quat_to_matrix
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.nurbs import Patch
     from .geometry.shape import Shape
-    from .placement import Bodies
 
 #: Pair kinds a contact interface may be restricted to.
 PAIR_KINDS = ("particle-particle", "particle-wall")
@@ -309,6 +309,77 @@ class Output:
 
 
 @dataclass
+class Bodies:
+    """The state of N particles (arrays, row i = one body).
+
+    id, shape_id, material_id, line: int64 (N,) — deck body id, shape id, material id, and
+    the deck line that defined it. position: (N, 3) centroid, world, m. quaternion: (N, 4)
+    (w, x, y, z). velocity: (N, 3) m/s, angular_velocity: (N, 3) rad/s, world frame.
+    """
+
+    id: np.ndarray
+    shape_id: np.ndarray
+    material_id: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    line: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("id", "shape_id", "material_id", "line"):
+            setattr(self, name, np.asarray(getattr(self, name), np.int64).reshape(-1))
+        for name, k in (("position", 3), ("quaternion", 4), ("velocity", 3),
+                        ("angular_velocity", 3)):
+            setattr(self, name, np.asarray(getattr(self, name), float).reshape(-1, k))
+
+    def __len__(self) -> int:
+        return int(self.id.shape[0])
+
+    @classmethod
+    def empty(cls) -> "Bodies":
+        """No bodies."""
+        z = np.zeros(0, np.int64)
+        return cls(z, z, z, np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)),
+                   np.zeros((0, 3)), z)
+
+    def rotation_matrices(self) -> np.ndarray:
+        """(N, 3, 3) file-to-world rotation matrices."""
+        return quat_to_matrix(self.quaternion) if len(self) else np.zeros((0, 3, 3))
+
+    def copy(self) -> "Bodies":
+        """A deep copy."""
+        return Bodies(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    def take(self, index) -> "Bodies":
+        """The bodies at ``index`` (array of indices or boolean mask)."""
+        return Bodies(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    @staticmethod
+    def concatenate(parts: Sequence["Bodies"]) -> "Bodies":
+        """All bodies of ``parts``, in order."""
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Bodies.empty()
+        return Bodies(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                         for f in fields(Bodies)})
+
+    def sorted_by_id(self) -> "Bodies":
+        """The bodies in increasing id order."""
+        return self.take(np.argsort(self.id, kind="stable"))
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        """The arrays by field name (e.g. for a checkpoint)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, np.ndarray]) -> "Bodies":
+        """Inverse of :meth:`as_dict`."""
+        return cls(**{f.name: np.asarray(d[f.name]) for f in fields(cls)})
+
+
+
+@dataclass
 class Model:
     """Everything an input deck defines.
 
@@ -323,7 +394,7 @@ class Model:
     interfaces: contact interfaces in deck order (later ones override earlier ones).
     steps: solution steps in deck order.
     output: :class:`Output`.
-    bodies: the initial particle state (:class:`nurbsdem.placement.Bodies`), filled by
+    bodies: the initial particle state (:class:`Bodies`), filled by
         :func:`nurbsdem.io.deck.parse_deck` (``place=True``).
     """
 
@@ -393,7 +464,6 @@ class Model:
     # ------------------------------------------------------------------ summary
     def summary(self) -> str:
         """A human-readable description (printed by ``nurbsdem check``)."""
-        from .io.deck import summary_text
         return summary_text(self)
 
     def as_dict(self) -> dict[str, Any]:
@@ -401,3 +471,75 @@ class Model:
         return {"particles": self.particle_count, "walls": len(self.walls),
                 "shapes": len(self.shapes), "steps": len(self.steps),
                 "total_time": self.total_time}
+
+
+# ---------------------------------------------------------------------------- summary
+
+
+def _vec(v) -> str:
+    return " ".join(f"{x + 0.0:g}" for x in np.asarray(v, float))  # + 0.0: no "-0"
+
+
+def summary_text(model: Model) -> str:
+    """The text of :meth:`Model.summary`."""
+    out = [f"Deck: {model.path}", f"Gravity: {_vec(model.gravity)} m/s^2", "Materials:"]
+    for mat in model.materials.values():
+        out.append(f"  {mat.id}: density {mat.density:g} kg/m^3")
+    out.append("Shapes:")
+    for s in model.shapes.values():
+        src = f"file {s.source}" if s.kind == "file" else f"{s.kind} {_vec(s.params)} m"
+        over = []
+        if s.volume_override is not None:
+            over.append("volume")
+        if s.inertia_override is not None:
+            over.append("inertia")
+        extra = f" (given {' and '.join(over)})" if over else ""
+        out.append(f"  {s.id}: {s.name}: {src}, {len(s.shape.patches)} patches, volume "
+                   f"{s.volume:.6g} m^3{extra}, bounding radius {s.bounding_radius:.4g} m")
+    out.append(f"Particles: {model.particle_count}")
+    for g in model.random_groups:
+        parts = ", ".join(f"{n} x shape {sid}" for sid, n in zip(g.shape_ids, g.counts))
+        out.append(f"  Random {g.id} (ids {g.id}-{g.id + g.total - 1}): {parts}, material "
+                   f"{g.material_id}, region [{_vec(g.region_lo)}] - [{_vec(g.region_hi)}] m, "
+                   f"seed {g.seed}")
+    for p in model.particles:
+        out.append(f"  Particle {p.id}: shape {p.shape_id}, material {p.material_id}, "
+                   f"centroid {_vec(p.position)} m")
+    if model.bodies is not None:
+        masses = [model.shapes[int(s)].mass(model.materials[int(mm)].density)
+                  for s, mm in zip(model.bodies.shape_id, model.bodies.material_id)]
+        out.append(f"  placed {len(model.bodies)} bodies, total mass {sum(masses):.6g} kg")
+    out.append(f"Walls: {len(model.walls)}")
+    for w in model.walls:
+        out.append(f"  {w.id}: {w.name} at {_vec(w.center)} m, normal {_vec(w.normal)}")
+    out.append("Contact interfaces:")
+    for i in model.interfaces:
+        scope = i.between or "all pairs"
+        if i.materials:
+            scope += f", materials {' '.join(map(str, i.materials))}"
+        out.append(f"  {i.id} ({scope}): en {i.normal_penalty:g} N/m, et "
+                   f"{i.tangential_penalty:g} N/m, cn {i.normal_damping:g} N s/m, ct "
+                   f"{i.tangential_damping:g} N s/m, mu {i.friction:g}")
+    out.append("Steps:")
+    t = 0.0
+    for s in model.steps:
+        if isinstance(s, DynamicStep):
+            desc = f"Dynamic {s.duration:g} s, time step {s.time_step:g} s"
+        elif isinstance(s, ReplicateStep):
+            desc = f"Replicate into {s.layers} layers over {s.height:g} m"
+        else:
+            assert isinstance(s, MoveWallStep)
+            if s.to_contact:
+                desc = f"MoveWall {s.wall} to contact, gap {s.gap:g} m"
+            else:
+                desc = (f"MoveWall {s.wall} by {_vec(s.displacement)} m in {s.duration:g} s, "
+                        f"time step {s.time_step:g} s")
+        out.append(f"  {s.id}: t = {t:g} s: {desc}")
+        t += s.duration_s
+    out.append(f"Total simulated time: {t:g} s")
+    o = model.output
+    if o is not None:
+        out.append(f"Output: {o.directory}; VTK every {o.vtk_every:g} s (resolution "
+                   f"{o.vtk_resolution}); monitors every {o.monitors_every:g} s; results.h5 "
+                   f"every {o.results_interval:g} s; checkpoint every {o.checkpoint_every:g} s")
+    return "\n".join(out)

@@ -1,7 +1,5 @@
-"""Initial particle placement, layer replication, and the body-state container.
+"""Initial particle placement and layer replication (of :class:`nurbsdem.model.Bodies`).
 
-* :class:`Bodies` — arrays over N particles: deck id, shape id, material id, centroid
-  position (m, world), orientation quaternion, velocity (m/s), angular velocity (rad/s).
 * :func:`initial_bodies` — the deck's ``Particle`` and ``Random`` entries as a
   :class:`Bodies` (sorted by id).
 * :func:`place_random_group` — ``Random`` groups: uniform positions inside the region (the
@@ -17,156 +15,19 @@ the world (see docs/DEVNOTES.md: pose position = position - R @ centroid_file).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 import weakref
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
 from .errors import InputError
+from .geometry.rotation import quat_from_rotvec, random_quaternions
+from .model import Bodies
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.shape import Shape
     from .model import Model, RandomGroup, ReplicateStep
-
-# ---------------------------------------------------------------------------- rotations
-
-
-def quat_from_rotvec(rv: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) (w, x, y, z) of rotation vectors (..., 3) (rad)."""
-    rv = np.asarray(rv, float)
-    angle = np.linalg.norm(rv, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    # sin(a/2)/a, with its series near 0
-    k = np.where(angle > 1e-8, np.sin(half) / np.where(angle > 1e-8, angle, 1.0),
-                 0.5 - angle ** 2 / 48.0)
-    return np.concatenate([np.cos(half), k * rv], axis=-1)
-
-
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of quaternions (..., 4) (w, x, y, z); normalised first."""
-    q = np.asarray(q, float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
-
-
-def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) (w, x, y, z), w >= 0, of rotation matrices (..., 3, 3)."""
-    R = np.asarray(R, float)
-    flat = R.reshape(-1, 3, 3)
-    out = np.empty((flat.shape[0], 4))
-    for i, m in enumerate(flat):
-        tr = m[0, 0] + m[1, 1] + m[2, 2]
-        if tr > 0:
-            s = 2.0 * np.sqrt(tr + 1.0)
-            q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-        elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-            s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-            q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-        elif m[1, 1] > m[2, 2]:
-            s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-            q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-        else:
-            s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-            q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-        q = np.array(q)
-        q /= np.linalg.norm(q)
-        out[i] = q if q[0] >= 0 else -q
-    return out.reshape(R.shape[:-2] + (4,))
-
-
-def random_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
-    """n uniformly distributed random rotations (Haar measure) as unit quaternions (n, 4):
-    normalised 4-D standard normal vectors, sign fixed so that w >= 0."""
-    q = rng.standard_normal((n, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    q[q[:, 0] < 0] *= -1.0
-    return q
-
-
-# ---------------------------------------------------------------------------- bodies
-
-
-@dataclass
-class Bodies:
-    """The state of N particles (arrays, row i = one body).
-
-    id, shape_id, material_id, line: int64 (N,) — deck body id, shape id, material id, and
-    the deck line that defined it. position: (N, 3) centroid, world, m. quaternion: (N, 4)
-    (w, x, y, z). velocity: (N, 3) m/s, angular_velocity: (N, 3) rad/s, world frame.
-    """
-
-    id: np.ndarray
-    shape_id: np.ndarray
-    material_id: np.ndarray
-    position: np.ndarray
-    quaternion: np.ndarray
-    velocity: np.ndarray
-    angular_velocity: np.ndarray
-    line: np.ndarray
-
-    def __post_init__(self) -> None:
-        for name in ("id", "shape_id", "material_id", "line"):
-            setattr(self, name, np.asarray(getattr(self, name), np.int64).reshape(-1))
-        for name, k in (("position", 3), ("quaternion", 4), ("velocity", 3),
-                        ("angular_velocity", 3)):
-            setattr(self, name, np.asarray(getattr(self, name), float).reshape(-1, k))
-
-    def __len__(self) -> int:
-        return int(self.id.shape[0])
-
-    @classmethod
-    def empty(cls) -> "Bodies":
-        """No bodies."""
-        z = np.zeros(0, np.int64)
-        return cls(z, z, z, np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)),
-                   np.zeros((0, 3)), z)
-
-    def rotation_matrices(self) -> np.ndarray:
-        """(N, 3, 3) file-to-world rotation matrices."""
-        return quat_to_matrix(self.quaternion) if len(self) else np.zeros((0, 3, 3))
-
-    def copy(self) -> "Bodies":
-        """A deep copy."""
-        return Bodies(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
-
-    def take(self, index) -> "Bodies":
-        """The bodies at ``index`` (array of indices or boolean mask)."""
-        return Bodies(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
-
-    @staticmethod
-    def concatenate(parts: Sequence["Bodies"]) -> "Bodies":
-        """All bodies of ``parts``, in order."""
-        parts = [p for p in parts if len(p)]
-        if not parts:
-            return Bodies.empty()
-        return Bodies(**{f.name: np.concatenate([getattr(p, f.name) for p in parts])
-                         for f in fields(Bodies)})
-
-    def sorted_by_id(self) -> "Bodies":
-        """The bodies in increasing id order."""
-        return self.take(np.argsort(self.id, kind="stable"))
-
-    def as_dict(self) -> dict[str, np.ndarray]:
-        """The arrays by field name (e.g. for a checkpoint)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, np.ndarray]) -> "Bodies":
-        """Inverse of :meth:`as_dict`."""
-        return cls(**{f.name: np.asarray(d[f.name]) for f in fields(cls)})
-
 
 # ---------------------------------------------------------------------------- overlap test
 
@@ -449,5 +310,4 @@ def bounding_sphere_overlaps(bodies: Bodies, radii: np.ndarray) -> list[tuple[in
 
 __all__ = ["Bodies", "initial_bodies", "place_random_group", "explicit_bodies",
            "check_explicit_overlaps", "replicate_layers", "replicate_step", "layer_thickness",
-           "bodies_overlap", "first_overlap", "quat_from_rotvec", "quat_to_matrix",
-           "matrix_to_quat", "random_quaternions", "InputError"]
+           "bodies_overlap", "first_overlap", "InputError"]

@@ -34,10 +34,11 @@ from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.system import InstabilityError
 from .errors import InputError
+from .geometry.rotation import matrix_to_quat, quat_to_matrix
 from .io.checkpoint import load_checkpoint, save_checkpoint
 from .io.writers import OutputWriters
-from .model import DynamicStep, Model, MoveWallStep, ReplicateStep
-from .placement import Bodies, matrix_to_quat, quat_to_matrix, replicate_step
+from .model import Bodies, DynamicStep, Model, MoveWallStep, ReplicateStep
+from .placement import replicate_step
 
 log = logging.getLogger("nurbsdem")
 

@@ -10,9 +10,10 @@ from scipy.spatial.transform import Rotation
 from nurbsdem import save_shape, shapes
 from nurbsdem.errors import InputError
 from nurbsdem.io.deck import parse_deck
-from nurbsdem.placement import (Bodies, bodies_overlap, layer_thickness, matrix_to_quat,
-                                quat_from_rotvec, quat_to_matrix, random_quaternions,
-                                replicate_layers, replicate_step)
+from nurbsdem.geometry.rotation import (matrix_to_quat, quat_from_rotvec, quat_to_matrix,
+                                        random_quaternions)
+from nurbsdem.model import Bodies
+from nurbsdem.placement import bodies_overlap, layer_thickness, replicate_layers, replicate_step
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -23,8 +23,8 @@ from nurbsdem.io.checkpoint import load_checkpoint, save_checkpoint
 from nurbsdem.io.writers import (CONTACT_COLUMNS, ENERGY_COLUMNS, WALL_COLUMNS, MonitorWriter,
                                  OutputWriters, ParaViewWriter, ResultsWriter, read_pvd,
                                  read_results_sample, read_results_times)
-from nurbsdem.model import WallSpec
-from nurbsdem.placement import Bodies, quat_from_rotvec, quat_to_matrix
+from nurbsdem.geometry.rotation import quat_from_rotvec, quat_to_matrix
+from nurbsdem.model import Bodies, WallSpec
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .rigid import quat_mul
+from ..geometry.rotation import quat_mul_into
 
 
 @njit(cache=True)
@@ -74,7 +74,7 @@ def _rotate_about_axis(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, axis: in
     tmp[2] = 0.0
     tmp[3] = 0.0
     tmp[1 + axis] = math.sin(half)
-    quat_mul(q, tmp, out)
+    quat_mul_into(q, tmp, out)
     q[0], q[1], q[2], q[3] = out[0], out[1], out[2], out[3]
 
 

@@ -6,7 +6,7 @@ State arrays over N bodies (SI units):
 
 * ``x`` (N,3) m — centroid position in the world frame;
 * ``q`` (N,4) — unit quaternion (w, x, y, z) of the *principal* frame: it maps principal-frame
-  vectors to the world, ``Q = quat_to_matrix(q)``;
+  vectors to the world, ``Q = quat_to_matrix(q)`` (:mod:`nurbsdem.geometry.rotation`);
 * ``v`` (N,3) m/s — centroid velocity;
 * ``L`` (N,3) kg m^2/s — angular momentum about the centroid in the world frame (the integrator's
   rotational variable; the world angular velocity is ``omega = Q diag(1/I) Q^T L``).
@@ -35,63 +35,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
-
-
-# --------------------------------------------------------------------------- quaternions
-@njit(cache=True)
-def quat_mul(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """Hamilton product ``out = a ⊗ b`` of quaternions (w, x, y, z); ``out`` may not alias."""
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
-
-
-@njit(cache=True)
-def quat_to_matrix(q: np.ndarray, out: np.ndarray) -> None:
-    """Rotation matrix (3,3) of the unit quaternion q = (w, x, y, z) into ``out``."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[0, 1] = 2.0 * (x * y - w * z)
-    out[0, 2] = 2.0 * (x * z + w * y)
-    out[1, 0] = 2.0 * (x * y + w * z)
-    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[1, 2] = 2.0 * (y * z - w * x)
-    out[2, 0] = 2.0 * (x * z - w * y)
-    out[2, 1] = 2.0 * (y * z + w * x)
-    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
-
-
-@njit(cache=True)
-def quats_to_matrices(q: np.ndarray) -> np.ndarray:
-    """(N,4) unit quaternions -> (N,3,3) rotation matrices."""
-    n = q.shape[0]
-    out = np.empty((n, 3, 3))
-    for i in range(n):
-        quat_to_matrix(q[i], out[i])
-    return out
-
-
-def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a proper rotation matrix (Shepperd's method)."""
-    R = np.asarray(R, dtype=float)
-    tr = np.trace(R)
-    q = np.empty(4)
-    if tr > 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q[:] = (0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s)
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q[:] = ((R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s)
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q[:] = ((R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q[:] = ((R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s)
-    if q[0] < 0:
-        q = -q
-    return q / np.linalg.norm(q)
+from ..geometry.rotation import matrix_to_quat, quat_to_matrix_into, quats_to_matrices
 
 
 def principal_frame(J0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +104,7 @@ class RigidBodies:
         Q = R @ P                                  # principal -> world
         q = matrix_to_quat(Q)
         Qm = np.empty((3, 3))
-        quat_to_matrix(q, Qm)
+        quat_to_matrix_into(q, Qm)
         omega = np.zeros(3) if omega is None else np.asarray(omega, dtype=float)
         L = Qm @ (I * (Qm.T @ omega))
         self.mass = np.append(self.mass, float(mass))
@@ -208,7 +152,7 @@ def omega_world(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray) -> np.ndarray:
     out = np.empty((n, 3))
     Q = np.empty((3, 3))
     for i in range(n):
-        quat_to_matrix(q[i], Q)
+        quat_to_matrix_into(q[i], Q)
         p0 = Q[0, 0] * L[i, 0] + Q[1, 0] * L[i, 1] + Q[2, 0] * L[i, 2]
         p1 = Q[0, 1] * L[i, 0] + Q[1, 1] * L[i, 1] + Q[2, 1] * L[i, 2]
         p2 = Q[0, 2] * L[i, 0] + Q[1, 2] * L[i, 1] + Q[2, 2] * L[i, 2]

@@ -49,8 +49,7 @@ from .atomic import atomic_path, atomic_write_text
 if TYPE_CHECKING:  # pragma: no cover
     from ..geometry.nurbs import Patch
     from ..geometry.shape import Shape
-    from ..model import Model, WallSpec
-    from ..placement import Bodies
+    from ..model import Bodies, Model, WallSpec
 
 #: Column names of the monitor files (fixed).
 ENERGY_COLUMNS = ("time", "kinetic", "potential", "elastic", "dissipated", "external_work",

@@ -1,0 +1,129 @@
+"""Rotations as unit quaternions: the one module for quaternion helpers.
+
+Convention: ``q = (w, x, y, z)`` (scalar first); its matrix ``R`` maps body (file or
+principal) frame vectors to the world, ``x_world = R @ x_body``.
+
+NumPy functions (any leading shape, return new arrays):
+
+* :func:`quat_to_matrix` — (..., 4) -> (..., 3, 3); normalises ``q`` first.
+* :func:`matrix_to_quat` — (..., 3, 3) -> (..., 4), unit, ``w >= 0`` (Shepperd's method).
+* :func:`quat_from_rotvec` — rotation vectors (..., 3) (rad) -> (..., 4).
+* :func:`random_quaternions` — uniform random rotations (Haar measure).
+
+Compiled functions (numba, for kernels; write into ``out``, no normalisation, ``q`` unit):
+
+* :func:`quat_mul_into` — Hamilton product ``out = a ⊗ b``.
+* :func:`quat_to_matrix_into` — (4,) -> ``out`` (3, 3).
+* :func:`quats_to_matrices` — (N, 4) -> new (N, 3, 3).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["quat_to_matrix", "matrix_to_quat", "quat_from_rotvec", "random_quaternions",
+           "quat_mul_into", "quat_to_matrix_into", "quats_to_matrices"]
+
+
+# ---------------------------------------------------------------------------- NumPy
+
+
+def quat_from_rotvec(rv: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) (w, x, y, z) of rotation vectors (..., 3) (rad)."""
+    rv = np.asarray(rv, float)
+    angle = np.linalg.norm(rv, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    # sin(a/2)/a, with its series near 0
+    k = np.where(angle > 1e-8, np.sin(half) / np.where(angle > 1e-8, angle, 1.0),
+                 0.5 - angle ** 2 / 48.0)
+    return np.concatenate([np.cos(half), k * rv], axis=-1)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) (w, x, y, z); normalised first."""
+    q = np.asarray(q, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) (w, x, y, z), w >= 0, of proper rotation matrices (..., 3, 3)
+    (Shepperd's method: the branch of the largest diagonal term)."""
+    R = np.asarray(R, float)
+    flat = R.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for i, m in enumerate(flat):
+        tr = m[0, 0] + m[1, 1] + m[2, 2]
+        if tr > 0:
+            s = 2.0 * np.sqrt(tr + 1.0)
+            q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+        elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+            s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+            q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+        elif m[1, 1] > m[2, 2]:
+            s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+            q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+        else:
+            s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+            q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+        q = np.array(q)
+        q /= np.linalg.norm(q)
+        out[i] = q if q[0] >= 0 else -q
+    return out.reshape(R.shape[:-2] + (4,))
+
+
+def random_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n uniformly distributed random rotations (Haar measure) as unit quaternions (n, 4):
+    normalised 4-D standard normal vectors, sign fixed so that w >= 0."""
+    q = rng.standard_normal((n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 0] < 0] *= -1.0
+    return q
+
+
+# ---------------------------------------------------------------------------- compiled
+
+
+@njit(cache=True)
+def quat_mul_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """Hamilton product ``out = a ⊗ b`` of quaternions (w, x, y, z); ``out`` may not alias."""
+    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
+    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
+    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
+    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+
+
+@njit(cache=True)
+def quat_to_matrix_into(q: np.ndarray, out: np.ndarray) -> None:
+    """Rotation matrix (3,3) of the unit quaternion q = (w, x, y, z) into ``out``."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[0, 1] = 2.0 * (x * y - w * z)
+    out[0, 2] = 2.0 * (x * z + w * y)
+    out[1, 0] = 2.0 * (x * y + w * z)
+    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[1, 2] = 2.0 * (y * z - w * x)
+    out[2, 0] = 2.0 * (x * z - w * y)
+    out[2, 1] = 2.0 * (y * z + w * x)
+    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
+def quats_to_matrices(q: np.ndarray) -> np.ndarray:
+    """(N,4) unit quaternions -> (N,3,3) rotation matrices (no normalisation)."""
+    n = q.shape[0]
+    out = np.empty((n, 3, 3))
+    for i in range(n):
+        quat_to_matrix_into(q[i], out[i])
+    return out
