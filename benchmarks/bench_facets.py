@@ -19,7 +19,7 @@ the convex hull of the tessellation points, inscribed in the exact surface):
   which is what the contact force sees);
 * normal err: median angle (rad) between the polyhedral and exact normals;
 * µs/query: median wall time per call of the Python API
-  (:func:`nurbsdem.contact.polyhedral.polyhedral_contact`, hill-climbing supports);
+  (:func:`polyhedral.polyhedral_contact`, hill-climbing supports);
   kernel µs: compiled loop over all poses (no Python overhead); brute µs: the same compiled
   loop with brute-force supports over all hull vertices.
 
@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
-from nurbsdem.contact.polyhedral import Polyhedron, polyhedral_contact, polyhedral_contact_batch
+from polyhedral import Polyhedron, polyhedral_contact, polyhedral_contact_batch
 from nurbsdem.contact.reference import ellipsoid_pair
 from nurbsdem.geometry.generators import ellipsoid
 

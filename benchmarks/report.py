@@ -371,7 +371,7 @@ def section_facets(rep: Report) -> None:
     rep.add(
         f"`bench_facets.py` ({el:.0f} s): ellipsoid pairs (A: 32.4 × 29.1 × 25.1 mm, B = 0.8 A), "
         "exact penetration 0.1–5 % of L = 64.8 mm. Polyhedra: convex hulls of the NURBS "
-        "tessellation at n quads per patch direction, GJK/EPA (`nurbsdem.contact.polyhedral`). "
+        "tessellation at n quads per patch direction, GJK/EPA (`benchmarks/polyhedral.py`). "
         "Reference: the ellipsoid support function (`reference.ellipsoid_pair`). Errors are "
         "medians over the poses; kernel µs = compiled batch loop, one thread.\n")
     tab = []

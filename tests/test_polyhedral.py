@@ -8,10 +8,9 @@ from scipy.optimize import minimize
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
-from nurbsdem.contact.polyhedral import (EPA_MAX_IT, GJK_MAX_IT, ST_APPROX, Polyhedron,
-                                         facet_count, polyhedral_contact,
-                                         polyhedral_contact_batch, polyhedron_from_shape)
 from nurbsdem.geometry.generators import sphere
+from polyhedral import (EPA_MAX_IT, GJK_MAX_IT, ST_APPROX, Polyhedron, facet_count,  # benchmarks/
+                        polyhedral_contact, polyhedral_contact_batch, polyhedron_from_shape)
 
 I3 = np.eye(3)
 CUBE = np.array([[x, y, z] for x in (-.5, .5) for y in (-.5, .5) for z in (-.5, .5)])

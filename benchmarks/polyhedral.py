@@ -1,5 +1,10 @@
 """Polyhedral particles: the standard alternative to exact NURBS contact, for comparison.
 
+A reference for the benchmarks (``bench_facets.py``, ``report.py``) and the tests
+(``tests/test_polyhedral.py``), not part of the package: import it as ``polyhedral`` with
+``benchmarks/`` on ``sys.path`` (the benchmark scripts run from there; ``tests/conftest.py``
+adds it for pytest).
+
 Each particle is replaced by the convex hull of points tessellated from its NURBS surface
 (vertices lie *on* the exact surface, so the polyhedron is inscribed: penetrations come out
 too small and distances too large, by O(h²) with h the facet size). Contact between two
@@ -66,7 +71,7 @@ def polyhedron_from_shape(shape, n: int) -> np.ndarray:
         interior points of flat faces are kept — the hull drops them, see
         :func:`facet_count` and :class:`Polyhedron`).
     """
-    from ..geometry.tessellate import tessellate_patch
+    from nurbsdem.geometry.tessellate import tessellate_patch
 
     patches = getattr(shape, "patches", shape)
     pts = np.concatenate([tessellate_patch(p, int(n))[0] for p in patches])
