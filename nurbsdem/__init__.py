@@ -1,12 +1,46 @@
-"""nurbsdem: discrete element method for convex rigid particles bounded by exact NURBS surfaces."""
+"""nurbsdem: discrete element method for convex rigid particles bounded by exact NURBS surfaces.
+
+The public names load on first use (PEP 562), so ``import nurbsdem`` stays fast (numba and
+the compiled kernels are imported only when a shape is built or loaded)::
+
+    import nurbsdem
+    s = nurbsdem.shapes.sphere(0.01)           # generators: sphere, ellipsoid, paper_particle ...
+    a = nurbsdem.load_shape("inputs/shapes/A.yaml")
+"""
 from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from .errors import GeometryError, InputError, NurbsdemError
 
 __version__ = "0.1.0"
 
-from .errors import GeometryError, InputError, NurbsdemError  # noqa: E402
-from .geometry.nurbs import Patch  # noqa: E402
-from .geometry.shape import Shape  # noqa: E402
-from .io.shapefile import load_shape, save_shape  # noqa: E402
+#: Public names loaded on first use: name -> (module, attribute; None = the module itself).
+_LAZY: dict[str, tuple[str, str | None]] = {
+    "shapes": (".shapes", None),
+    "Patch": (".geometry.nurbs", "Patch"),
+    "Shape": (".geometry.shape", "Shape"),
+    "load_shape": (".io.shapefile", "load_shape"),
+    "save_shape": (".io.shapefile", "save_shape"),
+    # the scripting API (issue #14) goes here: "Simulation": (".<module>", "Simulation"),
+}
 
-__all__ = ["__version__", "Patch", "Shape", "load_shape", "save_shape",
+__all__ = ["__version__", "shapes", "Patch", "Shape", "load_shape", "save_shape",
            "NurbsdemError", "InputError", "GeometryError"]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name of :data:`_LAZY` on first access and keep it."""
+    try:
+        module, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    mod = importlib.import_module(module, __name__)
+    value = mod if attr is None else getattr(mod, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
