@@ -6,6 +6,8 @@
   in one table; the loop over pairs runs in compiled code, in parallel (numba ``prange``
   over thread chunks, one workspace per thread). Warm-start state is the previous result
   row of the same pair.
+* :func:`closest_points` — stage 1 alone (:func:`nurbsdem.contact.stage1.stage1`, the
+  distance of two surfaces, Eq. 4–5) -> :class:`Stage1Result`.
 
 Poses map the file frame to the world: ``x_world = position + R @ x_file``. Lengths in
 metres. The algorithm is described in :mod:`nurbsdem.contact.lcp` and
@@ -25,6 +27,9 @@ from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
                   I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, make_work, solve_pair)
+from .stage1 import (CLASS_NAMES as S1_CLASS_NAMES, DELTA0 as S1_DELTA0, MAX_IT as S1_MAX_IT,
+                     N_OUT as S1_N_OUT, O_F1, O_GL, O_LMIN, O_LREF, S1_PAW, S1_PBW, S1_ROW,
+                     make_w4, stage1 as stage1_kernel)
 from .support import make_seeds
 
 
@@ -324,3 +329,78 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     elif K:
         _solve_chunk(*args, 0, K)
     return out
+
+
+# --------------------------------------------------------------------------- stage 1 alone
+@dataclass
+class Stage1Result:
+    """Outcome of :func:`closest_points` (stage 1 alone).
+
+    classification: "separated" (strict positive minimum: distance and closest points),
+        "intersecting" (f1 ≈ 0), "saddle", "degenerate" or "not converged".
+    f1: ½|g|² (m²); distance: |g| (m); gap: g = point_a − point_b (m, paper Eq. 4).
+    point_a, point_b: world points (m); patch_a, patch_b: local patch indices;
+    params: (ζA, θA, ζB, θB); iterations: trust-region iterations; evaluations: patch
+    evaluations; lambda_max, lambda_min: extreme eigenvalues of the reduced scaled Hessian.
+    """
+
+    classification: str
+    code: int
+    f1: float
+    distance: float
+    gap: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    patch_a: int
+    patch_b: int
+    params: np.ndarray
+    iterations: int
+    evaluations: int
+    lambda_max: float
+    lambda_min: float
+
+
+def closest_points(shape_a, pose_a, shape_b, pose_b, start=None, max_it: int = S1_MAX_IT,
+                   delta0: float = S1_DELTA0) -> Stage1Result:
+    """Run stage 1 (minimise f1, paper Eq. 5) for two shapes in world poses.
+
+    ``start``: (patch_a, ζA, θA, patch_b, ζB, θB) local patch indices and parameters; None:
+    the nearest pair of surface samples (seed from A's sample farthest along the centroid
+    direction, then alternating nearest samples)."""
+    ta, tb = table_of(shape_a), table_of(shape_b)
+    pa, Ra = _pose(pose_a)
+    pb, Rb = _pose(pose_b)
+    ist = np.zeros((2, 4), np.int64)
+    fst = np.zeros((2, 3))
+    if start is None:
+        ca = pa + Ra @ ta.centroid[0]
+        cb = pb + Rb @ tb.centroid[0]
+        d = cb - ca
+        d = d / np.linalg.norm(d) if np.linalg.norm(d) > 0 else np.array([0.0, 0.0, 1.0])
+        xa = ta.seeds[0] @ Ra.T + pa
+        xb = tb.seeds[0] @ Rb.T + pb
+        ka = int(np.argmax(xa @ d))
+        for _ in range(2):
+            kb = int(np.argmin(np.sum((xb - xa[ka]) ** 2, axis=1)))
+            ka = int(np.argmin(np.sum((xa - xb[kb]) ** 2, axis=1)))
+        ist[0, 0] = ta.seeds[1][ka]
+        fst[0, :2] = ta.seeds[2][ka]
+        ist[1, 0] = tb.seeds[1][kb]
+        fst[1, :2] = tb.seeds[2][kb]
+    else:
+        ist[0, 0], fst[0, 0], fst[0, 1] = int(start[0]), start[1], start[2]
+        ist[1, 0], fst[1, 0], fst[1, 1] = int(start[3]), start[4], start[5]
+    wf = np.zeros((lcp.WORK_ROWS, 3))
+    w4 = make_w4()
+    out = np.zeros(S1_N_OUT)
+    scale = float(ta.radius[0] + tb.radius[0])
+    cls, it, nev = stage1_kernel(ta.tab, pa, Ra, tb.tab, pb, Rb, scale, ist, fst, max_it, delta0,
+                          make_workspace(), wf, w4, out)
+    pA = wf[S1_ROW + S1_PAW].copy()
+    pB = wf[S1_ROW + S1_PBW].copy()
+    return Stage1Result(classification=S1_CLASS_NAMES[int(cls)], code=int(cls), f1=float(out[O_F1]),
+                        distance=float(out[O_GL]), gap=pA - pB, point_a=pA, point_b=pB,
+                        patch_a=int(ist[0, 0]), patch_b=int(ist[1, 0]),
+                        params=np.array([fst[0, 0], fst[0, 1], fst[1, 0], fst[1, 1]]),
+                        iterations=int(it), evaluations=int(nev), lambda_max=float(out[O_LREF]),
+                        lambda_min=float(out[O_LMIN]))

@@ -60,7 +60,6 @@ Units: metres, parameters dimensionless.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -726,82 +725,3 @@ def nearest_seed(seed_x, seed_p, s0, ns, mask, p0, pos, R, q):
             best = dd
             ib = k
     return ib
-
-
-# --------------------------------------------------------------------------- Python API
-@dataclass
-class Stage1Result:
-    """Outcome of :func:`closest_points` (stage 1 alone).
-
-    classification: "separated" (strict positive minimum: distance and closest points),
-        "intersecting" (f1 ≈ 0), "saddle", "degenerate" or "not converged".
-    f1: ½|g|² (m²); distance: |g| (m); gap: g = point_a − point_b (m, paper Eq. 4).
-    point_a, point_b: world points (m); patch_a, patch_b: local patch indices;
-    params: (ζA, θA, ζB, θB); iterations: trust-region iterations; evaluations: patch
-    evaluations; lambda_max, lambda_min: extreme eigenvalues of the reduced scaled Hessian.
-    """
-
-    classification: str
-    code: int
-    f1: float
-    distance: float
-    gap: np.ndarray
-    point_a: np.ndarray
-    point_b: np.ndarray
-    patch_a: int
-    patch_b: int
-    params: np.ndarray
-    iterations: int
-    evaluations: int
-    lambda_max: float
-    lambda_min: float
-
-
-def closest_points(shape_a, pose_a, shape_b, pose_b, start=None, max_it: int = MAX_IT,
-                   delta0: float = DELTA0) -> Stage1Result:
-    """Run stage 1 (minimise f1, paper Eq. 5) for two shapes in world poses.
-
-    ``start``: (patch_a, ζA, θA, patch_b, ζB, θB) local patch indices and parameters; None:
-    the nearest pair of surface samples (seed from A's sample farthest along the centroid
-    direction, then alternating nearest samples)."""
-    from .detect import _pose, table_of
-    from ..geometry.kernel import make_workspace
-
-    ta, tb = table_of(shape_a), table_of(shape_b)
-    pa, Ra = _pose(pose_a)
-    pb, Rb = _pose(pose_b)
-    ist = np.zeros((2, 4), np.int64)
-    fst = np.zeros((2, 3))
-    if start is None:
-        ca = pa + Ra @ ta.centroid[0]
-        cb = pb + Rb @ tb.centroid[0]
-        d = cb - ca
-        d = d / np.linalg.norm(d) if np.linalg.norm(d) > 0 else np.array([0.0, 0.0, 1.0])
-        xa = ta.seeds[0] @ Ra.T + pa
-        xb = tb.seeds[0] @ Rb.T + pb
-        ka = int(np.argmax(xa @ d))
-        for _ in range(2):
-            kb = int(np.argmin(np.sum((xb - xa[ka]) ** 2, axis=1)))
-            ka = int(np.argmin(np.sum((xa - xb[kb]) ** 2, axis=1)))
-        ist[0, 0] = ta.seeds[1][ka]
-        fst[0, :2] = ta.seeds[2][ka]
-        ist[1, 0] = tb.seeds[1][kb]
-        fst[1, :2] = tb.seeds[2][kb]
-    else:
-        ist[0, 0], fst[0, 0], fst[0, 1] = int(start[0]), start[1], start[2]
-        ist[1, 0], fst[1, 0], fst[1, 1] = int(start[3]), start[4], start[5]
-    from .lcp import WORK_ROWS
-    wf = np.zeros((WORK_ROWS, 3))
-    w4 = make_w4()
-    out = np.zeros(N_OUT)
-    scale = float(ta.radius[0] + tb.radius[0])
-    cls, it, nev = stage1(ta.tab, pa, Ra, tb.tab, pb, Rb, scale, ist, fst, max_it, delta0,
-                          make_workspace(), wf, w4, out)
-    pA = wf[S1_ROW + _PAW].copy()
-    pB = wf[S1_ROW + _PBW].copy()
-    return Stage1Result(classification=CLASS_NAMES[int(cls)], code=int(cls), f1=float(out[O_F1]),
-                        distance=float(out[O_GL]), gap=pA - pB, point_a=pA, point_b=pB,
-                        patch_a=int(ist[0, 0]), patch_b=int(ist[1, 0]),
-                        params=np.array([fst[0, 0], fst[0, 1], fst[1, 0], fst[1, 1]]),
-                        iterations=int(it), evaluations=int(nev), lambda_max=float(out[O_LREF]),
-                        lambda_min=float(out[O_LMIN]))
