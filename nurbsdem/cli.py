@@ -9,10 +9,14 @@ and :class:`OSError` for files) is printed as one line
 traceback. The group class :class:`NurbsdemGroup` does this for every subcommand (so
 ``@main.command()`` is all a new command needs); :func:`handles_errors` is the same wrapper
 as a decorator for code outside the group (put it directly above the ``def``).
+Any other exception is a bug: one line ``nurbsdem: internal error (a bug ...)`` naming a log
+file that holds the traceback, exit status 3 (``NURBSDEM_DEBUG=1`` shows the traceback).
+RuntimeWarnings are not shown.
 """
 from __future__ import annotations
 
 import functools
+import math
 import sys
 from pathlib import Path
 from typing import Any, Callable, NoReturn
@@ -48,27 +52,87 @@ def warn(message: str) -> None:
 
 
 def handles_errors(func: Callable) -> Callable:
-    """Decorator: turn :class:`NurbsdemError` and :class:`OSError` into one-line errors
-    (exit status 2, no traceback)."""
+    """Decorator: the error policy of :func:`run_reporting_errors` (user errors one line,
+    exit status 2; internal errors one line and a log file, exit status 3)."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except (NurbsdemError, OSError) as exc:
-            fail(error_message(exc))
+        return run_reporting_errors(lambda: func(*args, **kwargs))
 
     return wrapper
 
 
-class NurbsdemGroup(click.Group):
-    """A click group whose subcommands all report user errors as one line (exit 2)."""
+#: Exit status for internal errors (bugs): one line on stderr, the traceback in a log file.
+EXIT_INTERNAL_ERROR = 3
 
-    def invoke(self, ctx: click.Context) -> Any:
+
+def internal_error_log(exc: BaseException) -> Path | None:
+    """Write the traceback of an unexpected exception to a log file (in the temporary
+    folder, or ``$NURBSDEM_ERROR_LOG``) and return its path (None if it cannot be written)."""
+    import datetime
+    import os
+    import tempfile
+    import traceback
+
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    path = Path(os.environ.get("NURBSDEM_ERROR_LOG")
+                or Path(tempfile.gettempdir()) / f"nurbsdem-error-{stamp}-{os.getpid()}.log")
+    text = (f"nurbsdem {__version__}, python {sys.version.split()[0]}\n"
+            f"command: {' '.join(sys.argv)}\n\n"
+            + "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
+    try:
+        path.write_text(text)
+    except OSError:
+        return None
+    return path
+
+
+def internal_error(exc: BaseException) -> NoReturn:
+    """Report a bug in one line (exit status 3); the traceback goes to a log file."""
+    log = internal_error_log(exc)
+    where = f"; the traceback is in {log}" if log is not None else ""
+    what = " ".join(f"{type(exc).__name__}: {exc}".split())
+    if len(what) > 200:
+        what = what[:200] + "..."
+    click.echo(f"nurbsdem: internal error (a bug in nurbsdem, please report it): {what}{where}",
+               err=True)
+    raise click.exceptions.Exit(EXIT_INTERNAL_ERROR)
+
+
+def run_reporting_errors(call: Callable[[], Any]) -> Any:
+    """Run ``call()`` with the command line's error policy: user errors (NurbsdemError,
+    OSError, MemoryError) as one line with exit status 2, interruptions with 130, anything
+    else as an internal error (exit status 3, traceback in a log file). Numerical
+    RuntimeWarnings are not shown (the checks report what matters).
+    Set ``NURBSDEM_DEBUG=1`` to get Python's traceback instead."""
+    import os
+    import warnings
+
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
         try:
-            return super().invoke(ctx)
+            return call()
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
         except (NurbsdemError, OSError) as exc:
             fail(error_message(exc))
+        except MemoryError:
+            fail("out of memory: the model is too large for this machine")
+        except KeyboardInterrupt:
+            click.echo("nurbsdem: interrupted", err=True)
+            raise click.exceptions.Exit(130)
+        except Exception as exc:
+            if os.environ.get("NURBSDEM_DEBUG"):
+                raise
+            internal_error(exc)
+
+
+class NurbsdemGroup(click.Group):
+    """A click group whose subcommands all report user errors as one line (exit 2) and
+    internal errors as one line pointing to a log file (exit 3)."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        return run_reporting_errors(lambda: super(NurbsdemGroup, self).invoke(ctx))
 
 
 @click.group(cls=NurbsdemGroup)
@@ -91,6 +155,8 @@ def info(shape_file: str, density: float | None) -> None:
     from .geometry.connectivity import check_shape
     from .io.shapefile import load_shape
 
+    if density is not None and not (math.isfinite(density) and density > 0):
+        raise NurbsdemError(f"--density must be a positive number (kg/m^3), got {density:g}")
     shape = load_shape(shape_file, check=False)
     conn = shape.connectivity
     out = click.echo

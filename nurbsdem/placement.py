@@ -32,6 +32,8 @@ if TYPE_CHECKING:  # pragma: no cover
 # ---------------------------------------------------------------------------- overlap test
 
 _SAMPLES_PER_PATCH_DIRECTION = 8
+#: Centroids closer than this fraction of the smaller bounding radius: the bodies overlap.
+COINCIDENT_FRACTION = 1e-3
 
 
 @dataclass
@@ -86,12 +88,16 @@ def bodies_overlap(shape_a: "Shape", pos_a, R_a, shape_b: "Shape", pos_b, R_b) -
     the convex hull of the other's samples (that hull lies inside the convex body, so there
     are no false alarms; overlaps shallower than the sampling's chord error may be missed).
 
-    pos_*: centroids in the world (m); R_*: (3, 3) file-to-world rotations.
+    pos_*: centroids in the world (m); R_*: (3, 3) file-to-world rotations. Centroids closer
+    than :data:`COINCIDENT_FRACTION` of the smaller bounding radius overlap outright.
     """
     sa, sb = _sampled(shape_a), _sampled(shape_b)
     pos_a, pos_b = np.asarray(pos_a, float), np.asarray(pos_b, float)
-    if np.linalg.norm(pos_a - pos_b) >= sa.radius + sb.radius:
+    dist = np.linalg.norm(pos_a - pos_b)
+    if dist >= sa.radius + sb.radius:
         return False
+    if dist < COINCIDENT_FRACTION * min(sa.radius, sb.radius):
+        return True   # a convex body contains its centroid; identical samples are not 'inside'
     tol = 1e-9 * max(sa.radius, sb.radius)
     wa = pos_a + sa.points @ np.asarray(R_a).T
     wb = pos_b + sb.points @ np.asarray(R_b).T
@@ -148,15 +154,11 @@ def explicit_bodies(model: "Model") -> Bodies:
 
 
 def check_explicit_overlaps(model: "Model", bodies: Bodies) -> None:
-    """Raise ``deck:LINE: particle I overlaps particle J`` for the first overlapping pair
-    of explicit bodies (LINE is the later of the two entries)."""
-    hit = first_overlap(bodies, _shape_map(model))
-    if hit is None:
-        return
-    i, j = hit
-    a, b = (i, j) if bodies.line[i] >= bodies.line[j] else (j, i)
-    raise model.error(f"particle {bodies.id[a]} overlaps particle {bodies.id[b]}",
-                      int(bodies.line[a]))
+    """Raise ``deck:LINE: particle I overlaps particle J ...`` for the first overlapping pair
+    of explicit bodies (LINE is the later of the two entries): bounding spheres, then the
+    exact LCP (:func:`nurbsdem.validation.check_body_overlaps`; coincident bodies included)."""
+    from .validation import check_body_overlaps
+    check_body_overlaps(model, bodies)
 
 
 def place_random_group(model: "Model", group: "RandomGroup",
@@ -297,6 +299,9 @@ def replicate_step(model: "Model", bodies: Bodies, step: "ReplicateStep") -> Bod
             f"{j // n} overlaps particle {out.id[i]}): the layer is {t:.4g} m thick but "
             f"Height / (Layers - 1) = {step.height / (step.layers - 1):.4g} m; use Height >= "
             f"{t * (step.layers - 1):.4g} m", step.line)
+    from .validation import check_bodies_against_walls
+    check_bodies_against_walls(model, out, index=range(n, len(out)), line=step.line,
+                               label=f"Step {step.id}: after replication, ")
     return out
 
 

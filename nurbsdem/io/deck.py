@@ -27,6 +27,7 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
     Shapes
       Shape ID File path.yaml | Sphere Radius r | Ellipsoid SemiAxes a b c
                [Volume V] [Inertia Jxx Jyy Jzz Jxy Jxz Jyz]   # m^3, kg m^2 (mass inertia)
+               [ConvexityTolerance t]    # File: accepted non-convexity / size, default 1e-4
     Particles
       Random ID Shapes s1 s2.. Counts n1 n2.. Material m Region x0 y0 z0 x1 y1 z1
                 [Seed k] [MaxAttempts n]
@@ -101,7 +102,7 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Materials": {"Material": EntrySpec(True, {"Density": F1})},
     "Shapes": {"Shape": EntrySpec(True, {
         "File": S1, "Sphere": FLAG, "Ellipsoid": FLAG, "Radius": F1, "SemiAxes": F3,
-        "Volume": F1, "Inertia": F6})},
+        "Volume": F1, "Inertia": F6, "ConvexityTolerance": F1})},
     "Particles": {
         "Random": EntrySpec(True, {"Shapes": IN, "Counts": IN, "Material": I1, "Region": F6,
                                    "Seed": I1, "MaxAttempts": I1}),
@@ -129,6 +130,78 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
 }
 
 _BLOCKS = {b.lower(): b for b in SCHEMA}
+
+#: Largest id of a numbered entry (ids are stored as 64-bit integers and a Replicate step
+#: numbers its copies after the largest id).
+ID_MAX = 10 ** 9
+
+_COORD = "float64 positions this far out cannot resolve contacts at particle scale"
+_SIZE = "the geometric tolerances of the contact search assume sizes in this range"
+_MATERIAL = "outside any real material; masses and critical time steps leave floating-point range"
+
+
+@dataclass(frozen=True)
+class Range:
+    """The supported magnitudes of a value: ``|x| <= hi`` and, for ``x > 0``, ``x >= lo``
+    (zero and negative values are judged by the entry's own rules), with the reason."""
+
+    lo: float
+    hi: float
+    unit: str
+    reason: str
+
+
+#: Supported magnitudes by key (or ``Keyword`` for a setting's own values).
+RANGES: dict[str, Range] = {
+    **{k: Range(0.0, 1e6, "m", _COORD) for k in ("Position", "Region", "Min", "Max", "Point",
+                                                  "Displacement", "Height", "Gap")},
+    **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size")},
+    **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
+       for k in ("Normal", "Axis", "Direction")},
+    "Gravity": Range(0.0, 1e6, "m/s^2", "a million times the Earth's gravity is beyond any "
+                     "granular flow"),
+    "Velocity": Range(0.0, 1e4, "m/s", "beyond any granular flow; contacts cannot be resolved"),
+    "AngularVelocity": Range(0.0, 1e6, "rad/s", "beyond any granular flow; contacts cannot be "
+                             "resolved"),
+    "Density": Range(1e-3, 1e6, "kg/m^3", _MATERIAL),
+    "Volume": Range(1e-27, 1e18, "m^3", _SIZE),
+    "Inertia": Range(0.0, 1e30, "kg m^2", _MATERIAL),
+    "NormalPenalty": Range(0.0, 1e15, "N/m", _MATERIAL),
+    "TangentialPenalty": Range(0.0, 1e15, "N/m", _MATERIAL),
+    "NormalDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
+    "TangentialDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
+    "Friction": Range(0.0, 100.0, "", "Coulomb coefficients of real materials are below ~2"),
+    "Duration": Range(0.0, 1e7, "s", "a simulated time of months is beyond a DEM run"),
+    "TimeStep": Range(1e-15, 1e7, "s", "below a femtosecond nothing granular happens"),
+    "Every": Range(1e-12, 1e7, "s", "output intervals beyond this range are meaningless"),
+    "MaxAttempts": Range(1, 10 ** 7, "", "more attempts take hours without placing the particle"),
+    "Seed": Range(0, 2 ** 63 - 1, "", "seeds are 64-bit integers"),
+    "Resolution": Range(1, 10 ** 4, "", "finer tessellations than this do not fit in memory"),
+    "Counts": Range(0, 10 ** 8, "", "more particles do not fit in memory"),
+    "Shapes": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
+    "Shape": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
+    "Material": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
+    "Materials": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
+}
+
+
+def _fmt_num(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else (str(x) if abs(x) < 10 ** 15 else f"{float(x):g}")
+
+
+def check_range(key: str, value: Any, label: str) -> None:
+    """Raise ``_DeckError`` when a value of ``key`` lies outside :data:`RANGES` (with why)."""
+    rng = RANGES.get(key)
+    if rng is None or isinstance(value, (bool, str)) or value is None:
+        return
+    unit = f" {rng.unit}" if rng.unit else ""
+    for x in np.ravel(np.asarray(value, dtype=object)):
+        if abs(x) > rng.hi or (0 < x < rng.lo):
+            span = (f"at most {_fmt_num(rng.hi)}{unit}" if not rng.lo
+                    else f"between {_fmt_num(rng.lo)} and {_fmt_num(rng.hi)}{unit}")
+            raise _DeckError(f"{label}{key} {_fmt_num(x)}{unit} is out of range: it must be "
+                             f"{span} ({rng.reason})")
+
 _NUMBER_RE = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 _INT_RE = re.compile(r"^[-+]?\d+$")
 _TRUE = {"yes", "true", "on", "1"}
@@ -223,6 +296,8 @@ def parse_int(token: str, what: str) -> int:
     """An integer, else an error naming ``what``."""
     if not _INT_RE.match(token):
         raise _DeckError(f"{what}: bad integer {token!r}")
+    if len(token.lstrip("+-")) > 19:
+        raise _DeckError(f"{what}: integer {token[:12]}... is too large (at most 19 digits)")
     return int(token)
 
 
@@ -311,12 +386,16 @@ def parse_entry(block: str, tokens: list[str], line: int) -> Entry:
         entry.id = parse_int(tokens[pos], f"{kw} id")
         if entry.id < 1:
             raise _DeckError(f"{kw} id must be >= 1, got {entry.id}")
+        if entry.id > ID_MAX:
+            raise _DeckError(f"{kw} id {entry.id} is too large: ids are at most {ID_MAX:g} "
+                             f"(ids are 64-bit integers and copies are numbered after them)")
         pos += 1
         label = f"{kw} {entry.id}: "
     else:
         label = f"{kw}: "
     if spec.head is not None:
         entry.head, pos = _take(spec.head, tokens, pos, kw, spec.keys)
+        check_range(kw, entry.head, "")
     while pos < len(tokens):
         tok = tokens[pos]
         key = _canonical(tok, spec.keys)
@@ -328,6 +407,7 @@ def parse_entry(block: str, tokens: list[str], line: int) -> Entry:
             raise _DeckError(f"{label}{key} given twice")
         entry.values[key], pos = _take(spec.keys[key], tokens, pos + 1, f"{label}{key}",
                                        spec.keys)
+        check_range(key, entry.values[key], label)
     return entry
 
 
@@ -434,16 +514,20 @@ class _Builder:
         from ..geometry import generators as gen
         from ..geometry.shape import Shape
         if kind == "File":
-            self.only(e, common | {"File"}, "a File shape")
+            self.only(e, common | {"File", "ConvexityTolerance"}, "a File shape")
             source = e.get("File")
             file = (self.base / source) if not Path(source).is_absolute() else Path(source)
-            shape = self.load_shape_file(file, source, e.line)
+            tol = e.get("ConvexityTolerance") if e.has("ConvexityTolerance") else None
+            if tol is not None and not tol >= 0:
+                self.fail(f"Shape {e.id}: ConvexityTolerance must be >= 0 (a fraction of the "
+                          f"particle size), got {tol:g}", e.line)
+            shape = self.load_shape_file(file, source, e.line, tol)
             entry = ShapeEntry(e.id, "file", shape, source=source, file=file, line=e.line)
         elif kind == "Sphere":
             self.only(e, common | {"Sphere", "Radius"}, "a Sphere shape")
             self.require(e, "Radius")
             r = self.positive(e, "Radius", e.get("Radius"))
-            shape = Shape(gen.sphere_patches(r), name=f"sphere r={r:g}")
+            shape = self.generated(e, lambda: Shape(gen.sphere_patches(r), name=f"sphere r={r:g}"))
             entry = ShapeEntry(e.id, "sphere", shape, params=(r,), line=e.line)
         else:
             self.only(e, common | {"Ellipsoid", "SemiAxes"}, "an Ellipsoid shape")
@@ -451,8 +535,8 @@ class _Builder:
             abc = e.get("SemiAxes")
             if np.any(abc <= 0):
                 self.fail(f"Shape {e.id}: SemiAxes must be > 0", e.line)
-            shape = Shape(gen.ellipsoid_patches(*abc),
-                          name=f"ellipsoid {abc[0]:g}x{abc[1]:g}x{abc[2]:g}")
+            shape = self.generated(e, lambda: Shape(
+                gen.ellipsoid_patches(*abc), name=f"ellipsoid {abc[0]:g}x{abc[1]:g}x{abc[2]:g}"))
             entry = ShapeEntry(e.id, "ellipsoid", shape, params=tuple(map(float, abc)),
                                line=e.line)
         if e.has("Volume"):
@@ -461,15 +545,24 @@ class _Builder:
             entry.inertia_override = self.inertia_matrix(e, e.get("Inertia"))
         self.model.shapes[e.id] = entry
 
-    def load_shape_file(self, file: Path, source: str, line: int):
+    def generated(self, e: Entry, make: Callable[[], Any]) -> Any:
+        """A shape generated from the deck's numbers; its errors carry this entry's line."""
+        try:
+            return make()
+        except (InputError, ValueError, ArithmeticError) as exc:
+            detail = getattr(exc, "detail", None) or str(exc)
+            self.fail(f"Shape {e.id}: {detail}", e.line)
+
+    def load_shape_file(self, file: Path, source: str, line: int,
+                        convexity_tol: float | None = None):
         from .shapefile import load_shape
-        key = file.resolve()
+        key = (file.resolve(), convexity_tol)
         if key in self._shape_cache:
             return self._shape_cache[key]
         if not file.is_file():
             self.fail(f"shape file {source}: no such file", line)
         try:
-            shape = load_shape(file)
+            shape = load_shape(file, convexity_tol=convexity_tol)
         except InputError as exc:
             loc = f"shape file {source}"
             if exc.line is not None:
@@ -780,13 +873,30 @@ def parse_deck(path: str | Path, place: bool = True) -> Model:
     """
     spath = str(path)
     try:
-        text = Path(path).read_text()
+        text = read_deck_text(path)
     except OSError as exc:
-        raise InputError(f"cannot read deck: {exc.strerror}", path=spath) from None
-    except UnicodeDecodeError:
-        raise InputError("the deck is not a text file (UTF-8)", path=spath) from None
+        raise InputError(f"cannot read deck: {exc.strerror or exc}", path=spath) from None
     model = build_model(text, spath)
     if place:
         from ..placement import initial_bodies
+        from ..validation import check_model, validate_scene
+        check_model(model)
         model.bodies = initial_bodies(model)
+        validate_scene(model)
     return model
+
+
+def read_deck_text(path: str | Path) -> str:
+    """The text of a deck file: UTF-8, with or without a byte-order mark; universal
+    newlines. Raises :class:`InputError` for a binary (non-UTF-8) file."""
+    data = Path(path).read_bytes()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise InputError(f"the deck is not a UTF-8 text file (byte 0x{data[exc.start]:02x} at "
+                         f"offset {exc.start})", path=str(path), line=line) from None
+    if "\x00" in text:
+        raise InputError("the deck is not a text file (it contains NUL bytes)",
+                         path=str(path), line=text[:text.index("\x00")].count("\n") + 1)
+    return text.replace("\r\n", "\n").replace("\r", "\n")

@@ -50,7 +50,9 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import GeometryError, InputError
+from ..geometry.kernel import MAX_DEGREE
 from ..geometry.nurbs import Patch
+from .shapefile import MAX_CONTROL_POINTS, check_patch_numbers, shape_or_input_error
 
 
 @dataclass
@@ -66,6 +68,29 @@ class GiraffeRecord:
     connectivity: tuple[int, int, int, int]
     patch: Patch
     line: int
+
+
+def _clip(tok: str, n: int = 40) -> str:
+    return tok if len(tok) <= n else tok[:n] + "..."
+
+
+def _as_integer(tok: str) -> int | None:
+    """The integer a token denotes (``6``, ``+6``, ``6.0``, ``6e0``), else None."""
+    try:
+        return int(tok) if len(tok) <= 30 else None
+    except ValueError:
+        pass
+    try:
+        x = float(tok)
+    except ValueError:
+        return None
+    if math.isfinite(x) and x.is_integer() and abs(x) < 2 ** 53:
+        return int(x)
+    return None
+
+
+#: Most control points along one direction of a patch, and in all (memory).
+MAX_DIM = 10 ** 4
 
 
 class _Tokens:
@@ -102,13 +127,18 @@ class _Tokens:
             raise InputError(f"expected '{word}', got '{tok}'", path=self.path, line=ln)
         return ln
 
-    def integer(self, what: str) -> int:
+    def integer(self, what: str, lo: int = -2 ** 31, hi: int = 2 ** 31 - 1) -> int:
+        """An integer token; like Giraffe's stream reader, ``6.0`` or ``6e0`` reads as 6.
+        Values outside [lo, hi] are refused."""
         tok, ln = self.next(what)
-        try:
-            return int(tok)
-        except ValueError:
-            raise InputError(f"{what} must be an integer, got '{tok}'", path=self.path,
-                             line=ln) from None
+        value = _as_integer(tok)
+        if value is None:
+            raise InputError(f"{what} must be an integer, got '{_clip(tok)}'", path=self.path,
+                             line=ln)
+        if not lo <= value <= hi:
+            raise InputError(f"{what} must be between {lo} and {hi}, got {value}",
+                             path=self.path, line=ln)
+        return value
 
     def floats(self, n: int, what: str) -> np.ndarray:
         out = np.empty(n)
@@ -120,31 +150,38 @@ class _Tokens:
             try:
                 out[k] = float(tok)
             except ValueError:
-                raise InputError(f"{what} needs {n} numbers, got '{tok}' at number {k + 1}",
-                                 path=self.path, line=ln) from None
+                raise InputError(f"{what} needs {n} numbers, got '{_clip(tok)}' at number "
+                                 f"{k + 1}", path=self.path, line=ln) from None
             self.pos += 1
         return out
 
 
-def read_giraffe(path: str | Path) -> list[GiraffeRecord]:
+def read_giraffe(path: str | Path, warnings: list[str] | None = None) -> list[GiraffeRecord]:
     """Read every patch record of a Giraffe CAD file (format: module docstring).
 
+    Lenient like Giraffe's own reader where that is harmless: integers may be written as
+    reals (``6.0``), and text after the last complete record that does not start another
+    record (``ID``) is ignored (a note is appended to ``warnings``).
+
     Raises :class:`InputError` (file and line) for unreadable files, syntax errors and bad
-    patch data (degree, knots, weights).
+    patch data (degree, knots, weights, numbers nurbsdem cannot compute with).
     """
+    from .shapefile import read_text_file
+
     path = str(path)
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise InputError(f"cannot read file: {exc.strerror}", path=path) from None
-    except UnicodeDecodeError:
-        raise InputError("not a text file", path=path) from None
+    text = read_text_file(path)
     tk = _Tokens(text, path)
     if tk.done():
         raise InputError("no patch records (expected 'ID ...')", path=path, line=1)
     records: list[GiraffeRecord] = []
     seen: dict[int, int] = {}
     while not tk.done():
+        if records and tk.items[tk.pos][0] != "ID":
+            if warnings is not None:
+                tok, ln = tk.items[tk.pos]
+                warnings.append(f"line {ln}: text after the last patch record ignored "
+                                f"(starting with '{_clip(tok)}')")
+            break
         line = tk.keyword("ID")
         pid = tk.integer("ID")
         if pid in seen:
@@ -152,16 +189,16 @@ def read_giraffe(path: str | Path) -> list[GiraffeRecord]:
                              path=path, line=line)
         seen[pid] = line
         tk.keyword("Subdivisions")
-        sub = (tk.integer("Subdivisions"), tk.integer("Subdivisions"))
+        sub = (tk.integer("Subdivisions", 0), tk.integer("Subdivisions", 0))
         tk.keyword("Connectivity")
         con = tuple(tk.integer("Connectivity") for _ in range(4))
         dims = {}
         knots = {}
         for d in ("U", "V"):
             ln = tk.keyword(f"{d}Dim")
-            n = tk.integer(f"{d}Dim")
+            n = tk.integer(f"{d}Dim", 1, MAX_DIM)
             tk.keyword(f"{d}Order")
-            p = tk.integer(f"{d}Order (the degree)")
+            p = tk.integer(f"{d}Order (the degree)", -2 ** 31, MAX_DEGREE)
             if p < 1:
                 raise InputError(f"{d}Order (the degree) must be >= 1, got {p}", path=path,
                                  line=ln)
@@ -172,6 +209,9 @@ def read_giraffe(path: str | Path) -> list[GiraffeRecord]:
             knots[d] = tk.floats(n + p + 1, f"{d}KnotVector ({d}Dim + {d}Order + 1)")
             dims[d] = (n, p)
         (nu, p), (nv, q) = dims["U"], dims["V"]
+        if nu * nv > MAX_CONTROL_POINTS:
+            raise InputError(f"UDim x VDim = {nu * nv} control points are more than "
+                             f"{MAX_CONTROL_POINTS:g}", path=path, line=line)
         tk.keyword("Weights")
         w = tk.floats(nu * nv, f"Weights (UDim * VDim = {nu * nv})")
         tk.keyword("ControlPoints")
@@ -283,10 +323,14 @@ def import_giraffe(path: str | Path, out: str | Path | None = None, name: str | 
     from ..geometry.shape import Shape
     from .shapefile import save_shape
 
-    records = read_giraffe(path)
-    shape = Shape([r.patch for r in records], name=name if name is not None else Path(path).stem,
-                  source=str(path), check=check)
-    warnings = connectivity_mismatches(records)
+    notes: list[str] = []
+    records = read_giraffe(path, notes)
+    for r in records:
+        check_patch_numbers(r.patch, str(path), f"patch ID {r.id}", r.line)
+    shape = shape_or_input_error(
+        lambda: Shape([r.patch for r in records], name=name if name is not None else Path(path).stem,
+                      source=str(path), check=check), str(path))
+    warnings = notes + connectivity_mismatches(records)
     if out is not None:
         save_shape(out, shape)
     return shape, warnings

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from ..geometry.kernel import MAX_DEGREE
 from ..geometry.nurbs import Patch
 
 _FLOAT_RE = re.compile(r"""^[-+]?(?:
@@ -64,13 +65,62 @@ def _construct_mapping(loader: StrictLoader, node: yaml.MappingNode, deep: bool 
 StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
-def load_yaml(path: str | Path) -> Any:
-    """Parse a YAML file strictly; errors are :class:`InputError` with file and line."""
+#: Deepest nesting a shape file may have (a patch needs 4 levels: patches, points, row, xyz).
+MAX_NESTING = 32
+#: Largest coordinate (m) and knot value a shape file may hold.
+COORD_MAX = 1e6
+#: Largest ratio of the largest to the smallest weight of a patch.
+WEIGHT_RATIO_MAX = 1e12
+#: Most control points of one patch (memory and evaluation cost).
+MAX_CONTROL_POINTS = 10 ** 6
+
+
+class _Composer(yaml.composer.Composer):
+    """Composes nodes with a nesting limit and without aliases (``*ref``: exponential
+    expansion), so that any text is answered quickly."""
+
+
+def _compose_node(self, parent, index):
+    if self.check_event(yaml.events.AliasEvent):
+        event = self.peek_event()
+        raise yaml.composer.ComposerError(None, None, "YAML aliases (*name) are not supported "
+                                          "in shape files", event.start_mark)
+    depth = getattr(self, "_nurbsdem_depth", 0)
+    if depth >= MAX_NESTING:
+        raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_NESTING} levels",
+                                          self.peek_event().start_mark)
+    self._nurbsdem_depth = depth + 1
+    try:
+        return yaml.composer.Composer.compose_node(self, parent, index)
+    finally:
+        self._nurbsdem_depth = depth
+
+
+StrictLoader.compose_node = _compose_node  # type: ignore[method-assign]
+
+
+def read_text_file(path: str | Path) -> str:
+    """The text of a UTF-8 file (a byte-order mark is allowed); :class:`InputError` when it
+    cannot be read or is not UTF-8 text."""
     path = str(path)
     try:
-        text = Path(path).read_text()
+        data = Path(path).read_bytes()
     except OSError as exc:
-        raise InputError(f"cannot read file: {exc.strerror}", path=path) from None
+        raise InputError(f"cannot read file: {exc.strerror or exc}", path=path) from None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise InputError(f"not a UTF-8 text file (byte 0x{data[exc.start]:02x} at offset "
+                         f"{exc.start})", path=path, line=line) from None
+    if "\x00" in text:
+        raise InputError("not a text file (it contains NUL bytes)", path=path,
+                         line=text[:text.index("\x00")].count("\n") + 1)
+    return text
+
+
+def parse_yaml_text(text: str, path: str) -> Any:
+    """Parse YAML text strictly; errors are :class:`InputError` with file and line."""
     try:
         return yaml.load(text, Loader=StrictLoader)
     except yaml.MarkedYAMLError as exc:
@@ -81,7 +131,16 @@ def load_yaml(path: str | Path) -> Any:
             msg = f"{exc.context}, {msg}"
         raise InputError(msg, path=path, line=line) from None
     except yaml.YAMLError as exc:
-        raise InputError(f"invalid YAML: {exc}", path=path) from None
+        raise InputError(f"invalid YAML: {' '.join(str(exc).split())}", path=path) from None
+    except RecursionError:
+        raise InputError(f"nested too deeply (at most {MAX_NESTING} levels)", path=path) from None
+    except (ValueError, OverflowError) as exc:   # e.g. an integer of 5000 digits
+        raise InputError(f"invalid value: {' '.join(str(exc).split())}", path=path) from None
+
+
+def load_yaml(path: str | Path) -> Any:
+    """Parse a YAML file strictly; errors are :class:`InputError` with file and line."""
+    return parse_yaml_text(read_text_file(path), str(path))
 
 
 def _all_numbers(value: Any) -> bool:
@@ -137,6 +196,9 @@ def patches_from_data(data: Any, path: str) -> tuple[list[Patch], str | None]:
         for key in ("degree_u", "degree_v"):
             if not isinstance(pd[key], int) or isinstance(pd[key], bool):
                 raise InputError(f"{key} must be an integer, got {pd[key]!r}", path=path, where=where)
+            if pd[key] > MAX_DEGREE:
+                raise InputError(f"{key} must be at most {MAX_DEGREE}, got {pd[key]}",
+                                 path=path, where=where)
         cp = _number_array(pd["control_points"], path, where, "control_points", 3)
         w = None
         if pd.get("weights") is not None:
@@ -147,6 +209,35 @@ def patches_from_data(data: Any, path: str) -> tuple[list[Patch], str | None]:
         patch.validate(path, i)
         patches.append(patch)
     return patches, (str(name) if name is not None else None)
+
+
+def check_patch_numbers(patch: Patch, path: str, where: str, line: int | None = None) -> None:
+    """Refuse numbers a valid patch may hold but nurbsdem cannot compute with: coordinates
+    and knots beyond :data:`COORD_MAX`, weights spread beyond :data:`WEIGHT_RATIO_MAX`, more
+    than :data:`MAX_CONTROL_POINTS` control points, degrees above the kernel's maximum."""
+    def fail(msg: str) -> None:
+        raise InputError(msg, path=path, line=line, where=where)
+
+    cp = np.asarray(patch.control_points, float)
+    if cp.shape[0] * cp.shape[1] > MAX_CONTROL_POINTS:
+        fail(f"{cp.shape[0]} x {cp.shape[1]} control points are more than {MAX_CONTROL_POINTS:g}")
+    for deg in (patch.degree_u, patch.degree_v):
+        if deg > MAX_DEGREE:
+            fail(f"degree {deg} is above the largest supported degree {MAX_DEGREE}")
+    big = float(np.abs(cp).max()) if cp.size else 0.0
+    if big > COORD_MAX:
+        fail(f"a control point coordinate is {big:.3g} m, beyond {COORD_MAX:g} m (float64 "
+             f"geometry that far out cannot resolve contacts at particle scale)")
+    for name, knots in (("knots_u", patch.knots_u), ("knots_v", patch.knots_v)):
+        k = np.asarray(knots, float)
+        if float(np.abs(k).max()) > COORD_MAX:
+            fail(f"{name} holds {float(np.abs(k).max()):.3g}, beyond {COORD_MAX:g}")
+        if (k[-1] - k[0]) < 1e-12 * max(1.0, float(np.abs(k).max())):
+            fail(f"{name} spans a parameter range too small to compute with")
+    w = np.asarray(patch.weights, float)
+    if w.size and float(w.max()) > WEIGHT_RATIO_MAX * float(w.min()):
+        fail(f"weights range from {float(w.min()):.3g} to {float(w.max()):.3g}, a ratio above "
+             f"{WEIGHT_RATIO_MAX:g}")
 
 
 def read_patches(path: str | Path) -> tuple[list[Patch], str | None]:
@@ -163,7 +254,25 @@ def load_shape(path: str | Path, check: bool = True):
     from ..geometry.shape import Shape
 
     patches, name = read_patches(path)
-    return Shape(patches, name=name, source=str(path), check=check)
+    for i, p in enumerate(patches):
+        check_patch_numbers(p, str(path), f"patch {i}")
+    return shape_or_input_error(
+        lambda: Shape(patches, name=name, source=str(path), check=check), str(path))
+
+
+def shape_or_input_error(make, path: str):
+    """``make()`` (a Shape built from file data); numerical failures of degenerate data
+    (singular matrices, overflow, hull errors) become one :class:`InputError` for the file."""
+    from scipy.spatial import QhullError
+
+    try:
+        return make()
+    except InputError:
+        raise
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, QhullError) as exc:
+        raise InputError(f"the surface is degenerate and cannot be used "
+                         f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})",
+                         path=path) from None
 
 
 def _floats(arr: np.ndarray) -> Any:

@@ -1,0 +1,455 @@
+"""Whole-scene validation: what ``nurbsdem check`` refuses before anything runs.
+
+:func:`validate_scene` checks a placed model (``model.bodies``) and raises
+:class:`~nurbsdem.errors.InputError` at the deck line of the first problem:
+
+* **bodies against each other**: any overlap deeper than :data:`OVERLAP_TOLERANCE` times the
+  smaller bounding radius, found by bounding spheres then the exact LCP
+  (:func:`nurbsdem.contact.detect`); two bodies whose centroids are closer than
+  :data:`COINCIDENT_FRACTION` of the smaller radius overlap outright (a convex body contains
+  its centroid, and the LCP of two identical poses is degenerate);
+* **bodies against walls**: a body behind a wall (on the side its normal points away from;
+  for a ``Box`` that means outside the box) or penetrating one deeper than the tolerance
+  (exact support point along the wall's normal, paper Eq. 8);
+* **walls**: finite control points and a finite, non-zero normal.
+
+Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
+bodies are tested against each other; every body is tested against every wall.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Iterator, Sequence
+
+import numpy as np
+
+from .errors import InputError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .geometry.shape import Shape
+    from .model import Model, WallSpec
+    from .placement import Bodies
+
+#: Overlaps (and wall penetrations) up to this fraction of the smaller bounding radius are
+#: accepted as touching (round-off of positions written with a few digits).
+OVERLAP_TOLERANCE = 1e-6
+#: Centroids closer than this fraction of the smaller bounding radius: coincident bodies.
+COINCIDENT_FRACTION = 1e-3
+
+
+# ---------------------------------------------------------------------------- body pairs
+
+
+def _pose(shape: "Shape", centroid_world: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (position, R) pose of a body given its centroid in the world."""
+    return np.asarray(centroid_world, float) - R @ np.asarray(shape.centroid, float), R
+
+
+def pair_penetration(shape_a: "Shape", pos_a, R_a, shape_b: "Shape", pos_b, R_b) -> float:
+    """Penetration depth (m) of two bodies: > 0 overlap, <= 0 separated or touching.
+
+    pos_*: centroids in the world (m); R_*: (3, 3) file-to-world rotations. Bounding
+    spheres first; coincident centroids give ``inf``; otherwise the exact LCP, and the
+    surface-sample test of :func:`nurbsdem.placement.bodies_overlap` when the LCP fails.
+    """
+    from .contact import detect
+    from .placement import bodies_overlap
+
+    ra, rb = float(shape_a.bounding_radius), float(shape_b.bounding_radius)
+    d = float(np.linalg.norm(np.asarray(pos_a, float) - np.asarray(pos_b, float)))
+    if d >= ra + rb:
+        return -(d - ra - rb)
+    if d < COINCIDENT_FRACTION * min(ra, rb):
+        return math.inf
+    res = detect(shape_a, _pose(shape_a, pos_a, R_a), shape_b, _pose(shape_b, pos_b, R_b))
+    if res.failed or not math.isfinite(res.signed_distance):
+        return math.inf if bodies_overlap(shape_a, pos_a, R_a, shape_b, pos_b, R_b) else 0.0
+    return -float(res.signed_distance)
+
+
+def close_pairs(position: np.ndarray, radii: np.ndarray) -> Iterator[tuple[int, int]]:
+    """Pairs (i < j) whose bounding spheres overlap (k-d tree, then exact radii)."""
+    n = len(position)
+    if n < 2:
+        return
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(position)
+    for i, j in sorted(tree.query_pairs(2.0 * float(np.max(radii)))):
+        if np.linalg.norm(position[i] - position[j]) < radii[i] + radii[j]:
+            yield int(i), int(j)
+
+
+def check_body_overlaps(model: "Model", bodies: "Bodies", index: Sequence[int] | None = None) -> None:
+    """Raise at the deck line of the first pair of overlapping bodies among ``index``
+    (default: all bodies)."""
+    idx = np.arange(len(bodies)) if index is None else np.asarray(index, np.int64)
+    if len(idx) < 2:
+        return
+    shapes = [model.shapes[int(bodies.shape_id[i])].shape for i in idx]
+    radii = np.array([float(s.bounding_radius) for s in shapes])
+    pos = bodies.position[idx]
+    R = bodies.rotation_matrices()[idx]
+    for a, b in close_pairs(pos, radii):
+        depth = pair_penetration(shapes[a], pos[a], R[a], shapes[b], pos[b], R[b])
+        tol = OVERLAP_TOLERANCE * min(radii[a], radii[b])
+        if depth > tol:
+            i, j = int(idx[a]), int(idx[b])
+            if bodies.line[i] < bodies.line[j]:
+                i, j = j, i
+            raise model.error(_overlap_text(bodies, i, j, depth, tol), int(bodies.line[i]))
+
+
+def _overlap_text(bodies: "Bodies", i: int, j: int, depth: float, tol: float) -> str:
+    what = ("is at the same place as" if math.isinf(depth)
+            else f"overlaps particle")
+    if math.isinf(depth):
+        return (f"particle {bodies.id[i]} {what} particle {bodies.id[j]} (their centroids "
+                f"coincide)")
+    return (f"particle {bodies.id[i]} {what} {bodies.id[j]} by {depth:.3g} m (tolerance "
+            f"{tol:.3g} m)")
+
+
+# ---------------------------------------------------------------------------- walls
+
+
+def wall_plane(wall: "WallSpec") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(corner o, edge a, edge b, unit normal n) of a flat wall; raises ValueError when the
+    wall is not finite or degenerate."""
+    cp = np.asarray(wall.patch.control_points, float)
+    if not np.isfinite(cp).all():
+        raise ValueError("its corners are not finite numbers")
+    o = cp[0, 0]
+    a, b = cp[-1, 0] - o, cp[0, -1] - o
+    scale = max(float(np.abs(a).max()), float(np.abs(b).max()), 1e-300)
+    n = np.cross(a / scale, b / scale)
+    norm = float(np.linalg.norm(n))
+    if not (math.isfinite(norm) and norm > 1e-12):
+        raise ValueError("its normal is zero or not a finite number")
+    return o, a, b, n / norm
+
+
+def check_walls(model: "Model") -> None:
+    """Every wall has finite corners and a finite, non-zero normal."""
+    for w in model.walls:
+        try:
+            wall_plane(w)
+        except ValueError as exc:
+            raise model.error(f"wall {w.name!r}: {exc}", w.line) from None
+
+
+def _inside_rectangle(p: np.ndarray, o: np.ndarray, a: np.ndarray, b: np.ndarray,
+                      margin: np.ndarray) -> np.ndarray:
+    """Whether points p (N, 3) project inside the parallelogram o + s a + t b, widened by
+    ``margin`` (N,) metres."""
+    d = p - o
+    la, lb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+    s = d @ a / la
+    t = d @ b / lb
+    return (s >= -margin) & (s <= la + margin) & (t >= -margin) & (t <= lb + margin)
+
+
+def plane_support_distance(shape: "Shape", centroid: np.ndarray, R: np.ndarray,
+                           point: np.ndarray, n: np.ndarray) -> float:
+    """Signed distance (m) along the unit normal n from the plane through ``point`` to the
+    body's deepest point (its support point along -n, paper Eq. 8): < 0 penetration."""
+    from .contact.wall import detect_wall
+
+    t1 = np.cross(n, [1.0, 0.0, 0.0])
+    if np.linalg.norm(t1) < 0.5:
+        t1 = np.cross(n, [0.0, 1.0, 0.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    r = float(shape.bounding_radius)
+    shift = float(n @ (centroid - point))
+    big = 4.0 * r
+    o = centroid - shift * n - big * (t1 + t2)   # a probe square under the body, in the plane
+    res = detect_wall(shape, _pose(shape, centroid, R), (o, 2 * big * t1, 2 * big * t2))
+    if res.failed or not math.isfinite(res.signed_distance):
+        return shift - r   # conservative: the bounding sphere
+    return float(res.signed_distance)
+
+
+def check_bodies_against_walls(model: "Model", bodies: "Bodies",
+                               index: Sequence[int] | None = None,
+                               line: int | None = None, label: str = "") -> None:
+    """Raise when a body (of ``index``, default all) is behind a wall or penetrates one.
+
+    line, label: report at this deck line with this prefix (e.g. a Replicate step) instead
+    of the body's own line.
+    """
+    if not model.walls or not len(bodies):
+        return
+    idx = np.arange(len(bodies)) if index is None else np.asarray(index, np.int64)
+    if not len(idx):
+        return
+    shapes = [model.shapes[int(bodies.shape_id[i])].shape for i in idx]
+    radii = np.array([float(s.bounding_radius) for s in shapes])
+    pos = bodies.position[idx]
+    R = bodies.rotation_matrices()[idx]
+    for w in model.walls:
+        o, a, b, n = wall_plane(w)
+        h = (pos - o) @ n                     # centroid height above the wall's plane
+        inside = _inside_rectangle(pos, o, a, b, radii)
+        behind = (h < 0) & (inside | (w.kind == "box"))
+        for k in np.nonzero(behind)[0]:
+            i = int(idx[k])
+            where = ("outside the box (behind its wall " f"{w.name!r})" if w.kind == "box"
+                     else f"behind wall {w.name!r}, on the side its Normal points away from "
+                          f"(a wall's Normal must point towards the particles)")
+            raise model.error(f"{label}particle {bodies.id[i]} (centroid {_vec(pos[k])} m) "
+                              f"is {where}", int(bodies.line[i]) if line is None else line)
+        under = _inside_rectangle(pos, o, a, b, np.zeros(len(pos)))
+        near = np.nonzero(under & (h >= 0) & (h < radii))[0]
+        for k in near:
+            sd = plane_support_distance(shapes[k], pos[k], R[k], o, n)
+            tol = OVERLAP_TOLERANCE * radii[k]
+            if sd < -tol:
+                i = int(idx[k])
+                raise model.error(
+                    f"{label}particle {bodies.id[i]} penetrates wall {w.name!r} by "
+                    f"{-sd:.3g} m (tolerance {tol:.3g} m); move it at least {-sd:.3g} m along "
+                    f"the wall's normal {_vec(n)}", int(bodies.line[i]) if line is None else line)
+
+
+def _vec(v) -> str:
+    return " ".join(f"{float(x) + 0.0:.6g}" for x in np.asarray(v, float))
+
+
+# ---------------------------------------------------------------------------- the model
+
+#: A deck step must not be shorter than this fraction of its step's Duration.
+MIN_STEP_FRACTION = 1e-9
+#: Refuse runs that would need more internal time steps than this (years of computing).
+MAX_INTERNAL_STEPS = 10 ** 10
+#: Rough memory per particle in the solver (state, contact search, histories), bytes.
+BYTES_PER_BODY = 16 * 1024
+#: Bytes per tessellation vertex of a VTK frame (points, point data, quads, meshio copies).
+BYTES_PER_VERTEX = 400
+
+
+def available_memory() -> int:
+    """Physical memory of this machine (bytes); 16 GiB when it cannot be read."""
+    import os
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 16 * 1024 ** 3
+
+
+def _gib(nbytes: float) -> str:
+    return f"{nbytes / 1024 ** 3:.3g} GiB"
+
+
+def max_particle_count(model: "Model") -> tuple[int, int | None]:
+    """(largest number of particles any step has, line of the step that makes it)."""
+    from .model import ReplicateStep
+    n, worst, line = model.particle_count, model.particle_count, None
+    for s in model.steps:
+        if isinstance(s, ReplicateStep):
+            n *= int(s.layers)
+            if n > worst:
+                worst, line = n, s.line
+    return worst, line
+
+
+def check_nothing_to_solve(model: "Model") -> None:
+    """A deck must define particles and at least one step."""
+    if not model.steps:
+        raise model.error("the deck defines no solution steps (a Steps block with e.g. "
+                          "'Step 1 Dynamic Duration T TimeStep DT'): nothing to solve", None)
+    if model.particle_count == 0:
+        raise model.error("the deck defines no particles (a Particles block with Particle or "
+                          "Random entries): nothing to solve", None)
+
+
+def check_time_steps(model: "Model") -> None:
+    """Every timed step has TimeStep >= :data:`MIN_STEP_FRACTION` x Duration."""
+    for s in model.steps:
+        dur, dt = float(getattr(s, "duration", 0.0) or 0.0), float(getattr(s, "time_step", 0.0) or 0.0)
+        if dur > 0 and dt > 0 and dt < MIN_STEP_FRACTION * dur:
+            raise model.error(
+                f"Step {s.id}: TimeStep {dt:g} s is below {MIN_STEP_FRACTION:g} of the Duration "
+                f"{dur:g} s: {dur / dt:.3g} time steps would never finish", s.line)
+
+
+def check_memory(model: "Model") -> None:
+    """Refuse particle counts (Counts, Replicate Layers) and VTK resolutions whose memory
+    would exceed this machine's, saying how much they would need."""
+    have = available_memory()
+    n, line = max_particle_count(model)
+    need = n * BYTES_PER_BODY
+    if need > have:
+        where = line if line is not None else _first_particle_line(model)
+        raise model.error(f"{n:.4g} particles would need about {_gib(need)} of memory; this "
+                          f"machine has {_gib(have)}", where)
+    out = model.output
+    if out is None or not model.shapes:
+        return
+    patches = max(len(e.shape.patches) for e in model.shapes.values())
+    verts = n * patches * (int(out.vtk_resolution) + 1) ** 2
+    need = verts * BYTES_PER_VERTEX
+    if need > have / 2:
+        raise model.error(f"VTK Resolution {out.vtk_resolution} would need about {_gib(need)} "
+                          f"for one frame of {n:.4g} particles ({verts:.3g} vertices); this "
+                          f"machine has {_gib(have)}: lower Resolution", _output_line(model))
+
+
+def _first_particle_line(model: "Model") -> int | None:
+    lines = [g.line for g in model.random_groups] + [p.line for p in model.particles]
+    return min(lines) if lines else None
+
+
+def _output_line(model: "Model") -> int | None:
+    for k, line in enumerate(model.text.splitlines(), start=1):
+        if line.split("#")[0].strip().lower().startswith("vtk"):
+            return k
+    return None
+
+
+def _particle_masses(model: "Model") -> dict[int, float]:
+    """Smallest particle mass (kg) per material id used by particles."""
+    out: dict[int, float] = {}
+    uses = [(g.material_id, sid) for g in model.random_groups for sid in g.shape_ids]
+    uses += [(p.material_id, p.shape_id) for p in model.particles]
+    for mid, sid in uses:
+        if mid in model.materials and sid in model.shapes:
+            m = model.shapes[sid].mass(model.materials[mid].density)
+            out[mid] = min(out.get(mid, math.inf), m)
+    return out
+
+
+def _critical_step(k: float, c: float, m: float) -> float:
+    """Critical step (s) of a spring k - dashpot c - mass m: (2/w)(sqrt(1+z^2) - z)."""
+    if k <= 0 or not m > 0:
+        return math.inf
+    omega = math.sqrt(k / m)
+    zeta = c / (2.0 * math.sqrt(k * m))
+    return (2.0 / omega) * (math.sqrt(1.0 + zeta * zeta) - zeta)
+
+
+def check_step_count(model: "Model") -> None:
+    """Refuse a run whose explicit integration would need more than
+    :data:`MAX_INTERNAL_STEPS` internal time steps (the stiffest contact law on the lightest
+    particle, translational modes only: an optimistic estimate)."""
+    masses = _particle_masses(model)
+    if not masses:
+        return
+    dt_cr, worst = math.inf, None
+    for itf in model.interfaces:
+        for mid, m in masses.items():
+            for k, c in ((itf.normal_penalty, itf.normal_damping),
+                         (itf.tangential_penalty, itf.tangential_damping)):
+                dt = _critical_step(k, c, 0.5 * m)
+                if dt < dt_cr:
+                    dt_cr, worst = dt, (itf, mid, m)
+    if worst is None:
+        return
+    run = sum(s.duration_s for s in model.steps)
+    steps = run / (0.5 * dt_cr) if dt_cr > 0 else math.inf
+    if steps > MAX_INTERNAL_STEPS:
+        itf, mid, m = worst
+        raise model.error(
+            f"Interface {itf.id}: with material {mid} (lightest particle {m:.3g} kg) the "
+            f"explicit critical time step is about {dt_cr:.3g} s, so the {run:g} s of the run "
+            f"would need about {steps:.3g} internal time steps (at most "
+            f"{MAX_INTERNAL_STEPS:.0e}): lower the penalties or damping, or raise the Density",
+            itf.line)
+
+
+def check_impacts(model: "Model") -> None:
+    """Refuse a particle so fast that it would sink deeper than its own size into what it
+    hits: v sqrt(m / en) > bounding radius (undamped normal spring), which no time step can
+    resolve."""
+    for p in model.particles:
+        v = float(np.linalg.norm(p.velocity))
+        if v == 0 or p.shape_id not in model.shapes or p.material_id not in model.materials:
+            continue
+        entry = model.shapes[p.shape_id]
+        m = entry.mass(model.materials[p.material_id].density)
+        ens = [i.normal_penalty for i in model.interfaces
+               if i.materials is None or p.material_id in i.materials]
+        if not ens:
+            continue
+        en = min(ens)
+        r = entry.bounding_radius
+        depth = v * math.sqrt(m / en)
+        if depth > r:
+            raise model.error(
+                f"Particle {p.id}: at {v:.3g} m/s it would sink about {depth:.3g} m into what it "
+                f"hits (mass {m:.3g} kg, NormalPenalty {en:g} N/m), more than its size "
+                f"({r:.3g} m), which no time step can resolve: lower its Velocity below "
+                f"{r * math.sqrt(en / m):.3g} m/s or raise NormalPenalty above "
+                f"{m * v * v / (r * r):.3g} N/m", p.line)
+
+
+def check_replicate_spacing(model: "Model") -> None:
+    """A Replicate step whose layer spacing Height / (Layers - 1) is below the smallest
+    vertical extent a particle can have, V / (pi R^2) (volume over the largest projected
+    area), stacks copies into each other whatever the particles do before it."""
+    from .model import ReplicateStep
+    used = {sid for g in model.random_groups for sid in g.shape_ids}
+    used |= {p.shape_id for p in model.particles}
+    extents = [(model.shapes[s].shape.volume / (math.pi * model.shapes[s].bounding_radius ** 2), s)
+               for s in used if s in model.shapes]
+    if not extents:
+        return
+    extent, sid = max(extents)
+    for s in model.steps:
+        if isinstance(s, ReplicateStep) and s.layers > 1:
+            spacing = s.height / (s.layers - 1)
+            if spacing < extent:
+                raise model.error(
+                    f"Step {s.id}: the layers would be {spacing:.3g} m apart (Height / (Layers - "
+                    f"1)), less than the {extent:.3g} m that any particle of shape {sid} extends "
+                    f"vertically: the copies would overlap; use Height >= "
+                    f"{extent * (s.layers - 1):.4g} m", s.line)
+
+
+def check_scale(model: "Model") -> None:
+    """Positions must be resolvable at particle scale: the largest coordinate of the scene
+    at most 1e9 times the smallest particle's bounding radius."""
+    radii = [e.bounding_radius for e in model.shapes.values()]
+    if not radii:
+        return
+    coords = [np.abs(p.position).max() for p in model.particles]
+    coords += [max(np.abs(g.region_lo).max(), np.abs(g.region_hi).max()) for g in model.random_groups]
+    coords += [float(np.abs(w.patch.control_points).max()) for w in model.walls]
+    if coords and max(coords) > 1e9 * min(radii):
+        raise model.error(f"the scene extends {max(coords):.3g} m from the origin but the "
+                          f"smallest particle is {min(radii):.3g} m across: float64 positions "
+                          f"cannot resolve its contacts (ratio at most 1e9)", None)
+
+
+def check_model(model: "Model") -> None:
+    """Everything that can be judged before placing particles: something to solve, time
+    steps, memory, explicit stability, impacts, Replicate spacing, scale."""
+    check_nothing_to_solve(model)
+    check_time_steps(model)
+    check_memory(model)
+    check_walls(model)
+    check_scale(model)
+    check_step_count(model)
+    check_impacts(model)
+    check_replicate_spacing(model)
+
+
+# ---------------------------------------------------------------------------- the scene
+
+
+def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
+    """Check the placed scene (default ``model.bodies``): walls, bodies against walls,
+    explicit bodies against each other. Raises :class:`InputError` (deck file and line)."""
+    bodies = model.bodies if bodies is None else bodies
+    check_walls(model)
+    if bodies is None or not len(bodies):
+        return
+    explicit = {p.id for p in model.particles}
+    index = [i for i in range(len(bodies)) if int(bodies.id[i]) in explicit]
+    check_body_overlaps(model, bodies, index)
+    check_bodies_against_walls(model, bodies)
+
+
+__all__ = ["OVERLAP_TOLERANCE", "COINCIDENT_FRACTION", "pair_penetration", "close_pairs",
+           "check_body_overlaps", "check_walls", "check_bodies_against_walls",
+           "plane_support_distance", "validate_scene", "check_model", "wall_plane", "InputError"]
