@@ -32,6 +32,7 @@ import numpy as np
 from . import __version__
 from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
+from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
 from .geometry.rotation import matrix_to_quat, quat_to_matrix
@@ -63,11 +64,18 @@ class RunSummary:
     particles: int = 0
     timers: dict = field(default_factory=dict)
 
+    def _balance_share(self) -> str:
+        """The balance error relative to the energy turned over (dissipated + external work),
+        or that energy itself when it is too small for a ratio to mean anything."""
+        err, scale = abs(self.balance_error), abs(self.balance_scale)
+        if scale > 0 and math.isfinite(scale) and err <= scale:
+            return f"({err / scale:.2e} of the {scale:.3g} J turned over)"
+        return f"(only {scale:.3g} J of energy was turned over)"
+
     def text(self) -> str:
         t = self.timers
         total = max(self.wall_time, 1e-12)
         split = ", ".join(f"{k} {v:.1f} s ({100 * v / total:.0f} %)" for k, v in t.items())
-        rel = self.balance_error / self.balance_scale if self.balance_scale > 0 else 0.0
         return (f"done: {self.simulated_time:.4g} s simulated, {self.particles} particles, "
                 f"{self.steps} time steps ({self.substeps} internal), wall time "
                 f"{self.wall_time:.1f} s\n"
@@ -75,8 +83,7 @@ class RunSummary:
                 f"steps {self.active_total} active contacts, {self.degenerated} of them "
                 f"degenerated ({100 * self.degenerated / max(self.active_total, 1):.2f} %), "
                 f"{self.failed} failed LCPs\n"
-                f"energy balance error: {self.balance_error:.3e} J "
-                f"({rel:.2e} of the energy turned over)\n"
+                f"energy balance error: {self.balance_error:.3e} J {self._balance_share()}\n"
                 f"time split: {split}")
 
 
@@ -159,6 +166,7 @@ class Solver:
         self.timers = {"global search": 0.0, "LCP": 0.0, "forces + integration": 0.0,
                        "output": 0.0, "setup": 0.0}
         self._carry_hist = None
+        self._compliances: dict = {}
         self._motion_spec: dict = {}
         self._last_energy: dict = {}
 
@@ -182,6 +190,16 @@ class Solver:
                 table.set(self.mat_index[ma], self.wall_material, law(itf))
         return table
 
+    def _compliance(self, shape_id: int, rho: float) -> tuple[float, float]:
+        """Worst point compliances (1/kg) of a shape at density rho, for the a-priori time-step
+        estimate (:func:`~nurbsdem.dynamics.stepcontrol.shape_compliance`), once per pair."""
+        key = (shape_id, rho)
+        if key not in self._compliances:
+            entry = self.model.shapes[shape_id]
+            self._compliances[key] = shape_compliance(entry.shape, entry.mass(rho),
+                                                      entry.mass_inertia(rho), entry.centroid)
+        return self._compliances[key]
+
     def _wall_patches(self) -> list:
         return [w.patch for w in self.model.walls]
 
@@ -199,7 +217,8 @@ class Solver:
             sysm.add_particle(entry.mass(rho), entry.mass_inertia(rho), b.position[i], R=Rs[i],
                               v=b.velocity[i], omega=b.angular_velocity[i],
                               material=self.mat_index[int(b.material_id[i])],
-                              centroid_file=entry.centroid, radius=entry.bounding_radius)
+                              centroid_file=entry.centroid, radius=entry.bounding_radius,
+                              compliance=self._compliance(int(b.shape_id[i]), rho))
         for k, w in enumerate(model.walls):
             sysm.add_wall(motions[k], material=self.wall_material, name=w.name)
         body_shape = np.array([self.shape_index[int(s)] for s in b.shape_id], np.int64)
@@ -308,19 +327,26 @@ class Solver:
         self.timers["output"] += time.perf_counter() - t0
 
     def _load_restart(self) -> dict:
-        st = load_checkpoint(self.restart_path)
-        if st.get("deck") != self.model.text:
-            raise InputError("the checkpoint was written for a different deck",
+        """Read the checkpoint, check it belongs to this deck (the parsed model is compared,
+        so comments and layout may change) and restore the run's state from it."""
+        from .io.checkpoint import restart_state
+        st = restart_state(self.restart_path, self.model)
+        try:
+            self.time = float(st["time"])
+            self.step_index = int(st["step_index"])
+            self.step_progress = int(st["step_progress"])
+            self.bodies = Bodies.from_dict(st["bodies"])
+            self.wall_offset = np.array(st["wall_offset"], float).reshape(len(self.model.walls), 3)
+            self.energy_offset = {k: float(v) for k, v in dict(st["energy_offset"]).items()}
+            self.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
+            ch = st.get("carry_hist") or {}
+            self._carry_hist = (ch["keys"], ch["springs"]) if ch else None
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise InputError(f"the checkpoint is incomplete or corrupted ({type(exc).__name__}: "
+                             f"{exc})", path=str(self.restart_path)) from None
+        if not 0 <= self.step_index <= len(self.model.steps):
+            raise InputError(f"the checkpoint is corrupted (step index {self.step_index})",
                              path=str(self.restart_path))
-        self.time = float(st["time"])
-        self.step_index = int(st["step_index"])
-        self.step_progress = int(st["step_progress"])
-        self.bodies = Bodies.from_dict(st["bodies"])
-        self.wall_offset = np.array(st["wall_offset"], float)
-        self.energy_offset = dict(st["energy_offset"])
-        self.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
-        ch = st.get("carry_hist") or {}
-        self._carry_hist = (ch["keys"], ch["springs"]) if ch else None
         return st
 
     # ------------------------------------------------------------------ steps

@@ -166,19 +166,27 @@ def test_short_paper_example_runs_all_steps(tmp_path):
     assert float(rows[-1]["displacement_z"]) < -0.03      # the lid came down to the pack
 
 
+def _misjudged_step(monkeypatch, factor: int, refinements: int) -> None:
+    """Make the time-step control choose ``factor`` times too few sub-steps (an estimate that
+    misjudges the stability limit), with ``refinements`` repetitions allowed to the guard."""
+    from nurbsdem.dynamics.system import DemSystem
+
+    original = DemSystem._needed_substeps
+
+    def too_few(self, dt_safe):
+        self.max_refinements = refinements
+        return max(1, original(self, dt_safe) // factor)
+    monkeypatch.setattr(DemSystem, "_needed_substeps", too_few)
+
+
 def test_instability_stops_with_a_message_and_the_last_good_state_saved(tmp_path, monkeypatch):
     """Forced to one sub-step at the paper's Δt = 1e-3 s, the small particles' damped contacts
-    are unstable (C–C: Δt_cr = 4.7e-4 s): the run must stop cleanly, not explode silently."""
-    from nurbsdem.dynamics.system import DemSystem
+    are unstable (C–C: Δt_cr = 4.7e-4 s): without refinement the run must stop cleanly, not
+    explode silently."""
     from nurbsdem.errors import NurbsdemError
     from nurbsdem.io.checkpoint import load_checkpoint
 
-    original = DemSystem._choose_substeps
-
-    def one_substep(self):
-        original(self)
-        self.substeps, self.dt_internal = 1, self.dt
-    monkeypatch.setattr(DemSystem, "_choose_substeps", one_substep)
+    _misjudged_step(monkeypatch, factor=100, refinements=0)
     deck = tmp_path / "unstable.inp"
     deck.write_text(LID_DECK.replace("Step 1 Dynamic Duration 0.06", "Step 1 Dynamic Duration 0.5"))
     with pytest.raises(NurbsdemError) as info:
@@ -188,6 +196,20 @@ def test_instability_stops_with_a_message_and_the_last_good_state_saved(tmp_path
     st = load_checkpoint(tmp_path / "out" / "checkpoint.h5")
     assert 0.0 <= st["time"] < 0.5
     assert np.all(np.isfinite(st["bodies"]["position"]))
+
+
+def test_an_unstable_deck_step_is_repeated_with_more_substeps(tmp_path, monkeypatch, caplog):
+    """The same run with the guard allowed to refine: each deck step found unstable at one
+    sub-step is repeated with more, the run completes, and the log says so."""
+    import logging
+
+    _misjudged_step(monkeypatch, factor=100, refinements=3)
+    deck = tmp_path / "unstable.inp"
+    deck.write_text(LID_DECK.replace("Step 1 Dynamic Duration 0.06", "Step 1 Dynamic Duration 0.5"))
+    with caplog.at_level(logging.WARNING, logger="nurbsdem"):
+        summary = Solver(parse_deck(deck), output=tmp_path / "out", quiet=True).run()
+    assert summary.simulated_time == pytest.approx(0.5 + 0.06 + 0.04)
+    assert any("repeated with" in r.getMessage() for r in caplog.records)
 
 
 @pytest.mark.parametrize("old, new, line, message", [

@@ -15,8 +15,18 @@ Per force evaluation (:meth:`SceneContacts.__call__`):
 
 The counters follow the paper's Fig. 5: ``monitored`` = LCPs solved (pairs left by the global
 search), ``active`` = penetrating pairs, ``degenerated`` = active pairs solved with the
-degeneration technique (Eq. 10–15), ``failed`` = LCPs that did not converge (their previous
-solution is kept when there is one, the run goes on, and each pair is warned about once).
+degeneration technique (Eq. 10–15), ``failed`` = LCPs that did not converge.
+
+A failed LCP never acts for more than one evaluation (never abort, never linger): a pair whose
+LCP fails right after a converged solution reuses that solution once, **moved rigidly with the
+two bodies** (the surface points follow their bodies, the normal turns with body A, the depth is
+measured again between the moved points); if the next LCP of that pair fails too, or there was
+no converged solution to move, the pair is left out of the force evaluation (and its tangential
+history ends).  Each case is logged once per pair, naming the pair.
+
+Besides the active contacts, each ContactSet reports the separated pairs it solved
+(``near_*``: their closest points, normal and gap) so that the time-step control can see the
+contacts about to close.
 
 Units: metres, seconds. Global body indices: particles 0..N-1, walls N..N+W-1 (DEVNOTES).
 """
@@ -24,7 +34,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -54,6 +64,15 @@ class ContactSet:
     active: int = 0
     degenerated_count: int = 0
     failed: int = 0
+    #: failed LCPs answered by the previous solution moved rigidly (one evaluation at most)
+    reused: int = 0
+    #: failed LCPs whose pair was left out of the force evaluation
+    dropped: int = 0
+    near_a: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    near_b: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    near_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    near_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    near_gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def empty(cls) -> "ContactSet":
@@ -112,7 +131,11 @@ class SceneContacts:
         self.depth_wall = 2.0 * float(self.radius.max()) if self.n else 0.0
         #: warm-start rows of the last solution of each pair: key -> (row_f, row_i)
         self.cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self.warned: set[int] = set()
+        #: keys whose cached row is a failed LCP's moved previous solution (not a converged one)
+        self.reused: frozenset[int] = frozenset()
+        #: poses of the previous call: pose positions (N,3), rotations (N,3,3), walls (W,3)
+        self.prev_pose: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.warned: set[tuple[int, str]] = set()
         self.timers = SceneTimers()
         self.totals = {"monitored": 0, "active": 0, "degenerated": 0, "failed": 0}
         self.last: ContactSet = ContactSet.empty()
@@ -129,25 +152,37 @@ class SceneContacts:
         return pf, pi
 
     def _store(self, keys: np.ndarray, rf: np.ndarray, ri: np.ndarray) -> dict:
-        new = {}
-        for r, k in enumerate(keys.tolist()):
-            if ri[r, I_FAIL] and k in self.cache:
-                new[k] = self.cache[k]   # keep the last good solution (never abort)
-            else:
-                new[k] = (rf[r].copy(), ri[r].copy())
-        return new
+        return {k: (rf[r].copy(), ri[r].copy()) for r, k in enumerate(keys.tolist())}
 
     def state(self) -> dict[str, np.ndarray]:
-        """The warm-start cache as arrays (for checkpoints: restarts stay bit-for-bit)."""
+        """The warm-start cache, the reused keys and the previous poses as arrays (for
+        checkpoints: restarts stay bit-for-bit)."""
         keys = np.array(sorted(self.cache), dtype=np.int64)
         rf = np.array([self.cache[k][0] for k in keys.tolist()]).reshape(-1, NF)
         ri = np.array([self.cache[k][1] for k in keys.tolist()], dtype=np.int64).reshape(-1, NI)
-        return {"keys": keys, "rows_f": rf, "rows_i": ri}
+        st = {"keys": keys, "rows_f": rf, "rows_i": ri,
+              "reused": np.array(sorted(self.reused), dtype=np.int64)}
+        if self.prev_pose is not None:
+            st.update(prev_pos=self.prev_pose[0], prev_R=self.prev_pose[1],
+                      prev_wall=self.prev_pose[2])
+        return st
 
     def set_state(self, st: dict) -> None:
         """Restore :meth:`state`."""
         self.cache = {int(k): (np.array(f), np.array(i)) for k, f, i in
                       zip(st["keys"], st["rows_f"], st["rows_i"])}
+        self.reused = frozenset(int(k) for k in st.get("reused", ()))
+        self.prev_pose = ((np.array(st["prev_pos"]), np.array(st["prev_R"]),
+                           np.array(st["prev_wall"])) if "prev_pos" in st else None)
+
+    def snapshot(self):
+        """What a rolled-back time step must restore (cheap: the call replaces, never mutates,
+        these objects)."""
+        return self.cache, self.reused, self.prev_pose, self.last
+
+    def restore(self, snap) -> None:
+        """Undo the calls made since :meth:`snapshot`."""
+        self.cache, self.reused, self.prev_pose, self.last = snap
 
     def _directed(self, pairs: np.ndarray, cand: np.ndarray):
         """Keep the body pairs with overlapping patch boxes, and their candidate patches as
@@ -214,7 +249,8 @@ class SceneContacts:
         cs = self._assemble(np.concatenate([a, wa]), np.concatenate([b, N + wb_idx]),
                             np.concatenate([keys_p, keys_w]), np.concatenate([rf, rwf]),
                             np.concatenate([ri, rwi]), pf_all=np.concatenate([pf, wf]),
-                            pi_all=np.concatenate([pi, wi]))
+                            pi_all=np.concatenate([pi, wi]),
+                            pose=(pos, R, np.array(kin.wall_displacement, float)))
         self.timers.global_search += t1 - t0
         self.timers.lcp += t2 - t1
         self.timers.calls += 1
@@ -222,28 +258,75 @@ class SceneContacts:
         self.last = cs
         return cs
 
-    def _assemble(self, a, b, keys, rf, ri, pf_all, pi_all) -> ContactSet:
+    def _assemble(self, a, b, keys, rf, ri, pf_all, pi_all, pose) -> ContactSet:
+        """The ContactSet of this call from the LCP rows; failed rows are answered by the
+        previous solution moved rigidly (once) or left out (module docstring)."""
         failed = ri[:, I_FAIL].astype(bool)
+        reused = []
         for r in np.nonzero(failed)[0].tolist():
             k = int(keys[r])
-            if pi_all[r, I_VALID]:   # keep the last good solution of that pair
-                rf[r], ri[r] = pf_all[r], pi_all[r]
-            if k not in self.warned:
-                self.warned.add(k)
-                log.warning("LCP did not converge for bodies %d-%d; keeping the last good "
-                            "solution (counted as failed in monitors/contacts.csv)",
-                            int(a[r]), int(b[r]))
+            if pi_all[r, I_VALID] and k not in self.reused and self.prev_pose is not None:
+                rf[r], ri[r] = self._moved(pf_all[r], pi_all[r], int(a[r]), int(b[r]), pose)
+                reused.append(k)
+                self._warn(k, int(a[r]), int(b[r]), "its last converged solution, moved rigidly "
+                           "with the two bodies, is used for this evaluation only")
+            else:
+                ri[r, I_ACTIVE] = 0
+                ri[r, I_VALID] = 0
+                self._warn(k, int(a[r]), int(b[r]), "no fresh converged solution to fall back on: "
+                           "the pair is left out of the force evaluation")
+        self.reused = frozenset(reused)
+        self.prev_pose = pose
         self.cache = self._store(keys, rf, ri)
-        act = (ri[:, I_ACTIVE] == 1) & (ri[:, I_VALID] == 1)
+        valid = ri[:, I_VALID] == 1
+        act = (ri[:, I_ACTIVE] == 1) & valid
         sel = np.nonzero(act)[0]
+        near = np.nonzero(valid & ~act & (rf[:, F_SD] > 0))[0]
         deg = ri[sel, I_DEG]
+        n_failed = int(failed.sum())
         cs = ContactSet(body_a=a[sel].astype(np.int64), body_b=b[sel].astype(np.int64),
                         point_a=rf[sel, F_PA:F_PA + 3].copy(), point_b=rf[sel, F_PB:F_PB + 3].copy(),
                         normal=rf[sel, F_N:F_N + 3].copy(), depth=-rf[sel, F_SD],
                         key=keys[sel].astype(np.int64), degenerated=deg.astype(np.int64),
                         monitored=int(keys.shape[0]), active=int(sel.shape[0]),
-                        degenerated_count=int(np.count_nonzero(deg)), failed=int(failed.sum()))
+                        degenerated_count=int(np.count_nonzero(deg)), failed=n_failed,
+                        reused=len(reused), dropped=n_failed - len(reused),
+                        near_a=a[near].astype(np.int64), near_b=b[near].astype(np.int64),
+                        near_point=0.5 * (rf[near, F_PA:F_PA + 3] + rf[near, F_PB:F_PB + 3]),
+                        near_normal=rf[near, F_N:F_N + 3].copy(), near_gap=rf[near, F_SD].copy())
         return cs
+
+    def _moved(self, row_f: np.ndarray, row_i: np.ndarray, a: int, b: int, pose):
+        """A previous LCP row moved rigidly from the previous call's poses to ``pose``: the
+        surface points follow their bodies (walls translate), the normal turns with body A and
+        the signed distance is measured again between the moved points, (p_B − p_A)·n."""
+        N = self.n
+        pos, R, wall = pose
+        ppos, pR, pwall = self.prev_pose
+
+        def move(i: int, p: np.ndarray) -> np.ndarray:
+            if i < N:
+                return R[i] @ (pR[i].T @ (p - ppos[i])) + pos[i]
+            return p + (wall[i - N] - pwall[i - N])
+        f, iv = row_f.copy(), row_i.copy()
+        f[F_PA:F_PA + 3] = move(a, row_f[F_PA:F_PA + 3])
+        f[F_PB:F_PB + 3] = move(b, row_f[F_PB:F_PB + 3])
+        n = row_f[F_N:F_N + 3]
+        f[F_N:F_N + 3] = R[a] @ (pR[a].T @ n) if a < N else n
+        f[F_SD] = float((f[F_PB:F_PB + 3] - f[F_PA:F_PA + 3]) @ f[F_N:F_N + 3])
+        iv[I_ACTIVE] = 1 if f[F_SD] < 0 else 0
+        iv[I_VALID] = 1
+        iv[I_FAIL] = 1
+        return f, iv
+
+    def _warn(self, key: int, a: int, b: int, what: str) -> None:
+        """Log a failed LCP once per pair and kind of answer."""
+        if (key, what) in self.warned:
+            return
+        self.warned.add((key, what))
+        pair = (f"particles {a} and {b}" if b < self.n else f"particle {a} and wall {b - self.n}")
+        log.warning("the contact problem (LCP) of %s did not converge: %s (counted as failed in "
+                    "monitors/contacts.csv)", pair, what)
 
 
 def _retry_failed_cold(solve, prev_f: np.ndarray, prev_i: np.ndarray):

@@ -18,29 +18,41 @@ Global body indices in a ContactSet: particles 0..N-1 in the order added, walls 
 Time-step control (sub-stepping)
 --------------------------------
 The deck's Δt may exceed the explicit stability limit (the paper's 1e-3 s does for the small
-particles: C–C Δt_cr = 4.7e-4 s).  :meth:`DemSystem.critical_time_step` estimates, for every
-contact interface that can occur (particle–particle between the materials present, particle–wall),
+particles: C–C Δt_cr = 4.7e-4 s).  A deck step is split into ``substeps`` internal steps of
+``dt_internal = Δt / substeps``, with ``dt_internal <= safety × Δt_cr`` (default safety 0.5) and
+Δt_cr the smaller of two estimates (:mod:`nurbsdem.dynamics.stepcontrol`):
 
-    Δt_cr = (2/ω) (√(1+ζ²) − ζ),   ω = √(k/m*),   ζ = c / (2√(k m*))
+* **a priori**, for contacts that may appear anywhere (:meth:`DemSystem.critical_time_step`):
+  Δt_cr = (2/ω)(√(1+ζ²) − ζ), ω = √(k/m*), ζ = c/(2√(k m*)) for every interface that can occur
+  and its normal (εn, cn) and tangential (εt, ct) modes, m* the smallest reduced *effective*
+  mass of a possible pair: each body's worst point compliance over its surface
+  (``compliance=`` of :meth:`DemSystem.add_particle`, from
+  :func:`~nurbsdem.dynamics.stepcontrol.shape_compliance`; without it a sphere of the body's
+  bounding radius is assumed);
+* **the contact network**, re-evaluated after every deck step from the contacts present and
+  the separated pairs that can close within one deck step: the highest frequency and damping
+  rate of the whole linearised network (Lanczos on the mass-scaled stiffness and damping
+  operators, with each contact's true lever arms), so that a body with many contacts, or an
+  off-centre contact on a flat body, is seen.
 
-for the normal mode (k = εn, c = cn, m* the smallest reduced mass of a possible pair — a wall's
-mass is infinite, so m* = m) and the tangential mode (k = εt, c = ct, with the *rotational*
-effective mass m_t = 1/(1/m + r²/I_min) per body, r its bounding radius, which for a sphere is
-the exact 2m/7).  The safe step is ``safety × min Δt_cr`` (default safety 0.5) and a deck step is
-split into ``substeps = ceil(Δt / Δt_safe)`` internal steps of ``dt_internal = Δt / substeps``
-(logged on logger ``'nurbsdem'``).  The safety factor covers what the pair estimate leaves out:
-an off-centre normal contact of a non-spherical body lowers its effective mass (by ≈ 20 % for the
-paper's particles), several simultaneous contacts on one body add their stiffnesses (a factor
-√2–√3 in ω in a pack), and the no-tension clip.
+The count rises at once when the network needs it and falls again (with 20 % hysteresis) when
+the pack loosens; every change is logged on logger ``'nurbsdem'`` with the reason (the particle
+that dominates the stiffest mode and its number of contacts).
 
 Instability guard
 -----------------
-After every internal step the state must be finite; after every deck step the mechanical energy
-gain ``E_mech − E_mech(0) − W_ext`` and the balance error must stay below
-``energy_tolerance × scale`` (scale = the largest kinetic + elastic energy seen so far, at least
-Σ m|g| r).  Otherwise the system is rolled back to the state at the start of that deck step (the
-last good state, still available as ``system.get_state()``) and :class:`InstabilityError` is
-raised.  Runs are deterministic: the same inputs give bit-for-bit the same results.
+After every internal step the state must be finite and no particle may be in **period-2
+motion** (half-step velocities reversing at every internal step, which the full-step kinetic
+energy of the monitors cannot see; :func:`~nurbsdem.dynamics.stepcontrol.alternation_update`);
+after every deck step the mechanical energy gain ``E_mech − E_mech(0) − W_ext`` and the balance
+error must stay below ``energy_tolerance × scale`` (scale = the largest kinetic + elastic energy
+seen so far, at least Σ m|g| r).  Otherwise the deck step is rolled back and **repeated with
+twice the sub-steps** (the refinement is kept, and halved again after
+``REFINE_DECAY_STEPS`` quiet deck steps), up to ``max_refinements`` times; only then is the
+system left at the last good state (the start of that deck step, ``system.get_state()``) and
+:class:`InstabilityError` raised, with a diagnosis (failed contact problems, penetration
+depth) instead of advice to reduce a time step that was already refined.
+Runs are deterministic: the same inputs give bit-for-bit the same results.
 """
 from __future__ import annotations
 
@@ -57,6 +69,8 @@ from .forces import (InterfaceTable, contact_forces, contact_velocities, kick_wo
                      match_history, store_history)
 from .integrator import drift, half_kick, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, omega_world
+from .stepcontrol import (ALTERNATION_STEPS, alternation_update, critical_step,
+                          critical_step_from_rates, network_rates)
 
 log = logging.getLogger("nurbsdem")
 
@@ -113,16 +127,6 @@ class ModeLimit:
     dt_cr: float
 
 
-def critical_step(k: float, c: float, m: float) -> tuple[float, float, float]:
-    """(ω rad/s, ζ, Δt_cr s) of a spring k (N/m) – dashpot c (N s/m) – mass m (kg) for the
-    explicit scheme: Δt_cr = (2/ω)(√(1+ζ²) − ζ).  Δt_cr = inf when k = 0."""
-    if k <= 0 or not math.isfinite(m):
-        return 0.0, 0.0, math.inf
-    omega = math.sqrt(k / m)
-    zeta = c / (2.0 * math.sqrt(k * m))
-    return omega, zeta, (2.0 / omega) * (math.sqrt(1.0 + zeta * zeta) - zeta)
-
-
 def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
     """Smallest reduced mass of a pair drawn from m_i (same group: two distinct) and m_j."""
     if m_j is None:
@@ -137,8 +141,14 @@ def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
 
 
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
-               "c_a", "c_b", "c_point", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn", "c_eel", "c_stick",
-               "c_key", "wall_d", "wall_u", "wall_work", "ledger")
+               "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
+               "c_eel", "c_stick", "c_key", "wall_d", "wall_u", "wall_work", "ledger",
+               "alt_count", "alt_prev_v", "alt_prev_L")
+
+#: quiet deck steps after which a refinement of the step (period-2 or energy guard) is halved
+REFINE_DECAY_STEPS = 200
+#: the sub-step count falls only when the need is below this fraction of the current count
+FALL_HYSTERESIS = 0.8
 
 
 class DemSystem:
@@ -154,11 +164,15 @@ class DemSystem:
     max_substeps: refuse (InputError) when more would be needed.
     energy_tolerance: relative tolerance of the instability guard (default 0.25).
     check_energy: enable the energy part of the guard.
+    max_refinements: how often a deck step found unstable is repeated with twice the sub-steps
+        before :class:`InstabilityError` is raised (0: stop at once).
+    watch_period2: enable the period-2 part of the guard (disable only to demonstrate it).
     """
 
     def __init__(self, dt: float, gravity=(0.0, 0.0, -9.81), interfaces: InterfaceTable | None = None,
                  safety: float = 0.5, substeps: int | None = None, max_substeps: int = 100000,
-                 energy_tolerance: float = 0.25, check_energy: bool = True, t0: float = 0.0) -> None:
+                 energy_tolerance: float = 0.25, check_energy: bool = True, t0: float = 0.0,
+                 max_refinements: int = 3, watch_period2: bool = True) -> None:
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError(f"time step must be positive, got {dt}")
         if not (0 < safety <= 1):
@@ -172,6 +186,8 @@ class DemSystem:
         self.safety = float(safety)
         self.forced_substeps = None if substeps is None else int(substeps)
         self.max_substeps = int(max_substeps)
+        self.max_refinements = int(max_refinements)
+        self.watch_period2 = bool(watch_period2)
         self.energy_tolerance = float(energy_tolerance)
         self.check_energy = bool(check_energy)
         self.bodies = RigidBodies()
@@ -182,7 +198,13 @@ class DemSystem:
         self.dt_internal = self.dt
         self.dt_critical = math.inf
         self.mode_limits: list[ModeLimit] = []
+        self.dt_apriori = math.inf      # a-priori critical step (s), from the possible pairs
+        self.dt_network = math.inf      # critical step of the current contact network (s)
+        self.refine = 1                 # factor on the sub-steps after a guard fired
+        self.calm_steps = 0             # deck steps since the guard last fired
+        self.failed_in_step = 0         # failed contact problems reported in the last deck step
         self.last_contacts: Any = None
+        self._compliance: list[tuple[float, float] | None] = []
         self._initialized = False
         self._peak = 0.0
         #: (keys, springs) of tangential springs to start from (set before initialize()).
@@ -190,11 +212,19 @@ class DemSystem:
 
     # ------------------------------------------------------------------ set-up
     def add_particle(self, mass: float, J0: np.ndarray, x, R=None, v=None, omega=None,
-                     material: int = 0, centroid_file=None, radius: float = 0.0) -> int:
-        """Add a particle (see :meth:`RigidBodies.add` for units); returns its global index."""
+                     material: int = 0, centroid_file=None, radius: float = 0.0,
+                     compliance: tuple[float, float] | None = None) -> int:
+        """Add a particle (see :meth:`RigidBodies.add` for units); returns its global index.
+
+        compliance: (g_n, g_t) the body's worst normal and tangential point compliances (1/kg,
+        :func:`~nurbsdem.dynamics.stepcontrol.shape_compliance`) for the a-priori step
+        estimate; None: a sphere of bounding radius ``radius`` (g_n = 1/m, g_t = 1/m + r²/I)."""
         self._check_not_initialized()
-        return self.bodies.add(mass, J0, x, R=R, v=v, omega=omega, material=material,
-                               centroid_file=centroid_file, radius=radius)
+        i = self.bodies.add(mass, J0, x, R=R, v=v, omega=omega, material=material,
+                            centroid_file=centroid_file, radius=radius)
+        self._compliance.append(None if compliance is None else
+                                (float(compliance[0]), float(compliance[1])))
+        return i
 
     def add_wall(self, motion: PrescribedMotion | None = None, material: int = 0, name: str = "") -> int:
         """Add a fixed (motion None) or prescribed-motion wall; returns its **global** index N+k
@@ -231,9 +261,7 @@ class DemSystem:
         b = self.bodies
         mats_p = sorted(set(int(m) for m in b.material))
         mats_w = sorted(set(int(m) for m in self.walls.material))
-        r = b.radius
-        rot = np.where(r > 0, r * r / b.I[:, 0], 2.5 / b.mass)      # r²/I_min (sphere if unknown)
-        m_t = 1.0 / (1.0 / b.mass + rot)
+        m_n, m_t = self._effective_masses()
         limits: list[ModeLimit] = []
         pairs = []
         for i, ma in enumerate(mats_p):
@@ -244,12 +272,12 @@ class DemSystem:
         for iface, ma, mb, wall in pairs:
             sel_a = b.material == ma
             if wall:
-                mn, mtn = float(b.mass[sel_a].min()), float(m_t[sel_a].min())
+                mn, mtn = float(m_n[sel_a].min()), float(m_t[sel_a].min())
             elif ma == mb:
-                mn, mtn = _smallest_pair(b.mass[sel_a], None), _smallest_pair(m_t[sel_a], None)
+                mn, mtn = _smallest_pair(m_n[sel_a], None), _smallest_pair(m_t[sel_a], None)
             else:
                 sel_b = b.material == mb
-                mn = _smallest_pair(b.mass[sel_a], b.mass[sel_b])
+                mn = _smallest_pair(m_n[sel_a], m_n[sel_b])
                 mtn = _smallest_pair(m_t[sel_a], m_t[sel_b])
             if not math.isfinite(mn):
                 continue          # no such pair can occur (e.g. a single particle)
@@ -265,27 +293,109 @@ class DemSystem:
         dt_cr = min((lim.dt_cr for lim in limits), default=math.inf)
         return dt_cr, limits
 
-    def _choose_substeps(self) -> None:
-        self.dt_critical, self.mode_limits = self.critical_time_step()
-        dt_safe = self.safety * self.dt_critical
-        auto = 1 if not math.isfinite(dt_safe) else max(1, math.ceil(self.dt / dt_safe * (1 - 1e-12)))
+    def _effective_masses(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) worst normal and tangential effective masses (kg) of each particle's contacts."""
+        b = self.bodies
+        r = b.radius
+        rot = np.where(r > 0, r * r / b.I[:, 0], 2.5 / b.mass)      # r²/I_min (sphere if unknown)
+        g_n = 1.0 / b.mass
+        g_t = 1.0 / b.mass + rot
+        for i, g in enumerate(self._compliance):
+            if g is not None:
+                g_n[i], g_t[i] = g
+        return 1.0 / g_n, 1.0 / g_t
+
+    def _apriori_limit(self) -> None:
+        """The a-priori critical step over the possible pairs (computed once per system)."""
+        self.dt_apriori, self.mode_limits = self.critical_time_step()
         worst = min(self.mode_limits, key=lambda m: m.dt_cr) if self.mode_limits else None
-        why = (f"critical step {self.dt_critical:.3g} s from the {worst.mode} mode of interface "
-               f"{worst.interface} (m*={worst.m_eff:.4g} kg, omega={worst.omega:.4g} rad/s, "
-               f"zeta={worst.zeta:.3g}), safety {self.safety}") if worst else "no contact modes"
+        self._apriori_why = (
+            f"{worst.mode} mode of interface {worst.interface} (m*={worst.m_eff:.4g} kg, "
+            f"omega={worst.omega:.4g} rad/s, zeta={worst.zeta:.3g})") if worst else "no contact modes"
+
+    def _network_limit(self) -> tuple[float, str]:
+        """Critical step (s) of the current contact network plus the pairs that can close within
+        one deck step, and why (module docstring)."""
+        b = self.bodies
+        a, bb, p, n = self.c_a, self.c_b, self.c_point, self.c_normal
+        near = self._near_pairs()
+        if near is not None:
+            a, bb = np.concatenate([a, near[0]]), np.concatenate([bb, near[1]])
+            p, n = np.concatenate([p, near[2]]), np.concatenate([n, near[3]])
+        if a.shape[0] == 0:
+            return math.inf, "no contacts"
+        coeffs = self._table[self._mat_all[a], self._mat_all[bb]][:, :4]
+        omega2, gamma, body = network_rates(a, bb, p, n, coeffs, b.x, b.principal_rotations(),
+                                            b.mass, b.I)
+        dt = critical_step_from_rates(omega2, gamma)
+        n_contacts = int(np.count_nonzero(a == body) + np.count_nonzero(bb == body))
+        why = (f"contact network of {a.shape[0]} pairs ({self.c_a.shape[0]} in contact): highest "
+               f"frequency {math.sqrt(omega2):.4g} rad/s, damping rate {gamma:.4g} 1/s, "
+               f"centred on particle {body} with {n_contacts} contacts")
+        return dt, why
+
+    def _near_pairs(self):
+        """Separated pairs reported by the provider (``near_*`` fields of its ContactSet) whose
+        gap can close within one deck step: (a, b, point, normal), or None."""
+        cs = self.last_contacts
+        gap = getattr(cs, "near_gap", None)
+        if gap is None or len(gap) == 0:
+            return None
+        a, bb = np.asarray(cs.near_a, np.int64), np.asarray(cs.near_b, np.int64)
+        b = self.bodies
+        N = b.n
+        speed = np.zeros(self.n_bodies)
+        speed[:N] = np.linalg.norm(b.v, axis=1) + self._ell * np.linalg.norm(
+            omega_world(b.q, b.L, self._inv_I), axis=1)
+        speed[N:] = np.linalg.norm(self.wall_u, axis=1)
+        g = float(np.linalg.norm(self.gravity))
+        reach = 2.0 * (speed[a] + speed[bb]) * self.dt + g * self.dt * self.dt
+        sel = np.asarray(gap) <= reach
+        if not sel.any():
+            return None
+        return (a[sel], bb[sel], np.asarray(cs.near_point)[sel], np.asarray(cs.near_normal)[sel])
+
+    def _needed_substeps(self, dt_safe: float) -> int:
+        """Sub-steps that keep the internal step within the safe step dt_safe (s)."""
+        if not math.isfinite(dt_safe):
+            return 1
+        return max(1, math.ceil(self.dt / dt_safe * (1 - 1e-12)))
+
+    def _control_step(self, initial: bool = False) -> None:
+        """Choose the sub-steps of the next deck step from both limits (module docstring)."""
+        if not initial and self.forced_substeps is not None:
+            return
+        self.dt_network, net_why = self._network_limit()
+        self.dt_critical = min(self.dt_apriori, self.dt_network)
+        dt_safe = self.safety * self.dt_critical
+        why = (f"critical step {self.dt_critical:.3g} s from the "
+               + (self._apriori_why if self.dt_apriori <= self.dt_network else net_why)
+               + f", safety {self.safety}")
         if self.forced_substeps is not None:
             self.substeps = self.forced_substeps
-            if self.dt / self.substeps > dt_safe:
+            self.dt_internal = self.dt / self.substeps
+            if self.dt_internal > dt_safe:
                 log.warning("substeps forced to %d: internal step %.3g s exceeds the safe step "
-                            "%.3g s (%s)", self.substeps, self.dt / self.substeps, dt_safe, why)
-        else:
-            if auto > self.max_substeps:
-                raise InputError(f"time step {self.dt} s would need {auto} sub-steps "
-                                 f"(> {self.max_substeps}); {why}")
-            self.substeps = auto
+                            "%.3g s (%s)", self.substeps, self.dt_internal, dt_safe, why)
+            log.info("time step: deck dt %.4g s, %d sub-step(s) of %.4g s (forced); %s", self.dt,
+                     self.substeps, self.dt_internal, why)
+            return
+        need = self._needed_substeps(dt_safe) * self.refine
+        if need > self.max_substeps:
+            raise InputError(f"time step {self.dt} s would need {need} sub-steps "
+                             f"(> {self.max_substeps}); {why}")
+        old = self.substeps
+        if initial or need > old or need < FALL_HYSTERESIS * old:
+            self.substeps = need
         self.dt_internal = self.dt / self.substeps
-        log.info("time step: deck dt %.4g s, %d sub-step(s) of %.4g s; %s", self.dt,
-                 self.substeps, self.dt_internal, why)
+        if initial:
+            log.info("time step: deck dt %.4g s, %d sub-step(s) of %.4g s; %s", self.dt,
+                     self.substeps, self.dt_internal, why)
+        elif self.substeps != old:
+            log.info("time step at t = %.6g s: %d -> %d sub-step(s) of %.4g s (%s); %s",
+                     self.time, old, self.substeps, self.dt_internal,
+                     "the contact network stiffened" if self.substeps > old else "the pack loosened",
+                     why + (f", refined x{self.refine} by the guard" if self.refine > 1 else ""))
 
     # ------------------------------------------------------------------ initialisation
     def initialize(self) -> None:
@@ -301,9 +411,15 @@ class DemSystem:
         nm = 1 + int(max(np.max(b.material, initial=0), np.max(self.walls.material, initial=0)))
         self._table = self.interfaces.as_array(nm)
         self._mat_all = np.concatenate([b.material, self.walls.material]).astype(np.int64)
-        self._choose_substeps()
         ell = np.where(b.radius > 0, b.radius, np.sqrt(b.I.sum(axis=1) / (2 * b.mass)))
+        self._ell = ell
         self._scale_floor = max(float(np.sum(b.mass * np.linalg.norm(self.gravity) * ell)), 1e-300)
+        # period-2 guard: round-off floors of a step's displacement (m) and rotation (kg m²)
+        self._alt_floor_x = 1e-9 * ell
+        self._alt_floor_L = 1e-9 * b.I[:, 2]
+        self.alt_count = np.zeros(b.n, np.int64)
+        self.alt_prev_v = np.zeros((b.n, 3))
+        self.alt_prev_L = np.zeros((b.n, 3))
         self.hist_keys = np.zeros(0, dtype=np.int64)
         self.hist_springs = np.zeros((0, 3))
         if self.initial_history is not None:   # tangential springs carried over from a previous step
@@ -313,6 +429,8 @@ class DemSystem:
         self.ledger = EnergyLedger()
         self._initialized = True
         self._evaluate(self.time, 0.0)
+        self._apriori_limit()
+        self._control_step(initial=True)
         if self.initial_history is not None:
             # carried-over springs bring their stored energy with them: none of it is dissipated
             self.ledger.tangential_spring_work = float(self.c_eel[:, 1].sum()) if self.c_eel.shape[0] else 0.0
@@ -366,7 +484,7 @@ class DemSystem:
         self.hist_keys, self.hist_springs = store_history(key, spring)
         force[: b.n] += b.mass[:, None] * self.gravity[None, :]
         self.force, self.torque = force, torque
-        self.c_a, self.c_b, self.c_point, self.c_ftot = a, bb, point, ftot
+        self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
         self.c_fet = fet
         self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
 
@@ -398,41 +516,116 @@ class DemSystem:
         d_new, _ = self.walls.kinematics(t_new)
         u_mean = (d_new - self.wall_d) / h
         self._kick(0.5 * h, u_mean)
+        self._watch_alternation(h)
         drift(b.x, b.v, b.q, b.L, self._inv_I, h)
         self._evaluate(t_new, h)
         self._kick(0.5 * h, u_mean)
+
+    def _watch_alternation(self, h: float) -> None:
+        """Period-2 guard on the half-step velocities (module docstring)."""
+        b = self.bodies
+        if b.n == 0 or not self.watch_period2:
+            return
+        worst = alternation_update(b.v, b.L, self.alt_prev_v, self.alt_prev_L, self.alt_count,
+                                   self._alt_floor_x, self._alt_floor_L, 1.0 / h)
+        if worst >= 0 and self.alt_count[worst] >= ALTERNATION_STEPS:
+            amp = float(np.linalg.norm(b.v[worst])) * h
+            raise _Unstable(f"period-2 motion of particle {worst}: its motion reversed at each "
+                            f"of the last {int(self.alt_count[worst])} internal steps (displacement "
+                            f"{amp:.3g} m per step), a mode beyond the stability limit")
 
     # ------------------------------------------------------------------ stepping
     def step(self) -> EnergySample:
         """Advance one deck step (``substeps`` internal steps); returns the energies at its end.
 
-        Raises InstabilityError (after rolling back to the state at the start of the step)."""
+        A deck step the guard finds unstable is rolled back and repeated with twice the
+        sub-steps, up to ``max_refinements`` times; then InstabilityError is raised (with the
+        system rolled back to the start of the step)."""
         self.initialize()
         good = self.get_state()
+        snapshot = getattr(self.provider, "snapshot", None)
+        provider_state = snapshot() if snapshot is not None else None
+        tried: list[str] = []
+        while True:
+            n_sub, refine = self.substeps, self.refine
+            try:
+                e = self._try_step()
+                break
+            except _Unstable as exc:
+                self.set_state(good)
+                if provider_state is not None:
+                    self.provider.restore(provider_state)
+                tried.append(f"{n_sub} sub-step(s): {exc}")
+                if (self.forced_substeps is not None or len(tried) > self.max_refinements
+                        or 2 * n_sub > self.max_substeps):
+                    self._give_up(tried)
+                self.refine = 2 * refine
+                self.substeps = 2 * n_sub
+                self.dt_internal = self.dt / self.substeps
+                self.calm_steps = 0
+                log.warning("deck step at t = %.6g s repeated with %d sub-steps of %.4g s: %s",
+                            self.time, self.substeps, self.dt_internal, exc)
+        self._peak = max(self._peak, e.kinetic + e.elastic)
+        self.calm_steps += 1
+        if self.refine > 1 and self.calm_steps >= REFINE_DECAY_STEPS:
+            self.refine //= 2
+            self.calm_steps = 0
+        self._control_step()
+        return e
+
+    def _try_step(self) -> EnergySample:
+        """The internal steps of one deck step and the guards; raises _Unstable."""
         t_start = self.time
         n = self.substeps
-        try:
-            for k in range(1, n + 1):
-                t_new = t_start + self.dt * k / n
-                with np.errstate(all="ignore"):
-                    self._internal_step(t_new, self.dt_internal)
-                b = self.bodies
-                if not (state_is_finite(b.x, b.v, b.q, b.L) and np.isfinite(self.force).all()):
-                    raise _Unstable(f"non-finite state at t = {t_new:.6g} s")
-            self.step_count += 1
-            e = self.energy()
-            self._check_energy(e)
-        except _Unstable as exc:
-            self.set_state(good)
-            msg = (f"integration unstable in the deck step starting at t = {t_start:.6g} s: {exc}; "
-                   f"deck dt {self.dt:.4g} s with {n} sub-step(s) of {self.dt_internal:.4g} s, "
-                   f"estimated critical step {self.dt_critical:.4g} s (safety {self.safety}). "
-                   f"Rolled back to the last good state (t = {t_start:.6g} s); reduce the time "
-                   f"step or let the solver sub-step")
-            log.error(msg)
-            raise InstabilityError(msg, time=t_start, reason=str(exc), step=self.step_count) from None
-        self._peak = max(self._peak, e.kinetic + e.elastic)
+        self.failed_in_step = 0
+        for k in range(1, n + 1):
+            t_new = t_start + self.dt * k / n
+            with np.errstate(all="ignore"):
+                self._internal_step(t_new, self.dt_internal)
+            self.failed_in_step += int(getattr(self.last_contacts, "failed", 0) or 0)
+            b = self.bodies
+            if not (state_is_finite(b.x, b.v, b.q, b.L) and np.isfinite(self.force).all()):
+                raise _Unstable(f"non-finite state at t = {t_new:.6g} s")
+        self.step_count += 1
+        e = self.energy()
+        self._check_energy(e)
         return e
+
+    def _give_up(self, tried: list[str]) -> None:
+        """Raise InstabilityError with what was tried and a diagnosis (the state is the last
+        good one, at the start of the deck step)."""
+        t = self.time
+        depth = self._max_relative_depth()
+        cause = []
+        if self.failed_in_step:
+            cause.append(f"{self.failed_in_step} contact problem(s) (LCP) failed in this step")
+        if depth > 0.1:
+            cause.append(f"contacts penetrate up to {depth:.2g} of the particle size (the normal "
+                         f"penalty is too soft for this load or impact speed)")
+        if self.forced_substeps is not None:
+            advice = "the sub-steps are forced: let the solver choose them"
+        elif len(tried) > 1:
+            advice = (f"repeating it with up to {2 ** (len(tried) - 1)}x the sub-steps did not "
+                      f"help" + (": " + "; ".join(cause) if cause else ""))
+        else:
+            advice = "; ".join(cause) if cause else "reduce the time step"
+        msg = (f"integration unstable in the deck step starting at t = {t:.6g} s (deck dt "
+               f"{self.dt:.4g} s, estimated critical step {self.dt_critical:.4g} s, safety "
+               f"{self.safety}); tried {' / '.join(tried)}. Rolled back to the last good state "
+               f"(t = {t:.6g} s): {advice}")
+        log.error(msg)
+        raise InstabilityError(msg, time=t, reason=tried[-1], step=self.step_count) from None
+
+    def _max_relative_depth(self) -> float:
+        """Largest penetration of the last evaluation over the smaller body's size (-)."""
+        cs = self.last_contacts
+        depth = np.asarray(getattr(cs, "depth", np.zeros(0)), float)
+        if depth.size == 0:
+            return 0.0
+        size = np.concatenate([self._ell, np.full(self.walls.n, np.inf)])
+        a = np.asarray(cs.body_a, np.int64)
+        bb = np.asarray(cs.body_b, np.int64)
+        return float(np.max(depth / np.minimum(size[a], size[bb])))
 
     def advance(self, n_steps: int, callback: Callable[["DemSystem", EnergySample], None] | None = None
                 ) -> EnergySample | None:
@@ -508,7 +701,8 @@ class DemSystem:
         b = self.bodies
         st.update(x=b.x.copy(), q=b.q.copy(), v=b.v.copy(), L=b.L.copy(),
                   ledger=self.ledger.to_array(),
-                  counters=np.array([self.step_count, self.substeps], dtype=np.int64),
+                  counters=np.array([self.step_count, self.substeps, self.refine,
+                                     self.calm_steps], dtype=np.int64),
                   scalars=np.array([self.t0, self.dt, self._peak]))
         return st
 
@@ -525,6 +719,9 @@ class DemSystem:
             setattr(self, k, np.array(st[k], copy=True))
         self.ledger = EnergyLedger.from_array(st["ledger"])
         self.step_count = int(st["counters"][0])
+        if st["counters"].shape[0] >= 4:
+            self.substeps, self.refine, self.calm_steps = (int(c) for c in st["counters"][1:4])
+            self.dt_internal = self.dt / self.substeps
         self.t0 = float(st["scalars"][0])
         if float(st["scalars"][1]) != self.dt:
             raise InputError("checkpoint was written with a different deck time step")

@@ -1,0 +1,276 @@
+"""Time-step control that sees the whole contact network, and a guard against period-2 motion.
+
+Why a network and not a pair
+----------------------------
+The explicit scheme (:mod:`nurbsdem.dynamics.integrator`) is stable while the internal step h
+satisfies, for every mode of the linearised contact network,
+
+    h < Δt_cr = 2 / (γ/2 + √(ω² + γ²/4))  =  (2/ω)(√(1+ζ²) − ζ),   ζ = γ / (2ω)        (1)
+
+(the digest's formula written with the damping rate γ = 2ζω, which makes plain that Δt_cr falls
+when either ω² or γ grows).  For one pair, ω² = k/m* and γ = c/m*.  A body with n contacts has a
+stiffer mode than any of its pairs (in a face-centred cubic block of spheres ω² reaches about
+8× the pair value), so a step chosen from the stiffest pair can be unstable in a dense pack.
+
+The network's operators
+-----------------------
+With the generalised coordinates of the N particles scaled by the mass matrix,
+y = M^{1/2} (u, θ) (θ in each body's principal frame), the linearised contact stiffness is the
+symmetric positive semi-definite operator
+
+    A_K = Σ_c J_cᵀ D_c J_c ,   D_c = εn n nᵀ + εt (1 − n nᵀ)                             (2)
+
+where J_c y is the relative displacement of body B with respect to body A at the contact point
+p (translation plus rotation × lever arm r = p − x, so an off-centre contact on a flat body
+counts with its true, smaller effective mass), and walls have no degrees of freedom.  The
+damping operator A_C is the same with (cn, ct).  ω² = λmax(A_K), γ = λmax(A_C) in (1) (for
+damping proportional to stiffness, as in every interface of the paper, the two maxima belong to
+the same mode and (1) is exact; otherwise it is conservative).
+
+λmax is computed matrix-free by Lanczos iteration (:func:`lanczos_max`, a few tens of
+products, each O(K)) from a fixed start vector, so the result is deterministic and a restart
+reproduces it bit for bit.  The operator includes, besides the active contacts, the separated
+pairs that can close within the next deck step ("near" pairs), so the sub-step count rises
+*before* the contact appears.  The a-priori estimate for contacts that are not yet near uses
+each shape's worst point compliance (:func:`surface_compliance`): the largest
+1/m + (r × n)ᵀ I⁻¹ (r × n) over its surface.
+
+Period-2 guard
+--------------
+An explicit step beyond the limit of the highest mode shows as motion that reverses at every
+internal step.  Its full-step velocities are ~0, so the kinetic energy of the monitors cannot
+see it.  :func:`alternation_update` watches the half-step velocities (the drift of each internal
+step) instead: a body whose translational or angular half-step velocity reverses at every step
+(cosine < −0.9) without decaying (ratio ≥ 0.9), above a round-off floor, for
+:data:`ALTERNATION_STEPS` consecutive steps, is in period-2 motion.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: consecutive reversing internal steps that make period-2 motion
+ALTERNATION_STEPS = 10
+#: a reversal: cos(angle between successive half-step velocities) below this
+ALTERNATION_COS = -0.9
+#: not decaying: |v_{n+1/2}| >= this × |v_{n-1/2}|
+ALTERNATION_RATIO = 0.9
+#: Lanczos steps of the network estimate
+LANCZOS_STEPS = 30
+
+
+def critical_step(k: float, c: float, m: float) -> tuple[float, float, float]:
+    """(ω rad/s, ζ, Δt_cr s) of a spring k (N/m) – dashpot c (N s/m) – mass m (kg) for the
+    explicit scheme: Δt_cr = (2/ω)(√(1+ζ²) − ζ).  Δt_cr = inf when k = 0."""
+    if k <= 0 or not math.isfinite(m):
+        return 0.0, 0.0, math.inf
+    omega = math.sqrt(k / m)
+    zeta = c / (2.0 * math.sqrt(k * m))
+    return omega, zeta, (2.0 / omega) * (math.sqrt(1.0 + zeta * zeta) - zeta)
+
+
+def critical_step_from_rates(omega2: float, gamma: float) -> float:
+    """Eq. (1): Δt_cr (s) from the largest squared frequency ω² (1/s²) and damping rate γ (1/s)."""
+    if omega2 <= 0 and gamma <= 0:
+        return math.inf
+    return 2.0 / (0.5 * gamma + math.sqrt(max(omega2, 0.0) + 0.25 * gamma * gamma))
+
+
+# --------------------------------------------------------------------------- a priori
+def surface_compliance(points: np.ndarray, normals: np.ndarray, mass: float,
+                       inertia: np.ndarray) -> tuple[float, float]:
+    """Worst point compliances of a body (1/kg) over sampled surface points.
+
+    points (S,3) relative to the centroid and normals (S,3), in the body frame; inertia (3,3)
+    about the centroid in that frame (kg m²).  Returns (g_n, g_t): the largest
+    1/m + (r×n)ᵀ I⁻¹ (r×n) (normal direction) and the largest eigenvalue of the compliance
+    G = 1/m + [r]ₓᵀ I⁻¹ [r]ₓ restricted to the tangent plane.  An effective mass of a contact
+    at that point is 1/g.  For a sphere (r ∥ n): g_n = 1/m, g_t = 1/m + r²/I = 3.5/m.
+    """
+    inv_I = np.linalg.inv(0.5 * (inertia + inertia.T))
+    rxn = np.cross(points, normals)
+    g_n = 1.0 / mass + np.einsum("si,ij,sj->s", rxn, inv_I, rxn)
+    # G = 1/m + [r]x^T I^-1 [r]x ; [r]x w = r x w
+    rx = np.zeros((points.shape[0], 3, 3))
+    rx[:, 0, 1], rx[:, 0, 2] = -points[:, 2], points[:, 1]
+    rx[:, 1, 0], rx[:, 1, 2] = points[:, 2], -points[:, 0]
+    rx[:, 2, 0], rx[:, 2, 1] = -points[:, 1], points[:, 0]
+    G = np.einsum("sji,jk,skl->sil", rx, inv_I, rx) + np.eye(3)[None] / mass
+    P = np.eye(3)[None] - np.einsum("si,sj->sij", normals, normals)
+    g_t = np.linalg.eigvalsh(np.einsum("sij,sjk,skl->sil", P, G, P))[:, -1]
+    return float(g_n.max()), float(g_t.max())
+
+
+def shape_compliance(shape, mass: float, inertia: np.ndarray, centroid: np.ndarray,
+                     n: int = 16) -> tuple[float, float]:
+    """:func:`surface_compliance` of a NURBS shape sampled on a (2n+1)² grid of parameters per
+    patch, edges and mid-lines included (exact points and normals; file frame; inertia (3,3)
+    about ``centroid``).  Points where the normal is undefined (poles) are skipped."""
+    pts, nrm = [], []
+    for patch in shape.patches:
+        u0, u1, v0, v1 = patch.domain
+        t = np.linspace(0.0, 1.0, 2 * n + 1)
+        U, V = np.meshgrid(u0 + t * (u1 - u0), v0 + t * (v1 - v0), indexing="ij")
+        d = patch.evaluate(U.ravel(), V.ravel(), 1)
+        cr = np.cross(d[:, 1], d[:, 2])
+        ln = np.linalg.norm(cr, axis=1)
+        ok = ln > 1e-12 * max(float(ln.max()), 1e-300)
+        pts.append(d[ok, 0])
+        nrm.append(cr[ok] / ln[ok, None])
+    return surface_compliance(np.concatenate(pts) - np.asarray(centroid, float)[None],
+                              np.concatenate(nrm), mass, inertia)
+
+
+# --------------------------------------------------------------------------- network operator
+@njit(cache=True)
+def _relative_displacement(y, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, out):
+    """out = J y: relative displacement (m-scaled) of B w.r.t. A at the contact (3,)."""
+    for k in range(3):
+        out[k] = 0.0
+    for side in range(2):
+        i = b if side == 0 else a
+        if i >= n_part:
+            continue
+        sign = 1.0 if side == 0 else -1.0
+        r = r_b if side == 0 else r_a
+        # rotation in the world: theta_w = Q (y_rot / sqrt(I))
+        t0 = y[6 * i + 3] / sq_I[i, 0]
+        t1 = y[6 * i + 4] / sq_I[i, 1]
+        t2 = y[6 * i + 5] / sq_I[i, 2]
+        w0 = Q[i, 0, 0] * t0 + Q[i, 0, 1] * t1 + Q[i, 0, 2] * t2
+        w1 = Q[i, 1, 0] * t0 + Q[i, 1, 1] * t1 + Q[i, 1, 2] * t2
+        w2 = Q[i, 2, 0] * t0 + Q[i, 2, 1] * t1 + Q[i, 2, 2] * t2
+        out[0] += sign * (y[6 * i] / sq_m[i] + w1 * r[2] - w2 * r[1])
+        out[1] += sign * (y[6 * i + 1] / sq_m[i] + w2 * r[0] - w0 * r[2])
+        out[2] += sign * (y[6 * i + 2] / sq_m[i] + w0 * r[1] - w1 * r[0])
+
+
+@njit(cache=True)
+def _scatter_force(f, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, z):
+    """z += Jᵀ f: the contact force f on B (−f on A) as scaled generalised forces."""
+    for side in range(2):
+        i = b if side == 0 else a
+        if i >= n_part:
+            continue
+        sign = 1.0 if side == 0 else -1.0
+        r = r_b if side == 0 else r_a
+        m0 = r[1] * f[2] - r[2] * f[1]
+        m1 = r[2] * f[0] - r[0] * f[2]
+        m2 = r[0] * f[1] - r[1] * f[0]
+        for k in range(3):
+            z[6 * i + k] += sign * f[k] / sq_m[i]
+        for k in range(3):
+            z[6 * i + 3 + k] += sign * (Q[i, 0, k] * m0 + Q[i, 1, k] * m1 + Q[i, 2, k] * m2) / sq_I[i, k]
+
+
+@njit(cache=True)
+def network_apply(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                  normal: np.ndarray, k_n: np.ndarray, k_t: np.ndarray, x: np.ndarray,
+                  Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray) -> np.ndarray:
+    """z = A y for the operator of Eq. (2) with per-contact normal/tangential coefficients
+    k_n, k_t (stiffness N/m, or damping N s/m).  y, z (6N,); x (N,3) centroids; Q (N,3,3)
+    principal→world; sq_m (N,) √m; sq_I (N,3) √(principal moments).  Walls: index ≥ N."""
+    n_part = x.shape[0]
+    z = np.zeros(y.shape[0])
+    rel = np.empty(3)
+    f = np.empty(3)
+    r_a = np.zeros(3)
+    r_b = np.zeros(3)
+    for c in range(body_a.shape[0]):
+        a, b = body_a[c], body_b[c]
+        for k in range(3):
+            r_a[k] = point[c, k] - x[a, k] if a < n_part else 0.0
+            r_b[k] = point[c, k] - x[b, k] if b < n_part else 0.0
+        _relative_displacement(y, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, rel)
+        dn = rel[0] * normal[c, 0] + rel[1] * normal[c, 1] + rel[2] * normal[c, 2]
+        for k in range(3):
+            f[k] = k_n[c] * dn * normal[c, k] + k_t[c] * (rel[k] - dn * normal[c, k])
+        _scatter_force(f, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, z)
+    return z
+
+
+def lanczos_max(apply, dim: int, steps: int = LANCZOS_STEPS) -> tuple[float, np.ndarray]:
+    """Largest eigenvalue of a symmetric positive semi-definite operator and its Ritz vector.
+
+    ``apply(y) -> A y`` on (dim,) vectors; Lanczos with full re-orthogonalisation from a fixed
+    start vector (deterministic).  The Ritz value is a lower bound of λmax that converges
+    from below (to round-off within a few tens of steps for the spectra met here)."""
+    if dim == 0:
+        return 0.0, np.zeros(0)
+    v = 1.0 + 0.5 * np.sin(np.arange(dim) * 1.2345 + 0.1)
+    v /= np.linalg.norm(v)
+    m = min(steps, dim)
+    V = np.zeros((m, dim))
+    alpha = np.zeros(m)
+    beta = np.zeros(m)
+    k = 0
+    for k in range(m):
+        V[k] = v
+        w = apply(v)
+        alpha[k] = v @ w
+        w = w - V[: k + 1].T @ (V[: k + 1] @ w)          # full re-orthogonalisation
+        w = w - V[: k + 1].T @ (V[: k + 1] @ w)
+        nb = float(np.linalg.norm(w))
+        beta[k] = nb
+        if nb <= 1e-12 * max(abs(alpha[: k + 1]).max(), 1e-300):
+            break
+        v = w / nb
+    T = np.diag(alpha[: k + 1]) + np.diag(beta[:k], 1) + np.diag(beta[:k], -1)
+    ev, evec = np.linalg.eigh(T)
+    return max(float(ev[-1]), 0.0), V[: k + 1].T @ evec[:, -1]
+
+
+def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                  normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
+                  mass: np.ndarray, I: np.ndarray) -> tuple[float, float, int]:
+    """(ω² 1/s², γ 1/s, dominant body) of the contact network: λmax of Eq. (2)'s stiffness and
+    damping operators, and the particle with the largest share of the stiffest mode (−1 when
+    there is no contact).  coeffs (K,4): εn, cn, εt, ct of each contact."""
+    N = x.shape[0]
+    if body_a.shape[0] == 0 or N == 0:
+        return 0.0, 0.0, -1
+    sq_m, sq_I = np.sqrt(mass), np.sqrt(I)
+    args = (body_a, body_b, point, normal)
+
+    def op(kn, kt):
+        return lambda y: network_apply(y, *args, kn, kt, x, Q, sq_m, sq_I)
+    kn, cn, kt, ct = (np.ascontiguousarray(coeffs[:, j]) for j in range(4))
+    omega2, vec = lanczos_max(op(kn, kt), 6 * N)
+    gamma = lanczos_max(op(cn, ct), 6 * N)[0] if (cn.any() or ct.any()) else 0.0
+    share = (vec.reshape(N, 6) ** 2).sum(axis=1)
+    return omega2, gamma, int(np.argmax(share))
+
+
+# --------------------------------------------------------------------------- period-2 guard
+@njit(cache=True)
+def _reversed(arr: np.ndarray, prev: np.ndarray, i: int, floor: float) -> bool:
+    """Whether row i of arr reverses row i of prev without decaying (prev updated to arr)."""
+    dot = arr[i, 0] * prev[i, 0] + arr[i, 1] * prev[i, 1] + arr[i, 2] * prev[i, 2]
+    n1 = math.sqrt(arr[i, 0] ** 2 + arr[i, 1] ** 2 + arr[i, 2] ** 2)
+    n0 = math.sqrt(prev[i, 0] ** 2 + prev[i, 1] ** 2 + prev[i, 2] ** 2)
+    for k in range(3):
+        prev[i, k] = arr[i, k]
+    return (n1 > floor and n0 > floor and dot < ALTERNATION_COS * n1 * n0
+            and n1 >= ALTERNATION_RATIO * n0)
+
+
+@njit(cache=True)
+def alternation_update(v: np.ndarray, L: np.ndarray, prev_v: np.ndarray, prev_L: np.ndarray,
+                       count: np.ndarray, floor_x: np.ndarray, floor_L: np.ndarray,
+                       inv_h: float) -> int:
+    """Count, per body, consecutive internal steps whose half-step velocity v (N,3) or angular
+    momentum L (N,3) reversed with respect to the previous step's (prev_v, prev_L, updated in
+    place) without decaying; reset on any other step or below the round-off floors:
+    floor_x (N,) m of displacement and floor_L (N,) kg m² of angular momentum × step, both
+    divided by the step h (inv_h = 1/h, 1/s).  Returns the body with the longest run (its count
+    in ``count``), −1 when there is none."""
+    worst, best = -1, 0
+    for i in range(v.shape[0]):
+        flip_v = _reversed(v, prev_v, i, floor_x[i] * inv_h)
+        flip_L = _reversed(L, prev_L, i, floor_L[i] * inv_h)
+        count[i] = count[i] + 1 if (flip_v or flip_L) else 0
+        if count[i] > best:
+            best, worst = count[i], i
+    return worst
