@@ -246,3 +246,76 @@ Output
     assert summary.simulated_time == pytest.approx(0.1) and summary.failed == 0
     assert summary.active_max >= 1                     # they reached the floor
     assert abs(summary.balance_error) < 1e-3 * summary.balance_scale
+
+
+# --------------------------------------------------------------------------- failed LCPs
+def failing(monkeypatch, when):
+    """Make the scene's particle LCPs fail (garbage rows flagged failed) while ``when()``."""
+    import nurbsdem.contact.scene as scene_mod
+    from nurbsdem.contact.lcp import F_SD, I_FAIL
+
+    real = scene_mod.detect_batch
+
+    def detect(*args, **kw):
+        rf, ri = real(*args, **kw)
+        if when():
+            rf[:, F_SD] = -1.0                 # a 1 m "penetration": must never act
+            ri[:, I_FAIL] = 1
+        return rf, ri
+    monkeypatch.setattr(scene_mod, "detect_batch", detect)
+
+
+def two_spheres_kin(gap_x, r=0.02):
+    from types import SimpleNamespace
+    x = np.array([[0.1, 0.1, 0.1], [0.1 + 2 * r + gap_x, 0.1, 0.1]])
+    return SimpleNamespace(x=x, R=np.repeat(np.eye(3)[None], 2, 0), position=x.copy(),
+                           wall_displacement=np.zeros((0, 3)))
+
+
+def test_a_failed_lcp_reuses_the_moved_solution_once_then_drops_the_pair(monkeypatch, caplog):
+    r = 0.02
+    scene = SceneContacts([sphere(r)], np.zeros(2, np.int64))
+    fail = [False]
+    failing(monkeypatch, lambda: fail[0])
+    cs = scene(two_spheres_kin(-1e-4))
+    assert cs.active == 1 and cs.depth[0] == pytest.approx(1e-4, abs=1e-12)
+    fail[0] = True
+    with caplog.at_level(logging.WARNING, logger="nurbsdem"):
+        cs = scene(two_spheres_kin(-5e-5))          # B moved 50 µm away, the LCP fails
+    assert cs.failed == 1 and cs.reused == 1 and cs.active == 1
+    assert cs.depth[0] == pytest.approx(5e-5, abs=1e-12)   # the old solution moved with B
+    np.testing.assert_allclose(cs.normal[0], [1, 0, 0], atol=1e-10)
+    cs = scene(two_spheres_kin(-4e-5))               # fails again: left out
+    assert cs.failed == 1 and cs.dropped == 1 and cs.active == 0
+    msgs = [rec.getMessage() for rec in caplog.records]
+    assert any("particles 0 and 1" in m and "moved rigidly" in m for m in msgs)
+    assert any("left out of the force evaluation" in m for m in msgs)
+    fail[0] = False
+    cs = scene(two_spheres_kin(-4e-5))               # converges again (cold): back in
+    assert cs.active == 1 and cs.failed == 0 and cs.depth[0] == pytest.approx(4e-5, abs=1e-12)
+
+
+def test_a_failing_pair_never_pushes_for_more_than_one_evaluation(monkeypatch):
+    """Two spheres pressed together; from the 5th force evaluation on, every LCP of the pair
+    fails.  Before, the last good row (1e-4 m deep) kept pushing them apart for as long as the
+    failures lasted."""
+    r, m = 0.02, 0.1
+    s = DemSystem(dt=1e-4, gravity=(0, 0, 0), interfaces=InterfaceTable(default=PAPER))
+    s.add_particle(m, sphere_inertia(m, r), [0.1, 0.1, 0.1], radius=r)
+    s.add_particle(m, sphere_inertia(m, r), [0.1 + 2 * r - 1e-4, 0.1, 0.1], radius=r)
+    scene = SceneContacts([sphere(r)], np.zeros(2, np.int64))
+    calls = [0]
+    failing(monkeypatch, lambda: calls[0] >= 5)
+    pushing = []
+
+    def provider(kin):
+        calls[0] += 1
+        cs = scene(kin)
+        if calls[0] >= 5:
+            pushing.append(cs.active)
+        return cs
+    s.set_contact_provider(provider)
+    for _ in range(20):
+        s.step()
+    assert len(pushing) > 10 and sum(pushing) == 1 and pushing[0] == 1
+    assert np.all(s.force == 0)

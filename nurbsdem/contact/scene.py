@@ -68,6 +68,8 @@ class ContactSet:
     reused: int = 0
     #: failed LCPs whose pair was left out of the force evaluation
     dropped: int = 0
+    #: keys of the pairs left out (their elastic energy is booked as dissipated by the system)
+    dropped_keys: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     near_a: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     near_b: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     near_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -262,7 +264,7 @@ class SceneContacts:
         """The ContactSet of this call from the LCP rows; failed rows are answered by the
         previous solution moved rigidly (once) or left out (module docstring)."""
         failed = ri[:, I_FAIL].astype(bool)
-        reused = []
+        reused, dropped = [], []
         for r in np.nonzero(failed)[0].tolist():
             k = int(keys[r])
             if pi_all[r, I_VALID] and k not in self.reused and self.prev_pose is not None:
@@ -273,6 +275,7 @@ class SceneContacts:
             else:
                 ri[r, I_ACTIVE] = 0
                 ri[r, I_VALID] = 0
+                dropped.append(k)
                 self._warn(k, int(a[r]), int(b[r]), "no fresh converged solution to fall back on: "
                            "the pair is left out of the force evaluation")
         self.reused = frozenset(reused)
@@ -290,7 +293,8 @@ class SceneContacts:
                         key=keys[sel].astype(np.int64), degenerated=deg.astype(np.int64),
                         monitored=int(keys.shape[0]), active=int(sel.shape[0]),
                         degenerated_count=int(np.count_nonzero(deg)), failed=n_failed,
-                        reused=len(reused), dropped=n_failed - len(reused),
+                        reused=len(reused), dropped=len(dropped),
+                        dropped_keys=np.array(dropped, np.int64),
                         near_a=a[near].astype(np.int64), near_b=b[near].astype(np.int64),
                         near_point=0.5 * (rf[near, F_PA:F_PA + 3] + rf[near, F_PB:F_PB + 3]),
                         near_normal=rf[near, F_N:F_N + 3].copy(), near_gap=rf[near, F_SD].copy())

@@ -7,7 +7,9 @@ Per sample (:class:`EnergySample`):
   with g = (0, 0, −9.81) it is Σ m 9.81 z);
 * ``elastic_normal`` Σ ½ εn d², ``elastic_tangential`` Σ ½ εt |s|² over the active contacts;
 * ``dissipated_normal`` / ``dissipated_tangential``: work removed by the normal / tangential
-  dashpots (incl. the no-tension clip of the normal force), ``dissipated_friction``: work done on
+  dashpots (incl. the no-tension clip of the normal force; the normal part also takes the
+  elastic energy of a contact left out after its contact problem failed twice,
+  :mod:`nurbsdem.contact.scene`), ``dissipated_friction``: work done on
   the tangential springs minus the tangential elastic energy still stored (slip of the Coulomb
   return mapping, and springs dropped loaded when a contact ends; see
   :mod:`nurbsdem.dynamics.forces`);

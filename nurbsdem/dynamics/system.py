@@ -461,6 +461,7 @@ class DemSystem:
         self.wall_d, self.wall_u = self.walls.kinematics(t)
         cs = self.provider(self._kinematics(t))
         self.last_contacts = cs
+        self._book_dropped(cs)
         a, bb, pa, pb, nrm, dep, key = _unpack(cs, self.n_bodies)
         K = a.shape[0]
         if K and np.isnan(self._table[self._mat_all[a], self._mat_all[bb], 0]).any():
@@ -487,6 +488,16 @@ class DemSystem:
         self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
         self.c_fet = fet
         self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
+
+    def _book_dropped(self, cs: Any) -> None:
+        """A pair the provider left out after a failed contact problem takes its normal elastic
+        energy with it: book it as dissipated (normal), so the energy balance stays closed."""
+        dropped = getattr(cs, "dropped_keys", None)
+        if dropped is None or len(dropped) == 0 or getattr(self, "c_key", None) is None:
+            return
+        gone = np.isin(self.c_key, dropped)
+        if gone.any():
+            self.ledger.dissipated_normal += float(self.c_eel[gone, 0].sum())
 
     def _kick(self, hk: float, wall_u: np.ndarray) -> None:
         """Half kick with the stored loads, accumulating the exact discrete work of the impulses.
