@@ -543,3 +543,44 @@ def summary_text(model: Model) -> str:
                    f"{o.vtk_resolution}); monitors every {o.monitors_every:g} s; results.h5 "
                    f"every {o.results_interval:g} s; checkpoint every {o.checkpoint_every:g} s")
     return "\n".join(out)
+
+
+# ---------------------------------------------------------------------------- comparing models
+
+#: Fields that do not change the simulation (where an entry is written, file names).
+_NOT_PHYSICS = {"line", "path", "text", "output", "bodies", "file", "source"}
+
+
+def _canonical(x: Any) -> Any:
+    """A hashable, comparable form of a model value (dataclasses, arrays, patches, shapes)."""
+    if is_dataclass(x) and not isinstance(x, type):
+        return (type(x).__name__,) + tuple(
+            (f.name, _canonical(getattr(x, f.name))) for f in fields(x) if f.name not in _NOT_PHYSICS)
+    if hasattr(x, "patches") and hasattr(x, "volume"):       # a Shape: its geometry
+        return ("shape", tuple(_canonical(p) for p in x.patches))
+    if hasattr(x, "control_points") and hasattr(x, "knots_u"):  # a Patch
+        return ("patch", int(x.degree_u), int(x.degree_v), _canonical(x.knots_u),
+                _canonical(x.knots_v), _canonical(x.control_points), _canonical(x.weights))
+    if isinstance(x, np.ndarray):
+        return ("array", x.shape, tuple(np.ravel(x).tolist()))
+    if isinstance(x, dict):
+        return tuple(sorted((k, _canonical(v)) for k, v in x.items()))
+    if isinstance(x, (list, tuple)):
+        return tuple(_canonical(v) for v in x)
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+#: The parts of a model compared by :func:`model_differences`, with their names.
+MODEL_PARTS = (("gravity", "Environment"), ("materials", "Materials"), ("shapes", "Shapes"),
+               ("random_groups", "Particles (Random)"), ("particles", "Particles (Particle)"),
+               ("walls", "Walls"), ("interfaces", "Contact"), ("steps", "Steps"))
+
+
+def model_differences(a: Model, b: Model) -> list[str]:
+    """The deck blocks in which two models differ physically (ignoring comments, layout,
+    line numbers, the order of blocks and the Output block); empty when they simulate the
+    same thing."""
+    return [name for attr, name in MODEL_PARTS
+            if _canonical(getattr(a, attr)) != _canonical(getattr(b, attr))]

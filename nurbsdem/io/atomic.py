@@ -1,7 +1,9 @@
 """Atomic file writes: a file is either complete or absent, never torn."""
 from __future__ import annotations
 
+import errno
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -40,3 +42,43 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     """Write text to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+#: Prefix/suffix of the temporaries of :func:`atomic_path` (``.NAME.XXXX.tmp``).
+TEMP_GLOB = ".*.tmp"
+
+
+def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Delete the temporaries a killed writer left in ``folder`` (``.NAME.XXXX.tmp``, the
+    names :func:`atomic_path` uses); returns what was removed. Missing folder: nothing."""
+    removed = []
+    folder = Path(folder)
+    if not folder.is_dir():
+        return removed
+    for tmp in folder.glob(TEMP_GLOB):
+        try:
+            if tmp.is_file():
+                tmp.unlink()
+                removed.append(tmp)
+        except OSError:
+            pass
+    return removed
+
+
+#: Free space kept in reserve on the output file system (bytes) by :func:`ensure_space`.
+SPACE_RESERVE = 4 * 1024 * 1024
+
+
+def ensure_space(folder: str | Path, nbytes: int) -> None:
+    """Raise ``OSError(ENOSPC)`` naming ``folder`` when its file system has less than
+    ``nbytes`` + :data:`SPACE_RESERVE` free: a clean error before a library (HDF5) meets a
+    full disk in the middle of a write."""
+    folder = Path(folder)
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return
+    need = int(nbytes) + SPACE_RESERVE
+    if free < need:
+        raise OSError(errno.ENOSPC, f"no space left on device: {need / 1e6:.3g} MB needed, "
+                      f"{free / 1e6:.3g} MB free", str(folder))

@@ -28,7 +28,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .atomic import atomic_path
+from .atomic import atomic_path, ensure_space
 
 FORMAT = "nurbsdem-checkpoint-1"
 _KIND = "__kind__"
@@ -173,6 +173,19 @@ def _remove_stale_temporaries(path: Path) -> None:
             pass
 
 
+def _state_bytes(value: Any) -> int:
+    """Rough size (bytes) of a checkpoint state: its arrays and strings."""
+    if isinstance(value, Mapping):
+        return sum(_state_bytes(v) for v in value.values()) + 64
+    if isinstance(value, (list, tuple)):
+        return sum(_state_bytes(v) for v in value) + 64
+    if isinstance(value, np.ndarray):
+        return int(value.nbytes) + 64
+    if isinstance(value, (str, bytes)):
+        return len(value) + 64
+    return 64
+
+
 def _fsync_dir(folder: Path) -> None:
     try:
         fd = os.open(folder, os.O_RDONLY)
@@ -201,6 +214,7 @@ def save_checkpoint(path: str | Path, state: Mapping[str, Any]) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
+    ensure_space(path.parent, 2 * _state_bytes(state) + 1024 * 1024)
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w", track_order=True) as f:
             f.attrs["format"] = FORMAT
@@ -217,13 +231,68 @@ def save_checkpoint(path: str | Path, state: Mapping[str, Any]) -> None:
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """Read a checkpoint written by :func:`save_checkpoint` (exact round trip)."""
+    """Read a checkpoint written by :func:`save_checkpoint` (exact round trip).
+
+    Raises :class:`~nurbsdem.errors.InputError` naming the file when it is not a readable
+    nurbsdem checkpoint (another HDF5 file such as ``results.h5``, a truncated or corrupted
+    file, not HDF5 at all).
+    """
     import h5py
 
-    with h5py.File(path, "r") as f:
-        fmt = f.attrs.get("format")
-        if isinstance(fmt, bytes):
-            fmt = fmt.decode()
+    from ..errors import InputError
+
+    spath = str(path)
+    try:
+        f = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise InputError("no such checkpoint file", path=spath) from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"not a readable checkpoint (HDF5: {_short(exc)})", path=spath) from None
+    with f:
+        try:
+            fmt = f.attrs.get("format")
+            if isinstance(fmt, bytes):
+                fmt = fmt.decode()
+        except (OSError, ValueError, KeyError, UnicodeDecodeError) as exc:
+            raise InputError(f"corrupted checkpoint ({_short(exc)})", path=spath) from None
         if fmt != FORMAT:
-            raise ValueError(f"{path}: not a nurbsdem checkpoint (format {fmt!r})")
-        return _read(f)
+            what = "a nurbsdem results file" if fmt == "nurbsdem-results-1" else f"format {fmt!r}"
+            raise InputError(f"not a nurbsdem checkpoint ({what}); give the checkpoint.h5 of "
+                             f"the results folder", path=spath)
+        try:
+            return _read(f)
+        except (OSError, ValueError, KeyError, TypeError, UnicodeDecodeError, SyntaxError) as exc:
+            raise InputError(f"corrupted checkpoint ({_short(exc)})", path=spath) from None
+
+
+def _short(exc: BaseException) -> str:
+    return " ".join(str(exc).split())[:160] or type(exc).__name__
+
+
+def restart_state(path: str | Path, model) -> dict[str, Any]:
+    """The state of a checkpoint to restart ``model`` from: :func:`load_checkpoint`, then a
+    check that it was written for the same simulation. The decks are compared as parsed
+    models (:func:`nurbsdem.model.model_differences`), so comments, layout, block order and
+    the Output block may differ. Raises :class:`~nurbsdem.errors.InputError`."""
+    from ..errors import InputError
+    from ..model import model_differences
+    from .deck import build_model
+
+    st = load_checkpoint(path)
+    deck = st.get("deck")
+    if not isinstance(deck, str) or "time" not in st:
+        raise InputError("not a nurbsdem checkpoint of a run (no deck or time in it)",
+                         path=str(path))
+    if deck == model.text:
+        return st
+    try:
+        old = build_model(deck, model.path)
+    except InputError as exc:
+        raise InputError(f"the checkpoint was written for a different deck (its deck no "
+                         f"longer reads: {exc.detail})", path=str(path)) from None
+    diff = model_differences(old, model)
+    if diff:
+        raise InputError(f"the checkpoint was written for a different deck (it differs in "
+                         f"{', '.join(diff)}); restart with the deck that wrote it",
+                         path=str(path))
+    return st
