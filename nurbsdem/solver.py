@@ -522,6 +522,9 @@ class Solver:
                 self.step_index += 1
                 self.step_progress = 0
                 self._checkpoint_end_of_step(writers)
+        except BaseException:
+            writers.abort()   # a run without a complete sample puts the previous results back
+            raise
         finally:
             writers.close()
         s = self.summary

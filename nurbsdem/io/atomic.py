@@ -26,10 +26,22 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    except OSError as exc:
+        _unlink_quietly(tmp)
+        if exc.filename in (None, tmp, str(tmp)):   # name the file the user knows
+            raise OSError(exc.errno, f"cannot write: {exc.strerror or exc}", str(path)) from None
         raise
+    except BaseException:
+        _unlink_quietly(tmp)
+        raise
+
+
+def _unlink_quietly(path: str) -> None:
+    try:
+        if os.path.exists(path):
+            os.unlink(path)
+    except OSError:
+        pass
 
 
 def _umask() -> int:
@@ -42,6 +54,31 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     """Write text to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write bytes to ``path`` atomically (plain file I/O: a full disk is an OSError)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+
+
+def write_hdf5_atomically(path: str | Path, fill, source: str | Path | None = None,
+                          **file_kwargs) -> None:
+    """Build an HDF5 file in memory and write it to ``path`` atomically.
+
+    ``fill(h5file)`` writes the content; ``source``: an existing file to start from (opened
+    ``r+`` in memory) instead of an empty one. HDF5 never writes to the disk itself, so a
+    full disk or a file-size limit ends in a clean ``OSError`` instead of an HDF5 failure
+    inside the library (which can crash the process).
+    """
+    import io
+
+    import h5py
+
+    buf = io.BytesIO(Path(source).read_bytes()) if source is not None else io.BytesIO()
+    with h5py.File(buf, "r+" if source is not None else "w", **file_kwargs) as f:
+        fill(f)
+    atomic_write_bytes(path, buf.getvalue())
 
 
 #: Prefix/suffix of the temporaries of :func:`atomic_path` (``.NAME.XXXX.tmp``).

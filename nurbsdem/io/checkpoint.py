@@ -28,7 +28,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .atomic import atomic_path, ensure_space
+from .atomic import ensure_space, write_hdf5_atomically
 
 FORMAT = "nurbsdem-checkpoint-1"
 _KIND = "__kind__"
@@ -215,18 +215,19 @@ def save_checkpoint(path: str | Path, state: Mapping[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
     ensure_space(path.parent, 2 * _state_bytes(state) + 1024 * 1024)
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w", track_order=True) as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["nurbsdem_version"] = __version__
-            keys = list(state.keys())
-            int_keys = bool(keys) and all(isinstance(k, (int, np.integer))
-                                          and not isinstance(k, bool) for k in keys)
-            if not int_keys and any(not isinstance(k, str) for k in keys):
-                raise TypeError("checkpoint keys must be all str or all int")
-            f.attrs[_KIND] = "dict_int" if int_keys else "dict"
-            for k in keys:
-                _write(f, _check_key(k), state[k])
+
+    def fill(f) -> None:
+        f.attrs["format"] = FORMAT
+        f.attrs["nurbsdem_version"] = __version__
+        keys = list(state.keys())
+        int_keys = bool(keys) and all(isinstance(k, (int, np.integer))
+                                      and not isinstance(k, bool) for k in keys)
+        if not int_keys and any(not isinstance(k, str) for k in keys):
+            raise TypeError("checkpoint keys must be all str or all int")
+        f.attrs[_KIND] = "dict_int" if int_keys else "dict"
+        for k in keys:
+            _write(f, _check_key(k), state[k])
+    write_hdf5_atomically(path, fill, track_order=True)
     _fsync_dir(path.parent)
 
 

@@ -44,7 +44,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .atomic import atomic_path, atomic_write_text
+from .atomic import (atomic_path, atomic_write_text, ensure_space, remove_stale_temporaries,
+                     write_hdf5_atomically)
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..geometry.nurbs import Patch
@@ -540,9 +541,11 @@ class ResultsWriter:
     """
 
     def __init__(self, path: str | Path, deck_text: str = "", deck_path: str = "",
-                 restart_time: float | None = None, flush_every: int = 20) -> None:
+                 restart_time: float | None = None, flush_every: int = 20,
+                 after_append=None) -> None:
         self.path = Path(path)
         self.flush_every = int(flush_every)
+        self.after_append = after_append   # called after each append (OutputWriters' commit)
         self._pending: list[tuple[float, dict[str, np.ndarray]]] = []
         if restart_time is not None and self.path.exists():
             self._truncate(restart_time)
@@ -553,32 +556,32 @@ class ResultsWriter:
         import h5py
 
         from .. import __version__
-        with atomic_path(self.path) as tmp:
-            with h5py.File(tmp, "w") as f:
-                f.attrs["deck"] = deck_text
-                f.attrs["deck_path"] = str(deck_path)
-                f.attrs["nurbsdem_version"] = __version__
-                f.attrs["format"] = "nurbsdem-results-1"
-                f.attrs["conventions"] = ("SI units; position = centroid in the world; "
-                                          "quaternion (w, x, y, z) maps the shape file frame "
-                                          "to the world; velocities in the world frame; "
-                                          "sample k = rows offset[k]:offset[k+1]")
-                f.create_dataset("time", (0,), np.float64, maxshape=(None,), chunks=(1024,))
-                f.create_dataset("count", (0,), np.int64, maxshape=(None,), chunks=(1024,))
-                f.create_dataset("offset", data=np.zeros(1, np.int64), maxshape=(None,),
-                                 chunks=(1024,))
-                for name, (tail, dt) in RESULTS_FIELDS.items():
-                    f.create_dataset(name, (0, *tail), dt, maxshape=(None, *tail),
-                                     chunks=(4096, *tail))
+
+        def fill(f) -> None:
+            f.attrs["deck"] = deck_text
+            f.attrs["deck_path"] = str(deck_path)
+            f.attrs["nurbsdem_version"] = __version__
+            f.attrs["format"] = "nurbsdem-results-1"
+            f.attrs["conventions"] = ("SI units; position = centroid in the world; "
+                                      "quaternion (w, x, y, z) maps the shape file frame "
+                                      "to the world; velocities in the world frame; "
+                                      "sample k = rows offset[k]:offset[k+1]")
+            f.create_dataset("time", (0,), np.float64, maxshape=(None,), chunks=(1024,))
+            f.create_dataset("count", (0,), np.int64, maxshape=(None,), chunks=(1024,))
+            f.create_dataset("offset", data=np.zeros(1, np.int64), maxshape=(None,),
+                             chunks=(1024,))
+            for name, (tail, dt) in RESULTS_FIELDS.items():
+                f.create_dataset(name, (0, *tail), dt, maxshape=(None, *tail),
+                                 chunks=(4096, *tail))
+        write_hdf5_atomically(self.path, fill)
 
     def _rewrite(self, edit) -> None:
         """Copy the file, apply ``edit(h5file)``, fsync, rename into place."""
         import h5py
 
-        with atomic_path(self.path) as tmp:
-            shutil.copyfile(self.path, tmp)
-            with h5py.File(tmp, "r+") as f:
-                edit(f)
+        pending = sum(d[k].nbytes for _, d in self._pending for k in d)
+        ensure_space(self.path.parent, 2 * (self.path.stat().st_size + pending) + 1024 * 1024)
+        write_hdf5_atomically(self.path, edit, source=self.path)
 
     def _truncate(self, restart_time: float) -> None:
         def edit(f) -> None:
@@ -601,6 +604,8 @@ class ResultsWriter:
                                             for k, v in data.items()}))
         if len(self._pending) >= self.flush_every:
             self.flush()
+        if self.after_append is not None:
+            self.after_append()
 
     def flush(self) -> None:
         """Write the queued samples (atomic replace of the file)."""
@@ -658,12 +663,71 @@ def read_results_sample(path: str | Path, k: int) -> dict[str, Any]:
 # ---------------------------------------------------------------------------- bundle
 
 
+#: Result files and folders of a run in its output directory (what a new run replaces).
+RUN_FILES = tuple(f"{name}.pvd" for name in SERIES) + (VTK_DIR, MONITOR_DIR, RESULTS_NAME,
+                                                       "checkpoint.h5")
+#: Where a fresh run keeps the previous run's results until it has its first complete sample.
+PREVIOUS_DIR = ".previous-run"
+
+
+def restore_previous_run(directory: str | Path) -> bool:
+    """Put back the results a fresh run set aside (``.previous-run``) when that run ended
+    before writing a complete sample (killed, disk full, ...); returns whether it did.
+    The unfinished run's files of the same names are discarded."""
+    directory = Path(directory)
+    prev = directory / PREVIOUS_DIR
+    if not prev.is_dir():
+        return False
+    for name in RUN_FILES:
+        if (prev / name).exists():
+            _remove(directory / name)
+            os.replace(prev / name, directory / name)
+    shutil.rmtree(prev, ignore_errors=True)
+    return True
+
+
+def set_previous_run_aside(directory: str | Path) -> bool:
+    """Move a previous run's result files into ``.previous-run`` (renames: no copy, no
+    space needed); returns whether there were any."""
+    directory = Path(directory)
+    found = [name for name in RUN_FILES if (directory / name).exists()]
+    if not found:
+        return False
+    prev = directory / PREVIOUS_DIR
+    prev.mkdir(exist_ok=True)
+    for name in found:
+        os.replace(directory / name, prev / name)
+    return True
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+def clean_output_directory(directory: str | Path) -> None:
+    """What a start does first: temporaries of killed writers are removed, and results a
+    fresh run had set aside are put back if that run never completed a sample."""
+    directory = Path(directory)
+    restore_previous_run(directory)
+    for folder in (directory, directory / VTK_DIR, directory / MONITOR_DIR):
+        remove_stale_temporaries(folder)
+
+
 class OutputWriters:
     """All writers of a run, from the model's ``Output`` block.
 
     restart_time: ``None`` for a fresh run, or the checkpoint's time (s) on a restart.
     Attributes: ``directory``, ``paraview`` (:class:`ParaViewWriter`), ``monitors``
     (:class:`MonitorWriter`), ``results`` (:class:`ResultsWriter`).
+
+    Safety of earlier results: on every start, temporaries of killed writers are removed
+    (:func:`clean_output_directory`). A fresh run first moves the previous run's files into
+    ``.previous-run`` and deletes them only once it has a complete sample of its own (its
+    first ``results.append``, or a :meth:`sync` before a checkpoint); if it fails before
+    that (:meth:`abort`, or killed: the next start), the previous files are put back.
     """
 
     def __init__(self, model: "Model", restart_time: float | None = None,
@@ -671,21 +735,68 @@ class OutputWriters:
         assert model.output is not None
         self.directory = Path(model.output.directory)
         self.directory.mkdir(parents=True, exist_ok=True)
-        shapes = {sid: e.shape for sid, e in model.shapes.items()}
-        self.paraview = ParaViewWriter(self.directory, shapes, model.walls,
-                                       model.output.vtk_resolution, restart_time)
-        self.monitors = MonitorWriter(self.directory, model.wall_names, restart_time)
-        self.results = ResultsWriter(self.directory / RESULTS_NAME, model.text, model.path,
-                                     restart_time, flush_every)
+        clean_output_directory(self.directory)
+        self._committed = restart_time is not None
+        if restart_time is None:
+            set_previous_run_aside(self.directory)
+        try:
+            shapes = {sid: e.shape for sid, e in model.shapes.items()}
+            self.paraview = ParaViewWriter(self.directory, shapes, model.walls,
+                                           model.output.vtk_resolution, restart_time)
+            self.monitors = MonitorWriter(self.directory, model.wall_names, restart_time)
+            self.results = ResultsWriter(self.directory / RESULTS_NAME, model.text, model.path,
+                                         restart_time, flush_every, after_append=self._commit)
+        except BaseException:
+            self._restore()
+            raise
+
+    @property
+    def committed(self) -> bool:
+        """Whether this run's results have replaced the previous run's."""
+        return self._committed
+
+    def _commit(self) -> None:
+        """The first complete sample is on disk: the previous run's results can go."""
+        if self._committed:
+            return
+        self.results.flush()
+        self.monitors.sync()
+        self._committed = True
+        shutil.rmtree(self.directory / PREVIOUS_DIR, ignore_errors=True)
+
+    def _restore(self) -> None:
+        if not self._committed:
+            restore_previous_run(self.directory)
 
     def sync(self) -> None:
         """Make everything written so far durable (call before saving a checkpoint)."""
         self.results.flush()
         self.monitors.sync()
+        self._commit()
+
+    def abort(self) -> None:
+        """The run failed: close the files and, if this run has no complete sample yet, put
+        the previous run's results back. Never raises."""
+        for m in (getattr(self, "monitors", None),):
+            try:
+                if m is not None:
+                    m.close()
+            except OSError:
+                pass
+        if not self._committed:
+            try:
+                restore_previous_run(self.directory)
+            except OSError:
+                pass
+            self._aborted = True
 
     def close(self) -> None:
+        """Flush and close (after :meth:`abort`: nothing more is written)."""
+        if getattr(self, "_aborted", False):
+            return
         self.results.close()
         self.monitors.close()
+        self._commit()
 
 
 def is_multiple(t: float, every: float, tol: float = 1e-9) -> bool:
