@@ -146,13 +146,23 @@ def _fmt_vec(v) -> str:
     return "[" + ", ".join(f"{x:.9g}" for x in np.asarray(v).ravel()) + "]"
 
 
+def _convexity_tol_option(func: Callable) -> Callable:
+    """The ``--convexity-tol`` option (accepted non-convexity relative to the size)."""
+    return click.option(
+        "--convexity-tol", "convexity_tol", type=click.FloatRange(min=0.0), default=None,
+        help="Accepted non-convexity (height of the surface above its own tangent planes) "
+             "relative to the particle size; default 1e-4, 0 = strict.")(func)
+
+
 @main.command()
 @click.argument("shape_file", metavar="SHAPE.yaml")
 @click.option("--density", type=float, default=None,
               help="Also print mass (kg) and mass inertia (kg m^2) for this density (kg/m^3).")
-def info(shape_file: str, density: float | None) -> None:
+@_convexity_tol_option
+def info(shape_file: str, density: float | None, convexity_tol: float | None) -> None:
     """Print a shape's patches, mass properties and checks."""
-    from .geometry.connectivity import check_shape
+    from .geometry.connectivity import (DEFAULT_CONVEXITY_TOL, check_shape, convexity_warning,
+                                        measure_convexity)
     from .io.shapefile import load_shape
 
     if density is not None and not (math.isfinite(density) and density > 0):
@@ -190,12 +200,20 @@ def info(shape_file: str, density: float | None) -> None:
     out(f"bounding radius: {shape.bounding_radius:.9g} m")
     closed = conn.closed
     out(f"closed: {'yes' if closed else 'no'}")
+    tol = DEFAULT_CONVEXITY_TOL if convexity_tol is None else convexity_tol
+    cv = measure_convexity(shape.patches)
+    out(f"non-convexity: {cv.height:.3g} m = {cv.relative:.3g} of the size {cv.size:.6g} m "
+        f"(tolerance {tol:g}; height of the surface above its own tangent planes)"
+        + ("" if cv.convex else f"; {cv.where}: {cv.describe()}"))
     try:
-        check_shape(shape, source=shape_file)
+        cv = check_shape(shape, source=shape_file, convexity_tol=tol)
     except NurbsdemError:
         out("convex, outward oriented: no")
         raise
-    out("convex, outward oriented: yes")
+    msg = convexity_warning(cv, shape_file, tol)
+    if msg:
+        warn(msg)
+    out("convex, outward oriented: yes" + (" (within the tolerance)" if msg else ""))
 
 
 # ---------------------------------------------------------------------- shape
@@ -248,6 +266,13 @@ def shape(kind: str, output: str, radius: float | None, semi_axes, particle_kind
 
 
 # ---------------------------------------------------------------------- imports
+def _checked(sh, convexity_tol: float | None):
+    """The shape checked (closed, outward, convex within ``convexity_tol``); a nearly convex
+    shape's warning goes to the ``nurbsdem`` logger (one line)."""
+    from .geometry.shape import Shape
+    return Shape(sh.patches, name=sh.name, source=sh.source, convexity_tol=convexity_tol)
+
+
 def _finish_import(sh, output: str, scale: float) -> None:
     from .io.shapefile import save_shape
 
@@ -266,11 +291,15 @@ def _finish_import(sh, output: str, scale: float) -> None:
 @click.option("--name", default=None, help="Name stored in the file (default: file stem).")
 @click.option("--scale", type=float, default=1.0, show_default=True,
               help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
-def import_giraffe_cmd(cad_file: str, output: str, name: str | None, scale: float) -> None:
+@_convexity_tol_option
+def import_giraffe_cmd(cad_file: str, output: str, name: str | None, scale: float,
+                       convexity_tol: float | None) -> None:
     """Convert a Giraffe CAD file (one record per patch) to a shape file."""
     from .io.giraffe import import_giraffe
 
-    sh, warnings = import_giraffe(cad_file, name=name)
+    _setup_logging(quiet=False, verbose=False)
+    sh, warnings = import_giraffe(cad_file, name=name, check=False)
+    sh = _checked(sh, convexity_tol)
     for w in warnings:
         warn(f"{cad_file}: {w}")
     _finish_import(sh, output, scale)
@@ -282,12 +311,70 @@ def import_giraffe_cmd(cad_file: str, output: str, name: str | None, scale: floa
 @click.option("--name", default=None, help="Name stored in the file (default: file stem).")
 @click.option("--scale", type=float, default=1.0, show_default=True,
               help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
-def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float) -> None:
+@_convexity_tol_option
+def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float,
+                   convexity_tol: float | None) -> None:
     """Convert the NURBS surfaces and Brep faces of a Rhino .3dm file to a shape file
     (needs the optional package rhino3dm)."""
     from .io.rhino import import_3dm
 
-    _finish_import(import_3dm(cad_file, name=name), output, scale)
+    _setup_logging(quiet=False, verbose=False)
+    sh = _checked(import_3dm(cad_file, name=name, check=False), convexity_tol)
+    _finish_import(sh, output, scale)
+
+
+# ---------------------------------------------------------------------- fit, export
+@main.command("fit")
+@click.argument("mesh_file", metavar="MESH")
+@click.option("-o", "--output", required=True, metavar="SHAPE.yaml", help="Shape file to write.")
+@click.option("--control-points", "n_cp", type=click.IntRange(3, 20), default=8,
+              show_default=True, help="Control points per patch and direction.")
+@click.option("--degree", type=click.IntRange(2, 5), default=3, show_default=True,
+              help="Degree of the patches (3: bicubic).")
+@click.option("--scale", type=float, default=1.0, show_default=True,
+              help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
+@click.option("--name", default=None, help="Name stored in the file (default: file stem).")
+@_convexity_tol_option
+def fit_cmd(mesh_file: str, output: str, n_cp: int, degree: int, scale: float,
+            name: str | None, convexity_tol: float | None) -> None:
+    """Fit a closed six-patch NURBS particle (cube-sphere) to the convex hull of a mesh or
+    point cloud (STL, PLY, OBJ, OFF, or XYZ text) by least squares."""
+    from .geometry.fit import fit_particle, read_input
+    from .io.shapefile import save_shape
+
+    _setup_logging(quiet=False, verbose=False)
+    if not (math.isfinite(scale) and scale > 0):
+        raise NurbsdemError(f"--scale must be > 0, got {scale:g}")
+    data = read_input(mesh_file)
+    if scale != 1.0:
+        data.points = data.points * scale
+        if data.mesh is not None:
+            data.mesh = data.mesh.copy()
+            data.mesh.apply_scale(scale)
+    res = fit_particle(data, n_cp=n_cp, degree=degree, convexity_tol=convexity_tol,
+                       name=name if name is not None else Path(mesh_file).stem)
+    for line in res.lines():
+        click.echo(line)
+    save_shape(output, res.shape)
+    click.echo(f"wrote {output}: {res.shape.name}, 6 patches, volume {res.shape.volume:.9g} m^3")
+
+
+@main.command("export")
+@click.argument("shape_file", metavar="SHAPE.yaml")
+@click.option("-o", "--output", required=True, metavar="FILE",
+              help="FILE.stl (tessellated triangles) or FILE.3dm (Rhino NURBS surfaces).")
+@click.option("--resolution", type=click.IntRange(1, 512), default=24, show_default=True,
+              help="STL: quads per patch and parameter direction (two triangles each).")
+@_convexity_tol_option
+def export_cmd(shape_file: str, output: str, resolution: int,
+               convexity_tol: float | None) -> None:
+    """Export a shape to STL (for other DEM codes and printers) or Rhino .3dm (NURBS)."""
+    from .io.export import export_shape
+    from .io.shapefile import load_shape
+
+    _setup_logging(quiet=False, verbose=False)
+    shape = load_shape(shape_file, convexity_tol=convexity_tol)
+    click.echo(export_shape(shape, output, resolution))
 
 
 # --------------------------------------------------------------------------- the solver

@@ -383,7 +383,198 @@ def check_topology(conn: Connectivity, source: str | None = None) -> None:
                     f"of one of them)", path=source, where=_where(i, e))
 
 
-def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9) -> None:
+#: Default convexity tolerance: the largest non-convexity accepted, relative to the
+#: particle size (see :func:`measure_convexity`). 1e-4 of a 5 cm particle is 5 µm, well below
+#: the penetrations of a DEM contact; 0 refuses every measurable non-convexity.
+DEFAULT_CONVEXITY_TOL = 1e-4
+#: Heights above a tangent plane below this fraction of the size are round-off.
+ROUNDOFF_REL = 1e-9
+#: Outward normal curvature below this / size (1/m) is round-off.
+CURVATURE_REL = 1e-6
+
+
+@dataclass
+class Convexity:
+    """How far a closed surface is from convex (:func:`measure_convexity`).
+
+    Attributes
+    ----------
+    height: m, the largest height of a sampled surface point above the tangent plane at
+        another sampled point — 0 for a convex surface; for a dent about its depth below the
+        convex hull; the largest error in a support point that stops at a local optimum.
+    size: m, the particle size (diagonal of the control points' bounding box).
+    plane: (patch, u, v) of the tangent plane's point.
+    above: (patch, u, v) of the point highest above it.
+    curvature: 1/m, the largest sampled normal curvature that bends outward (> 0 is a saddle
+        or dent; convex surfaces have <= 0); ``-inf`` when none is sampled.
+    curvature_at: (patch, u, v) where it is largest.
+    """
+
+    height: float
+    size: float
+    plane: tuple[int, float, float]
+    above: tuple[int, float, float]
+    curvature: float
+    curvature_at: tuple[int, float, float]
+
+    @property
+    def relative(self) -> float:
+        """Non-convexity relative to the size (dimensionless): height / size."""
+        return self.height / self.size if self.size > 0 else 0.0
+
+    @property
+    def convex(self) -> bool:
+        """True if convex up to round-off (no measurable height, no outward curvature)."""
+        return (self.height <= ROUNDOFF_REL * self.size
+                and not self.curvature * self.size > CURVATURE_REL)
+
+    def describe(self) -> str:
+        """One-line description: how much and where (without the patch prefix)."""
+        if self.convex:
+            return "convex (non-convexity 0 within round-off)"
+        ip, u, v = self.plane
+        jp, uj, vj = self.above
+        kp, uk, vk = self.curvature_at
+        text = (f"the surface rises {self.height:.3g} m ({self.relative:.3g} of the particle "
+                f"size {self.size:.3g} m) above its tangent plane at (u, v) = ({_fmt(u)}, "
+                f"{_fmt(v)}) (highest point: patch {jp} at (u, v) = ({_fmt(uj)}, {_fmt(vj)}))")
+        if self.curvature * self.size > CURVATURE_REL:
+            text += (f"; largest outward normal curvature {self.curvature:.3g} 1/m at patch "
+                     f"{kp}, (u, v) = ({_fmt(uk)}, {_fmt(vk)})")
+        return text
+
+    @property
+    def where(self) -> str:
+        """The patch that the description refers to ("patch i")."""
+        if self.height > ROUNDOFF_REL * self.size or not np.isfinite(self.curvature):
+            return f"patch {self.plane[0]}"
+        return f"patch {self.curvature_at[0]}"
+
+
+def _patch_samples(p: Patch, tu: np.ndarray, tv: np.ndarray, order: int):
+    """Points, unit normals, max principal curvature (outward normal: convex <= 0), a mask
+    of usable normals and the parameters, at the grid tu x tv of one patch."""
+    U, V = np.meshgrid(tu, tv, indexing="ij")
+    d = p.evaluate(U.ravel(), V.ravel(), order)
+    Su, Sv = d[:, 1], d[:, 2]
+    n = np.cross(Su, Sv)
+    nn = np.linalg.norm(n, axis=-1)
+    nsu = np.linalg.norm(Su, axis=-1)
+    nsv = np.linalg.norm(Sv, axis=-1)
+    scale = nsu * nsv
+    good = (scale > 0) & (nn > 1e-8 * np.maximum(scale, 1e-300))
+    # a pole (edge collapsed to a point): a derivative vanishes up to round-off and the
+    # cross product has no meaningful direction there
+    good &= (nsu > 1e-7 * nsu.max()) & (nsv > 1e-7 * nsv.max())
+    nu = n / np.where(good, nn, 1.0)[:, None]
+    k1 = np.full(len(nu), -np.inf)
+    if order >= 2:
+        E_ = np.einsum("ij,ij->i", Su, Su)
+        F_ = np.einsum("ij,ij->i", Su, Sv)
+        G_ = np.einsum("ij,ij->i", Sv, Sv)
+        L_ = np.einsum("ij,ij->i", d[:, 3], nu)
+        M_ = np.einsum("ij,ij->i", d[:, 4], nu)
+        N_ = np.einsum("ij,ij->i", d[:, 5], nu)
+        det1 = np.where(good, E_ * G_ - F_ ** 2, 1.0)
+        H = (E_ * N_ - 2 * F_ * M_ + G_ * L_) / (2 * det1)
+        K = (L_ * N_ - M_ ** 2) / det1
+        k1 = np.where(good, H + np.sqrt(np.maximum(H * H - K, 0.0)), -np.inf)
+    return d[:, 0], nu, k1, good, np.stack([U.ravel(), V.ravel()], -1)
+
+
+def _max_height(Xa: np.ndarray, Na: np.ndarray, Xb: np.ndarray) -> tuple[float, int, int]:
+    """max over a, b of Na[a] . (Xb[b] - Xa[a]) (m), with the maximising (a, b)."""
+    best, ia, ib = -np.inf, 0, 0
+    for start in range(0, len(Xa), 512):
+        D = np.einsum("rk,rmk->rm", Na[start:start + 512],
+                      Xb[None, :, :] - Xa[start:start + 512, None, :])
+        r, m = np.unravel_index(int(np.argmax(D)), D.shape)
+        if D[r, m] > best:
+            best, ia, ib = float(D[r, m]), start + int(r), int(m)
+    return best, ia, ib
+
+
+def measure_convexity(patches: Sequence[Patch], n_coarse: int = 9, n_fine: int = 17,
+                      n_seeds: int = 16, n_local: int = 15) -> Convexity:
+    """Measure how far a closed surface is from convex, as a length (:class:`Convexity`).
+
+    1. Coarse: on n_coarse parameters per direction and patch (plus the knots) every point is
+       tested against every tangent plane: height = max_ab n_a . (x_b - x_a) (m).
+    2. Fine: the largest principal curvature with the outward normal on n_fine parameters
+       (plus the knots); > 0 marks a saddle or dent.
+    3. Local: around the n_seeds worst outward-curved fine samples (at most one per patch
+       and grid neighbourhood) an n_local x n_local grid spanning +-2 fine cells is tested
+       against itself and the coarse points — the height of a small saddle at a patch corner
+       (a region far smaller than the coarse grid) is found here.
+    The height is zero for a convex surface (up to round-off), and the error a support
+    mapping makes when it stops at a local optimum.
+    """
+    size = _size(patches)
+    Xc, Nc, OWc, UVc = [], [], [], []
+    Kf, OWf, UVf = [], [], []
+    for i, p in enumerate(patches):
+        tu = _sample_params(p.knots_u, p.degree_u, n_coarse)
+        tv = _sample_params(p.knots_v, p.degree_v, n_coarse)
+        x, nu, _, good, uv = _patch_samples(p, tu, tv, 1)
+        Xc.append(x)
+        Nc.append(np.where(good[:, None], nu, 0.0))
+        OWc.append(np.full(len(x), i))
+        UVc.append(uv)
+        tu = _sample_params(p.knots_u, p.degree_u, n_fine)
+        tv = _sample_params(p.knots_v, p.degree_v, n_fine)
+        _, _, k1, _, uv = _patch_samples(p, tu, tv, 2)
+        Kf.append(k1)
+        OWf.append(np.full(len(k1), i))
+        UVf.append(uv)
+    Xc, Nc, OWc, UVc = map(np.concatenate, (Xc, Nc, OWc, UVc))
+    Kf, OWf, UVf = map(np.concatenate, (Kf, OWf, UVf))
+    h, a, b = _max_height(Xc, Nc, Xc)
+    plane = (int(OWc[a]), float(UVc[a, 0]), float(UVc[a, 1]))
+    above = (int(OWc[b]), float(UVc[b, 0]), float(UVc[b, 1]))
+    kk = int(np.argmax(Kf))
+    curv = float(Kf[kk])
+    curv_at = (int(OWf[kk]), float(UVf[kk, 0]), float(UVf[kk, 1]))
+    for ip, u0, v0 in _seeds(patches, Kf, OWf, UVf, size, n_fine, n_seeds):
+        p = patches[ip]
+        du0, du1, dv0, dv1 = p.domain
+        hu = 2.0 * (du1 - du0) / (n_fine - 1)
+        hv = 2.0 * (dv1 - dv0) / (n_fine - 1)
+        tu = np.linspace(max(du0, u0 - hu), min(du1, u0 + hu), n_local)
+        tv = np.linspace(max(dv0, v0 - hv), min(dv1, v0 + hv), n_local)
+        x, nu, _, good, uv = _patch_samples(p, tu, tv, 1)
+        xa, na, uva = x[good], nu[good], uv[good]
+        if not len(xa):
+            continue
+        hl, a, b = _max_height(xa, na, np.concatenate([x, Xc]))
+        if hl > h:
+            h = hl
+            plane = (ip, float(uva[a, 0]), float(uva[a, 1]))
+            above = (ip, float(uv[b, 0]), float(uv[b, 1])) if b < len(x) else \
+                (int(OWc[b - len(x)]), float(UVc[b - len(x), 0]), float(UVc[b - len(x), 1]))
+    return Convexity(max(h, 0.0), size, plane, above, curv, curv_at)
+
+
+def _seeds(patches, K, owner, UV, size: float, n_fine: int, n_seeds: int):
+    """Parameters of the worst outward-curved samples, at least 2 fine cells apart."""
+    cand = np.flatnonzero(K * size > CURVATURE_REL)
+    cand = cand[np.argsort(-K[cand])]
+    out: list[tuple[int, float, float]] = []
+    for c in cand:
+        ip = int(owner[c])
+        du0, du1, dv0, dv1 = patches[ip].domain
+        cu = 2.0 * (du1 - du0) / (n_fine - 1)
+        cv = 2.0 * (dv1 - dv0) / (n_fine - 1)
+        u, v = float(UV[c, 0]), float(UV[c, 1])
+        if any(q == ip and abs(u - a) < cu and abs(v - b) < cv for q, a, b in out):
+            continue
+        out.append((ip, u, v))
+        if len(out) >= n_seeds:
+            break
+    return out
+
+
+def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9,
+                convexity_tol: float | None = None) -> Convexity:
     """Reject a shape that is not a closed, outward-oriented, convex surface.
 
     Checks, in order (the first failure raises :class:`~nurbsdem.errors.GeometryError`
@@ -394,71 +585,46 @@ def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9) -> None
        its two sides;
     3. outward: on every patch the normals S_u x S_v point away from the interior (the mean
        of the sampled surface points), and the volume is positive;
-    4. convex: on a grid of at least 9 x 9 parameters per patch (plus the knots), every
-       sampled surface point lies on the inner side of every sampled tangent plane, up to
-       ``rel_tol`` x size, and no sampled normal curvature is concave.
+    4. convex within a tolerance: the non-convexity of :func:`measure_convexity` (the
+       largest height of the surface above one of its own tangent planes, m) must not exceed
+       ``convexity_tol`` x size. A shape with a smaller, but measurable, non-convexity (a
+       small saddle at a patch corner, as CAD tools make them) is accepted; the returned
+       :class:`Convexity` says where and how much (the caller warns).
 
     Parameters
     ----------
     shape: a :class:`~nurbsdem.geometry.shape.Shape` (uses ``patches``, ``connectivity``,
         ``volume``).
     source: file name for messages (default ``shape.source``).
-    rel_tol: tolerance of the tangent-plane test relative to the size of the body.
+    rel_tol: heights above a tangent plane up to ``rel_tol`` x size are round-off.
+    convexity_tol: accepted non-convexity relative to the size (default
+        :data:`DEFAULT_CONVEXITY_TOL`; 0 refuses any measurable non-convexity).
+
+    Returns
+    -------
+    The :class:`Convexity` measurement.
     """
     if source is None:
         source = getattr(shape, "source", None)
+    if convexity_tol is None:
+        convexity_tol = DEFAULT_CONVEXITY_TOL
     patches = shape.patches
     conn = getattr(shape, "connectivity", None)
     if conn is None:
         conn = find_connectivity(patches, source)
     check_topology(conn, source)
-    size = _size(patches)
-    tol = rel_tol * size
 
-    # ---- samples: points, unit normals, curvature
-    X, N, ok, owner, UV, kmax = [], [], [], [], [], []
+    # ---- outward orientation per patch
+    X, N, ok, owner = [], [], [], []
     for i, p in enumerate(patches):
         tu = _sample_params(p.knots_u, p.degree_u)
         tv = _sample_params(p.knots_v, p.degree_v)
-        U, V = np.meshgrid(tu, tv, indexing="ij")
-        d = p.evaluate(U.ravel(), V.ravel(), 2)
-        Su, Sv = d[:, 1], d[:, 2]
-        n = np.cross(Su, Sv)
-        nn = np.linalg.norm(n, axis=-1)
-        scale = np.linalg.norm(Su, axis=-1) * np.linalg.norm(Sv, axis=-1)
-        good = nn > 1e-8 * np.maximum(scale, 1e-300)
-        good &= scale > 0
-        # a pole (edge collapsed to a point): a derivative vanishes up to round-off and the
-        # cross product has no meaningful direction there
-        nsu = np.linalg.norm(Su, axis=-1)
-        nsv = np.linalg.norm(Sv, axis=-1)
-        good &= (nsu > 1e-7 * nsu.max()) & (nsv > 1e-7 * nsv.max())
-        nu = n / np.where(good, nn, 1.0)[:, None]
-        # shape operator eigenvalues (principal curvatures, n outward: convex => <= 0)
-        E_ = np.einsum("ij,ij->i", Su, Su)
-        F_ = np.einsum("ij,ij->i", Su, Sv)
-        G_ = np.einsum("ij,ij->i", Sv, Sv)
-        L_ = np.einsum("ij,ij->i", d[:, 3], nu)
-        M_ = np.einsum("ij,ij->i", d[:, 4], nu)
-        N_ = np.einsum("ij,ij->i", d[:, 5], nu)
-        det1 = np.where(good, E_ * G_ - F_ ** 2, 1.0)
-        H = (E_ * N_ - 2 * F_ * M_ + G_ * L_) / (2 * det1)
-        K = (L_ * N_ - M_ ** 2) / det1
-        k1 = H + np.sqrt(np.maximum(H * H - K, 0.0))
-        X.append(d[:, 0])
+        x, nu, _, good, _ = _patch_samples(p, tu, tv, 1)
+        X.append(x)
         N.append(nu)
         ok.append(good)
-        owner.append(np.full(len(U.ravel()), i))
-        UV.append(np.stack([U.ravel(), V.ravel()], -1))
-        kmax.append(np.where(good, k1, -np.inf))
-    X = np.concatenate(X)
-    N = np.concatenate(N)
-    ok = np.concatenate(ok)
-    owner = np.concatenate(owner)
-    UV = np.concatenate(UV)
-    kmax = np.concatenate(kmax)
-
-    # ---- outward orientation per patch
+        owner.append(np.full(len(x), i))
+    X, N, ok, owner = map(np.concatenate, (X, N, ok, owner))
     c = X.mean(0)
     out = np.einsum("ij,ij->i", N, X - c)
     for i in range(len(patches)):
@@ -472,25 +638,24 @@ def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9) -> None
         raise GeometryError(f"the enclosed volume {vol:.6g} m^3 is not positive: the "
                             "normals point inward or the surface is degenerate", path=source)
 
-    # ---- convexity: tangent planes (rows) against all points (columns)
-    rows = np.flatnonzero(ok)
-    for start in range(0, len(rows), 512):
-        r = rows[start:start + 512]
-        D = np.einsum("rk,rmk->rm", N[r], X[None, :, :] - X[r][:, None, :])
-        worst = D.max(1)
-        bad = np.flatnonzero(worst > tol)
-        if bad.size:
-            a = r[bad[np.argmax(worst[bad])]]
-            b = int(np.argmax(D[np.flatnonzero(r == a)[0]]))
-            raise GeometryError(
-                f"not convex: the point of patch {owner[b]} at (u, v) = "
-                f"({_fmt(UV[b, 0])}, {_fmt(UV[b, 1])}) lies {worst.max():.3g} m outside the "
-                f"tangent plane at (u, v) = ({_fmt(UV[a, 0])}, {_fmt(UV[a, 1])})",
-                path=source, where=f"patch {owner[a]}")
-    concave = np.flatnonzero(kmax * size > 1e-6)
-    if concave.size:
-        a = concave[np.argmax(kmax[concave])]
-        raise GeometryError(
-            f"not convex: the surface curves outward (normal curvature {kmax[a]:.3g} 1/m > 0 "
-            f"with the outward normal) at (u, v) = ({_fmt(UV[a, 0])}, {_fmt(UV[a, 1])})",
-            path=source, where=f"patch {owner[a]}")
+    # ---- convexity, measured as a length
+    cv = measure_convexity(patches)
+    cv.size = _size(patches)
+    if cv.height > max(rel_tol, convexity_tol) * cv.size or (
+            convexity_tol <= 0 and not cv.convex):
+        raise GeometryError(f"not convex: {cv.describe()}; the convexity tolerance is "
+                            f"{convexity_tol:g} of the size (option --convexity-tol, deck "
+                            f"keyword ConvexityTolerance)", path=source, where=cv.where)
+    return cv
+
+
+def convexity_warning(cv: Convexity, source: str | None = None,
+                      convexity_tol: float | None = None) -> str | None:
+    """The one-line warning for a shape accepted within the convexity tolerance, or None
+    if it is convex up to round-off."""
+    if cv.convex:
+        return None
+    tol = DEFAULT_CONVEXITY_TOL if convexity_tol is None else convexity_tol
+    loc = f"{source}: " if source else ""
+    return (f"{loc}{cv.where}: nearly convex, accepted: {cv.describe()}; below the convexity "
+            f"tolerance {tol:g} of the size (the contact's degeneration handles it)")

@@ -93,24 +93,27 @@ _FACES = (
 
 
 # ---------------------------------------------------------------------- topology
-@lru_cache(maxsize=1)
-def _control_point_table() -> tuple[np.ndarray, np.ndarray]:
-    """Global ids of the control points of the six faces.
+@lru_cache(maxsize=8)
+def _control_point_table(n_cp: int = N_CP) -> tuple[np.ndarray, np.ndarray]:
+    """Global ids of the control points of the six faces (n_cp x n_cp control points each;
+    also used by :mod:`nurbsdem.geometry.fit` with other net sizes).
 
     Returns
     -------
-    ids: int array (6, 6, 6): ids[f, i, j] is the global id of control point (i, j) of face f.
+    ids: int array (6, n_cp, n_cp): ids[f, i, j] is the global id of control point (i, j) of
+        face f.
     keys: int array (N, 3): the cube-lattice position of each global point (coordinates in
-        {-5, -3, -1, 1, 3, 5}; ±5 on the cube's surface planes).
+        {-(n_cp-1), ..., -1, 1, ..., n_cp-1} in steps of 2, e.g. {-5, -3, -1, 1, 3, 5} for
+        n_cp = 6; ±(n_cp-1) on the cube's surface planes).
     """
-    lat = 2 * np.arange(N_CP) - (N_CP - 1)  # -5 .. 5
+    lat = 2 * np.arange(n_cp) - (n_cp - 1)  # -5 .. 5
     index: dict[tuple[int, int, int], int] = {}
-    ids = np.zeros((6, N_CP, N_CP), dtype=np.int64)
+    ids = np.zeros((6, n_cp, n_cp), dtype=np.int64)
     for f, (n, a, b) in enumerate(_FACES):
         n, a, b = np.array(n), np.array(a), np.array(b)
-        for i in range(N_CP):
-            for j in range(N_CP):
-                key = tuple(int(k) for k in (N_CP - 1) * n + lat[i] * a + lat[j] * b)
+        for i in range(n_cp):
+            for j in range(n_cp):
+                key = tuple(int(k) for k in (n_cp - 1) * n + lat[i] * a + lat[j] * b)
                 ids[f, i, j] = index.setdefault(key, len(index))
     keys = np.array(sorted(index, key=index.get))
     return ids, keys
@@ -155,7 +158,14 @@ def _fit_matrix() -> tuple[np.ndarray, np.ndarray]:
 
 @lru_cache(maxsize=1)
 def _constraints() -> np.ndarray:
-    """Linear constraints C x = 0 on the flattened control-point table x (3 N,).
+    """The smoothness constraints of the paper particles' fit: :func:`cube_sphere_constraints`
+    for 6 x 6 control points with the cube diagonals as corner normals."""
+    return cube_sphere_constraints(N_CP)
+
+
+def cube_sphere_constraints(n_cp: int, corner_normals: dict | None = None) -> np.ndarray:
+    """Linear constraints C x = 0 on the flattened control-point table x (3 N,) of
+    :func:`_control_point_table` (n_cp).
 
     * Along every cube edge, at the 4 edge points that are not corners: the edge point is the
       midpoint of its two cross-boundary neighbours (one on each face). The cross-boundary
@@ -167,10 +177,12 @@ def _constraints() -> np.ndarray:
 
     What is left is a small convex tangent-plane kink on the end spans of each edge
     (a valence-3 corner does not admit C1 bicubic patches with constant ratio).
+    ``corner_normals`` maps a corner's sign triple (sx, sy, sz), each ±1, to the unit normal
+    of its tangent plane (default: the cube diagonal (sx, sy, sz) / √3).
     """
-    ids, keys = _control_point_table()
+    ids, keys = _control_point_table(n_cp)
     index = {tuple(k): i for i, k in enumerate(keys.tolist())}
-    m = N_CP - 1
+    m = n_cp - 1
     rows = []
     for i, k in enumerate(keys):
         on = np.flatnonzero(np.abs(k) == m)
@@ -188,6 +200,8 @@ def _constraints() -> np.ndarray:
                 rows.append(r)
         elif len(on) == 3:  # corner
             normal = np.sign(k) / np.sqrt(3.0)
+            if corner_normals is not None:
+                normal = np.asarray(corner_normals[tuple(int(x) for x in np.sign(k))], float)
             for ax in range(3):
                 kk = k.copy()
                 kk[ax] -= 2 * np.sign(k[ax])

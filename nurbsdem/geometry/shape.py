@@ -6,6 +6,7 @@ A body's pose maps the file frame to the world: ``x_world = position + R @ x_fil
 """
 from __future__ import annotations
 
+import logging
 from functools import cached_property
 from typing import Sequence
 
@@ -25,6 +26,9 @@ class Shape:
     source: the file it came from (used in error messages).
     check: verify closed / outward / convex and raise :class:`~nurbsdem.errors.GeometryError`
         with the location when it is not.
+    convexity_tol: accepted non-convexity relative to the size (default
+        :data:`~nurbsdem.geometry.connectivity.DEFAULT_CONVEXITY_TOL`); a shape that is not
+        convex but within it is accepted with one warning on the ``nurbsdem`` logger.
 
     Attributes
     ----------
@@ -33,11 +37,14 @@ class Shape:
     volume: m^3.  centroid: m (file frame).  inertia: 3x3 volume inertia about the centroid
         in the file frame, m^5 (times density gives the mass inertia, kg m^2).
     bounding_radius: m, distance from the centroid to the farthest control point (paper Eq. 3).
+    convexity: :class:`~nurbsdem.geometry.connectivity.Convexity` (None when not checked).
+    warnings: one-line warnings issued while checking (e.g. nearly convex).
     """
 
     def __init__(self, patches: Sequence[Patch], name: str | None = None,
-                 source: str | None = None, check: bool = True) -> None:
-        from .connectivity import find_connectivity, check_shape
+                 source: str | None = None, check: bool = True,
+                 convexity_tol: float | None = None) -> None:
+        from .connectivity import check_shape, convexity_warning, find_connectivity
         from .mass import mass_properties
 
         self.patches = list(patches)
@@ -47,8 +54,15 @@ class Shape:
             pt.validate(source, i)
         self.connectivity = find_connectivity(self.patches, source=source)
         self.volume, self.centroid, self.inertia = mass_properties(self.patches)
+        self.convexity = None
+        self.convexity_tol = convexity_tol
+        self.warnings: list[str] = []
         if check:
-            check_shape(self, source=source)
+            self.convexity = check_shape(self, source=source, convexity_tol=convexity_tol)
+            msg = convexity_warning(self.convexity, source, convexity_tol)
+            if msg is not None:
+                self.warnings.append(msg)
+                logging.getLogger("nurbsdem").warning(msg)
 
     # ------------------------------------------------------------------ derived data
     @property
@@ -87,7 +101,8 @@ class Shape:
     def transformed(self, matrix: np.ndarray, offset=None, name: str | None = None) -> "Shape":
         """The shape under x -> matrix @ x + offset (a proper affine map keeps convexity)."""
         return Shape([p.transformed(matrix, offset) for p in self.patches],
-                     name=name if name is not None else self.name, source=self.source)
+                     name=name if name is not None else self.name, source=self.source,
+                     convexity_tol=getattr(self, "convexity_tol", None))
 
     def scaled(self, factor: float, name: str | None = None) -> "Shape":
         """The shape scaled about the file origin."""

@@ -245,11 +245,12 @@ def read_patches(path: str | Path) -> tuple[list[Patch], str | None]:
     return patches_from_data(load_yaml(path), str(path))
 
 
-def load_shape(path: str | Path, check: bool = True):
+def load_shape(path: str | Path, check: bool = True, convexity_tol: float | None = None):
     """Load a shape file into a :class:`~nurbsdem.geometry.shape.Shape`.
 
     Errors (syntax, bad patch data, open or non-convex shape) are :class:`InputError`
-    naming the file and the line or patch.
+    naming the file and the line or patch. ``convexity_tol``: accepted non-convexity
+    relative to the size (default: :data:`~nurbsdem.geometry.connectivity.DEFAULT_CONVEXITY_TOL`).
     """
     from ..geometry.shape import Shape
 
@@ -257,7 +258,8 @@ def load_shape(path: str | Path, check: bool = True):
     for i, p in enumerate(patches):
         check_patch_numbers(p, str(path), f"patch {i}")
     return shape_or_input_error(
-        lambda: Shape(patches, name=name, source=str(path), check=check), str(path))
+        lambda: Shape(patches, name=name, source=str(path), check=check,
+                      convexity_tol=convexity_tol), str(path))
 
 
 def shape_or_input_error(make, path: str):
