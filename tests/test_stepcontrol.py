@@ -13,10 +13,11 @@ from nurbsdem.contact.scene import SceneContacts
 from nurbsdem.dynamics import ContactLaw, DemSystem, InstabilityError, InterfaceTable, sphere_inertia
 from nurbsdem.dynamics.stepcontrol import (alternation_update, critical_step,
                                            critical_step_from_rates, lanczos_max, network_apply,
-                                           network_rates, shape_compliance, surface_compliance)
+                                           network_rates, period2_amplitude, shape_compliance,
+                                           surface_compliance)
 from nurbsdem.geometry.rotation import quats_to_matrices, random_quaternions
-from nurbsdem.lattice import fcc_positions
-from nurbsdem.shapes import box_walls, ellipsoid, sphere
+from nurbsdem.lattice import fcc_sphere_block
+from nurbsdem.shapes import ellipsoid, sphere
 
 PAPER = ContactLaw(en=1e5, cn=1e2, et=1e4, ct=0.0, mu=0.5)
 R_C = (3 * 21.29e-6 / (4 * math.pi)) ** (1 / 3)        # particle C's volume-equivalent radius
@@ -130,36 +131,8 @@ def test_alternation_counts_only_sustained_reversals_above_round_off():
 
 
 # --------------------------------------------------------------------------- dense pack
-def fcc_block(dt, substeps=None, watch=True, cells=2, overlap=1e-5):
-    """Exact NURBS spheres of particle C's mass in FCC order, 12 contacts each inside, held by a
-    box of walls that touch the outer spheres; zero gravity; the paper's contact law.  Returns
-    the system and the list of centroid arrays at every force evaluation (internal step)."""
-    X = fcc_positions(cells, 2 * R_C - overlap, origin=(0.1, 0.1, 0.1))
-    s = DemSystem(dt=dt, gravity=(0, 0, 0), interfaces=InterfaceTable(default=PAPER),
-                  substeps=substeps, watch_period2=watch)
-    rng = np.random.default_rng(1)
-    for x in X:
-        s.add_particle(M_C, sphere_inertia(M_C, R_C), x, v=rng.normal(0, 1e-3, 3), radius=R_C)
-    walls = list(box_walls(X.min(0) - R_C + overlap, X.max(0) + R_C - overlap, top=True).values())
-    for _ in walls:
-        s.add_wall()
-    scene = SceneContacts([sphere(R_C)], np.zeros(len(X), np.int64), walls)
-    trace = []
-
-    def provider(kin):
-        trace.append(kin.x.copy())
-        return scene(kin)
-    s.set_contact_provider(provider)
-    return s, trace
-
-
-def period2_amplitude(trace, last=40):
-    """Largest period-2 component (m) of the centroids' increments over the last internal
-    steps: |mean of (−1)ⁿ (x_{n+1} − x_n)|, ≈ 0 for resolved motion."""
-    x = np.array(trace[-(last + 1):])
-    inc = np.diff(x, axis=0)
-    sign = (-1.0) ** np.arange(inc.shape[0])
-    return float(np.abs(np.einsum("n,nij->ij", sign, inc)).max() / inc.shape[0])
+def fcc_block(dt, substeps=None, watch=True):
+    return fcc_sphere_block(dt, substeps=substeps, watch_period2=watch)
 
 
 @pytest.mark.parametrize("dt", [5e-4, 1e-3, 2e-3])

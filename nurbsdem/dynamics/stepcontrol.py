@@ -244,6 +244,17 @@ def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
 
 
 # --------------------------------------------------------------------------- period-2 guard
+def period2_amplitude(trace, last: int = 40) -> float:
+    """Largest period-2 component (m) of the centroids' increments over the ``last`` internal
+    steps of ``trace`` (a list of (N,3) centroid arrays, one per internal step):
+    max over bodies of |mean of (−1)ⁿ (x_{n+1} − x_n)|; ≈ 0 for motion the step resolves, the
+    half amplitude of the flip for period-2 motion.  A diagnostic for tests and benchmarks."""
+    x = np.array(trace[-(last + 1):])
+    inc = np.diff(x, axis=0)
+    sign = (-1.0) ** np.arange(inc.shape[0])
+    return float(np.abs(np.einsum("n,nij->ij", sign, inc)).max() / inc.shape[0])
+
+
 @njit(cache=True)
 def _reversed(arr: np.ndarray, prev: np.ndarray, i: int, floor: float) -> bool:
     """Whether row i of arr reverses row i of prev without decaying (prev updated to arr)."""
