@@ -75,11 +75,34 @@ def _args(argv):
 
 
 def _set(proxy, name, value):
-    """Set a property that not every ParaView version has (skipped where missing)."""
+    """Set a property that not every ParaView version has, or whose allowed values changed
+    between versions (skipped there)."""
     try:
         setattr(proxy, name, value)
-    except AttributeError:
+    except (AttributeError, ValueError):
         pass
+
+
+def _bounds(*sources):
+    """Union of the data bounds (xmin, xmax, ymin, ymax, zmin, zmax) of the sources, m."""
+    b = [1e300, -1e300] * 3
+    for src in sources:
+        sb = src.GetDataInformation().GetBounds()
+        for i in range(3):
+            if sb[2 * i] <= sb[2 * i + 1]:
+                b[2 * i] = min(b[2 * i], sb[2 * i])
+                b[2 * i + 1] = max(b[2 * i + 1], sb[2 * i + 1])
+    return b if b[0] <= b[1] else [0.0, 1.0] * 3
+
+
+def _go_to(time):
+    """Show ``time`` (s) in every view."""
+    from paraview.simple import GetAnimationScene, GetTimeKeeper
+
+    scene = GetAnimationScene()
+    scene.UpdateAnimationUsingDataTimeSteps()
+    _set(scene, "AnimationTime", time)
+    _set(GetTimeKeeper(), "Time", time)
 
 
 def _solid(display, colour):
@@ -168,8 +191,7 @@ def _isometric_camera(view):
 
 def show(folder, time=None):
     """Build the pipeline and the view for the results in ``folder``; returns (view, time)."""
-    from paraview.simple import (GetActiveViewOrCreate, GetAnimationScene, Glyph, PVDReader,
-                                 Show)
+    from paraview.simple import GetActiveViewOrCreate, Glyph, PVDReader, Show
 
     view = GetActiveViewOrCreate("RenderView")
     _set(view, "UseColorPaletteForBackground", 0)
@@ -185,24 +207,25 @@ def show(folder, time=None):
     pdisp = Show(particles, view)
     _colour_by_shape(particles, pdisp, view, _unique_ints(particles, "shape_id", t) or [1])
 
+    shown = [particles]
     path = os.path.join(folder, "walls.pvd")
     if os.path.exists(path):
         walls = PVDReader(registrationName="walls", FileName=path)
         wdisp = Show(walls, view)
         _solid(wdisp, WALL_COLOUR)
         wdisp.Opacity = WALL_OPACITY
+        shown.append(walls)
 
-    scene = GetAnimationScene()
-    scene.UpdateAnimationUsingDataTimeSteps()
-    scene.AnimationTime = t
-    _set(view, "ViewTime", t)
+    _go_to(t)
     _isometric_camera(view)   # fitted to particles and walls, before the arrows
 
     path = os.path.join(folder, "contacts.pvd")
     if os.path.exists(path):
         contacts = PVDReader(registrationName="contacts", FileName=path)
         fmax = _largest_force(contacts, list(contacts.TimestepValues or [t]))
-        b = view.GetRenderer().ComputeVisiblePropBounds()
+        for src in shown:
+            src.UpdatePipeline(t)
+        b = _bounds(*shown)
         diag = sum((b[2 * i + 1] - b[2 * i]) ** 2 for i in range(3)) ** 0.5
         arrows = Glyph(registrationName="contact forces", Input=contacts, GlyphType="Arrow")
         arrows.OrientationArray = ["POINTS", "force_normal"]
@@ -214,7 +237,7 @@ def show(folder, time=None):
         _solid(adisp, ARROW_COLOUR)
         if fmax > 0.0:
             pdisp.Opacity = PARTICLE_OPACITY
-    scene.AnimationTime = t
+    _go_to(t)
     return view, t
 
 
