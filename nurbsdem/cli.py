@@ -240,6 +240,8 @@ def shape(kind: str, output: str, radius: float | None, semi_axes, particle_kind
     def need(value, opt: str):
         if value is None:
             raise NurbsdemError(f"shape {kind}: {opt} is required")
+        for x in np.ravel(value):
+            _check_length(x, f"shape {kind}: {opt}")
         return value
 
     try:
@@ -273,13 +275,28 @@ def _checked(sh, convexity_tol: float | None):
     return Shape(sh.patches, name=sh.name, source=sh.source, convexity_tol=convexity_tol)
 
 
+def _check_length(x: float, what: str) -> None:
+    """A size given on the command line: finite, > 0 and in the range the deck accepts."""
+    from .io.deck import RANGES
+    rng = RANGES["Radius"]
+    if not (math.isfinite(x) and x > 0):
+        raise NurbsdemError(f"{what} must be a positive number (m), got {x:g}")
+    if not rng.lo <= x <= rng.hi:
+        raise NurbsdemError(f"{what} {x:g} m is out of range: it must be between {rng.lo:g} "
+                            f"and {rng.hi:g} m ({rng.reason})")
+
+
 def _finish_import(sh, output: str, scale: float) -> None:
-    from .io.shapefile import save_shape
+    from .io.shapefile import check_patch_numbers, save_shape
 
     if scale != 1.0:
-        if not scale > 0:
-            raise NurbsdemError(f"--scale must be > 0, got {scale}")
+        if not (math.isfinite(scale) and scale > 0):
+            raise NurbsdemError(f"--scale must be a positive number, got {scale:g}")
+        size = scale * max(float(np.abs(p.control_points).max()) for p in sh.patches)
+        _check_length(size, f"--scale {scale:g}: the scaled shape's largest coordinate")
         sh = sh.scaled(scale)
+        for i, p in enumerate(sh.patches):
+            check_patch_numbers(p, f"{output} (after --scale {scale:g})", f"patch {i}")
     save_shape(output, sh)
     click.echo(f"wrote {output}: {sh.name}, {len(sh.patches)} patches, "
                f"volume {sh.volume:.9g} m^3")

@@ -334,3 +334,52 @@ def test_checkpoint_round_trip_still_exact(tmp_path):
     save_checkpoint(ck, state)
     back = load_checkpoint(ck)
     assert np.array_equal(back["a"], state["a"]) and back["b"] == state["b"]
+
+
+@pytest.mark.parametrize("args,fragment", [
+    (["sphere", "--radius", "1e300"], "--radius 1e+300 m is out of range"),
+    (["sphere", "--radius", "1e-300"], "--radius 1e-300 m is out of range"),
+    (["ellipsoid", "--semi-axes", "1e300", "1", "1"], "out of range"),
+    (["sphere", "--radius", "nan"], "must be a positive number"),
+])
+def test_shape_command_refuses_sizes_out_of_range(tmp_path, args, fragment):
+    r = CliRunner().invoke(main, ["shape", *args, "-o", str(tmp_path / "x.yaml")])
+    assert r.exit_code == 2 and fragment in r.output
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_import_scale_that_overflows_is_refused(tmp_path):
+    f = tmp_path / "p.txt"
+    f.write_text(giraffe_text(gen.sphere_patches(0.02)))
+    r = CliRunner().invoke(main, ["import-giraffe", str(f), "-o", str(tmp_path / "y.yaml"),
+                                  "--scale", "1e300"])
+    assert r.exit_code == 2 and "--scale 1e+300: the scaled shape" in r.output
+
+
+def test_output_directory_that_is_a_file(tmp_path):
+    path = _deck(tmp_path, DECK)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file")
+    r = CliRunner().invoke(main, ["solve", str(path), "--quiet", "--output", str(blocker)])
+    assert r.exit_code == 2 and "the output directory is a file" in r.output
+    assert blocker.read_text() == "a file"
+
+
+def test_replicating_onto_the_same_place_is_refused_at_run_time(tmp_path):
+    """The run-time Replicate check catches coincident copies (the sampled test alone saw
+    identical surfaces as touching)."""
+    from nurbsdem.model import ReplicateStep
+    from nurbsdem.placement import replicate_step
+    model = parse_deck(_deck(tmp_path, DECK))
+    step = ReplicateStep(9, 17, layers=3, height=1e-300)
+    with pytest.raises(InputError, match="replicated layers overlap"):
+        replicate_step(model, model.bodies, step)
+
+
+def test_replicating_through_the_lid_is_refused_at_run_time(tmp_path):
+    from nurbsdem.model import ReplicateStep
+    from nurbsdem.placement import replicate_step
+    model = parse_deck(_deck(tmp_path, DECK))
+    step = ReplicateStep(9, 17, layers=2, height=0.3)
+    with pytest.raises(InputError, match="after replication, particle 3 .* behind wall 'lid'"):
+        replicate_step(model, model.bodies, step)

@@ -33,6 +33,7 @@ Typical use by the solver (see :class:`OutputWriters`)::
 """
 from __future__ import annotations
 
+import errno
 import functools
 import math
 import os
@@ -734,6 +735,8 @@ class OutputWriters:
                  flush_every: int = 20) -> None:
         assert model.output is not None
         self.directory = Path(model.output.directory)
+        if self.directory.exists() and not self.directory.is_dir():
+            raise OSError(errno.ENOTDIR, "the output directory is a file", str(self.directory))
         self.directory.mkdir(parents=True, exist_ok=True)
         clean_output_directory(self.directory)
         self._committed = restart_time is not None
