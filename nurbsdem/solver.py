@@ -132,17 +132,22 @@ class Solver:
     quiet: no progress display.
     safety: fraction of the critical time step used by the sub-stepping (0.5).
     progress_stream: where the progress line goes (default stderr).
+    contact_options: keywords of :class:`~nurbsdem.contact.scene.SceneContacts` (``skin``,
+        ``certificates``): e.g. ``dict(skin=0, certificates=False)`` searches and solves every
+        pair at every evaluation (the same results, more work: a test says so).
     """
 
     def __init__(self, model: Model, output: str | Path | None = None,
                  restart: str | Path | None = None, quiet: bool = False,
-                 safety: float = 0.5, progress_stream=None) -> None:
+                 safety: float = 0.5, progress_stream=None,
+                 contact_options: dict | None = None) -> None:
         self.model = model
         if output is not None:
             model.output.directory = Path(output)
         self.outdir = Path(model.output.directory)
         self.quiet = quiet
         self.safety = safety
+        self.contact_options = dict(contact_options or {})
         self.progress = Progress(quiet, progress_stream)
         self.restart_path = Path(restart) if restart is not None else None
         # materials: deck ids -> 0..M-1; walls get material M
@@ -223,7 +228,8 @@ class Solver:
             sysm.add_wall(motions[k], material=self.wall_material, name=w.name)
         body_shape = np.array([self.shape_index[int(s)] for s in b.shape_id], np.int64)
         if self.scene is None or self.scene.n != len(b):
-            self.scene = SceneContacts(self.shapes, body_shape, self._wall_patches())
+            self.scene = SceneContacts(self.shapes, body_shape, self._wall_patches(),
+                                       **self.contact_options)
         sysm.set_contact_provider(self.scene)
         if self._carry_hist is not None:
             sysm.initial_history = self._carry_hist

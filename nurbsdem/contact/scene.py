@@ -1,20 +1,35 @@
 """Contact detection for a whole scene: the hierarchy of paper Section 3 for N bodies and W
 flat walls, as a *contact provider* of :class:`nurbsdem.dynamics.DemSystem`.
 
-Per force evaluation (:meth:`SceneContacts.__call__`):
+The global search (levels 1–2) builds a **neighbour list with a skin** (a Verlet list):
 
 1. level 0/1 — bounding spheres (paper Eq. 3) on a cell grid
    (:func:`~nurbsdem.contact.broadphase.sphere_pairs`), bodies against wall rectangles
-   (:func:`~nurbsdem.contact.broadphase.sphere_wall_pairs`);
+   (:func:`~nurbsdem.contact.broadphase.sphere_wall_pairs`), both widened by the skin s;
 2. level 2 — oriented patch boxes by the separating-axis test
-   (:func:`~nurbsdem.contact.boxes.candidate_patch_pairs_batch`); a body pair with no
-   overlapping patch boxes cannot touch and is dropped;
-3. the LCP of every remaining pair in compiled code, in parallel
-   (:func:`~nurbsdem.contact.detect_batch`, :func:`~nurbsdem.contact.detect_wall_batch`),
-   warm-started from the same pair's previous solution.
+   (:func:`~nurbsdem.contact.boxes.candidate_patch_pairs_batch`), each box inflated by s/2; a
+   body pair with no overlapping boxes is dropped.
+
+Each body carries an **odometer**: the sum over force evaluations of the largest displacement
+of any of its points, |Δx| + 2 sin(Δθ/2)·r (r its bounding radius; walls: |Δd|).  A pair left
+out of the list at its build was at least s apart, so the list stays valid (it holds every pair
+that can touch) until some body's odometer has grown by s/2 since the build; then it is built
+again.  With s = 0 it is built at every evaluation.
+
+Per force evaluation (:meth:`SceneContacts.__call__`) the LCP of each listed pair is solved in
+compiled code, in parallel (:func:`~nurbsdem.contact.detect_batch`,
+:func:`~nurbsdem.contact.detect_wall_batch`), warm-started from the pair's previous solution —
+**unless the pair holds a separation certificate**: a pair solved as separated by a distance d
+cannot touch until the odometers of its two bodies have grown by d together (the distance
+between two sets shrinks by at most the largest displacements of their points), so its LCP is
+skipped until then.  Both devices are exact: they change which LCPs are solved, not the contacts
+found (up to the round-off of a different warm start).
+
+Bookkeeping is in flat arrays aligned with the list (sorted pair keys a·(N+W) + b): previous
+solutions, certificates, reused flags; a rebuild carries them over by a merge of sorted keys.
 
 The counters follow the paper's Fig. 5: ``monitored`` = LCPs solved (pairs left by the global
-search), ``active`` = penetrating pairs, ``degenerated`` = active pairs solved with the
+search and not certified apart), ``active`` = penetrating pairs, ``degenerated`` = active pairs solved with the
 degeneration technique (Eq. 10–15), ``failed`` = LCPs that did not converge.
 
 A failed LCP never acts for more than one evaluation (never abort, never linger): a pair whose
@@ -24,9 +39,9 @@ measured again between the moved points); if the next LCP of that pair fails too
 no converged solution to move, the pair is left out of the force evaluation (and its tangential
 history ends).  Each case is logged once per pair, naming the pair.
 
-Besides the active contacts, each ContactSet reports the separated pairs it solved
-(``near_*``: their closest points, normal and gap) so that the time-step control can see the
-contacts about to close.
+Besides the active contacts, each ContactSet reports the separated listed pairs (``near_*``:
+their closest points, normal and gap — for a certified pair a lower bound of it) so that the
+time-step control can see the contacts about to close.
 
 Units: metres, seconds. Global body indices: particles 0..N-1, walls N..N+W-1 (DEVNOTES).
 """
@@ -106,11 +121,14 @@ class SceneContacts:
     body_shape: int (N,) shape index of each particle.
     walls: W flat wall patches (degree 1, 2×2 control points) in the world at zero
         displacement; their displacements come with the kinematics.
-    margin: skin added to the bounding volumes (m).
+    margin: extra margin added to the bounding volumes (m), on top of the skin.
+    skin: Verlet skin s (m) of the neighbour list; None: 5 % of the smallest bounding radius;
+        0: the list is built at every evaluation.
+    certificates: skip the LCPs of pairs certified apart (module docstring).
     """
 
     def __init__(self, shapes: Sequence, body_shape: np.ndarray, walls: Sequence = (),
-                 margin: float = 0.0) -> None:
+                 margin: float = 0.0, skin: float | None = None, certificates: bool = True) -> None:
         self.shapes = list(shapes)
         self.table = ContactTable(self.shapes)
         self.boxes, self.box_offsets = pack_boxes(self.shapes)
@@ -120,6 +138,9 @@ class SceneContacts:
         self.n = int(self.body_shape.shape[0])
         self.walls = list(walls)
         W = len(self.walls)
+        self.nb = self.n + W
+        self.skin = (0.05 * float(self.radius.min()) if self.n else 0.0) if skin is None else float(skin)
+        self.certificates = bool(certificates)
         self.wall_center = np.zeros((W, 3))
         self.wall_axes = np.zeros((W, 3, 3))
         self.wall_half = np.zeros((W, 2))
@@ -131,69 +152,107 @@ class SceneContacts:
             self.wall_center[k], self.wall_axes[k], self.wall_half[k] = wall_geometry(w)
             self.wall_origin[k], self.wall_a[k], self.wall_b[k], self.wall_dom[k] = wall_frame(w)
         self.depth_wall = 2.0 * float(self.radius.max()) if self.n else 0.0
-        #: warm-start rows of the last solution of each pair: key -> (row_f, row_i)
-        self.cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        #: keys whose cached row is a failed LCP's moved previous solution (not a converged one)
-        self.reused: frozenset[int] = frozenset()
-        #: poses of the previous call: pose positions (N,3), rotations (N,3,3), walls (W,3)
-        self.prev_pose: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.P = int(np.diff(self.box_offsets).max()) if len(self.shapes) else 1
+        #: the neighbour list and the per-pair arrays aligned with it (module docstring)
+        self.pairs = _PairState.empty(self.P)
+        #: odometer of every body (m), and its value when the list was built
+        self.odo = np.zeros(self.nb)
+        self.built_odo: np.ndarray | None = None
+        #: poses of the previous call: pose positions (N,3), rotations (N,3,3), walls (W,3),
+        #: centroids (N,3)
+        self.prev_pose: tuple | None = None
         self.warned: set[tuple[int, str]] = set()
         self.timers = SceneTimers()
-        self.totals = {"monitored": 0, "active": 0, "degenerated": 0, "failed": 0}
+        self.builds = 0
         self.last: ContactSet = ContactSet.empty()
 
-    # ------------------------------------------------------------------ warm starts
-    def _previous(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        K = keys.shape[0]
-        pf = np.zeros((K, NF))
-        pi = np.zeros((K, NI), np.int64)
-        for r, k in enumerate(keys.tolist()):
-            hit = self.cache.get(k)
-            if hit is not None:
-                pf[r], pi[r] = hit
-        return pf, pi
-
-    def _store(self, keys: np.ndarray, rf: np.ndarray, ri: np.ndarray) -> dict:
-        return {k: (rf[r].copy(), ri[r].copy()) for r, k in enumerate(keys.tolist())}
-
+    # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
-        """The warm-start cache, the reused keys and the previous poses as arrays (for
-        checkpoints: restarts stay bit-for-bit)."""
-        keys = np.array(sorted(self.cache), dtype=np.int64)
-        rf = np.array([self.cache[k][0] for k in keys.tolist()]).reshape(-1, NF)
-        ri = np.array([self.cache[k][1] for k in keys.tolist()], dtype=np.int64).reshape(-1, NI)
-        st = {"keys": keys, "rows_f": rf, "rows_i": ri,
-              "reused": np.array(sorted(self.reused), dtype=np.int64)}
+        """Everything a restart needs to continue bit for bit, as arrays."""
+        st = self.pairs.as_dict()
+        st["odo"] = self.odo
+        if self.built_odo is not None:
+            st["built_odo"] = self.built_odo
         if self.prev_pose is not None:
             st.update(prev_pos=self.prev_pose[0], prev_R=self.prev_pose[1],
-                      prev_wall=self.prev_pose[2])
+                      prev_wall=self.prev_pose[2], prev_x=self.prev_pose[3])
         return st
 
     def set_state(self, st: dict) -> None:
         """Restore :meth:`state`."""
-        self.cache = {int(k): (np.array(f), np.array(i)) for k, f, i in
-                      zip(st["keys"], st["rows_f"], st["rows_i"])}
-        self.reused = frozenset(int(k) for k in st.get("reused", ()))
+        self.pairs = _PairState.from_dict(st, self.P)
+        self.odo = np.array(st.get("odo", np.zeros(self.nb)), float)
+        self.built_odo = np.array(st["built_odo"], float) if "built_odo" in st else None
         self.prev_pose = ((np.array(st["prev_pos"]), np.array(st["prev_R"]),
-                           np.array(st["prev_wall"])) if "prev_pos" in st else None)
+                           np.array(st["prev_wall"]), np.array(st["prev_x"]))
+                          if "prev_x" in st else None)
 
     def snapshot(self):
-        """What a rolled-back time step must restore (cheap: the call replaces, never mutates,
-        these objects)."""
-        return self.cache, self.reused, self.prev_pose, self.last
+        """What a rolled-back time step must restore (cheap: a call replaces these objects,
+        never mutates them)."""
+        return self.pairs, self.odo, self.built_odo, self.prev_pose, self.last
 
     def restore(self, snap) -> None:
         """Undo the calls made since :meth:`snapshot`."""
-        self.cache, self.reused, self.prev_pose, self.last = snap
+        self.pairs, self.odo, self.built_odo, self.prev_pose, self.last = snap
+
+    # ------------------------------------------------------------------ neighbour list
+    def _advance_odometers(self, pose) -> None:
+        """odometer += largest displacement of any point of each body since the last call."""
+        if self.prev_pose is None:
+            return
+        _, R, wall, x = pose
+        _, R0, wall0, x0 = self.prev_pose
+        N = self.n
+        step = np.empty(self.nb)
+        if N:
+            chord = np.sqrt(((R - R0) ** 2).sum(axis=(1, 2)) / 2.0)     # 2 sin(θ/2)
+            step[:N] = np.linalg.norm(x - x0, axis=1) + chord * self.radius
+        if self.nb > N:
+            step[N:] = np.linalg.norm(wall - wall0, axis=1)
+        self.odo = self.odo + step
+
+    def _list_is_stale(self) -> bool:
+        if self.built_odo is None or self.skin <= 0:
+            return True
+        return bool(np.any(self.odo - self.built_odo > 0.5 * self.skin))
+
+    def _build_list(self, kin, pos: np.ndarray, R: np.ndarray) -> None:
+        """Neighbour list with the skin (levels 1–2), carrying over the per-pair arrays."""
+        N = self.n
+        m = self.margin + self.skin
+        pairs = sphere_pairs(kin.x, self.radius, m) if N > 1 else np.zeros((0, 2), np.int64)
+        mask_a = np.zeros((0, self.P), np.bool_)
+        mask_b = mask_a.copy()
+        if pairs.shape[0]:
+            cand = candidate_patch_pairs_batch(self.boxes, self.box_offsets, self.body_shape,
+                                               pos, R, pairs, m)
+            pairs, mask_a, mask_b = self._directed(pairs, cand)
+        wpairs = np.zeros((0, 2), np.int64)
+        if self.walls and N:
+            wc = self.wall_center + kin.wall_displacement
+            wpairs = sphere_wall_pairs(kin.x, self.radius, wc, self.wall_axes, self.wall_half, m)
+            if wpairs.shape[0]:
+                cand = candidate_patches_wall_batch(self.boxes, self.box_offsets, self.body_shape,
+                                                    pos, R, wc, self.wall_axes, self.wall_half,
+                                                    wpairs, m, self.depth_wall)
+                wpairs = wpairs[np.unique(cand[:, 0])] if cand.shape[0] else wpairs[:0]
+        a = np.concatenate([pairs[:, 0], wpairs[:, 0]]).astype(np.int64)
+        b = np.concatenate([pairs[:, 1], N + wpairs[:, 1]]).astype(np.int64)
+        W = wpairs.shape[0]
+        mask_a = np.concatenate([mask_a, np.ones((W, self.P), np.bool_)])
+        mask_b = np.concatenate([mask_b, np.ones((W, self.P), np.bool_)])
+        self.pairs = self.pairs.rebuilt(a, b, a * self.nb + b, mask_a, mask_b)
+        self.built_odo = self.odo.copy()
+        self.builds += 1
 
     def _directed(self, pairs: np.ndarray, cand: np.ndarray):
         """Keep the body pairs with overlapping patch boxes, and their candidate patches as
         (K, P) masks that direct the LCP's cold starts (paper 3.1)."""
         keep = np.unique(cand[:, 0])
         row = np.searchsorted(keep, cand[:, 0])
-        P = int(np.diff(self.box_offsets).max())
-        mask_a = np.zeros((keep.shape[0], P), np.bool_)
-        mask_b = np.zeros((keep.shape[0], P), np.bool_)
+        mask_a = np.zeros((keep.shape[0], self.P), np.bool_)
+        mask_b = np.zeros((keep.shape[0], self.P), np.bool_)
         mask_a[row, cand[:, 1]] = True
         mask_b[row, cand[:, 2]] = True
         return pairs[keep], mask_a, mask_b
@@ -202,111 +261,111 @@ class SceneContacts:
     def __call__(self, kin) -> ContactSet:
         """Active contacts for the kinematics of a :class:`~nurbsdem.dynamics.DemSystem`."""
         t0 = time.perf_counter()
-        N = self.n
-        nb = N + len(self.walls)
         pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
-        # particle pairs: bounding spheres (Eq. 3), then patch boxes (Sec. 3.1)
-        pairs = sphere_pairs(kin.x, self.radius, self.margin) if N > 1 else np.zeros((0, 2), np.int64)
-        mask_a = mask_b = None
-        if pairs.shape[0]:
-            cand = candidate_patch_pairs_batch(self.boxes, self.box_offsets, self.body_shape,
-                                               pos, R, pairs, self.margin)
-            pairs, mask_a, mask_b = self._directed(pairs, cand)
-        # particle-wall pairs
-        wpairs = np.zeros((0, 2), np.int64)
-        if self.walls and N:
-            wc = self.wall_center + kin.wall_displacement
-            wpairs = sphere_wall_pairs(kin.x, self.radius, wc, self.wall_axes, self.wall_half,
-                                       self.margin)
-            if wpairs.shape[0]:
-                cand = candidate_patches_wall_batch(self.boxes, self.box_offsets, self.body_shape,
-                                                    pos, R, wc, self.wall_axes, self.wall_half,
-                                                    wpairs, self.margin, self.depth_wall)
-                wpairs = wpairs[np.unique(cand[:, 0])] if cand.shape[0] else wpairs[:0]
+        pose = (pos, R, np.array(kin.wall_displacement, float), np.array(kin.x, float))
+        self._advance_odometers(pose)
+        if self._list_is_stale():
+            self._build_list(kin, pos, R)
+        ps = self.pairs
+        reach = self.odo[ps.a] + self.odo[ps.b]
+        certified = (ps.budget > reach) if self.certificates else np.zeros(ps.a.shape[0], bool)
+        due = np.nonzero(~certified)[0]
         t1 = time.perf_counter()
-        # LCPs
-        a = pairs[:, 0]
-        b = pairs[:, 1]
-        keys_p = a * nb + b
-        pf, pi = self._previous(keys_p)
-        def solve_pairs(k, prev_f, prev_i):
-            return detect_batch(self.table, self.body_shape[a[k]], pos[a[k]], R[a[k]],
-                                self.body_shape[b[k]], pos[b[k]], R[b[k]], prev_f, prev_i,
-                                mask_a=None if mask_a is None else mask_a[k],
-                                mask_b=None if mask_b is None else mask_b[k])
-        rf, ri = _retry_failed_cold(solve_pairs, pf, pi)
-        wb_idx = wpairs[:, 1]
-        wa = wpairs[:, 0]
-        keys_w = wa * nb + (N + wb_idx)
-        wf, wi = self._previous(keys_w)
-        d = kin.wall_displacement[wb_idx] if len(self.walls) else np.zeros((0, 3))
-
-        def solve_walls(k, prev_f, prev_i):
-            w = wb_idx[k]
-            return detect_wall_batch(self.table, self.body_shape[wa[k]], pos[wa[k]], R[wa[k]],
-                                     self.wall_origin[w] + d[k], self.wall_a[w], self.wall_b[w],
-                                     self.wall_dom[w], prev_f, prev_i)
-        rwf, rwi = _retry_failed_cold(solve_walls, wf, wi)
+        rf, ri = self._solve(due, pos, R, pose[2])
         t2 = time.perf_counter()
-        cs = self._assemble(np.concatenate([a, wa]), np.concatenate([b, N + wb_idx]),
-                            np.concatenate([keys_p, keys_w]), np.concatenate([rf, rwf]),
-                            np.concatenate([ri, rwi]), pf_all=np.concatenate([pf, wf]),
-                            pi_all=np.concatenate([pi, wi]),
-                            pose=(pos, R, np.array(kin.wall_displacement, float)))
+        cs = self._assemble(due, rf, ri, reach, pose)
         self.timers.global_search += t1 - t0
         self.timers.lcp += t2 - t1
         self.timers.calls += 1
-        self.timers.lcps += int(keys_p.shape[0] + keys_w.shape[0])
+        self.timers.lcps += int(due.shape[0])
         self.last = cs
         return cs
 
-    def _assemble(self, a, b, keys, rf, ri, pf_all, pi_all, pose) -> ContactSet:
-        """The ContactSet of this call from the LCP rows; failed rows are answered by the
-        previous solution moved rigidly (once) or left out (module docstring)."""
+    def _solve(self, due: np.ndarray, pos: np.ndarray, R: np.ndarray, wall_d: np.ndarray):
+        """LCP rows of the listed pairs ``due`` (warm-started, failed warm starts retried cold)."""
+        ps = self.pairs
+        N = self.n
+        rf = np.zeros((due.shape[0], NF))
+        ri = np.zeros((due.shape[0], NI), np.int64)
+        a, b = ps.a[due], ps.b[due]
+        part = np.nonzero(b < N)[0]
+        wall = np.nonzero(b >= N)[0]
+        if part.size:
+            pa, pb, idx = a[part], b[part], due[part]
+
+            def solve_pairs(k, prev_f, prev_i):
+                return detect_batch(self.table, self.body_shape[pa[k]], pos[pa[k]], R[pa[k]],
+                                    self.body_shape[pb[k]], pos[pb[k]], R[pb[k]], prev_f, prev_i,
+                                    mask_a=ps.mask_a[idx[k]], mask_b=ps.mask_b[idx[k]])
+            rf[part], ri[part] = _retry_failed_cold(solve_pairs, ps.rows_f[idx], ps.rows_i[idx])
+        if wall.size:
+            wa, w, idx = a[wall], b[wall] - N, due[wall]
+            org = self.wall_origin[w] + wall_d[w]
+
+            def solve_walls(k, prev_f, prev_i):
+                return detect_wall_batch(self.table, self.body_shape[wa[k]], pos[wa[k]], R[wa[k]],
+                                         org[k], self.wall_a[w[k]], self.wall_b[w[k]],
+                                         self.wall_dom[w[k]], prev_f, prev_i)
+            rf[wall], ri[wall] = _retry_failed_cold(solve_walls, ps.rows_f[idx], ps.rows_i[idx])
+        return rf, ri
+
+    def _assemble(self, due, rf, ri, reach, pose) -> ContactSet:
+        """Store the new rows (failed ones answered by the previous solution moved rigidly,
+        once, or left out: module docstring), renew the certificates, and make the ContactSet."""
+        ps = self.pairs
+        keys = ps.keys
+        prev_f, prev_i = ps.rows_f[due], ps.rows_i[due]
         failed = ri[:, I_FAIL].astype(bool)
-        reused, dropped = [], []
+        reused = np.zeros(ps.a.shape[0], bool)
+        dropped = []
         for r in np.nonzero(failed)[0].tolist():
-            k = int(keys[r])
-            if pi_all[r, I_VALID] and k not in self.reused and self.prev_pose is not None:
-                rf[r], ri[r] = self._moved(pf_all[r], pi_all[r], int(a[r]), int(b[r]), pose)
-                reused.append(k)
-                self._warn(k, int(a[r]), int(b[r]), "its last converged solution, moved rigidly "
+            j = int(due[r])
+            a, b, k = int(ps.a[j]), int(ps.b[j]), int(keys[j])
+            if prev_i[r, I_VALID] and not ps.reused[j] and self.prev_pose is not None:
+                rf[r], ri[r] = self._moved(prev_f[r], prev_i[r], a, b, pose)
+                reused[j] = True
+                self._warn(k, a, b, "its last converged solution, moved rigidly "
                            "with the two bodies, is used for this evaluation only")
             else:
                 ri[r, I_ACTIVE] = 0
                 ri[r, I_VALID] = 0
                 dropped.append(k)
-                self._warn(k, int(a[r]), int(b[r]), "no fresh converged solution to fall back on: "
+                self._warn(k, a, b, "no fresh converged solution to fall back on: "
                            "the pair is left out of the force evaluation")
-        self.reused = frozenset(reused)
+        rows_f, rows_i, budget = ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy()
+        rows_f[due], rows_i[due] = rf, ri
+        sd = rf[:, F_SD]
+        apart = (ri[:, I_VALID] == 1) & (ri[:, I_ACTIVE] == 0) & ~failed & (sd > 0)
+        budget[due] = np.where(apart, sd * (1.0 - 1e-9) + reach[due], -np.inf)
+        self.pairs = ps = ps.replaced(rows_f, rows_i, budget, reused)
         self.prev_pose = pose
-        self.cache = self._store(keys, rf, ri)
-        valid = ri[:, I_VALID] == 1
-        act = (ri[:, I_ACTIVE] == 1) & valid
+        valid = rows_i[:, I_VALID] == 1
+        act = (rows_i[:, I_ACTIVE] == 1) & valid
         sel = np.nonzero(act)[0]
-        near = np.nonzero(valid & ~act & (rf[:, F_SD] > 0))[0]
-        deg = ri[sel, I_DEG]
+        near = np.nonzero(valid & ~act & (rows_f[:, F_SD] > 0))[0]
+        gap = np.minimum(rows_f[near, F_SD], np.maximum(budget[near] - reach[near], 0.0))
+        deg = rows_i[sel, I_DEG]
         n_failed = int(failed.sum())
-        cs = ContactSet(body_a=a[sel].astype(np.int64), body_b=b[sel].astype(np.int64),
-                        point_a=rf[sel, F_PA:F_PA + 3].copy(), point_b=rf[sel, F_PB:F_PB + 3].copy(),
-                        normal=rf[sel, F_N:F_N + 3].copy(), depth=-rf[sel, F_SD],
-                        key=keys[sel].astype(np.int64), degenerated=deg.astype(np.int64),
-                        monitored=int(keys.shape[0]), active=int(sel.shape[0]),
-                        degenerated_count=int(np.count_nonzero(deg)), failed=n_failed,
-                        reused=len(reused), dropped=len(dropped),
-                        dropped_keys=np.array(dropped, np.int64),
-                        near_a=a[near].astype(np.int64), near_b=b[near].astype(np.int64),
-                        near_point=0.5 * (rf[near, F_PA:F_PA + 3] + rf[near, F_PB:F_PB + 3]),
-                        near_normal=rf[near, F_N:F_N + 3].copy(), near_gap=rf[near, F_SD].copy())
-        return cs
+        return ContactSet(body_a=ps.a[sel].copy(), body_b=ps.b[sel].copy(),
+                          point_a=rows_f[sel, F_PA:F_PA + 3].copy(),
+                          point_b=rows_f[sel, F_PB:F_PB + 3].copy(),
+                          normal=rows_f[sel, F_N:F_N + 3].copy(), depth=-rows_f[sel, F_SD],
+                          key=keys[sel].copy(), degenerated=deg.astype(np.int64),
+                          monitored=int(due.shape[0]), active=int(sel.shape[0]),
+                          degenerated_count=int(np.count_nonzero(deg)), failed=n_failed,
+                          reused=int(reused.sum()), dropped=len(dropped),
+                          dropped_keys=np.array(dropped, np.int64),
+                          near_a=ps.a[near].copy(), near_b=ps.b[near].copy(),
+                          near_point=0.5 * (rows_f[near, F_PA:F_PA + 3] + rows_f[near, F_PB:F_PB + 3]),
+                          near_normal=rows_f[near, F_N:F_N + 3].copy(), near_gap=gap)
 
     def _moved(self, row_f: np.ndarray, row_i: np.ndarray, a: int, b: int, pose):
         """A previous LCP row moved rigidly from the previous call's poses to ``pose``: the
         surface points follow their bodies (walls translate), the normal turns with body A and
         the signed distance is measured again between the moved points, (p_B − p_A)·n."""
         N = self.n
-        pos, R, wall = pose
-        ppos, pR, pwall = self.prev_pose
+        pos, R, wall, _ = pose
+        ppos, pR, pwall, _ = self.prev_pose
 
         def move(i: int, p: np.ndarray) -> np.ndarray:
             if i < N:
@@ -331,6 +390,64 @@ class SceneContacts:
         pair = (f"particles {a} and {b}" if b < self.n else f"particle {a} and wall {b - self.n}")
         log.warning("the contact problem (LCP) of %s did not converge: %s (counted as failed in "
                     "monitors/contacts.csv)", pair, what)
+
+
+@dataclass(frozen=True)
+class _PairState:
+    """The neighbour list and the arrays aligned with it (L pairs, sorted by key).
+
+    a, b (L,) body indices (b >= N: a wall); keys (L,) a·(N+W) + b; mask_a, mask_b (L, P)
+    candidate patches; rows_f (L, NF), rows_i (L, NI) the last LCP row of each pair (zeros:
+    none); budget (L,) the certificate: the pair cannot touch while the sum of its bodies'
+    odometers stays below it (−inf: none); reused (L,) the row is a failed LCP's moved solution.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    keys: np.ndarray
+    mask_a: np.ndarray
+    mask_b: np.ndarray
+    rows_f: np.ndarray
+    rows_i: np.ndarray
+    budget: np.ndarray
+    reused: np.ndarray
+
+    @classmethod
+    def empty(cls, P: int) -> "_PairState":
+        z = np.zeros(0, np.int64)
+        m = np.zeros((0, P), np.bool_)
+        return cls(z, z.copy(), z.copy(), m, m.copy(), np.zeros((0, NF)), np.zeros((0, NI), np.int64),
+                   np.zeros(0), np.zeros(0, bool))
+
+    def rebuilt(self, a, b, keys, mask_a, mask_b) -> "_PairState":
+        """A new list; the arrays of pairs already listed are carried over (sorted merge)."""
+        order = np.argsort(keys, kind="stable")
+        a, b, keys, mask_a, mask_b = a[order], b[order], keys[order], mask_a[order], mask_b[order]
+        L = keys.shape[0]
+        rows_f, rows_i = np.zeros((L, NF)), np.zeros((L, NI), np.int64)
+        budget, reused = np.full(L, -np.inf), np.zeros(L, bool)
+        if self.keys.shape[0] and L:
+            j = np.minimum(np.searchsorted(self.keys, keys), self.keys.shape[0] - 1)
+            hit = self.keys[j] == keys
+            rows_f[hit], rows_i[hit] = self.rows_f[j[hit]], self.rows_i[j[hit]]
+            budget[hit], reused[hit] = self.budget[j[hit]], self.reused[j[hit]]
+        return _PairState(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, reused)
+
+    def replaced(self, rows_f, rows_i, budget, reused) -> "_PairState":
+        return _PairState(self.a, self.b, self.keys, self.mask_a, self.mask_b, rows_f, rows_i,
+                          budget, reused)
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        return {"list_a": self.a, "list_b": self.b, "keys": self.keys, "mask_a": self.mask_a,
+                "mask_b": self.mask_b, "rows_f": self.rows_f, "rows_i": self.rows_i,
+                "budget": self.budget, "reused": self.reused}
+
+    @classmethod
+    def from_dict(cls, st: dict, P: int) -> "_PairState":
+        if "list_a" not in st:
+            return cls.empty(P)
+        return cls(*(np.array(st[k]) for k in ("list_a", "list_b", "keys", "mask_a", "mask_b",
+                                                "rows_f", "rows_i", "budget", "reused")))
 
 
 def _retry_failed_cold(solve, prev_f: np.ndarray, prev_i: np.ndarray):
