@@ -431,6 +431,9 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     from .solver import Solver
     _setup_logging(quiet, verbose)
     model = parse_deck(deck)
+    if restart is not None and Path(restart).parent.is_dir():
+        from .io.writers import clean_output_directory
+        clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries
     if restart is not None and not Path(restart).is_file():
         fail(f"{restart}: no such checkpoint file")
     solver = Solver(model, output=output, restart=restart, quiet=quiet)

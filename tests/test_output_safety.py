@@ -167,3 +167,28 @@ def test_solve_under_a_file_size_limit_ends_cleanly(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("nurbsdem: error: ") and "results.h5" in lines[0]
     after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert after == before
+
+
+def test_restart_after_a_killed_fresh_run_finds_the_previous_checkpoint(model, tmp_path):
+    """A fresh run killed before its first sample had set the checkpoint aside; --restart
+    from it puts the previous run back first."""
+    from click.testing import CliRunner
+
+    from nurbsdem.cli import main
+    out = Path(model.output.directory)
+    deck = Path(model.path)
+    assert CliRunner().invoke(main, ["solve", str(deck), "--quiet"]).exit_code == 0
+    good = (out / "checkpoint.h5").read_bytes()
+    OutputWriters(model)                         # a fresh run, killed at once
+    assert not (out / "checkpoint.h5").exists()
+    r = CliRunner().invoke(main, ["solve", str(deck), "--quiet", "--restart",
+                                  str(out / "checkpoint.h5")])
+    assert r.exit_code == 0, r.output
+    assert not (out / PREVIOUS_DIR).exists()
+    assert load_checkpoint(out / "checkpoint.h5")["time"] == load_checkpoint_bytes(good, tmp_path)
+
+
+def load_checkpoint_bytes(data: bytes, folder: Path) -> float:
+    f = folder / "copy.h5"
+    f.write_bytes(data)
+    return load_checkpoint(f)["time"]
