@@ -73,3 +73,33 @@ def test_failed_warm_starts_are_retried_cold():
     assert len(calls) == 2 and calls[1][0].tolist() == [1, 2]
     assert not calls[1][1].any()                       # the retry is cold
     assert rf[1, F_SD] == pytest.approx(-2e-6)
+
+
+def test_neighbour_lists_and_certificates_do_not_change_the_results(tmp_path):
+    """The lid deck (every body in contact, a moving wall) solved with the skin and the
+    separation certificates (default) and with a full search and every LCP at every
+    evaluation: the same monitors to round-off, with fewer LCPs."""
+    import csv
+    from pathlib import Path
+
+    from nurbsdem.io.deck import parse_deck
+    from nurbsdem.solver import Solver
+
+    deck = Path(__file__).resolve().parents[1] / "inputs" / "regression" / "lid_press.inp"
+
+    def run(name, **opts):
+        out = tmp_path / name
+        summary = Solver(parse_deck(deck), output=out, quiet=True, contact_options=opts).run()
+        cols = {}
+        for mon in ("energy.csv", "wall_lid.csv"):
+            with open(out / "monitors" / mon) as fh:
+                rows = list(csv.DictReader(fh))
+            cols.update({f"{mon}:{k}": np.array([float(r[k]) for r in rows]) for k in rows[0]})
+        return summary, cols
+
+    fast, a = run("fast")
+    full, b = run("full", skin=0.0, certificates=False)
+    assert fast.lcps < 0.95 * full.lcps and fast.active_total == full.active_total
+    for k in a:
+        scale = max(np.abs(b[k]).max(), 1e-300)
+        np.testing.assert_allclose(a[k], b[k], rtol=1e-9, atol=1e-12 * scale, err_msg=k)
