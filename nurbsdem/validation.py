@@ -406,6 +406,27 @@ def check_replicate_spacing(model: "Model") -> None:
                     f"{extent * (s.layers - 1):.4g} m", s.line)
 
 
+#: Random sequential placement of spheres jams at about this volume fraction.
+JAMMING_FRACTION = 0.38
+
+
+def check_random_fill(model: "Model") -> None:
+    """Refuse a ``Random`` group whose bounding spheres would fill more of its region than
+    random sequential placement can reach (it would try for a long time, then fail)."""
+    for g in model.random_groups:
+        if any(s not in model.shapes for s in g.shape_ids):
+            continue
+        vol = float(np.prod(np.asarray(g.region_hi, float) - np.asarray(g.region_lo, float)))
+        spheres = sum(n * 4.0 / 3.0 * math.pi * model.shapes[s].bounding_radius ** 3
+                      for s, n in zip(g.shape_ids, g.counts))
+        if vol > 0 and spheres > JAMMING_FRACTION * vol:
+            raise model.error(
+                f"Random {g.id}: the bounding spheres of its {g.total} particles fill "
+                f"{100 * spheres / vol:.0f} % of the Region, but random placement jams at about "
+                f"{100 * JAMMING_FRACTION:.0f} %: enlarge Region to at least "
+                f"{spheres / JAMMING_FRACTION:.3g} m^3 or reduce Counts", g.line)
+
+
 def check_scale(model: "Model") -> None:
     """Positions must be resolvable at particle scale: the largest coordinate of the scene
     at most 1e9 times the smallest particle's bounding radius."""
@@ -429,6 +450,7 @@ def check_model(model: "Model") -> None:
     check_memory(model)
     check_walls(model)
     check_scale(model)
+    check_random_fill(model)
     check_step_count(model)
     check_impacts(model)
     check_replicate_spacing(model)

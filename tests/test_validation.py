@@ -383,3 +383,12 @@ def test_replicating_through_the_lid_is_refused_at_run_time(tmp_path):
     step = ReplicateStep(9, 17, layers=2, height=0.3)
     with pytest.raises(InputError, match="after replication, particle 3 .* behind wall 'lid'"):
         replicate_step(model, model.bodies, step)
+
+
+def test_random_group_beyond_jamming_is_refused_at_once(tmp_path):
+    """A million spheres in a small region used to try for hours before failing."""
+    text = DECK.replace(P2, P2 + "\n  Random 3 Shapes 1 Counts 100000 Material 1 Region "
+                        "0 0 0 0.25 0.25 0.25")
+    with pytest.raises(InputError) as info:
+        parse_deck(_deck(tmp_path, text))
+    assert "random placement jams" in str(info.value) and info.value.line == 10
