@@ -427,6 +427,22 @@ def check_random_fill(model: "Model") -> None:
                 f"{spheres / JAMMING_FRACTION:.3g} m^3 or reduce Counts", g.line)
 
 
+def check_wall_moves(model: "Model") -> None:
+    """A ``MoveWall ... ToContact Direction d`` must move the wall towards the particles
+    (d . normal > 0); otherwise no travel reaches them."""
+    from .model import MoveWallStep
+    for s in model.steps:
+        if not (isinstance(s, MoveWallStep) and s.to_contact and s.direction is not None):
+            continue
+        if s.wall not in model.wall_names:
+            continue
+        n = wall_plane(model.wall(s.wall))[3]
+        if float(np.asarray(s.direction, float) @ n) <= 1e-12:
+            raise model.error(f"Step {s.id}: Direction {_vec(s.direction)} does not move wall "
+                              f"{s.wall!r} towards the particles (its normal is {_vec(n)})",
+                              s.line)
+
+
 def check_scale(model: "Model") -> None:
     """Positions must be resolvable at particle scale: the largest coordinate of the scene
     at most 1e9 times the smallest particle's bounding radius."""
@@ -451,6 +467,7 @@ def check_model(model: "Model") -> None:
     check_walls(model)
     check_scale(model)
     check_random_fill(model)
+    check_wall_moves(model)
     check_step_count(model)
     check_impacts(model)
     check_replicate_spacing(model)
