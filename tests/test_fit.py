@@ -186,15 +186,15 @@ def test_bad_inputs_one_line(tmp_path):
 
 
 # ---------------------------------------------------------------------- the README's example
-GRAIN = __import__("pathlib").Path(__file__).resolve().parent.parent / "inputs" / "grain"
+INPUTS = __import__("pathlib").Path(__file__).resolve().parent.parent / "inputs"
 
 
 def test_shipped_grain_is_small_and_its_fit_reproducible(tmp_path):
-    scan = GRAIN / "grain_scan.ply"
+    scan = INPUTS / "shapes" / "grain_scan.ply"
     assert scan.stat().st_size < 1_000_000
     data = read_input(scan)
     r = fit_particle(data, name="synthetic grain")
-    shipped = load_shape(GRAIN / "grain.yaml")
+    shipped = load_shape(INPUTS / "shapes" / "grain.yaml")
     assert abs(r.shape.volume / shipped.volume - 1.0) < 1e-9
     # synthetic noise sigma = 15 um on a 38 mm grain: RMS error of the order of the noise
     assert r.err_rms < 3 * 15e-6 and r.err_max / r.size < 5e-3
@@ -202,8 +202,8 @@ def test_shipped_grain_is_small_and_its_fit_reproducible(tmp_path):
 
 
 def test_grain_deck_runs_briefly(tmp_path):
-    deck = (GRAIN / "drop_grains.inp").read_text()
-    deck = deck.replace("File grain.yaml", f"File {GRAIN / 'grain.yaml'}")
+    deck = (INPUTS / "grain" / "drop_grains.inp").read_text()
+    deck = deck.replace("File ../shapes/grain.yaml", f"File {INPUTS / 'shapes' / 'grain.yaml'}")
     deck = deck.replace("Duration 0.8", "Duration 0.01")
     f = tmp_path / "drop.inp"
     f.write_text(deck)

@@ -8,7 +8,7 @@ vertex moved along the surface normal by Gaussian measurement noise (σ = 15 µm
 of the size). Written as binary PLY (about 100 kB) with trimesh. Seeded: re-running it
 reproduces the file.
 
-    .venv/bin/python inputs/grain/make_grain.py      # writes inputs/grain/grain_scan.ply
+    .venv/bin/python inputs/shapes/make_grain.py      # writes inputs/shapes/grain_scan.ply
 """
 from __future__ import annotations
 
