@@ -308,14 +308,19 @@ def _output_line(model: "Model") -> int | None:
 
 
 def _particle_masses(model: "Model") -> dict[int, float]:
-    """Smallest particle mass (kg) per material id used by particles."""
+    """Smallest effective particle mass (kg) per material id used by particles: the mass,
+    or the rotational inertia seen at the bounding radius when that is smaller."""
     out: dict[int, float] = {}
     uses = [(g.material_id, sid) for g in model.random_groups for sid in g.shape_ids]
     uses += [(p.material_id, p.shape_id) for p in model.particles]
     for mid, sid in uses:
         if mid in model.materials and sid in model.shapes:
-            m = model.shapes[sid].mass(model.materials[mid].density)
-            out[mid] = min(out.get(mid, math.inf), m)
+            entry, rho = model.shapes[sid], model.materials[mid].density
+            m = entry.mass(rho)
+            # a contact at the bounding radius R also drives rotation: J_min / R^2
+            j_min = float(np.linalg.eigvalsh(entry.mass_inertia(rho))[0])
+            m_rot = j_min / entry.bounding_radius ** 2 if j_min > 0 else 0.0
+            out[mid] = min(out.get(mid, math.inf), m, m_rot)
     return out
 
 
@@ -350,7 +355,7 @@ def check_step_count(model: "Model") -> None:
     if steps > MAX_INTERNAL_STEPS:
         itf, mid, m = worst
         raise model.error(
-            f"Interface {itf.id}: with material {mid} (lightest particle {m:.3g} kg) the "
+            f"Interface {itf.id}: with material {mid} (smallest effective mass {m:.3g} kg) the "
             f"explicit critical time step is about {dt_cr:.3g} s, so the {run:g} s of the run "
             f"would need about {steps:.3g} internal time steps (at most "
             f"{MAX_INTERNAL_STEPS:.0e}): lower the penalties or damping, or raise the Density",
@@ -363,6 +368,8 @@ def check_impacts(model: "Model") -> None:
     resolve."""
     for p in model.particles:
         v = float(np.linalg.norm(p.velocity))
+        if p.shape_id in model.shapes:   # surface speed of the spin
+            v += float(np.linalg.norm(p.angular_velocity)) * model.shapes[p.shape_id].bounding_radius
         if v == 0 or p.shape_id not in model.shapes or p.material_id not in model.materials:
             continue
         entry = model.shapes[p.shape_id]
@@ -376,9 +383,9 @@ def check_impacts(model: "Model") -> None:
         depth = v * math.sqrt(m / en)
         if depth > r:
             raise model.error(
-                f"Particle {p.id}: at {v:.3g} m/s it would sink about {depth:.3g} m into what it "
+                f"Particle {p.id}: at {v:.3g} m/s (centroid plus spin) it would sink about {depth:.3g} m into what it "
                 f"hits (mass {m:.3g} kg, NormalPenalty {en:g} N/m), more than its size "
-                f"({r:.3g} m), which no time step can resolve: lower its Velocity below "
+                f"({r:.3g} m), which no time step can resolve: lower its speed below "
                 f"{r * math.sqrt(en / m):.3g} m/s or raise NormalPenalty above "
                 f"{m * v * v / (r * r):.3g} N/m", p.line)
 

@@ -131,6 +131,9 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
 
 _BLOCKS = {b.lower(): b for b in SCHEMA}
 
+#: Largest ratio of an ellipsoid's longest to shortest semi-axis.
+ASPECT_MAX = 1e3
+
 #: Largest id of a numbered entry (ids are stored as 64-bit integers and a Replicate step
 #: numbers its copies after the largest id).
 ID_MAX = 10 ** 9
@@ -535,6 +538,9 @@ class _Builder:
             abc = e.get("SemiAxes")
             if np.any(abc <= 0):
                 self.fail(f"Shape {e.id}: SemiAxes must be > 0", e.line)
+            if abc.max() > ASPECT_MAX * abc.min():
+                self.fail(f"Shape {e.id}: SemiAxes {abc.max() / abc.min():.3g} times longer than "
+                          f"wide is beyond the {ASPECT_MAX:g} the contact search resolves", e.line)
             shape = self.generated(e, lambda: Shape(
                 gen.ellipsoid_patches(*abc), name=f"ellipsoid {abc[0]:g}x{abc[1]:g}x{abc[2]:g}"))
             entry = ShapeEntry(e.id, "ellipsoid", shape, params=tuple(map(float, abc)),
