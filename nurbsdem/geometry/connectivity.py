@@ -24,8 +24,12 @@ Corners (nodes where three or more patches meet, paper Eq. 10–15: the degenera
 no free parameter) are listed in :attr:`Connectivity.corners`.
 
 :func:`check_shape` rejects shapes that are not closed, not consistently outward oriented or
-not convex, with a :class:`~nurbsdem.errors.GeometryError` naming the file, the patch and
-the edge or parameters where the check fails. Lengths in metres.
+not convex within a tolerance, with a :class:`~nurbsdem.errors.GeometryError` naming the file,
+the patch and the edge or parameters where the check fails. Non-convexity is measured as a
+length (:func:`measure_convexity`: the largest height of the surface above one of its own
+tangent planes) relative to the particle size; a shape below the tolerance
+(:data:`DEFAULT_CONVEXITY_TOL`, or the caller's) is accepted, and :func:`convexity_warning`
+gives the one-line warning that says where and how much. Lengths in metres.
 """
 from __future__ import annotations
 
