@@ -25,6 +25,11 @@ between two sets shrinks by at most the largest displacements of their points), 
 skipped until then.  Both devices are exact: they change which LCPs are solved, not the contacts
 found (up to the round-off of a different warm start).
 
+**Only the work a scene needs**: a pair of exact spheres (recognised from their NURBS
+surfaces, :func:`~nurbsdem.geometry.analytic.exact_sphere`) and an exact sphere against a
+flat wall are solved in closed form (:mod:`nurbsdem.contact.analytic`), NURBS against NURBS
+or a flat wall by the LCP.
+
 Bookkeeping is in flat arrays aligned with the list (sorted pair keys a·(N+W) + b): previous
 solutions, certificates, reused flags; a rebuild carries them over by a merge of sorted keys.
 
@@ -54,6 +59,8 @@ from typing import Sequence
 
 import numpy as np
 
+from ..geometry.analytic import exact_sphere
+from .analytic import sphere_sphere_rows, sphere_wall_rows
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
@@ -152,6 +159,12 @@ class SceneContacts:
             self.wall_center[k], self.wall_axes[k], self.wall_half[k] = wall_geometry(w)
             self.wall_origin[k], self.wall_a[k], self.wall_b[k], self.wall_dom[k] = wall_frame(w)
         self.depth_wall = 2.0 * float(self.radius.max()) if self.n else 0.0
+        # exact spheres take the closed forms of .analytic (module docstring)
+        spheres = [exact_sphere(sh) for sh in self.shapes]
+        self.sphere_center = np.array([c if c is not None else np.zeros(3)
+                                       for c, _ in (sp or (None, None) for sp in spheres)]).reshape(-1, 3)
+        self.sphere_radius = np.array([sp[1] if sp is not None else np.nan for sp in spheres])
+        self.is_sphere = np.isfinite(self.sphere_radius)[self.body_shape] if self.n else np.zeros(0, bool)
         self.P = int(np.diff(self.box_offsets).max()) if len(self.shapes) else 1
         #: the neighbour list and the per-pair arrays aligned with it (module docstring)
         self.pairs = _PairState.empty(self.P)
@@ -288,8 +301,13 @@ class SceneContacts:
         rf = np.zeros((due.shape[0], NF))
         ri = np.zeros((due.shape[0], NI), np.int64)
         a, b = ps.a[due], ps.b[due]
-        part = np.nonzero(b < N)[0]
-        wall = np.nonzero(b >= N)[0]
+        sph = self.is_sphere
+        wall_pair = b >= N
+        closed = sph[a] & (wall_pair | sph[np.minimum(b, N - 1)])
+        part = np.nonzero(~wall_pair & ~closed)[0]
+        wall = np.nonzero(wall_pair & ~closed)[0]
+        self._closed_forms(np.nonzero(~wall_pair & closed)[0], np.nonzero(wall_pair & closed)[0],
+                           a, b, pos, R, wall_d, rf, ri)
         if part.size:
             pa, pb, idx = a[part], b[part], due[part]
 
@@ -308,6 +326,24 @@ class SceneContacts:
                                          self.wall_dom[w[k]], prev_f, prev_i)
             rf[wall], ri[wall] = _retry_failed_cold(solve_walls, ps.rows_f[idx], ps.rows_i[idx])
         return rf, ri
+
+    def _closed_forms(self, pp, pw, a, b, pos, R, wall_d, rf, ri) -> None:
+        """Rows of the sphere–sphere (indices pp of a, b) and sphere–wall (pw) pairs."""
+        N = self.n
+        if pp.size:
+            sa, sb = self.body_shape[a[pp]], self.body_shape[b[pp]]
+            xa = pos[a[pp]] + np.einsum("kij,kj->ki", R[a[pp]], self.sphere_center[sa])
+            xb = pos[b[pp]] + np.einsum("kij,kj->ki", R[b[pp]], self.sphere_center[sb])
+            f, i = np.zeros((pp.size, NF)), np.zeros((pp.size, NI), np.int64)
+            sphere_sphere_rows(xa, self.sphere_radius[sa], xb, self.sphere_radius[sb], f, i)
+            rf[pp], ri[pp] = f, i
+        if pw.size:
+            sa, w = self.body_shape[a[pw]], b[pw] - N
+            x = pos[a[pw]] + np.einsum("kij,kj->ki", R[a[pw]], self.sphere_center[sa])
+            f, i = np.zeros((pw.size, NF)), np.zeros((pw.size, NI), np.int64)
+            sphere_wall_rows(x, self.sphere_radius[sa], self.wall_origin[w] + wall_d[w],
+                             self.wall_a[w], self.wall_b[w], self.wall_dom[w], f, i)
+            rf[pw], ri[pw] = f, i
 
     def _assemble(self, due, rf, ri, reach, pose) -> ContactSet:
         """Store the new rows (failed ones answered by the previous solution moved rigidly,
