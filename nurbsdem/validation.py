@@ -264,13 +264,21 @@ def check_nothing_to_solve(model: "Model") -> None:
 
 
 def check_time_steps(model: "Model") -> None:
-    """Every timed step has TimeStep >= :data:`MIN_STEP_FRACTION` x Duration."""
+    """Every timed step has TimeStep >= :data:`MIN_STEP_FRACTION` x Duration and a Duration
+    that is a whole number of TimeSteps (else the solver would stop when it gets there)."""
     for s in model.steps:
         dur, dt = float(getattr(s, "duration", 0.0) or 0.0), float(getattr(s, "time_step", 0.0) or 0.0)
         if dur > 0 and dt > 0 and dt < MIN_STEP_FRACTION * dur:
             raise model.error(
                 f"Step {s.id}: TimeStep {dt:g} s is below {MIN_STEP_FRACTION:g} of the Duration "
                 f"{dur:g} s: {dur / dt:.3g} time steps would never finish", s.line)
+        if dur > 0 and dt > 0:
+            n = max(1, round(dur / dt))
+            if abs(n * dt - dur) > 1e-9 * dur:   # the solver's rule, known before it runs
+                raise model.error(
+                    f"Step {s.id}: Duration {dur:g} s is not a whole number of TimeStep {dt:g} s "
+                    f"({dur / dt:.6g} steps); use e.g. TimeStep {dur / max(1, math.ceil(dur / dt)):.6g}",
+                    s.line)
 
 
 def check_memory(model: "Model") -> None:

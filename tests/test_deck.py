@@ -148,9 +148,12 @@ BAD_DECKS = [
     (6, "  Random 1 Shapes 1 Counts 3 Material 1 Region 0 0 0 0.05 0.2 0.2", 6,
      "Random 1: the region is too small for shape 1 (bounding radius 0.03839 m needs at "
      "least 0.07679 m in each direction)"),
-    (6, "  Random 1 Shapes 1 Counts 300 Material 1 Region 0 0 0 0.2 0.2 0.2 MaxAttempts 50", 6,
+    (6, "  Random 1 Shapes 1 Counts 12 Material 1 Region 0 0 0 0.2 0.2 0.2 MaxAttempts 50", 6,
      "Random 1: could not place particle 7 (shape 1) without overlap after 50 attempts "
-     "(6 of 300 placed); enlarge Region or reduce Counts"),
+     "(6 of 12 placed); enlarge Region or reduce Counts"),
+    (6, "  Random 1 Shapes 1 Counts 300 Material 1 Region 0 0 0 0.2 0.2 0.2 MaxAttempts 50", 6,
+     "Random 1: the bounding spheres of its 300 particles fill 889 % of the Region, but random "
+     "placement jams at about 38 %: enlarge Region to at least 0.187 m^3 or reduce Counts"),
     (0, "Particles\n  Particle 2 Shape 1 Material 1 Position 0.1 0.1 0.3", 16,
      "Particle 2: particle id 2 already used by Random 1 (line 6)"),
     (0, "Particles\n  Particle 9 Shape 3 Material 1 Position 0.1 0.1 0.3", 16,

@@ -80,6 +80,7 @@ CORPUS = [
     ("Max 0.25 0.25 0.25", "Max 1e300 1e300 1e300", "Max 1e+300 m is out of range", 11),
     ("TimeStep 1e-3", "TimeStep 1e-300", "TimeStep 1e-300 s is out of range", 16),
     ("TimeStep 1e-3", "TimeStep 1e-14", "below 1e-09 of the Duration", 16),
+    ("TimeStep 1e-3", "TimeStep 3e-3", "is not a whole number of TimeStep", 16),
     ("Layers 2 Height 0.08", "Layers 100000000000000000000000 Height 1", "is too large", 17),
     ("Layers 2 Height 0.08", "Layers 10000000000 Height 1e5", "of memory; this machine has", 17),
     ("Density 2700", "Density 1e-300", "Density 1e-300 kg/m^3 is out of range", 4),
