@@ -13,7 +13,7 @@ from nurbsdem.contact.scene import SceneContacts
 from nurbsdem.dynamics import ContactLaw, DemSystem, InstabilityError, InterfaceTable, sphere_inertia
 from nurbsdem.dynamics.stepcontrol import (alternation_update, critical_step,
                                            critical_step_from_rates, lanczos_max, network_apply,
-                                           network_rates, period2_amplitude, shape_compliance,
+                                           network_gershgorin, network_rates, period2_amplitude, shape_compliance,
                                            surface_compliance)
 from nurbsdem.geometry.rotation import quats_to_matrices, random_quaternions
 from nurbsdem.lattice import fcc_sphere_block
@@ -68,8 +68,13 @@ def test_network_operator_equals_an_independent_dense_assembly():
         z = network_apply(y, a, b, p, n, coef[:, 0].copy(), coef[:, 1].copy(), x, Q,
                           np.sqrt(m), np.sqrt(I))
         np.testing.assert_allclose(z, A @ y, rtol=1e-12, atol=1e-12 * np.abs(A @ y).max())
-        lam, vec = lanczos_max(lambda v: A @ v, A.shape[0])
-        assert lam == pytest.approx(np.linalg.eigvalsh(A)[-1], rel=1e-10)
+        lam, vec = lanczos_max(lambda v: A @ v, A.shape[0], rtol=1e-12)
+        exact = np.linalg.eigvalsh(A)[-1]
+        assert lam == pytest.approx(exact, rel=1e-10)
+        # the Gershgorin bound is an upper bound (stiffness: normal coef[:,0], tangential [:,1])
+        coeffs = np.stack([coef[:, 0], coef[:, 0], coef[:, 1], coef[:, 1]], axis=1)
+        g_k, g_c = network_gershgorin(a, b, p, n, coeffs, x, Q, 1 / m, 1 / I)
+        assert exact <= g_k * (1 + 1e-12) and g_c == pytest.approx(g_k, rel=1e-12)
 
 
 def test_one_pair_gives_the_pair_formula_and_off_centre_contacts_their_effective_mass():

@@ -192,6 +192,86 @@ def network_apply(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, point: 
     return z
 
 
+@njit(cache=True)
+def _side_norms(i, n_part, r, n, Q, inv_m, inv_I, t1, t2):
+    """(|ĵ_n|, ||ĵ_t||) of one side of a contact: the square roots of the normal and the
+    largest tangential point compliance n·G n, λmax(Tᵀ G T), G = 1/m + [r]ₓᵀ I⁻¹ [r]ₓ."""
+    if i >= n_part:
+        return 0.0, 0.0
+    g = np.empty(3)
+    # c = Qᵀ (r × d) for d = n, t1, t2; d·G d' = (1/m) d·d' + Σ_k c_k c'_k / I_k
+    cs = np.empty((3, 3))
+    for row in range(3):
+        d = n if row == 0 else (t1 if row == 1 else t2)
+        x0 = r[1] * d[2] - r[2] * d[1]
+        x1 = r[2] * d[0] - r[0] * d[2]
+        x2 = r[0] * d[1] - r[1] * d[0]
+        for k in range(3):
+            cs[row, k] = Q[i, 0, k] * x0 + Q[i, 1, k] * x1 + Q[i, 2, k] * x2
+    for row in range(3):
+        g[row] = 0.0
+        for k in range(3):
+            g[row] += cs[row, k] * cs[row, k] * inv_I[i, k]
+    g12 = 0.0
+    for k in range(3):
+        g12 += cs[1, k] * cs[2, k] * inv_I[i, k]
+    a11, a22 = inv_m[i] + g[1], inv_m[i] + g[2]
+    lam = 0.5 * (a11 + a22) + math.sqrt(0.25 * (a11 - a22) ** 2 + g12 * g12)
+    return math.sqrt(inv_m[i] + g[0]), math.sqrt(lam)
+
+
+@njit(cache=True)
+def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                       normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
+                       inv_m: np.ndarray, inv_I: np.ndarray) -> tuple[float, float]:
+    """Upper bounds (ω² 1/s², γ 1/s) of λmax of Eq. (2)'s stiffness and damping operators:
+    the largest block-Gershgorin row sum Σ_c k_c |ĵ_c,i| (|ĵ_c,i| + |ĵ_c,j|) over the bodies,
+    normal and tangential parts with their own point compliances.  O(K), no iteration: cheap
+    enough for every deck step (the Lanczos value is needed only when this bound calls for
+    more sub-steps).  coeffs (K,4): εn, cn, εt, ct."""
+    n_part = x.shape[0]
+    rk = np.zeros(n_part)
+    rc = np.zeros(n_part)
+    r = np.empty(3)
+    t1 = np.empty(3)
+    t2 = np.empty(3)
+    for c in range(body_a.shape[0]):
+        n = normal[c]
+        # a tangent basis
+        if abs(n[0]) < 0.9:
+            t1[0], t1[1], t1[2] = 0.0, n[2], -n[1]
+        else:
+            t1[0], t1[1], t1[2] = -n[2], 0.0, n[0]
+        ln = math.sqrt(t1[0] ** 2 + t1[1] ** 2 + t1[2] ** 2)
+        for k in range(3):
+            t1[k] /= ln
+        t2[0] = n[1] * t1[2] - n[2] * t1[1]
+        t2[1] = n[2] * t1[0] - n[0] * t1[2]
+        t2[2] = n[0] * t1[1] - n[1] * t1[0]
+        norms = np.zeros((2, 2))
+        for side in range(2):
+            i = body_a[c] if side == 0 else body_b[c]
+            if i < n_part:
+                for k in range(3):
+                    r[k] = point[c, k] - x[i, k]
+            jn, jt = _side_norms(i, n_part, r, n, Q, inv_m, inv_I, t1, t2)
+            norms[side, 0], norms[side, 1] = jn, jt
+        for side in range(2):
+            i = body_a[c] if side == 0 else body_b[c]
+            if i >= n_part:
+                continue
+            jn, jt = norms[side, 0], norms[side, 1]
+            sn = jn * (jn + norms[1 - side, 0])
+            st = jt * (jt + norms[1 - side, 1])
+            rk[i] += coeffs[c, 0] * sn + coeffs[c, 2] * st
+            rc[i] += coeffs[c, 1] * sn + coeffs[c, 3] * st
+    wk, wc = 0.0, 0.0
+    for i in range(n_part):
+        wk = max(wk, rk[i])
+        wc = max(wc, rc[i])
+    return wk, wc
+
+
 def lanczos_max(apply, dim: int, steps: int = LANCZOS_STEPS,
                 rtol: float = 1e-4) -> tuple[float, np.ndarray]:
     """Largest eigenvalue of a symmetric positive semi-definite operator and its Ritz vector.

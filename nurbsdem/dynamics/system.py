@@ -33,7 +33,9 @@ particles: C–C Δt_cr = 4.7e-4 s).  A deck step is split into ``substeps`` int
   the separated pairs that can close within one deck step: the highest frequency and damping
   rate of the whole linearised network (Lanczos on the mass-scaled stiffness and damping
   operators, with each contact's true lever arms), so that a body with many contacts, or an
-  off-centre contact on a flat body, is seen.
+  off-centre contact on a flat body, is seen.  After every deck step a rigorous upper bound
+  (block Gershgorin, O(K)) decides whether the count may have to rise; only then, and every
+  ``NETWORK_RECHECK_STEPS`` deck steps, is the Lanczos estimate computed.
 
 The count rises at once when the network needs it and falls again (with 20 % hysteresis) when
 the pack loosens; every change is logged on logger ``'nurbsdem'`` with the reason (the particle
@@ -70,7 +72,7 @@ from .forces import (InterfaceTable, contact_forces, contact_velocities, kick_wo
 from .integrator import drift, half_kick, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, critical_step,
-                          critical_step_from_rates, network_rates)
+                          critical_step_from_rates, network_gershgorin, network_rates)
 
 log = logging.getLogger("nurbsdem")
 
@@ -147,6 +149,9 @@ _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs
 
 #: quiet deck steps after which a refinement of the step (period-2 or energy guard) is halved
 REFINE_DECAY_STEPS = 200
+#: deck steps between exact (Lanczos) network estimates when the Gershgorin bound calls for no
+#: more sub-steps (a fall of the count is noticed at these steps)
+NETWORK_RECHECK_STEPS = 20
 #: the sub-step count falls only when the need is below this fraction of the current count
 FALL_HYSTERESIS = 0.8
 
@@ -313,18 +318,34 @@ class DemSystem:
             f"{worst.mode} mode of interface {worst.interface} (m*={worst.m_eff:.4g} kg, "
             f"omega={worst.omega:.4g} rad/s, zeta={worst.zeta:.3g})") if worst else "no contact modes"
 
-    def _network_limit(self) -> tuple[float, str]:
-        """Critical step (s) of the current contact network plus the pairs that can close within
-        one deck step, and why (module docstring)."""
-        b = self.bodies
+    def _network(self):
+        """The contacts of the last evaluation plus the pairs that can close within one deck
+        step: (a, b, point, normal, coeffs (K,4)), or None when there is none."""
         a, bb, p, n = self.c_a, self.c_b, self.c_point, self.c_normal
         near = self._near_pairs()
         if near is not None:
             a, bb = np.concatenate([a, near[0]]), np.concatenate([bb, near[1]])
             p, n = np.concatenate([p, near[2]]), np.concatenate([n, near[3]])
         if a.shape[0] == 0:
+            return None
+        return a, bb, p, n, np.ascontiguousarray(self._table[self._mat_all[a], self._mat_all[bb]][:, :4])
+
+    def _network_bound(self, net) -> float:
+        """A lower bound (s) of the network's critical step, from the Gershgorin bounds of its
+        frequency and damping rate (O(K), every deck step)."""
+        if net is None:
+            return math.inf
+        b = self.bodies
+        omega2, gamma = network_gershgorin(*net, b.x, b.principal_rotations(), self._inv_mass,
+                                           self._inv_I)
+        return critical_step_from_rates(omega2, gamma)
+
+    def _network_limit(self, net) -> tuple[float, str]:
+        """Critical step (s) of the network ``net`` (:meth:`_network`) by Lanczos, and why."""
+        if net is None:
             return math.inf, "no contacts"
-        coeffs = self._table[self._mat_all[a], self._mat_all[bb]][:, :4]
+        b = self.bodies
+        a, bb, p, n, coeffs = net
         omega2, gamma, body = network_rates(a, bb, p, n, coeffs, b.x, b.principal_rotations(),
                                             b.mass, b.I)
         dt = critical_step_from_rates(omega2, gamma)
@@ -365,7 +386,13 @@ class DemSystem:
         """Choose the sub-steps of the next deck step from both limits (module docstring)."""
         if not initial and self.forced_substeps is not None:
             return
-        self.dt_network, net_why = self._network_limit()
+        net = self._network()
+        if not initial and self.step_count % NETWORK_RECHECK_STEPS:
+            # the exact estimate only when the cheap bound says the count might have to rise
+            bound = min(self.dt_apriori, self._network_bound(net))
+            if self._needed_substeps(self.safety * bound) * self.refine <= self.substeps:
+                return
+        self.dt_network, net_why = self._network_limit(net)
         self.dt_critical = min(self.dt_apriori, self.dt_network)
         dt_safe = self.safety * self.dt_critical
         why = (f"critical step {self.dt_critical:.3g} s from the "
