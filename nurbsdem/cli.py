@@ -240,8 +240,10 @@ def shape(kind: str, output: str, radius: float | None, semi_axes, particle_kind
     def need(value, opt: str):
         if value is None:
             raise NurbsdemError(f"shape {kind}: {opt} is required")
-        for x in np.ravel(value):
-            _check_length(x, f"shape {kind}: {opt}")
+        if not isinstance(value, str):
+            for x in np.ravel(value):
+                if x > 0:   # zero, negative, nan: the generator's own message
+                    _check_length(float(x), f"shape {kind}: {opt}")
         return value
 
     try:

@@ -347,7 +347,8 @@ def test_checkpoint_round_trip_still_exact(tmp_path):
     (["sphere", "--radius", "1e300"], "--radius 1e+300 m is out of range"),
     (["sphere", "--radius", "1e-300"], "--radius 1e-300 m is out of range"),
     (["ellipsoid", "--semi-axes", "1e300", "1", "1"], "out of range"),
-    (["sphere", "--radius", "nan"], "must be a positive number"),
+    (["sphere", "--radius", "nan"], "radius must be > 0"),
+    (["sphere", "--radius", "inf"], "must be a positive number (m), got inf"),
 ])
 def test_shape_command_refuses_sizes_out_of_range(tmp_path, args, fragment):
     r = CliRunner().invoke(main, ["shape", *args, "-o", str(tmp_path / "x.yaml")])
