@@ -275,8 +275,11 @@ def test_runtime_warnings_are_not_shown(tmp_path, monkeypatch):
         warnings.warn("noise", RuntimeWarning)
         return real(path, place)
     monkeypatch.setattr(deck, "parse_deck", noisy)
-    r = CliRunner().invoke(main, ["check", str(_deck(tmp_path, DECK))])
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        r = CliRunner().invoke(main, ["check", str(_deck(tmp_path, DECK))])
     assert r.exit_code == 0 and "Warning" not in r.output
+    assert not [w for w in seen if issubclass(w.category, RuntimeWarning)]
 
 
 # ---------------------------------------------------------------------------- messages
