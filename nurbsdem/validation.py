@@ -458,6 +458,29 @@ def check_wall_moves(model: "Model") -> None:
                               s.line)
 
 
+def check_wall_strokes(model: "Model") -> None:
+    """A ``MoveWall ... Displacement`` must not drive a wall past a wall facing it (e.g. a lid
+    through the floor): the travel along its normal, summed over the steps (ToContact moves
+    only add to it and are not counted), must stay below their initial distance."""
+    from .model import MoveWallStep
+    planes = {w.name: wall_plane(w) for w in model.walls}
+    travel: dict[str, float] = {}
+    for s in model.steps:
+        if not (isinstance(s, MoveWallStep) and not s.to_contact and s.wall in planes):
+            continue
+        o, _, _, n = planes[s.wall]
+        travel[s.wall] = travel.get(s.wall, 0.0) + float(np.asarray(s.displacement, float) @ n)
+        for other, (o2, _, _, n2) in planes.items():
+            if other == s.wall or float(n @ n2) > -0.9:
+                continue
+            gap = float((o2 - o) @ n)
+            if gap > 0 and travel[s.wall] >= gap:
+                raise model.error(
+                    f"Step {s.id}: wall {s.wall!r} would have moved {travel[s.wall]:.4g} m towards "
+                    f"the particles by the end of this step, past wall {other!r} that faces it "
+                    f"{gap:.4g} m away: the particles would be crushed through it", s.line)
+
+
 def check_scale(model: "Model") -> None:
     """Positions must be resolvable at particle scale: the largest coordinate of the scene
     at most 1e9 times the smallest particle's bounding radius."""
@@ -483,6 +506,7 @@ def check_model(model: "Model") -> None:
     check_scale(model)
     check_random_fill(model)
     check_wall_moves(model)
+    check_wall_strokes(model)
     check_step_count(model)
     check_impacts(model)
     check_replicate_spacing(model)

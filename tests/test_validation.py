@@ -76,6 +76,9 @@ CORPUS = [
     ("Layers 2 Height 0.08", "Layers 3 Height 0.01", "the copies would overlap", 17),
     ("Step 2 Replicate Layers 2 Height 0.08", "Step 2 MoveWall lid ToContact Direction 0 0 1",
      "does not move wall 'lid' towards the particles", 17),
+    ("Step 2 Replicate Layers 2 Height 0.08",
+     "Step 2 MoveWall lid Displacement 0 0 -0.3 Duration 0.01 TimeStep 1e-3",
+     "past wall 'bottom' that faces it 0.25 m away", 17),
     # overflow and degenerate numbers
     ("Max 0.25 0.25 0.25", "Max 1e300 1e300 1e300", "Max 1e+300 m is out of range", 11),
     ("TimeStep 1e-3", "TimeStep 1e-300", "TimeStep 1e-300 s is out of range", 16),
