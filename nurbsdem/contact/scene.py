@@ -235,21 +235,30 @@ class SceneContacts:
         N = self.n
         m = self.margin + self.skin
         pairs = sphere_pairs(kin.x, self.radius, m) if N > 1 else np.zeros((0, 2), np.int64)
+        # exact spheres: the bounding-sphere test is exact, no patch boxes needed
+        both = self.is_sphere[pairs[:, 0]] & self.is_sphere[pairs[:, 1]]
+        spheres, pairs = pairs[both], pairs[~both]
         mask_a = np.zeros((0, self.P), np.bool_)
         mask_b = mask_a.copy()
         if pairs.shape[0]:
             cand = candidate_patch_pairs_batch(self.boxes, self.box_offsets, self.body_shape,
                                                pos, R, pairs, m)
             pairs, mask_a, mask_b = self._directed(pairs, cand)
+        pairs = np.concatenate([pairs, spheres])
+        ones = np.ones((spheres.shape[0], self.P), np.bool_)
+        mask_a, mask_b = np.concatenate([mask_a, ones]), np.concatenate([mask_b, ones])
         wpairs = np.zeros((0, 2), np.int64)
         if self.walls and N:
             wc = self.wall_center + kin.wall_displacement
             wpairs = sphere_wall_pairs(kin.x, self.radius, wc, self.wall_axes, self.wall_half, m)
+            ball = self.is_sphere[wpairs[:, 0]]
+            balls, wpairs = wpairs[ball], wpairs[~ball]
             if wpairs.shape[0]:
                 cand = candidate_patches_wall_batch(self.boxes, self.box_offsets, self.body_shape,
                                                     pos, R, wc, self.wall_axes, self.wall_half,
                                                     wpairs, m, self.depth_wall)
                 wpairs = wpairs[np.unique(cand[:, 0])] if cand.shape[0] else wpairs[:0]
+            wpairs = np.concatenate([wpairs, balls])
         a = np.concatenate([pairs[:, 0], wpairs[:, 0]]).astype(np.int64)
         b = np.concatenate([pairs[:, 1], N + wpairs[:, 1]]).astype(np.int64)
         W = wpairs.shape[0]

@@ -33,9 +33,10 @@ particles: C–C Δt_cr = 4.7e-4 s).  A deck step is split into ``substeps`` int
   the separated pairs that can close within one deck step: the highest frequency and damping
   rate of the whole linearised network (Lanczos on the mass-scaled stiffness and damping
   operators, with each contact's true lever arms), so that a body with many contacts, or an
-  off-centre contact on a flat body, is seen.  After every deck step a rigorous upper bound
-  (block Gershgorin, O(K)) decides whether the count may have to rise; only then, and every
-  ``NETWORK_RECHECK_STEPS`` deck steps, is the Lanczos estimate computed.
+  off-centre contact on a flat body, is seen.  After every deck step a rigorous bound (block
+  Gershgorin, O(K)) is compared with its value at the last Lanczos estimate; the Lanczos
+  estimate is repeated when the bound shows a stiffer network, and every
+  ``NETWORK_RECHECK_STEPS`` deck steps.
 
 The count rises at once when the network needs it and falls again (with 20 % hysteresis) when
 the pack loosens; every change is logged on logger ``'nurbsdem'`` with the reason (the particle
@@ -152,6 +153,9 @@ REFINE_DECAY_STEPS = 200
 #: deck steps between exact (Lanczos) network estimates when the Gershgorin bound calls for no
 #: more sub-steps (a fall of the count is noticed at these steps)
 NETWORK_RECHECK_STEPS = 20
+#: the exact estimate is repeated when the Gershgorin bound of the network's critical step has
+#: fallen by more than this fraction since the last exact estimate
+NETWORK_BOUND_SLACK = 0.05
 #: the sub-step count falls only when the need is below this fraction of the current count
 FALL_HYSTERESIS = 0.8
 
@@ -205,6 +209,7 @@ class DemSystem:
         self.mode_limits: list[ModeLimit] = []
         self.dt_apriori = math.inf      # a-priori critical step (s), from the possible pairs
         self.dt_network = math.inf      # critical step of the current contact network (s)
+        self.dt_bound = math.inf        # its Gershgorin lower bound at the last exact estimate
         self.refine = 1                 # factor on the sub-steps after a guard fired
         self.calm_steps = 0             # deck steps since the guard last fired
         self.failed_in_step = 0         # failed contact problems reported in the last deck step
@@ -387,11 +392,11 @@ class DemSystem:
         if not initial and self.forced_substeps is not None:
             return
         net = self._network()
-        if not initial and self.step_count % NETWORK_RECHECK_STEPS:
-            # the exact estimate only when the cheap bound says the count might have to rise
-            bound = min(self.dt_apriori, self._network_bound(net))
-            if self._needed_substeps(self.safety * bound) * self.refine <= self.substeps:
-                return
+        bound = self._network_bound(net)
+        if (not initial and self.step_count % NETWORK_RECHECK_STEPS
+                and bound >= (1.0 - NETWORK_BOUND_SLACK) * self.dt_bound):
+            return      # the network is no stiffer than at the last exact estimate
+        self.dt_bound = bound
         self.dt_network, net_why = self._network_limit(net)
         self.dt_critical = min(self.dt_apriori, self.dt_network)
         dt_safe = self.safety * self.dt_critical
@@ -741,7 +746,8 @@ class DemSystem:
                   ledger=self.ledger.to_array(),
                   counters=np.array([self.step_count, self.substeps, self.refine,
                                      self.calm_steps], dtype=np.int64),
-                  scalars=np.array([self.t0, self.dt, self._peak]))
+                  scalars=np.array([self.t0, self.dt, self._peak, self.dt_bound,
+                                    self.dt_network, self.dt_critical]))
         return st
 
     def set_state(self, st: dict[str, np.ndarray]) -> None:
@@ -764,6 +770,8 @@ class DemSystem:
         if float(st["scalars"][1]) != self.dt:
             raise InputError("checkpoint was written with a different deck time step")
         self._peak = float(st["scalars"][2])
+        if st["scalars"].shape[0] >= 6:
+            self.dt_bound, self.dt_network, self.dt_critical = (float(v) for v in st["scalars"][3:6])
 
 
 class _Unstable(Exception):
