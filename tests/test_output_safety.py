@@ -192,3 +192,28 @@ def load_checkpoint_bytes(data: bytes, folder: Path) -> float:
     f = folder / "copy.h5"
     f.write_bytes(data)
     return load_checkpoint(f)["time"]
+
+
+@pytest.mark.parametrize("victim,fragment", [
+    ("particles.pvd", "not a readable ParaView collection"),
+    ("results.h5", "cannot continue the results file: it is corrupted"),
+])
+def test_restart_with_a_corrupted_result_file_is_one_line(model, victim, fragment):
+    from nurbsdem.errors import InputError
+    out = Path(model.output.directory)
+    w = OutputWriters(model)
+    w.paraview.write(0.0, model.bodies)
+    w.results.append(0.0, model.bodies)
+    w.close()
+    (out / victim).write_bytes(b"\xff\xfe garbage")
+    with pytest.raises(InputError) as info:
+        OutputWriters(model, restart_time=0.0)
+    assert fragment in str(info.value) and str(info.value).startswith(str(out / victim))
+
+
+def test_restart_with_a_binary_monitor_file(model):
+    out = Path(model.output.directory)
+    OutputWriters(model).close()
+    (out / "monitors" / "energy.csv").write_bytes(b"\xff\xfe\x00garbage")
+    OutputWriters(model, restart_time=0.0).close()
+    assert (out / "monitors" / "energy.csv").read_text().startswith("time,")

@@ -185,8 +185,13 @@ def pvd_text(entries: Sequence[tuple[float, str]]) -> str:
 
 def read_pvd(path: str | Path) -> list[tuple[float, str]]:
     """The (time, file) entries of a .pvd file (files relative to its folder)."""
-    root = ET.parse(str(path)).getroot()
-    return [(float(ds.get("timestep")), ds.get("file")) for ds in root.iter("DataSet")]
+    from ..errors import InputError
+    try:
+        root = ET.parse(str(path)).getroot()
+        return [(float(ds.get("timestep")), str(ds.get("file"))) for ds in root.iter("DataSet")]
+    except (ET.ParseError, TypeError, ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"not a readable ParaView collection ({' '.join(str(exc).split())}); "
+                         f"move it away to continue (its series restarts)", path=str(path)) from None
 
 
 class PvdSeries:
@@ -404,7 +409,7 @@ class CsvMonitor:
         self._fh = open(self.path, "a", newline="")
 
     def _kept_rows(self, restart_time: float) -> list[str]:
-        text = self.path.read_text()
+        text = self.path.read_text(encoding="utf-8", errors="replace")
         lines = text.split("\n")
         if not lines or lines[0].strip() != self.header:
             return []
@@ -585,6 +590,16 @@ class ResultsWriter:
         write_hdf5_atomically(self.path, edit, source=self.path)
 
     def _truncate(self, restart_time: float) -> None:
+        try:
+            self._truncate_file(restart_time)
+        except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+            from ..errors import InputError
+            raise InputError(f"cannot continue the results file: it is corrupted "
+                             f"({' '.join(str(exc).split())[:120]}); move it away to restart "
+                             f"(a new one starts at the checkpoint's time)",
+                             path=str(self.path)) from None
+
+    def _truncate_file(self, restart_time: float) -> None:
         def edit(f) -> None:
             t = f["time"][:]
             s = int(np.searchsorted(t, restart_time + _time_tol(restart_time), side="right"))
