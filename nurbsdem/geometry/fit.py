@@ -365,6 +365,7 @@ class FitResult:
     err_max: float
     err_rms: float
     hull_err_max: float
+    facet_err_max: float
     n_points: int
     n_hull_vertices: int
     volume_hull: float
@@ -388,7 +389,11 @@ class FitResult:
         out.append(f"fit error, {self.n_points} input points to the surface: max "
                    f"{self.err_max:.3g} m ({self.err_max / L:.2e} of the size), RMS "
                    f"{self.err_rms:.3g} m ({self.err_rms / L:.2e}); hull vertices: max "
-                   f"{self.hull_err_max / L:.2e}")
+                   f"{self.hull_err_max / L:.2e}; centres of the hull's facets: max "
+                   f"{self.facet_err_max / L:.2e} (includes the facets' sag)")
+        if self.facet_err_max > 10.0 * max(self.hull_err_max, 1e-3 * L):
+            out.append("note: the hull has large flat facets that the smooth particle does not "
+                       "follow (a polyhedron, or too few points?): check the volume below")
         out.append(f"G1 across patch edges: largest kink {self.kink_deg:.3g} deg (next to the "
                    f"corners, where a bicubic cube-sphere admits no C1 joint)")
         cv = s.convexity
@@ -521,6 +526,7 @@ def fit_particle(data: FitInput | np.ndarray, n_cp: int = DEFAULT_N_CP,
     shape = Shape(patches, name=name, source=src, convexity_tol=tol)
     d_in = surface_distances(patches, data.points)
     d_hull = surface_distances(patches, V)
+    d_facet = surface_distances(patches, np.asarray(hull.triangles_center, float))
     vh, jh = _mass_of(hull)
     vm = jm = None
     if data.mesh is not None and data.mesh.is_watertight and data.mesh.volume > 0:
@@ -529,7 +535,8 @@ def fit_particle(data: FitInput | np.ndarray, n_cp: int = DEFAULT_N_CP,
         notes.append("the input mesh is not closed (or not oriented): its volume and inertia "
                      "are not compared")
     return FitResult(shape, size, float(d_in.max()), float(np.sqrt(np.mean(d_in ** 2))),
-                     float(d_hull.max()), len(data.points), len(V), vh, jh, vm, jm,
+                     float(d_hull.max()), float(d_facet.max()), len(data.points), len(V), vh,
+                     jh, vm, jm,
                      _kink_degrees(shape), lam, n_cp, degree, notes)
 
 
