@@ -146,6 +146,31 @@ def _fmt_vec(v) -> str:
     return "[" + ", ".join(f"{x:.9g}" for x in np.asarray(v).ravel()) + "]"
 
 
+def _warnings_to_stderr(func: Callable) -> Callable:
+    """Decorator: while the command runs, the ``nurbsdem`` logger's warnings (e.g. a nearly
+    convex shape) go to the current stderr as ``nurbsdem: warning: ...`` (one line each)."""
+    import logging
+
+    class _Echo(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            warn(record.getMessage())
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        log = logging.getLogger("nurbsdem")
+        saved = (log.handlers[:], log.propagate, log.level)
+        log.handlers = [_Echo(logging.WARNING)]
+        log.propagate = False
+        log.setLevel(logging.WARNING)
+        try:
+            return func(*args, **kwargs)
+        finally:
+            log.handlers, log.propagate = saved[0], saved[1]
+            log.setLevel(saved[2])
+
+    return wrapper
+
+
 def _convexity_tol_option(func: Callable) -> Callable:
     """The ``--convexity-tol`` option (accepted non-convexity relative to the size)."""
     return click.option(
@@ -311,12 +336,12 @@ def _finish_import(sh, output: str, scale: float) -> None:
 @click.option("--scale", type=float, default=1.0, show_default=True,
               help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
 @_convexity_tol_option
+@_warnings_to_stderr
 def import_giraffe_cmd(cad_file: str, output: str, name: str | None, scale: float,
                        convexity_tol: float | None) -> None:
     """Convert a Giraffe CAD file (one record per patch) to a shape file."""
     from .io.giraffe import import_giraffe
 
-    _setup_logging(quiet=False, verbose=False)
     sh, warnings = import_giraffe(cad_file, name=name, check=False)
     sh = _checked(sh, convexity_tol)
     for w in warnings:
@@ -331,13 +356,13 @@ def import_giraffe_cmd(cad_file: str, output: str, name: str | None, scale: floa
 @click.option("--scale", type=float, default=1.0, show_default=True,
               help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
 @_convexity_tol_option
+@_warnings_to_stderr
 def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float,
                    convexity_tol: float | None) -> None:
     """Convert the NURBS surfaces and Brep faces of a Rhino .3dm file to a shape file
     (needs the optional package rhino3dm)."""
     from .io.rhino import import_3dm
 
-    _setup_logging(quiet=False, verbose=False)
     sh = _checked(import_3dm(cad_file, name=name, check=False), convexity_tol)
     _finish_import(sh, output, scale)
 
@@ -354,6 +379,7 @@ def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float,
               help="Factor applied to the coordinates (e.g. 0.001 for mm -> m).")
 @click.option("--name", default=None, help="Name stored in the file (default: file stem).")
 @_convexity_tol_option
+@_warnings_to_stderr
 def fit_cmd(mesh_file: str, output: str, n_cp: int, degree: int, scale: float,
             name: str | None, convexity_tol: float | None) -> None:
     """Fit a closed six-patch NURBS particle (cube-sphere) to the convex hull of a mesh or
@@ -361,7 +387,6 @@ def fit_cmd(mesh_file: str, output: str, n_cp: int, degree: int, scale: float,
     from .geometry.fit import fit_particle, read_input
     from .io.shapefile import save_shape
 
-    _setup_logging(quiet=False, verbose=False)
     if not (math.isfinite(scale) and scale > 0):
         raise NurbsdemError(f"--scale must be > 0, got {scale:g}")
     data = read_input(mesh_file)
@@ -385,13 +410,13 @@ def fit_cmd(mesh_file: str, output: str, n_cp: int, degree: int, scale: float,
 @click.option("--resolution", type=click.IntRange(1, 512), default=24, show_default=True,
               help="STL: quads per patch and parameter direction (two triangles each).")
 @_convexity_tol_option
+@_warnings_to_stderr
 def export_cmd(shape_file: str, output: str, resolution: int,
                convexity_tol: float | None) -> None:
     """Export a shape to STL (for other DEM codes and printers) or Rhino .3dm (NURBS)."""
     from .io.export import export_shape
     from .io.shapefile import load_shape
 
-    _setup_logging(quiet=False, verbose=False)
     shape = load_shape(shape_file, convexity_tol=convexity_tol)
     click.echo(export_shape(shape, output, resolution))
 
