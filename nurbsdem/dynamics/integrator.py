@@ -39,6 +39,8 @@ import numpy as np
 from numba import njit
 
 from ..geometry.rotation import quat_mul_into
+from .forces import kick_work
+from .rigid import omega_world
 
 
 @njit(cache=True)
@@ -131,3 +133,51 @@ def state_is_finite(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray) 
     """True when every state array is finite."""
     return bool(np.isfinite(x).all() and np.isfinite(v).all() and np.isfinite(q).all()
                 and np.isfinite(L).all())
+
+
+@njit(cache=True)
+def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                               x: np.ndarray, wall_d: np.ndarray, v: np.ndarray,
+                               omega: np.ndarray, wall_u: np.ndarray, out: np.ndarray) -> None:
+    """out (K,3): velocity of B relative to A at each contact point (m/s); bodies >= N are
+    walls (position wall_d, velocity wall_u, no rotation)."""
+    N = x.shape[0]
+    for c in range(body_a.shape[0]):
+        for k in range(3):
+            out[c, k] = 0.0
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            sign = 1.0 if side == 0 else -1.0
+            if i >= N:
+                for k in range(3):
+                    out[c, k] += sign * wall_u[i - N, k]
+                continue
+            r0, r1, r2 = point[c, 0] - x[i, 0], point[c, 1] - x[i, 1], point[c, 2] - x[i, 2]
+            w0, w1, w2 = omega[i, 0], omega[i, 1], omega[i, 2]
+            out[c, 0] += sign * (v[i, 0] + w1 * r2 - w2 * r1)
+            out[c, 1] += sign * (v[i, 1] + w2 * r0 - w0 * r2)
+            out[c, 2] += sign * (v[i, 2] + w0 * r1 - w1 * r0)
+
+
+@njit(cache=True)
+def kick_with_work(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
+                   inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray,
+                   torque: np.ndarray, hk: float, body_a: np.ndarray, body_b: np.ndarray,
+                   point: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
+                   f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
+                   f_el_t: np.ndarray, acc: np.ndarray, wall_work: np.ndarray) -> None:
+    """:func:`half_kick` of length hk (s) and the exact discrete work of its contact impulses
+    (:func:`nurbsdem.dynamics.forces.kick_work`, from the relative contact-point velocities
+    before and after the kick), in one call.  acc (4,) and wall_work (W,) are added to."""
+    K = body_a.shape[0]
+    w0 = np.empty((K, 3))
+    w1 = np.empty((K, 3))
+    if K:
+        _relative_point_velocities(body_a, body_b, point, x, wall_d, v,
+                                   omega_world(q, L, inv_I), wall_u, w0)
+    half_kick(v, L, force, torque, inv_mass, hk)
+    if K:
+        _relative_point_velocities(body_a, body_b, point, x, wall_d, v,
+                                   omega_world(q, L, inv_I), wall_u, w1)
+        kick_work(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n, f_damp_t,
+                  f_el_t, hk, acc, wall_work)

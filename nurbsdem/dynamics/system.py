@@ -68,9 +68,8 @@ import numpy as np
 
 from ..errors import InputError, NurbsdemError
 from .energy import EnergyLedger, EnergySample, potential_energy
-from .forces import (InterfaceTable, contact_forces, contact_velocities, kick_work,
-                     match_history, store_history)
-from .integrator import drift, half_kick, kinetic_energies, state_is_finite
+from .forces import InterfaceTable, contact_forces, match_history, store_history
+from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, critical_step,
                           critical_step_from_rates, network_gershgorin, network_rates)
@@ -538,17 +537,11 @@ class DemSystem:
         so that the external work adds up to force × the walls' exact displacement (trapezoidal
         in the force, no error at kinks of a piecewise-linear motion)."""
         b = self.bodies
-        K = self.c_a.shape[0]
-        if K:
-            pos, vel, omg = self._all_kinematics(wall_u)
-            w0 = contact_velocities(self.c_a, self.c_b, self.c_point, pos, vel, omg)
-        half_kick(b.v, b.L, self.force, self.torque, self._inv_mass, hk)
-        if K:
-            pos, vel, omg = self._all_kinematics(wall_u)
-            w1 = contact_velocities(self.c_a, self.c_b, self.c_point, pos, vel, omg)
-            acc = np.zeros(4)
-            kick_work(self.c_a, self.c_b, b.n, w0, w1, wall_u, self.c_ftot, self.c_fdn,
-                      self.c_fdt, self.c_fet, hk, acc, self.wall_work)
+        acc = np.zeros(4)
+        kick_with_work(b.v, b.L, b.x, b.q, self._inv_I, self._inv_mass, self.force, self.torque,
+                       hk, self.c_a, self.c_b, self.c_point, self.wall_d, wall_u, self.c_ftot,
+                       self.c_fdn, self.c_fdt, self.c_fet, acc, self.wall_work)
+        if self.c_a.shape[0]:
             self.ledger.dissipated_normal += acc[0]
             self.ledger.dissipated_tangential += acc[1]
             self.ledger.external_work += acc[2]
