@@ -771,9 +771,7 @@ def section_dense_pack(rep: Report) -> None:
     import bench_timestep
     T = 0.01 if rep.quick else 0.03
     table = bench_timestep.rows(T)
-    rep.add("### A dense pack: the contact network against the stiffest pair
-
-"
+    rep.add("### A dense pack: the contact network against the stiffest pair\n\n"
             "63 exact NURBS spheres in FCC order (12 contacts each inside, particle C's mass, "
             f"the paper's contact law, zero gravity, walls touching the outer spheres), {T:g} s "
             f"at the deck step 1e-3 s (`benchmarks/bench_timestep.py`). The stiffest pair's "
