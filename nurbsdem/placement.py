@@ -301,7 +301,8 @@ def replicate_step(model: "Model", bodies: Bodies, step: "ReplicateStep") -> Bod
             f"{t * (step.layers - 1):.4g} m", step.line)
     from .validation import check_bodies_against_walls
     check_bodies_against_walls(model, out, index=range(n, len(out)), line=step.line,
-                               label=f"Step {step.id}: after replication, ")
+                               label=f"Step {step.id}: after replication, ",
+                               reference=[k % n for k in range(n, len(out))])
     return out
 
 

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Iterator, Sequence
 
 import numpy as np
 
+from .dynamics.stepcontrol import critical_step
 from .errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -172,11 +173,14 @@ def plane_support_distance(shape: "Shape", centroid: np.ndarray, R: np.ndarray,
 
 def check_bodies_against_walls(model: "Model", bodies: "Bodies",
                                index: Sequence[int] | None = None,
-                               line: int | None = None, label: str = "") -> None:
+                               line: int | None = None, label: str = "",
+                               reference: Sequence[int] | None = None) -> None:
     """Raise when a body (of ``index``, default all) is behind a wall or penetrates one.
 
     line, label: report at this deck line with this prefix (e.g. a Replicate step) instead
-    of the body's own line.
+    of the body's own line.  reference: for each indexed body, a body whose penetration of
+    the same wall it may share (a replicated copy inherits the small penalty penetration of
+    its settled original; only a deeper one is an error).
     """
     if not model.walls or not len(bodies):
         return
@@ -204,6 +208,11 @@ def check_bodies_against_walls(model: "Model", bodies: "Bodies",
         for k in near:
             sd = plane_support_distance(shapes[k], pos[k], R[k], o, n)
             tol = OVERLAP_TOLERANCE * radii[k]
+            if sd < -tol and reference is not None:
+                j = int(reference[k])
+                tol -= min(0.0, plane_support_distance(
+                    model.shapes[int(bodies.shape_id[j])].shape, bodies.position[j],
+                    bodies.rotation_matrices()[j], o, n))
             if sd < -tol:
                 i = int(idx[k])
                 raise model.error(
@@ -332,15 +341,6 @@ def _particle_masses(model: "Model") -> dict[int, float]:
     return out
 
 
-def _critical_step(k: float, c: float, m: float) -> float:
-    """Critical step (s) of a spring k - dashpot c - mass m: (2/w)(sqrt(1+z^2) - z)."""
-    if k <= 0 or not m > 0:
-        return math.inf
-    omega = math.sqrt(k / m)
-    zeta = c / (2.0 * math.sqrt(k * m))
-    return (2.0 / omega) * (math.sqrt(1.0 + zeta * zeta) - zeta)
-
-
 def check_step_count(model: "Model") -> None:
     """Refuse a run whose explicit integration would need more than
     :data:`MAX_INTERNAL_STEPS` internal time steps (the stiffest contact law on the lightest
@@ -353,7 +353,7 @@ def check_step_count(model: "Model") -> None:
         for mid, m in masses.items():
             for k, c in ((itf.normal_penalty, itf.normal_damping),
                          (itf.tangential_penalty, itf.tangential_damping)):
-                dt = _critical_step(k, c, 0.5 * m)
+                dt = critical_step(k, c, 0.5 * m)[2]
                 if dt < dt_cr:
                     dt_cr, worst = dt, (itf, mid, m)
     if worst is None:

@@ -406,3 +406,36 @@ def test_random_group_beyond_jamming_is_refused_at_once(tmp_path):
     with pytest.raises(InputError) as info:
         parse_deck(_deck(tmp_path, text))
     assert "random placement jams" in str(info.value) and info.value.line == 10
+
+
+def test_replicated_copies_may_share_the_settled_penetration_of_their_originals(tmp_path):
+    """A settled layer rests on penalty contacts, a little into the side walls: its copies
+    inherit that penetration (the quick paper deck stopped at its Replicate step); a copy
+    deeper into a wall than its original is still refused."""
+    from nurbsdem.errors import InputError
+    from nurbsdem.io.deck import parse_deck
+    from nurbsdem.placement import replicate_step
+    from nurbsdem.validation import check_bodies_against_walls
+
+    deck = tmp_path / "rep.inp"
+    deck.write_text("""Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 Sphere Radius 0.02
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.1 0.1 0.05
+Walls
+  Box 1 Min 0 0 0 Max 0.25 0.25 0.6
+Contact
+  Interface 1 NormalPenalty 1e5 NormalDamping 1e2
+Steps
+  Step 1 Replicate Layers 3 Height 0.2
+""")
+    model = parse_deck(deck)
+    settled = model.bodies.copy()
+    settled.position = np.array([[0.1, 0.25 - 0.02 + 1e-6, 0.05]])    # 1 µm into y_max
+    out = replicate_step(model, settled, model.steps[0])
+    assert len(out) == 3
+    out.position[1, 1] += 4e-6                                        # a copy 5 µm deep
+    with pytest.raises(InputError, match="penetrates wall 'y_max' by 5"):
+        check_bodies_against_walls(model, out, index=[1, 2], reference=[0, 0])
