@@ -94,3 +94,17 @@ def sphere_wall_rows(x: np.ndarray, r: np.ndarray, origin: np.ndarray, a: np.nda
         if not inside:
             res_i[k, I_BROAD] = 2
         res_i[k, I_ACTIVE] = 1 if (inside and sd < 0.0) else 0
+
+
+@njit(cache=True)
+def sphere_centres(idx: np.ndarray, pos: np.ndarray, R: np.ndarray, body_shape: np.ndarray,
+                   centre: np.ndarray) -> np.ndarray:
+    """(K,3) world centres pos + R c of the exact-sphere bodies idx (c: the sphere's centre in
+    its shape's frame, per shape)."""
+    out = np.empty((idx.shape[0], 3))
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        c = centre[body_shape[i]]
+        for j in range(3):
+            out[k, j] = pos[i, j] + R[i, j, 0] * c[0] + R[i, j, 1] * c[1] + R[i, j, 2] * c[2]
+    return out

@@ -60,7 +60,7 @@ from typing import Sequence
 import numpy as np
 
 from ..geometry.analytic import exact_sphere
-from .analytic import sphere_sphere_rows, sphere_wall_rows
+from .analytic import sphere_centres, sphere_sphere_rows, sphere_wall_rows
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
@@ -339,19 +339,20 @@ class SceneContacts:
     def _closed_forms(self, pp, pw, a, b, pos, R, wall_d, rf, ri) -> None:
         """Rows of the sphere–sphere (indices pp of a, b) and sphere–wall (pw) pairs."""
         N = self.n
+        rad = self.sphere_radius[self.body_shape]
         if pp.size:
-            sa, sb = self.body_shape[a[pp]], self.body_shape[b[pp]]
-            xa = pos[a[pp]] + np.einsum("kij,kj->ki", R[a[pp]], self.sphere_center[sa])
-            xb = pos[b[pp]] + np.einsum("kij,kj->ki", R[b[pp]], self.sphere_center[sb])
-            f, i = np.zeros((pp.size, NF)), np.zeros((pp.size, NI), np.int64)
-            sphere_sphere_rows(xa, self.sphere_radius[sa], xb, self.sphere_radius[sb], f, i)
+            ia, ib = a[pp], b[pp]
+            xa = sphere_centres(ia, pos, R, self.body_shape, self.sphere_center)
+            xb = sphere_centres(ib, pos, R, self.body_shape, self.sphere_center)
+            f, i = np.empty((pp.size, NF)), np.empty((pp.size, NI), np.int64)
+            sphere_sphere_rows(xa, rad[ia], xb, rad[ib], f, i)
             rf[pp], ri[pp] = f, i
         if pw.size:
-            sa, w = self.body_shape[a[pw]], b[pw] - N
-            x = pos[a[pw]] + np.einsum("kij,kj->ki", R[a[pw]], self.sphere_center[sa])
-            f, i = np.zeros((pw.size, NF)), np.zeros((pw.size, NI), np.int64)
-            sphere_wall_rows(x, self.sphere_radius[sa], self.wall_origin[w] + wall_d[w],
-                             self.wall_a[w], self.wall_b[w], self.wall_dom[w], f, i)
+            ia, w = a[pw], b[pw] - N
+            x = sphere_centres(ia, pos, R, self.body_shape, self.sphere_center)
+            f, i = np.empty((pw.size, NF)), np.empty((pw.size, NI), np.int64)
+            sphere_wall_rows(x, rad[ia], self.wall_origin[w] + wall_d[w], self.wall_a[w],
+                             self.wall_b[w], self.wall_dom[w], f, i)
             rf[pw], ri[pw] = f, i
 
     def _assemble(self, due, rf, ri, reach, pose) -> ContactSet:
