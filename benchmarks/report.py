@@ -913,7 +913,7 @@ def section_fit(rep: Report) -> None:
     v_ex = 4.0 / 3.0 * np.pi * ax.prod()
     j_ex = v_ex / 5.0 * np.diag([ax[1] ** 2 + ax[2] ** 2, ax[0] ** 2 + ax[2] ** 2,
                                  ax[0] ** 2 + ax[1] ** 2])
-    subs = (3, 4) if rep.quick else (2, 3, 4, 5)
+    subs = (4,) if rep.quick else (2, 3, 4, 5)
     ncps = (6, 8) if rep.quick else (5, 6, 8, 10)
     rows = []
     best = None
