@@ -149,6 +149,8 @@ _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs
 
 #: quiet deck steps after which a refinement of the step (period-2 or energy guard) is halved
 REFINE_DECAY_STEPS = 200
+#: from this many sub-steps per deck step on, a warning says what limits the step
+HEAVY_SUBSTEPS = 20
 #: deck steps between exact (Lanczos) network estimates when the Gershgorin bound calls for no
 #: more sub-steps (a fall of the count is noticed at these steps)
 NETWORK_RECHECK_STEPS = 20
@@ -212,6 +214,8 @@ class DemSystem:
         self.refine = 1                 # factor on the sub-steps after a guard fired
         self.calm_steps = 0             # deck steps since the guard last fired
         self.failed_in_step = 0         # failed contact problems reported in the last deck step
+        self._warned_heavy = False
+        self._apriori_zeta = self._network_zeta = 0.0
         self.last_contacts: Any = None
         self._compliance: list[tuple[float, float] | None] = []
         self._initialized = False
@@ -321,6 +325,7 @@ class DemSystem:
         self._apriori_why = (
             f"{worst.mode} mode of interface {worst.interface} (m*={worst.m_eff:.4g} kg, "
             f"omega={worst.omega:.4g} rad/s, zeta={worst.zeta:.3g})") if worst else "no contact modes"
+        self._apriori_zeta = worst.zeta if worst else 0.0
 
     def _network(self):
         """The contacts of the last evaluation plus the pairs that can close within one deck
@@ -353,6 +358,7 @@ class DemSystem:
         omega2, gamma, body = network_rates(a, bb, p, n, coeffs, b.x, b.principal_rotations(),
                                             b.mass, b.I)
         dt = critical_step_from_rates(omega2, gamma)
+        self._network_zeta = gamma / (2.0 * math.sqrt(omega2)) if omega2 > 0 else 0.0
         n_contacts = int(np.count_nonzero(a == body) + np.count_nonzero(bb == body))
         why = (f"contact network of {a.shape[0]} pairs ({self.c_a.shape[0]} in contact): highest "
                f"frequency {math.sqrt(omega2):.4g} rad/s, damping rate {gamma:.4g} 1/s, "
@@ -419,6 +425,9 @@ class DemSystem:
         if initial or need > old or need < FALL_HYSTERESIS * old:
             self.substeps = need
         self.dt_internal = self.dt / self.substeps
+        if self.substeps >= HEAVY_SUBSTEPS and not self._warned_heavy:
+            self._warned_heavy = True
+            self._warn_heavy(why)
         if initial:
             log.info("time step: deck dt %.4g s, %d sub-step(s) of %.4g s; %s", self.dt,
                      self.substeps, self.dt_internal, why)
@@ -427,6 +436,21 @@ class DemSystem:
                      self.time, old, self.substeps, self.dt_internal,
                      "the contact network stiffened" if self.substeps > old else "the pack loosened",
                      why + (f", refined x{self.refine} by the guard" if self.refine > 1 else ""))
+
+    def _warn_heavy(self, why: str) -> None:
+        """One warning per system when the deck step is sub-stepped heavily: what limits the
+        step and what the user could change (like LIGGGHTS' and Yade's step-size warnings)."""
+        zeta = self._apriori_zeta if self.dt_apriori <= self.dt_network else self._network_zeta
+        if zeta > 1.0:
+            lever = (f"the damping limits it (zeta {zeta:.3g} > 1: the dashpots' rate, not the "
+                     f"springs, sets the step): a smaller NormalDamping / TangentialDamping "
+                     f"would allow a larger one")
+        else:
+            lever = ("the stiffness limits it: a softer NormalPenalty / TangentialPenalty or "
+                     "heavier particles would allow a larger one")
+        log.warning("the deck's TimeStep %.4g s is sub-stepped %d times (internal step %.4g s, "
+                    "%.2f of the critical step): %s; %s", self.dt, self.substeps,
+                    self.dt_internal, self.dt_internal / self.dt_critical, lever, why)
 
     # ------------------------------------------------------------------ initialisation
     def initialize(self) -> None:
