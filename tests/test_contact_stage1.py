@@ -14,7 +14,7 @@ from nurbsdem.contact import ContactResult, ContactTable, detect, detect_batch
 from nurbsdem.contact.lcp import F_N, F_SD, I_FAIL, I_STAGE, NF, NI, I_VALID, I_PA, I_PB, F_PAR
 from nurbsdem.contact.reference import ellipsoid_pair
 from nurbsdem.contact.detect import closest_points
-from nurbsdem.contact.stage1 import jacobi_eig
+from nurbsdem.contact.trust_region import jacobi_eig
 from nurbsdem.geometry.generators import ellipsoid, sphere
 from nurbsdem.geometry.particles import paper_particle_shape
 

@@ -76,7 +76,8 @@ from numba import njit
 from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
                      S1_C, S1_G, S1_INTERSECTING, S1_NONE, S1_PAW, S1_PBW, S1_ROW, S1_ROWS,
                      S1_SEPARATED, W4_COLS, W4_ROWS, nearest_seed, outward_normal, stage1)
-from .support import CREASE, dot3, norm3, seed_start, support_map, tr_step2
+from .support import CREASE, dot3, norm3, seed_start, support_map
+from .trust_region import tr_step2
 
 # float result columns
 F_SD = 0          # signed distance (m): < 0 penetration depth, > 0 separation
@@ -118,6 +119,7 @@ S1_CERT_TOL = 1e-9
 _PA, _MA, _GA, _PB, _MB, _GB = 0, 1, 4, 6, 7, 10
 _TRIAL = 12
 _EV, _EV2, _TMP, _EA, _EB, _D, _T1, _T2, _DT, _H = 24, 30, 36, 37, 38, 39, 40, 41, 42, 43
+_TR = 45     # 3 rows: scratch of the trust-region step (rows 45..47)
 
 
 def make_work() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -478,7 +480,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         k11 = _quad_world(RA, MA, t1, t1) + _quad_world(RB, MB, t1, t1) - phi
         k12 = _quad_world(RA, MA, t1, t2) + _quad_world(RB, MB, t1, t2)
         k22 = _quad_world(RA, MA, t2, t2) + _quad_world(RB, MB, t2, t2) - phi
-        x1, x2, mval = tr_step2(k11, k12, k22, g1, g2, delta)
+        x1, x2, mval = tr_step2(k11, k12, k22, g1, g2, delta, wf[_TR:_TR + 3])
         xn = math.sqrt(x1 * x1 + x2 * x2)
         newton = xn < 0.99 * delta          # the step is the (positive definite) Newton step
         if newton and xn <= ANGLE_TOL:

@@ -15,7 +15,8 @@ with the exact derivatives from the compiled kernel's first and second surface d
 **Trust-region Newton** (as in the authors' Giraffe code, Δ0 = 0.1, Δmax = 1e4, η = 0.15, at
 most 50 iterations; see ``/work/shared/reference/README.md``). The variables are scaled by
 each patch's parameter width, so the radius is in patch widths. The step is the exact
-trust-region step in the eigenbasis of the (reduced) Hessian (4×4 cyclic Jacobi): the
+trust-region step (:func:`.trust_region.tr_step_eig`, shared with the support mapping and
+the direction search) in the eigenbasis of the (reduced) Hessian (4×4 cyclic Jacobi): the
 Newton step when the Hessian is positive definite and the step fits, otherwise the
 eigenvalues are shifted by μ ≥ max(0, −λmin) until the step has length Δ (the Moré–Sorensen
 refinement of Giraffe's "shifted eigenvalues / dogleg"; along the lowest eigenvector in the
@@ -66,6 +67,7 @@ from numba import njit
 
 from .support import (CREASE, FREE, OPEN_FIX, POLE_FIX, dot3, evaluate, pole_escape,
                       try_migrate)
+from .trust_region import jacobi_eig, tr_step_eig
 
 #: classification codes
 S1_NONE = 0
@@ -111,144 +113,6 @@ _HS, _Q, _LAM, _GR, _X, _XN, _WD, _ST, _HR, _GS, _Y, _IDX, _DIAG = 0, 4, 8, 9, 1
 def make_w4() -> np.ndarray:
     """The (24, 8) float work array of :func:`stage1`."""
     return np.zeros((W4_ROWS, W4_COLS))
-
-
-# --------------------------------------------------------------------------- linear algebra
-@njit(cache=True)
-def jacobi_eig(A, n, Q, lam):
-    """Eigen-decomposition of the leading n×n block (n <= 4) of the symmetric ``A`` by cyclic
-    Jacobi rotations: A = Q diag(lam) Qᵀ (eigenvectors in the columns of Q). ``A`` is
-    overwritten."""
-    for i in range(n):
-        for j in range(n):
-            Q[i, j] = 1.0 if i == j else 0.0
-    for sweep in range(40):
-        off = 0.0
-        dg = 0.0
-        for i in range(n):
-            dg += A[i, i] * A[i, i]
-            for j in range(i + 1, n):
-                off += A[i, j] * A[i, j]
-        if off <= 1e-34 * dg or off == 0.0:
-            break
-        for p in range(n - 1):
-            for q in range(p + 1, n):
-                apq = A[p, q]
-                if apq == 0.0:
-                    continue
-                theta = (A[q, q] - A[p, p]) / (2.0 * apq)
-                t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                if theta < 0.0:
-                    t = -t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = t * c
-                for k in range(n):
-                    akp = A[k, p]
-                    akq = A[k, q]
-                    A[k, p] = c * akp - s * akq
-                    A[k, q] = s * akp + c * akq
-                for k in range(n):
-                    apk = A[p, k]
-                    aqk = A[q, k]
-                    A[p, k] = c * apk - s * aqk
-                    A[q, k] = s * apk + c * aqk
-                for k in range(n):
-                    qkp = Q[k, p]
-                    qkq = Q[k, q]
-                    Q[k, p] = c * qkp - s * qkq
-                    Q[k, q] = s * qkp + c * qkq
-    for i in range(n):
-        lam[i] = A[i, i]
-
-
-@njit(cache=True)
-def tr_step_eig(lam, Q, gv, n, delta, y, s, w_a):
-    """Exact trust-region step: minimise gv·s + ½ sᵀ H s with |s| <= delta, H = Q diag(lam) Qᵀ
-    (n×n, n <= 4). Newton when H is positive definite and the step fits; else the shift
-    μ >= max(0, −λmin) with |s(μ)| = delta (safeguarded Newton on the secular equation),
-    hard case along the lowest eigenvector. Writes s (and y = Qᵀ s); returns
-    (newton_step_taken, model value). ``w_a`` (4,): scratch."""
-    lmin = 1e300
-    imin = 0
-    lmax = 0.0
-    for i in range(n):
-        if lam[i] < lmin:
-            lmin = lam[i]
-            imin = i
-        if abs(lam[i]) > lmax:
-            lmax = abs(lam[i])
-    scale = max(lmax, 1e-300)
-    a = w_a
-    for i in range(n):
-        acc = 0.0
-        for k in range(n):
-            acc += Q[k, i] * gv[k]
-        a[i] = acc
-    newton = False
-    if lmin > 1e-14 * scale:
-        nn = 0.0
-        for i in range(n):
-            y[i] = -a[i] / lam[i]
-            nn += y[i] * y[i]
-        if nn <= delta * delta:
-            newton = True
-    if not newton:
-        lo = max(0.0, -lmin)
-        gn = 0.0
-        for i in range(n):
-            gn += a[i] * a[i]
-        gn = math.sqrt(gn)
-        eps = 1e-12 * scale + 1e-300
-        # hard case: the step at mu -> lo (lowest component dropped) is shorter than delta
-        nn = 0.0
-        hard = lmin <= 0.0
-        for i in range(n):
-            den = lam[i] + lo
-            if den > eps:
-                y[i] = -a[i] / den
-                nn += y[i] * y[i]
-            elif abs(a[i]) <= 1e-12 * (gn + 1e-300):
-                y[i] = 0.0
-            else:
-                y[i] = 0.0
-                hard = False
-        if hard and nn <= delta * delta:
-            rest = delta * delta - (nn - y[imin] * y[imin])
-            y[imin] = math.sqrt(rest) if rest > 0.0 else 0.0
-            if a[imin] > 0.0:
-                y[imin] = -y[imin]
-        else:
-            hi = lo + gn / delta + 1e-300
-            mu = hi
-            for _ in range(80):
-                nn = 0.0
-                s3 = 0.0
-                for i in range(n):
-                    d = lam[i] + mu
-                    y[i] = -a[i] / d
-                    nn += y[i] * y[i]
-                    s3 += a[i] * a[i] / (d * d * d)
-                nn = math.sqrt(nn)
-                if abs(nn - delta) <= 1e-6 * delta:
-                    break
-                if nn > delta:
-                    lo = mu
-                else:
-                    hi = mu
-                step = (nn / delta - 1.0) * nn * nn / s3 if s3 > 0.0 else 0.0
-                mnew = mu + step
-                if not (mnew > lo and mnew < hi):
-                    mnew = 0.5 * (lo + hi)
-                mu = mnew
-    mval = 0.0
-    for i in range(n):
-        mval += a[i] * y[i] + 0.5 * lam[i] * y[i] * y[i]
-    for k in range(n):
-        acc = 0.0
-        for i in range(n):
-            acc += Q[k, i] * y[i]
-        s[k] = acc
-    return newton, mval
 
 
 # --------------------------------------------------------------------------- geometry
@@ -551,7 +415,7 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
         stationary = n == 0 or (gn < GRAD_TOL * lref and rel and lmin >= -EIG_TOL * lref)
         if not stationary and it < max_it:
             it += 1
-            newton, mval = tr_step_eig(lam, Q, sr, n, delta, y, xn, w4[22])
+            newton = tr_step_eig(lam, Q, sr, n, delta, y, xn, w4[22])
             for k in range(4):
                 st[k] = 0.0
             for i in range(n):

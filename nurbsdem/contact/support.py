@@ -2,7 +2,8 @@
 
 For a unit direction ``e`` (body file frame) the support point is the point of the closed
 surface that maximises ``e · s(u, v)`` (paper Eq. 8–9, ``f_sup = e · Γ(ζ, θ)``). It is found
-by a trust-region Newton method on one patch at a time with the exact 2×2 Hessian
+by a trust-region Newton method (the step of :mod:`.trust_region`) on one patch at a time
+with the exact 2×2 Hessian
 ``H = [[e·s_uu, e·s_uv], [e·s_uv, e·s_vv]]`` (bound-constrained to the parameter rectangle):
 
 * **patch migration** (paper 3.2.2): a parameter that reaches its bound with the gradient
@@ -44,6 +45,7 @@ from numba import njit
 
 from ..geometry.connectivity import edge_uv_nb, map_to_neighbour_nb
 from ..geometry.kernel import patch_derivs
+from .trust_region import sym2_eig, tr_step1, tr_step2
 
 #: Parameter status codes.
 FREE = 0
@@ -81,94 +83,6 @@ def dot3(a, b):
 def norm3(a):
     """|a| for a 3-vector."""
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-
-
-# --------------------------------------------------------------------------- trust region
-@njit(cache=True)
-def sym2_eig(b11, b12, b22):
-    """Eigen-decomposition of a symmetric 2×2 matrix: (l1, l2, c, s) with l1 <= l2,
-    q1 = (−s, c) the eigenvector of l1 and q2 = (c, s) the eigenvector of l2."""
-    half = 0.5 * (b11 - b22)
-    r = math.sqrt(half * half + b12 * b12)
-    m = 0.5 * (b11 + b22)
-    th = 0.5 * math.atan2(b12, half) if r > 0.0 else 0.0
-    return m - r, m + r, math.cos(th), math.sin(th)
-
-
-@njit(cache=True)
-def tr_step2(b11, b12, b22, c1, c2, delta):
-    """Exact trust-region step in 2-D: minimise m(x) = c·x + ½ xᵀBx subject to |x| <= delta.
-
-    Eigen-decomposition of B, Newton step when B is positive definite and the step fits,
-    otherwise the shift mu >= max(0, −l_min) with |x(mu)| = delta found by safeguarded
-    Newton on the secular equation (hard case: a component along the lowest eigenvector).
-    Returns (x1, x2, m(x)).
-    """
-    l1, l2, c, s = sym2_eig(b11, b12, b22)
-    a1 = -s * c1 + c * c2     # q1 · c
-    a2 = c * c1 + s * c2      # q2 · c
-    scale = max(abs(l1), abs(l2), 1e-300)
-    y1 = 0.0
-    y2 = 0.0
-    done = False
-    if l1 > 1e-14 * scale:
-        y1 = -a1 / l1
-        y2 = -a2 / l2
-        if y1 * y1 + y2 * y2 <= delta * delta:
-            done = True
-    if not done:
-        lo = max(0.0, -l1)
-        gn = math.sqrt(a1 * a1 + a2 * a2)
-        hi = lo + gn / delta + 1e-300
-        # hard case: even at mu -> lo the step is shorter than delta
-        eps = 1e-12 * scale + 1e-300
-        mu = lo + eps
-        n1 = a1 / (l1 + mu)
-        n2 = a2 / (l2 + mu)
-        if n1 * n1 + n2 * n2 <= delta * delta and l1 <= 0.0:
-            y2 = -a2 / (l2 + lo) if l2 + lo > eps else 0.0
-            rest = delta * delta - y2 * y2
-            y1 = math.sqrt(rest) if rest > 0.0 else 0.0
-            if a1 > 0.0:
-                y1 = -y1
-        else:
-            mu = hi
-            for _ in range(60):
-                d1 = l1 + mu
-                d2 = l2 + mu
-                y1 = -a1 / d1
-                y2 = -a2 / d2
-                nn = math.sqrt(y1 * y1 + y2 * y2)
-                if abs(nn - delta) <= 1e-6 * delta:
-                    break
-                if nn > delta:
-                    lo = mu
-                else:
-                    hi = mu
-                s3 = a1 * a1 / (d1 * d1 * d1) + a2 * a2 / (d2 * d2 * d2)
-                step = (nn / delta - 1.0) * nn * nn / s3 if s3 > 0.0 else 0.0
-                mnew = mu + step
-                if not (mnew > lo and mnew < hi):
-                    mnew = 0.5 * (lo + hi)
-                mu = mnew
-    x1 = c * y2 - s * y1
-    x2 = s * y2 + c * y1
-    mval = c1 * x1 + c2 * x2 + 0.5 * (b11 * x1 * x1 + 2.0 * b12 * x1 * x2 + b22 * x2 * x2)
-    return x1, x2, mval
-
-
-@njit(cache=True)
-def tr_step1(b, cg, delta):
-    """Trust-region step in 1-D: minimise cg x + ½ b x² with |x| <= delta; returns (x, m(x))."""
-    if b > 0.0 and abs(cg) <= b * delta:
-        x = -cg / b
-    elif cg > 0.0:
-        x = -delta
-    elif cg < 0.0:
-        x = delta
-    else:
-        x = delta if b < 0.0 else 0.0
-    return x, cg * x + 0.5 * b * x * x
 
 
 # --------------------------------------------------------------------------- edges
@@ -475,7 +389,7 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         mval = 0.0
         finish = False
         if fixu == FREE and fixv == FREE:
-            xu, xv, mval = tr_step2(-hu, -huv, -hv, -gu, -gv, delta)
+            xu, xv, mval = tr_step2(-hu, -huv, -hv, -gu, -gv, delta, ev2)  # ev2: free here
         elif fixu == FREE:
             xu, mval = tr_step1(-hu, -gu, delta)
         elif fixv == FREE:
