@@ -195,7 +195,7 @@ def test_substeps_rise_with_the_network_and_fall_when_it_loosens():
 
 
 # --------------------------------------------------------------------------- flat particles
-def test_flat_ellipsoids_run_at_the_deck_time_step(tmp_path):
+def test_flat_ellipsoids_run_at_the_deck_time_step(tmp_path, caplog):
     """Two 100:1 ellipsoids dropped in the box at the deck's 1e-3 s (the pair estimate with the
     bounding radius chose 13 sub-steps and the run stopped at 0.07 s)."""
     from nurbsdem.io.deck import parse_deck
@@ -220,8 +220,12 @@ Output
   Directory out
   Monitors Every 0.001
 """)
-    summary = Solver(parse_deck(deck), output=tmp_path / "out", quiet=True).run()
+    with caplog.at_level(logging.WARNING, logger="nurbsdem"):
+        summary = Solver(parse_deck(deck), output=tmp_path / "out", quiet=True).run()
     assert summary.simulated_time == pytest.approx(0.1) and summary.failed == 0
+    # a warning the user can act on: heavily sub-stepped, because of the damping
+    assert any("sub-stepped" in r.getMessage() and "damping limits it" in r.getMessage()
+               for r in caplog.records)
     assert summary.active_max >= 1                     # they reached the floor
     assert abs(summary.balance_error) < 1e-3 * summary.balance_scale
 
