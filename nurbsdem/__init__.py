@@ -6,6 +6,7 @@ the compiled kernels are imported only when a shape is built or loaded)::
     import nurbsdem
     s = nurbsdem.shapes.sphere(0.01)           # generators: sphere, ellipsoid, paper_particle ...
     a = nurbsdem.load_shape("inputs/shapes/A.yaml")
+    sim = nurbsdem.Simulation(gravity=(0, 0, -9.81))   # scripting: see nurbsdem.simulation
 """
 from __future__ import annotations
 
@@ -23,10 +24,10 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "Shape": (".geometry.shape", "Shape"),
     "load_shape": (".io.shapefile", "load_shape"),
     "save_shape": (".io.shapefile", "save_shape"),
-    # the scripting API (issue #14) goes here: "Simulation": (".<module>", "Simulation"),
+    "Simulation": (".simulation", "Simulation"),      # the scripting API (issue #14)
 }
 
-__all__ = ["__version__", "shapes", "Patch", "Shape", "load_shape", "save_shape",
+__all__ = ["__version__", "shapes", "Simulation", "Patch", "Shape", "load_shape", "save_shape",
            "NurbsdemError", "InputError", "GeometryError"]
 
 

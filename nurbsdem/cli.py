@@ -454,20 +454,18 @@ def check(deck: str) -> None:
 @click.option("--verbose", is_flag=True, help="Debug log messages.")
 def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbose: bool) -> None:
     """Run the solution steps of a deck and write the results."""
-    from .io.deck import parse_deck
-    from .solver import Solver
+    from .simulation import Simulation
     _setup_logging(quiet, verbose)
-    model = parse_deck(deck)
+    sim = Simulation.from_deck(deck, output=output, restart=restart, quiet=quiet)
     if restart is not None and Path(restart).parent.is_dir():
         from .io.writers import clean_output_directory
         clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries
     if restart is not None and not Path(restart).is_file():
         fail(f"{restart}: no such checkpoint file")
-    solver = Solver(model, output=output, restart=restart, quiet=quiet)
-    summary = solver.run()
+    summary = sim.run()      # the Python API's code path: Simulation -> Solver
     if not quiet:
         click.echo(summary.text())
-        click.echo(f"results in {solver.outdir}")
+        click.echo(f"results in {sim.solver.outdir}")
 
 
 @main.command()

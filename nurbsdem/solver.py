@@ -135,12 +135,21 @@ class Solver:
     contact_options: keywords of :class:`~nurbsdem.contact.scene.SceneContacts` (``skin``,
         ``certificates``): e.g. ``dict(skin=0, certificates=False)`` searches and solves every
         pair at every evaluation (the same results, more work: a test says so).
+    write_output: False writes no files at all (no results, monitors, checkpoints).
+    restart_check: ``check(path) -> state``, reads the restart checkpoint and checks that it
+        belongs to this model (default :func:`~nurbsdem.io.checkpoint.restart_state`: the
+        decks compared; a model whose steps are added while it runs passes its own).
+
+    :meth:`run` runs every step; it is :meth:`start`, :meth:`run_pending` (or
+    :meth:`run_step` per step) and :meth:`finish`, which a model extended step by step calls
+    in turn (:class:`~nurbsdem.simulation.Simulation`).
     """
 
     def __init__(self, model: Model, output: str | Path | None = None,
                  restart: str | Path | None = None, quiet: bool = False,
                  safety: float = 0.5, progress_stream=None,
-                 contact_options: dict | None = None) -> None:
+                 contact_options: dict | None = None, write_output: bool = True,
+                 restart_check=None) -> None:
         self.model = model
         if output is not None:
             model.output.directory = Path(output)
@@ -150,6 +159,12 @@ class Solver:
         self.contact_options = dict(contact_options or {})
         self.progress = Progress(quiet, progress_stream)
         self.restart_path = Path(restart) if restart is not None else None
+        self.write_output = bool(write_output)
+        self.restart_check = restart_check
+        self._writers = None
+        self._finished_once = False
+        self._restored: dict | None = None
+        self._wall0 = time.perf_counter()
         # materials: deck ids -> 0..M-1; walls get material M
         mats = sorted(model.materials)
         self.mat_index = {m: i for i, m in enumerate(mats)}
@@ -174,6 +189,8 @@ class Solver:
         self._compliances: dict = {}
         self._motion_spec: dict = {}
         self._last_energy: dict = {}
+        self.end_energy: dict | None = None      # see _snapshot
+        self.end_contacts: dict | None = None
 
     # ------------------------------------------------------------------ set-up helpers
     def _interface_table(self) -> InterfaceTable:
@@ -263,6 +280,37 @@ class Solver:
         self._last_energy = row
         return row
 
+    def _snapshot(self) -> None:
+        """Keep what the end of a dynamic step leaves to read between steps (no side effects
+        on the run): :attr:`end_energy` (the energies of ``monitors/energy.csv`` now) and
+        :attr:`end_contacts` (the active contacts of the last evaluation, arrays)."""
+        e = self.system.energy()
+        diss = self.energy_offset["dissipated"] + e.dissipated
+        ext = self.energy_offset["external_work"] + e.external_work
+        mech0 = self.mech0 if self.mech0 is not None else e.mechanical
+        self.end_energy = dict(step=self.step_index, time=float(self.time),
+                               kinetic=float(e.kinetic), potential=float(e.potential),
+                               elastic=float(e.elastic), dissipated=float(diss),
+                               external_work=float(ext), mechanical=float(e.mechanical),
+                               balance_error=float(e.mechanical - mech0 - ext + diss))
+        out = self._contact_output()
+        n = len(self.bodies)
+        if out is None:
+            z3 = np.zeros((0, 3))
+            out = dict(point=z3, force_normal=z3, force_tangential=z3.copy(),
+                       penetration=np.zeros(0), degenerated=np.zeros(0, np.int64),
+                       body_a=np.zeros(0, np.int64), body_b=np.zeros(0, np.int64))
+            normal = z3.copy()
+        else:
+            normal = np.array(self.scene.last.normal, float)
+        self.end_contacts = dict(
+            body_a=np.array(out["body_a"], np.int64), body_b=np.array(out["body_b"], np.int64),
+            point=np.array(out["point"], float), normal=normal,
+            depth=np.array(out["penetration"], float),
+            force_normal=np.array(out["force_normal"], float),
+            force_tangential=np.array(out["force_tangential"], float),
+            degenerated=np.array(out["degenerated"]), n_particles=n, step=self.step_index)
+
     def _close_system(self) -> None:
         """Fold the current system's cumulative energies into the offsets before replacing it."""
         if self.system is None:
@@ -315,6 +363,8 @@ class Solver:
 
     # ------------------------------------------------------------------ checkpoints
     def _checkpoint(self, writers: OutputWriters) -> None:
+        if not self.write_output:
+            return
         t0 = time.perf_counter()
         writers.sync()
         state = {
@@ -336,7 +386,10 @@ class Solver:
         """Read the checkpoint, check it belongs to this deck (the parsed model is compared,
         so comments and layout may change) and restore the run's state from it."""
         from .io.checkpoint import restart_state
-        st = restart_state(self.restart_path, self.model)
+        if self.restart_check is not None:
+            st = self.restart_check(self.restart_path)
+        else:
+            st = restart_state(self.restart_path, self.model)
         try:
             self.time = float(st["time"])
             self.step_index = int(st["step_index"])
@@ -350,7 +403,8 @@ class Solver:
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise InputError(f"the checkpoint is incomplete or corrupted ({type(exc).__name__}: "
                              f"{exc})", path=str(self.restart_path)) from None
-        if not 0 <= self.step_index <= len(self.model.steps):
+        if not 0 <= self.step_index <= (len(self.model.steps) if self.restart_check is None
+                                        else 10 ** 9):
             raise InputError(f"the checkpoint is corrupted (step index {self.step_index})",
                              path=str(self.restart_path))
         return st
@@ -417,6 +471,7 @@ class Solver:
         self._sync_bodies_from_system()
         if self.wall_offset.size:
             self.wall_offset = sysm.wall_displacement.copy()
+        self._snapshot()
         self._close_system()
 
     def _run_replicate(self, step: ReplicateStep, writers: OutputWriters) -> None:
@@ -493,48 +548,93 @@ class Solver:
     # ------------------------------------------------------------------ main loop
     def run(self) -> RunSummary:
         """Run every step (or the rest of them after a restart); returns the summary."""
-        wall0 = time.perf_counter()
-        restored = None
-        if self.restart_path is not None:
-            restored = self._load_restart()
-        writers = OutputWriters(self.model, restart_time=self.time if restored else None)
-        self._motion_spec = {}
+        self.start()
         try:
-            steps = self.model.steps
-            while self.step_index < len(steps):
-                step = steps[self.step_index]
-                if isinstance(step, DynamicStep):
-                    self._motion_spec = {}
-                    self._run_dynamic(step, writers, self._fixed_motions(), restored)
-                elif isinstance(step, ReplicateStep):
-                    self._run_replicate(step, writers)
-                elif isinstance(step, MoveWallStep) and step.to_contact:
-                    self._to_contact(step)
-                elif isinstance(step, MoveWallStep):
-                    k = self._wall_index(step.wall)
-                    spec = restored.get("motion") if restored else None
-                    if spec:
-                        d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
-                    else:
-                        d0, t_start = self.wall_offset[k].copy(), self.time
-                    self._motion_spec = {"d0": d0, "t_start": t_start}
-                    motions = self._fixed_motions()
-                    motions[k] = PrescribedMotion.piecewise_linear(
-                        [t_start, t_start + step.duration], [d0, d0 + step.displacement])
-                    self._run_dynamic(step, writers, motions, restored)
-                else:  # pragma: no cover - the parser knows no other steps
-                    raise InputError(f"unknown step kind {step.kind}")
-                restored = None
-                self.step_index += 1
-                self.step_progress = 0
-                self._checkpoint_end_of_step(writers)
+            self.run_pending()
         except BaseException:
-            writers.abort()   # a run without a complete sample puts the previous results back
+            self.abort()
             raise
-        finally:
+        return self.finish()
+
+    @property
+    def started(self) -> bool:
+        """Whether :meth:`start` has opened the writers (and :meth:`finish` not yet closed them)."""
+        return self._writers is not None
+
+    def start(self) -> None:
+        """Begin a run: read the restart checkpoint if any and open the writers. Steps are then
+        run by :meth:`run_pending` (all of ``model.steps`` not run yet; a model may gain steps
+        between calls, as :class:`~nurbsdem.simulation.Simulation` adds them) and the run is
+        ended by :meth:`finish` (or :meth:`abort` after an error)."""
+        self._wall0 = time.perf_counter()
+        self._restored = None
+        resumed = self._finished_once     # writers closed by finish(): continue their files
+        if self.restart_path is not None and not resumed:
+            self._restored = self._load_restart()
+        if self.write_output:
+            self._writers = OutputWriters(self.model, restart_time=(
+                self.time if (self._restored or resumed) else None))
+        else:
+            self._writers = _NoWriters()
+        self._motion_spec = {}
+
+    def run_pending(self) -> None:
+        """Run the steps of ``model.steps`` from :attr:`step_index` on (after a restart, the
+        steps before the checkpoint's are done already and are not run again)."""
+        steps = self.model.steps
+        while self.step_index < len(steps):
+            self.run_step(steps[self.step_index])
+
+    def run_step(self, step) -> None:
+        """Run one step, the one at :attr:`step_index` (the next to run), with the open writers;
+        then write the end-of-step checkpoint."""
+        writers = self._writers
+        if writers is None:
+            raise RuntimeError("Solver.run_step before Solver.start")
+        restored = self._restored
+        if isinstance(step, DynamicStep):
+            self._motion_spec = {}
+            self._run_dynamic(step, writers, self._fixed_motions(), restored)
+        elif isinstance(step, ReplicateStep):
+            self._run_replicate(step, writers)
+        elif isinstance(step, MoveWallStep) and step.to_contact:
+            self._to_contact(step)
+        elif isinstance(step, MoveWallStep):
+            k = self._wall_index(step.wall)
+            spec = restored.get("motion") if restored else None
+            if spec:
+                d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
+            else:
+                d0, t_start = self.wall_offset[k].copy(), self.time
+            self._motion_spec = {"d0": d0, "t_start": t_start}
+            motions = self._fixed_motions()
+            motions[k] = PrescribedMotion.piecewise_linear(
+                [t_start, t_start + step.duration], [d0, d0 + step.displacement])
+            self._run_dynamic(step, writers, motions, restored)
+        else:  # pragma: no cover - the parser knows no other steps
+            raise InputError(f"unknown step kind {step.kind}")
+        self._restored = None
+        self.step_index += 1
+        self.step_progress = 0
+        self._checkpoint_end_of_step(writers)
+
+    def abort(self) -> None:
+        """End a run that failed: a run without a complete sample puts the previous results back."""
+        writers, self._writers = self._writers, None
+        if writers is not None:
+            try:
+                writers.abort()
+            finally:
+                writers.close()
+
+    def finish(self) -> RunSummary:
+        """Close the writers and return the summary of the run."""
+        writers, self._writers = self._writers, None
+        if writers is not None:
             writers.close()
+            self._finished_once = True
         s = self.summary
-        s.wall_time = time.perf_counter() - wall0
+        s.wall_time = time.perf_counter() - self._wall0
         s.simulated_time = self.time
         s.particles = len(self.bodies)
         s.timers = {k: v for k, v in self.timers.items()}
@@ -546,6 +646,27 @@ class Solver:
     def _checkpoint_end_of_step(self, writers: OutputWriters) -> None:
         self._motion_spec = {}
         self._checkpoint(writers)
+
+
+class _NoWriters:
+    """The writers of a run that writes no files (a :class:`~nurbsdem.simulation.Simulation`
+    without ``output``): every call does nothing."""
+
+    class _Sink:
+        def __getattr__(self, name):
+            return lambda *args, **kwargs: None
+
+    def __init__(self) -> None:
+        self.paraview = self.monitors = self.results = self._Sink()
+
+    def sync(self) -> None:
+        pass
+
+    def abort(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
 
 
 def _constant_motion(d: np.ndarray) -> PrescribedMotion:
