@@ -15,9 +15,10 @@ s; default the last output time), ``--size W H`` (pixels, default 1200 900).
 Reads ``particles.pvd``, ``walls.pvd`` and ``contacts.pvd`` written by nurbsdem (the last two
 are optional). Contact arrows start at the contact point and show the normal contact force
 (``force_normal`` as written, N; particles are drawn translucent so that the arrows
-inside them show); their length is proportional to the force, the largest force of the
-run (up to :data:`MAX_SCAN_FRAMES` frames scanned) drawn :data:`ARROW_FRACTION` of the
-scene's diagonal long.
+inside them show); their length is proportional to the force, the largest force at the
+time shown drawn :data:`ARROW_FRACTION` of the scene's diagonal long (the scale stays
+fixed when the animation is played; with no contact at that time, the largest force of the
+run, up to :data:`MAX_SCAN_FRAMES` frames scanned, sets it).
 """
 import os
 import sys
@@ -42,7 +43,7 @@ PARTICLE_OPACITY = 0.6
 ARROW_COLOUR = (0.1, 0.1, 0.1)
 #: Length of the largest contact-force arrow, as a fraction of the scene's diagonal.
 ARROW_FRACTION = 0.08
-#: Output frames read to find the largest contact force (evenly spaced over the run).
+#: Output frames read for the force scale when the time shown has no contact.
 MAX_SCAN_FRAMES = 50
 #: Viewing direction (from the focal point towards the camera), z up: isometric.
 ISO_DIRECTION = (1.0, -1.0, 1.0)
@@ -136,13 +137,9 @@ def _unique_ints(source, array, time):
 
 
 def _largest_force(contacts, times):
-    """Largest |force_normal| (N) over up to MAX_SCAN_FRAMES frames of the run."""
-    if not times:
-        times = [0.0]
-    step = max(1, -(-len(times) // MAX_SCAN_FRAMES))
-    scan = list(times[::step]) + [times[-1]]
+    """Largest |force_normal| (N) at the given times."""
     fmax = 0.0
-    for t in scan:
+    for t in times:
         contacts.UpdatePipeline(t)
         info = contacts.GetPointDataInformation().GetArray("force_normal")
         if info is not None:
@@ -172,7 +169,8 @@ def _colour_by_shape(particles, display, view, shape_ids):
         _set(bar, name, [0.0, 0.0, 0.0])
     _set(bar, "TitleFontSize", 12)
     _set(bar, "LabelFontSize", 11)
-    _set(bar, "ScalarBarLength", 0.08 * len(shape_ids) + 0.05)
+    _set(bar, "HorizontalTitle", 1)
+    _set(bar, "ScalarBarLength", min(0.8, max(0.2, 0.08 * len(shape_ids) + 0.05)))
     _set(bar, "WindowLocation", "Upper Right Corner")
     return lut
 
@@ -222,7 +220,10 @@ def show(folder, time=None):
     path = os.path.join(folder, "contacts.pvd")
     if os.path.exists(path):
         contacts = PVDReader(registrationName="contacts", FileName=path)
-        fmax = _largest_force(contacts, list(contacts.TimestepValues or [t]))
+        fmax = _largest_force(contacts, [t])
+        if fmax <= 0.0:   # no contact at the time shown: the scale of the whole run
+            times = list(contacts.TimestepValues or [t])
+            fmax = _largest_force(contacts, times[::max(1, -(-len(times) // MAX_SCAN_FRAMES))])
         for src in shown:
             src.UpdatePipeline(t)
         b = _bounds(*shown)
