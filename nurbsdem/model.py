@@ -44,11 +44,15 @@ PAIR_KINDS = ("particle-particle", "particle-wall")
 
 @dataclass
 class Material:
-    """``Material ID Density RHO``: density in kg/m^3."""
+    """``Material ID Density RHO [YoungModulus E] [PoissonRatio NU]``: density in kg/m^3;
+    Young's modulus E (Pa, None: not given, needed by a HertzMindlin interface) and Poisson's
+    ratio (-, default 0)."""
 
     id: int
     density: float
     line: int = 0
+    young_modulus: float | None = None
+    poisson_ratio: float = 0.0
 
 
 @dataclass
@@ -171,7 +175,8 @@ class WallSpec:
 
     Made by ``Box ID Min x y z Max x y z [Top yes|no]`` (names bottom, x_min, x_max, y_min,
     y_max [, top]) or ``Wall ID Name N Point x y z Normal nx ny nz Size Lu Lv
-    [Axis ax ay az]`` (a flat rectangle centred at Point, m).
+    [Axis ax ay az]`` (a flat rectangle centred at Point, m); both take ``[Material m]``
+    (material_id; None: rigid, for Hertz–Mindlin interfaces).
     """
 
     id: int
@@ -179,6 +184,7 @@ class WallSpec:
     patch: "Patch"
     kind: str = "wall"
     line: int = 0
+    material_id: int | None = None
 
     @property
     def normal(self) -> np.ndarray:
@@ -195,9 +201,15 @@ class WallSpec:
 
 @dataclass
 class Interface:
-    """``Interface ID NormalPenalty en [TangentialPenalty et] [NormalDamping cn]
-    [TangentialDamping ct] [Friction mu] [Between particle-particle|particle-wall]
-    [Materials m1 m2 | Materials m]``  (paper Eqs. 16-17).
+    """``Interface ID [Model LinearPenalty] NormalPenalty en [TangentialPenalty et]
+    [NormalDamping cn] [TangentialDamping ct] [Friction mu] [Between particle-particle|particle-wall]
+    [Materials m1 m2 | Materials m]``  (paper Eqs. 16-17), or
+    ``Interface ID Model HertzMindlin Restitution e [Friction mu] [Between ..] [Materials ..]``
+    (Hertz–Mindlin with the exact local curvature, :mod:`nurbsdem.dynamics.hertz`; the elastic
+    constants come from the materials' YoungModulus and PoissonRatio).
+
+    model: ``"linear"`` (default) or ``"hertz"``; restitution: coefficient of restitution
+    (Hertz only, 0 < e <= 1).
 
     normal_penalty (N/m), tangential_penalty (N/m), normal_damping (N s/m),
     tangential_damping (N s/m), friction (Coulomb coefficient, -).
@@ -215,6 +227,8 @@ class Interface:
     between: str | None = None
     materials: tuple[int, ...] | None = None
     line: int = 0
+    model: str = "linear"
+    restitution: float = 1.0
 
     def applies(self, kind: str, materials: tuple[int, ...]) -> bool:
         """Whether this interface covers a pair of the given kind and material ids
@@ -484,7 +498,9 @@ def summary_text(model: Model) -> str:
     """The text of :meth:`Model.summary`."""
     out = [f"Deck: {model.path}", f"Gravity: {_vec(model.gravity)} m/s^2", "Materials:"]
     for mat in model.materials.values():
-        out.append(f"  {mat.id}: density {mat.density:g} kg/m^3")
+        out.append(f"  {mat.id}: density {mat.density:g} kg/m^3"
+                   + (f", E {mat.young_modulus:g} Pa, nu {mat.poisson_ratio:g}"
+                      if mat.young_modulus is not None else ""))
     out.append("Shapes:")
     for s in model.shapes.values():
         src = f"file {s.source}" if s.kind == "file" else f"{s.kind} {_vec(s.params)} m"
@@ -517,6 +533,10 @@ def summary_text(model: Model) -> str:
         scope = i.between or "all pairs"
         if i.materials:
             scope += f", materials {' '.join(map(str, i.materials))}"
+        if i.model == "hertz":
+            out.append(f"  {i.id} ({scope}): Hertz-Mindlin (exact curvature), restitution "
+                       f"{i.restitution:g}, mu {i.friction:g}")
+            continue
         out.append(f"  {i.id} ({scope}): en {i.normal_penalty:g} N/m, et "
                    f"{i.tangential_penalty:g} N/m, cn {i.normal_damping:g} N s/m, ct "
                    f"{i.tangential_damping:g} N s/m, mu {i.friction:g}")

@@ -32,6 +32,7 @@ import numpy as np
 from . import __version__
 from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
+from .dynamics.hertz import law_from_deck as hertz_law_from_deck
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
@@ -198,7 +199,9 @@ class Solver:
         table = InterfaceTable(default=None)
         mats = sorted(self.mat_index)
 
-        def law(itf) -> ContactLaw:
+        def law(itf, ma, mb=None):
+            if itf.model == "hertz":     # Hertz–Mindlin (mb None: the walls)
+                return hertz_law_from_deck(self.model, itf, ma, mb)
             return ContactLaw(en=itf.normal_penalty, cn=itf.normal_damping,
                               et=itf.tangential_penalty, ct=itf.tangential_damping,
                               mu=itf.friction)
@@ -206,10 +209,10 @@ class Solver:
             for mb in mats[i:]:
                 itf = self.model.interface("particle-particle", (ma, mb))
                 if itf is not None:
-                    table.set(self.mat_index[ma], self.mat_index[mb], law(itf))
+                    table.set(self.mat_index[ma], self.mat_index[mb], law(itf, ma, mb))
             itf = self.model.interface("particle-wall", (ma,))
             if itf is not None:
-                table.set(self.mat_index[ma], self.wall_material, law(itf))
+                table.set(self.mat_index[ma], self.wall_material, law(itf, ma))
         return table
 
     def _compliance(self, shape_id: int, rho: float) -> tuple[float, float]:

@@ -350,6 +350,8 @@ def check_step_count(model: "Model") -> None:
         return
     dt_cr, worst = math.inf, None
     for itf in model.interfaces:
+        if itf.model != "linear":
+            continue      # Hertz: no constant stiffness (the solver's own estimate applies)
         for mid, m in masses.items():
             for k, c in ((itf.normal_penalty, itf.normal_damping),
                          (itf.tangential_penalty, itf.tangential_damping)):
@@ -382,8 +384,8 @@ def check_impacts(model: "Model") -> None:
             continue
         entry = model.shapes[p.shape_id]
         m = entry.mass(model.materials[p.material_id].density)
-        ens = [i.normal_penalty for i in model.interfaces
-               if i.materials is None or p.material_id in i.materials]
+        ens = [i.normal_penalty for i in model.interfaces if i.model == "linear"
+               and (i.materials is None or p.material_id in i.materials)]
         if not ens:
             continue
         en = min(ens)

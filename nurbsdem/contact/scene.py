@@ -64,7 +64,7 @@ from .analytic import sphere_centres, sphere_sphere_rows, sphere_wall_rows
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
-from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_VALID, NF, NI
+from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_VALID, NF, NI
 from .wall import detect_wall_batch, wall_frame
 
 log = logging.getLogger("nurbsdem")
@@ -97,6 +97,11 @@ class ContactSet:
     near_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     near_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     near_gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: surface parameters (uA, vA, uB, vB) and local patch indices of the active contacts
+    #: (patch −1: a closed form for exact spheres), for the curvature of Hertz contact
+    params: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    patch_a: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    patch_b: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @classmethod
     def empty(cls) -> "ContactSet":
@@ -403,7 +408,9 @@ class SceneContacts:
                           dropped_keys=np.array(dropped, np.int64),
                           near_a=ps.a[near].copy(), near_b=ps.b[near].copy(),
                           near_point=0.5 * (rows_f[near, F_PA:F_PA + 3] + rows_f[near, F_PB:F_PB + 3]),
-                          near_normal=rows_f[near, F_N:F_N + 3].copy(), near_gap=gap)
+                          near_normal=rows_f[near, F_N:F_N + 3].copy(), near_gap=gap,
+                          params=rows_f[sel, F_PAR:F_PAR + 4].copy(),
+                          patch_a=rows_i[sel, I_PA].copy(), patch_b=rows_i[sel, I_PB].copy())
 
     def _moved(self, row_f: np.ndarray, row_i: np.ndarray, a: int, b: int, pose):
         """A previous LCP row moved rigidly from the previous call's poses to ``pose``: the

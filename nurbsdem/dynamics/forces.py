@@ -37,8 +37,9 @@ contact ends with a loaded spring, and adds no error of its own to the energy ba
 History is keyed by ``ContactSet.key``: a new contact starts with s = 0, a contact absent from
 the set drops its history (:func:`match_history`).
 
-Contact laws are per interface: a dense table ``law[mat_a, mat_b] = (εn, cn, εt, ct, μ)`` (see
-:class:`InterfaceTable`).
+Contact laws are per interface: a dense table ``law[mat_a, mat_b] = (εn, cn, εt, ct, μ, model,
+E*, G*, ζ)`` (see :class:`InterfaceTable`; model 0 = this linear law, 1 = Hertz–Mindlin of
+:mod:`nurbsdem.dynamics.hertz`, whose εn..ct columns hold its reference linearisation).
 """
 from __future__ import annotations
 
@@ -52,6 +53,10 @@ from ..errors import InputError
 
 #: column indices of the interface table
 EN, CN, ET, CT, MU = 0, 1, 2, 3, 4
+#: Hertz–Mindlin columns (:mod:`nurbsdem.dynamics.hertz`): model id, E* (Pa), G* (Pa), ζ (-)
+MODEL, ESTAR, GSTAR, ZETA = 5, 6, 7, 8
+#: number of columns
+NCOL = 9
 
 
 @dataclass(frozen=True)
@@ -77,11 +82,15 @@ class ContactLaw:
             raise InputError(f"contact law: normal penalty en must be > 0, got {self.en}")
 
     def as_row(self) -> np.ndarray:
-        return np.array([self.en, self.cn, self.et, self.ct, self.mu], dtype=float)
+        row = np.zeros(NCOL)
+        row[:5] = self.en, self.cn, self.et, self.ct, self.mu
+        return row
 
 
 class InterfaceTable:
-    """Contact laws per pair of material ids (symmetric), a small dense table ``(M, M, 5)``.
+    """Contact laws per pair of material ids (symmetric), a small dense table ``(M, M, NCOL)``.
+
+    A law is a :class:`ContactLaw` or a :class:`~nurbsdem.dynamics.hertz.HertzMindlinLaw`.
 
     ``table.set(0, 1, law)`` sets the interface between materials 0 and 1 (both orders);
     ``table.default`` is used for pairs never set (None: such a pair is an input error).
@@ -103,8 +112,8 @@ class InterfaceTable:
         return self.default
 
     def as_array(self, n_materials: int) -> np.ndarray:
-        """Dense (M, M, 5) float table; rows for undefined pairs are NaN (and raise on use)."""
-        tab = np.full((n_materials, n_materials, 5), np.nan)
+        """Dense (M, M, NCOL) float table; rows for undefined pairs are NaN (and raise on use)."""
+        tab = np.full((n_materials, n_materials, NCOL), np.nan)
         for i in range(n_materials):
             for j in range(n_materials):
                 key = (min(i, j), max(i, j))

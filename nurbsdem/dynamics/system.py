@@ -69,6 +69,7 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from .energy import EnergyLedger, EnergySample, potential_energy
 from .forces import InterfaceTable, contact_forces, match_history, store_history
+from .hertz import contact_forces_hm, has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, critical_step,
@@ -145,7 +146,7 @@ def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
                "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
                "c_eel", "c_stick", "c_key", "wall_d", "wall_u", "wall_work", "ledger",
-               "alt_count", "alt_prev_v", "alt_prev_L")
+               "alt_count", "alt_prev_v", "alt_prev_L", "c_coeffs", "c_radius")
 
 #: quiet deck steps after which a refinement of the step (period-2 or energy guard) is halved
 REFINE_DECAY_STEPS = 200
@@ -337,7 +338,13 @@ class DemSystem:
             p, n = np.concatenate([p, near[2]]), np.concatenate([n, near[3]])
         if a.shape[0] == 0:
             return None
-        return a, bb, p, n, np.ascontiguousarray(self._table[self._mat_all[a], self._mat_all[bb]][:, :4])
+        # the contacts' own (tangent) coefficients from the force evaluation (Hertz: they grow
+        # with the overlap); the table's for the near pairs (Hertz: its reference linearisation)
+        coeffs = self._table[self._mat_all[a], self._mat_all[bb]][:, :4]
+        k = self.c_a.shape[0]
+        if k and self.c_coeffs.shape[0] == k and self.c_coeffs.ndim == 2:
+            coeffs[:k] = self.c_coeffs
+        return a, bb, p, n, np.ascontiguousarray(coeffs)
 
     def _network_bound(self, net) -> float:
         """A lower bound (s) of the network's critical step, from the Gershgorin bounds of its
@@ -534,8 +541,18 @@ class DemSystem:
         eel = np.empty((K, 2))
         stick = np.empty(K, dtype=np.int64)
         pos, vel, omg = self._all_kinematics()
-        slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
-                              spring, h, force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick)
+        if not has_hertz(self._table):
+            slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
+                                  spring, h, force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick)
+            self.c_coeffs = self.c_radius = np.zeros((0,))     # _network: the table's
+        else:   # Hertz–Mindlin interfaces (nurbsdem.dynamics.hertz): the exact curvature radii
+            from ..geometry.curvature import contact_radii_for
+            self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
+            self.c_coeffs = np.empty((K, 4))
+            inv_m = np.concatenate([self._inv_mass, np.zeros(self.walls.n)])
+            slip = contact_forces_hm(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all,
+                                     self._table, spring, h, inv_m, self.c_radius, force, torque,
+                                     point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs)
         self.last_slip_work = slip
         self.hist_keys, self.hist_springs = store_history(key, spring)
         force[: b.n] += b.mass[:, None] * self.gravity[None, :]
@@ -775,7 +792,7 @@ class DemSystem:
             raise InputError("checkpoint does not match the system's bodies and walls")
         b.x, b.q, b.v, b.L = (np.array(st[k], dtype=float, copy=True) for k in ("x", "q", "v", "L"))
         for k in _STATE_KEYS:
-            if k in ("x", "q", "v", "L", "ledger"):
+            if k in ("x", "q", "v", "L", "ledger") or k not in st:
                 continue
             setattr(self, k, np.array(st[k], copy=True))
         self.ledger = EnergyLedger.from_array(st["ledger"])

@@ -23,7 +23,7 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
     Environment
       Gravity gx gy gz                                   # m/s^2, default 0 0 0
     Materials
-      Material ID Density rho                            # kg/m^3
+      Material ID Density rho [YoungModulus E] [PoissonRatio nu]   # kg/m^3, Pa, -
     Shapes
       Shape ID File path.yaml | Sphere Radius r | Ellipsoid SemiAxes a b c
                [Volume V] [Inertia Jxx Jyy Jzz Jxy Jxz Jyz]   # m^3, kg m^2 (mass inertia)
@@ -34,12 +34,15 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
       Particle ID Shape s Material m Position x y z [Rotation rx ry rz]
                 [Velocity vx vy vz] [AngularVelocity wx wy wz]
     Walls
-      Box ID Min x y z Max x y z [Top yes|no]
-      Wall ID [Name n] Point x y z Normal nx ny nz Size lu lv [Axis ax ay az]
+      Box ID Min x y z Max x y z [Top yes|no] [Material m]
+      Wall ID [Name n] Point x y z Normal nx ny nz Size lu lv [Axis ax ay az] [Material m]
     Contact
       Interface ID NormalPenalty en [TangentialPenalty et] [NormalDamping cn]
                 [TangentialDamping ct] [Friction mu]
                 [Between particle-particle|particle-wall] [Materials m1 m2 | Materials m]
+      Interface ID Model HertzMindlin Restitution e [Friction mu] [Between ..] [Materials ..]
+                # Hertz-Mindlin with the exact curvature; E, nu from the Materials (walls:
+                # the Material on the Box/Wall line, default rigid). Model LinearPenalty: above
     Steps
       Step ID Dynamic Duration T TimeStep dt
       Step ID Replicate Layers L Height H
@@ -99,7 +102,8 @@ class EntrySpec:
 
 SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Environment": {"Gravity": EntrySpec(False, head=F3)},
-    "Materials": {"Material": EntrySpec(True, {"Density": F1})},
+    "Materials": {"Material": EntrySpec(True, {"Density": F1, "YoungModulus": F1,
+                                               "PoissonRatio": F1})},
     "Shapes": {"Shape": EntrySpec(True, {
         "File": S1, "Sphere": FLAG, "Ellipsoid": FLAG, "Radius": F1, "SemiAxes": F3,
         "Volume": F1, "Inertia": F6, "ConvexityTolerance": F1})},
@@ -110,12 +114,14 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
                                      "Rotation": F3, "Velocity": F3, "AngularVelocity": F3}),
     },
     "Walls": {
-        "Box": EntrySpec(True, {"Min": F3, "Max": F3, "Top": B1}),
-        "Wall": EntrySpec(True, {"Name": S1, "Point": F3, "Normal": F3, "Size": F2, "Axis": F3}),
+        "Box": EntrySpec(True, {"Min": F3, "Max": F3, "Top": B1, "Material": I1}),
+        "Wall": EntrySpec(True, {"Name": S1, "Point": F3, "Normal": F3, "Size": F2, "Axis": F3,
+                                 "Material": I1}),
     },
     "Contact": {"Interface": EntrySpec(True, {
         "NormalPenalty": F1, "TangentialPenalty": F1, "NormalDamping": F1,
-        "TangentialDamping": F1, "Friction": F1, "Between": S1, "Materials": IN})},
+        "TangentialDamping": F1, "Friction": F1, "Between": S1, "Materials": IN,
+        "Model": S1, "Restitution": F1})},
     "Steps": {"Step": EntrySpec(True, {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
@@ -167,6 +173,8 @@ RANGES: dict[str, Range] = {
     "AngularVelocity": Range(0.0, 1e6, "rad/s", "beyond any granular flow; contacts cannot be "
                              "resolved"),
     "Density": Range(1e-3, 1e6, "kg/m^3", _MATERIAL),
+    "YoungModulus": Range(1.0, 1e13, "Pa", "beyond the stiffest solids (diamond: 1.2e12 Pa) "
+                          "and softer than any gel"),
     "Volume": Range(1e-27, 1e18, "m^3", _SIZE),
     "Inertia": Range(0.0, 1e30, "kg m^2", _MATERIAL),
     "NormalPenalty": Range(0.0, 1e15, "N/m", _MATERIAL),
@@ -504,7 +512,13 @@ class _Builder:
         self.unique(self.model.materials, e, "material")
         self.require(e, "Density")
         rho = self.positive(e, "Density", e.get("Density"))
-        self.model.materials[e.id] = Material(e.id, rho, e.line)
+        E = e.get("YoungModulus")
+        if E is not None:
+            self.positive(e, "YoungModulus", E)
+        nu = e.get("PoissonRatio", 0.0)
+        if not -1.0 < nu < 0.5:
+            self.fail(f"{self.label(e)}: PoissonRatio must lie in (-1, 0.5), got {nu:g}", e.line)
+        self.model.materials[e.id] = Material(e.id, rho, e.line, E, float(nu))
 
     def shape(self, e: Entry) -> None:
         self.unique(self.model.shapes, e, "shape")
@@ -651,7 +665,8 @@ class _Builder:
         if np.any(hi <= lo):
             self.fail(f"Box {e.id}: Max must exceed Min in x, y and z", e.line)
         for k, (name, patch) in enumerate(box_walls(lo, hi, top=e.get("Top", False)).items()):
-            self.add_wall(WallSpec(e.id + k, name, patch, kind="box", line=e.line), f"Box {e.id}")
+            self.add_wall(WallSpec(e.id + k, name, patch, kind="box", line=e.line,
+                                   material_id=e.get("Material")), f"Box {e.id}")
 
     def wall(self, e: Entry) -> None:
         from ..geometry.generators import flat_wall
@@ -669,10 +684,27 @@ class _Builder:
                 self.fail(f"Wall {e.id}: Axis must not be parallel to Normal", e.line)
         patch = flat_wall(e.get("Point"), n, size, axis)
         name = e.get("Name", f"wall{e.id}")
-        self.add_wall(WallSpec(e.id, name, patch, kind="wall", line=e.line), f"Wall {e.id}")
+        self.add_wall(WallSpec(e.id, name, patch, kind="wall", line=e.line,
+                               material_id=e.get("Material")), f"Wall {e.id}")
 
     def interface(self, e: Entry) -> None:
         self.unique({i.id: i for i in self.model.interfaces}, e, "interface")
+        model = (e.get("Model") or "LinearPenalty").lower()
+        if model not in ("linearpenalty", "hertzmindlin"):
+            self.fail(f"Interface {e.id}: Model must be LinearPenalty or HertzMindlin, got "
+                      f"{e.get('Model')!r}", e.line)
+        hertz = model == "hertzmindlin"
+        if hertz:
+            self.only(e, {"Model", "Restitution", "Friction", "Between", "Materials"},
+                      "a HertzMindlin interface (its stiffness and damping come from the "
+                      "materials' YoungModulus, PoissonRatio and the Restitution)")
+            self.require(e, "Restitution")
+            rest = e.get("Restitution")
+            if not 0.0 < rest <= 1.0:
+                self.fail(f"Interface {e.id}: Restitution must lie in (0, 1], got {rest:g}", e.line)
+            e.values["NormalPenalty"] = 0.0
+        elif e.has("Restitution"):
+            self.fail(f"Interface {e.id}: Restitution applies to Model HertzMindlin only", e.line)
         self.require(e, "NormalPenalty")
         vals = {}
         for key, attr, strict in (("NormalPenalty", "normal_penalty", True),
@@ -681,7 +713,7 @@ class _Builder:
                                   ("TangentialDamping", "tangential_damping", False),
                                   ("Friction", "friction", False)):
             if e.has(key):
-                vals[attr] = self.positive(e, key, e.get(key), strict)
+                vals[attr] = self.positive(e, key, e.get(key), strict and not hertz)
         between = e.get("Between")
         if between is not None:
             low = between.lower()
@@ -700,7 +732,10 @@ class _Builder:
                           f"{kind} pairs, but Between says {between}", e.line)
             between = kind
         self.model.interfaces.append(Interface(e.id, vals.pop("normal_penalty"), **vals,
-                                               between=between, materials=mats, line=e.line))
+                                               between=between, materials=mats, line=e.line,
+                                               **({"model": "hertz",
+                                                   "restitution": float(e.get("Restitution"))}
+                                                  if hertz else {})))
 
     def step(self, e: Entry) -> None:
         steps = self.model.steps

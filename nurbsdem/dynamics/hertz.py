@@ -1,0 +1,378 @@
+"""Hertz–Mindlin contact with the exact local curvature (``Interface ... Model HertzMindlin``).
+
+Normal force (Hertz, elliptical contact)::
+
+    f_n = (4/3) E* √R δ^{3/2}  +  c_n δ̇ ,   clipped at 0 (no tension, as the linear law)
+    c_n = 2 ζ √(k_n m*),   k_n = df/dδ = 2 E* √(R δ)   (the tangent stiffness)
+
+R is the force-equivalent radius of the elliptical contact from both surfaces' principal
+curvatures and directions at their contact points (:mod:`nurbsdem.geometry.curvature`: exact
+spheres 1/r, walls flat; degenerated contacts take the bounding-sphere radius and are counted),
+E* = 1/((1−ν_A²)/E_A + (1−ν_B²)/E_B) (a rigid wall: E = inf), m* the reduced mass of the pair.
+
+Damping: the viscous term ∝ δ^{1/4} δ̇ of Tsuji et al. (1992), in the form of LIGGGHTS/EDEM
+(c_n = 2 ζ √(k_n m*) with the tangent stiffness).  Why this one: with it the coefficient of
+restitution of a Hertz impact does not depend on the impact velocity (Antypov & Elliott 2011:
+the impact equation becomes x'' = −x^{3/2} − 2√(3/2) ζ x^{1/4} x' in the units δ0 =
+(m* v0² / K)^{2/5}, t0 = δ0/v0), which is what a restitution coefficient asks for; a constant
+dashpot would make e fall with the speed.  The ζ of a given e is **not** taken from the linear
+oscillator's β = −ln e / √(ln² e + π²) (√(5/6) β in LIGGGHTS/EDEM, which misses the target by
+up to several per cent for Hertz); it is the root of that dimensionless impact equation, solved
+once per interface (:func:`damping_ratio`), with the same no-tension clip as the force kernel,
+so an impact returns the deck's e to the accuracy of the integration.
+
+Tangential force (Mindlin, no-slip stiffness of the same contact size)::
+
+    f_t = −k_t s − c_t w_t,   k_t = 8 G* a,   a = √(R δ),   c_t = 2 ζ √(k_t m*)
+
+with G* = 1/((2−ν_A)/G_A + (2−ν_B)/G_B), G = E/(2(1+ν)), the existing spring history s
+(rotated into the current tangent plane), and the Coulomb limit |f_t| <= μ f_n by the same
+return mapping as the linear law.  a = √(R δ) is the radius of the circle with the normal
+tangent stiffness of the ellipse (dP/dδ = 2E* a); Mindlin's elliptical compliance differs from
+it by the (small) ellipticity terms, not modelled.  The spring force uses the current k_t
+(the usual DEM simplification of Mindlin–Deresiewicz, as in LIGGGHTS): the energy ledger stays
+closed because the friction dissipation is the exact spring work minus the stored ½ k_t |s|².
+
+Elastic energies: (2/5) f_el δ normal (exact while R is constant), ½ k_t |s|² tangential.
+
+Time-step control: the kernel returns per contact (k_n, c_n, k_t, c_t) with the **tangent**
+normal stiffness (df/dδ, 1.5× the secant), which the network estimate of
+:class:`~nurbsdem.dynamics.system.DemSystem` uses instead of the table's constants.  For the
+a-priori estimate and the pairs not yet in contact, a Hertz law carries a linearisation at a
+reference impact (:func:`reference_linearisation`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from ..errors import InputError
+from .forces import CN, CT, EN, ET, ESTAR, GSTAR, MODEL, MU, ZETA, _cross
+
+#: model ids in the table's MODEL column
+LINEAR, HERTZ = 0, 1
+
+
+# ---------------------------------------------------------------------------- material pairs
+def effective_moduli(E_a: float, nu_a: float, E_b: float, nu_b: float) -> tuple[float, float]:
+    """(E*, G*) (Pa) of two materials; E = inf is rigid."""
+    def comp(E, nu, fac):
+        return 0.0 if math.isinf(E) else fac / E
+    g_a = math.inf if math.isinf(E_a) else E_a / (2.0 * (1.0 + nu_a))
+    g_b = math.inf if math.isinf(E_b) else E_b / (2.0 * (1.0 + nu_b))
+    e_star = 1.0 / (comp(E_a, nu_a, 1.0 - nu_a ** 2) + comp(E_b, nu_b, 1.0 - nu_b ** 2))
+    g_star = 1.0 / (comp(g_a, nu_a, 2.0 - nu_a) + comp(g_b, nu_b, 2.0 - nu_b))
+    return e_star, g_star
+
+
+# ---------------------------------------------------------------------------- restitution
+def _impact_restitution(zeta: float) -> float:
+    """Restitution of the dimensionless damped Hertz impact x'' = −x^{3/2} − 2√1.5 ζ x^{1/4} x'
+    (x(0) = 0, x'(0) = 1), with the force clipped at 0: |x'| when the force or x returns to 0."""
+    from scipy.integrate import solve_ivp
+    c = 2.0 * math.sqrt(1.5) * zeta
+
+    def rhs(t, y):
+        x = max(y[0], 0.0)
+        f = x ** 1.5 + c * x ** 0.25 * y[1]
+        return [y[1], -max(f, 0.0)]
+
+    def ends(t, y):
+        x = max(y[0], 0.0)
+        if y[1] >= 0:
+            return 1.0
+        return x ** 1.5 + c * x ** 0.25 * y[1] if x > 0 else -1.0
+    ends.terminal = True
+    ends.direction = -1
+    sol = solve_ivp(rhs, (0.0, 50.0), [0.0, 1.0], events=ends, rtol=1e-11, atol=1e-13,
+                    max_step=0.01)
+    if sol.t_events[0].size:
+        return float(abs(sol.y_events[0][0][1]))
+    return float(abs(sol.y[1, -1])) if sol.y[0, -1] <= 0 else 0.0
+
+
+@lru_cache(maxsize=256)
+def damping_ratio(e: float) -> float:
+    """ζ of the Hertz law (module docstring) whose impact has the restitution e (0 < e <= 1)."""
+    from scipy.optimize import brentq
+    e = float(e)
+    if not (0.0 < e <= 1.0):
+        raise InputError(f"Restitution must be in (0, 1], got {e}")
+    if e == 1.0:
+        return 0.0
+    hi = 1.0
+    while _impact_restitution(hi) > e:
+        hi *= 2.0
+        if hi > 1e4:
+            raise InputError(f"Restitution {e} is too small for the Hertz damping")
+    return float(brentq(lambda z: _impact_restitution(z) - e, 0.0, hi, xtol=1e-12, rtol=1e-12))
+
+
+def linear_beta_zeta(e: float) -> float:
+    """The LIGGGHTS/EDEM damping ratio √(5/6) β, β = −ln e/√(ln²e + π²) (for comparison)."""
+    le = math.log(e)
+    return math.sqrt(5.0 / 6.0) * (-le) / math.sqrt(le * le + math.pi ** 2)
+
+
+# ---------------------------------------------------------------------------- the law
+def hertz_impact(e_star: float, radius: float, m_eff: float, v: float) -> dict:
+    """Undamped Hertz impact theory (Johnson §11.4): max overlap (m), max force (N), duration (s)."""
+    k = 4.0 / 3.0 * e_star * math.sqrt(radius)
+    d_max = (1.25 * m_eff * v * v / k) ** 0.4
+    f_max = k * d_max ** 1.5
+    t_c = 2.0 * 1.4716 * d_max / v      # 2 ∫0^1 dx / √(1 − x^{5/2}) = 2 × 1.47164
+    return {"overlap": d_max, "force": f_max, "duration": t_c}
+
+
+def reference_linearisation(e_star: float, g_star: float, zeta: float, radius: float,
+                            m_eff: float, v: float) -> tuple[float, float, float, float]:
+    """(k_n, c_n, k_t, c_t) at the maximum overlap of an impact at speed v (m/s) of a reduced
+    mass m_eff (kg) on a radius (m): the stiffest moment of such an impact."""
+    d = hertz_impact(e_star, radius, m_eff, v)["overlap"]
+    a = math.sqrt(radius * d)
+    kn = 2.0 * e_star * a
+    kt = 8.0 * g_star * a
+    return kn, 2.0 * zeta * math.sqrt(kn * m_eff), kt, 2.0 * zeta * math.sqrt(kt * m_eff)
+
+
+@dataclass(frozen=True)
+class HertzMindlinLaw:
+    """Hertz–Mindlin law of one interface (module docstring).
+
+    e_star, g_star (Pa); restitution (-); mu Coulomb coefficient; ref: the linearisation
+    (k_n, c_n, k_t, c_t) used by the a-priori time-step estimate and for pairs not yet in
+    contact (:func:`reference_linearisation`)."""
+
+    e_star: float
+    g_star: float
+    restitution: float
+    mu: float = 0.0
+    ref: tuple = field(default=(0.0, 0.0, 0.0, 0.0))
+
+    def __post_init__(self) -> None:
+        if not (self.e_star > 0 and math.isfinite(self.e_star)):
+            raise InputError(f"Hertz law: effective modulus must be finite and > 0 (a rigid pair "
+                             f"needs a YoungModulus on one side), got {self.e_star}")
+        if not (self.g_star > 0 and math.isfinite(self.g_star)):
+            raise InputError(f"Hertz law: effective shear modulus must be finite and > 0, got "
+                             f"{self.g_star}")
+        if not (math.isfinite(self.mu) and self.mu >= 0):
+            raise InputError(f"Hertz law: friction must be finite and >= 0, got {self.mu}")
+        damping_ratio(self.restitution)
+
+    @property
+    def zeta(self) -> float:
+        return damping_ratio(self.restitution)
+
+    # the a-priori estimate of DemSystem reads these (N/m, N s/m)
+    en = property(lambda self: self.ref[0])
+    cn = property(lambda self: self.ref[1])
+    et = property(lambda self: self.ref[2])
+    ct = property(lambda self: self.ref[3])
+
+    def as_row(self) -> np.ndarray:
+        row = np.zeros(9)
+        row[EN], row[CN], row[ET], row[CT] = self.ref
+        row[MU], row[MODEL], row[ESTAR], row[GSTAR], row[ZETA] = (
+            self.mu, HERTZ, self.e_star, self.g_star, self.zeta)
+        return row
+
+
+def law_from_deck(model, itf, mat_a: int, mat_b: int | None) -> HertzMindlinLaw:
+    """The Hertz–Mindlin law of deck interface ``itf`` between particle materials mat_a and
+    mat_b (deck ids; mat_b None: the walls), with its reference linearisation from the lightest
+    particles of those materials, their bounding radii and a reference speed: the largest of
+    1 m/s, the particles' initial speeds and the free-fall speed over the scene's height."""
+    mats = model.materials
+    ma = mats[mat_a]
+    E_a, nu_a = _elastic(model, ma, itf)
+    if mat_b is None:
+        wm = _wall_material(model)
+        E_b, nu_b = (math.inf, 0.0) if wm is None else _elastic(model, mats[wm], itf)
+    else:
+        E_b, nu_b = _elastic(model, mats[mat_b], itf)
+    e_star, g_star = effective_moduli(E_a, nu_a, E_b, nu_b)
+    zeta = damping_ratio(itf.restitution)
+    light = _lightest(model)
+    m_a, r_a = light.get(mat_a, (math.inf, 0.0))
+    if mat_b is None:
+        m_eff, r = m_a, r_a
+    else:
+        m_b, r_b = light.get(mat_b, (math.inf, 0.0))
+        m_eff = m_a * m_b / (m_a + m_b) if math.isfinite(m_a + m_b) else min(m_a, m_b)
+        r = r_a * r_b / (r_a + r_b) if r_a + r_b > 0 else 0.0
+    ref = (0.0, 0.0, 0.0, 0.0)
+    if math.isfinite(m_eff) and r > 0 and math.isfinite(e_star):
+        ref = reference_linearisation(e_star, g_star, zeta, r, m_eff, _reference_speed(model))
+    return HertzMindlinLaw(e_star, g_star, float(itf.restitution), float(itf.friction), ref)
+
+
+def _elastic(model, mat, itf) -> tuple[float, float]:
+    E = getattr(mat, "young_modulus", None)
+    if E is None:
+        raise model.error(f"Interface {itf.id} (Model HertzMindlin) needs YoungModulus on "
+                          f"Material {mat.id} (line {mat.line})", itf.line)
+    return float(E), float(getattr(mat, "poisson_ratio", 0.0) or 0.0)
+
+
+def _wall_material(model) -> int | None:
+    ids = {getattr(w, "material_id", None) for w in model.walls}
+    ids.discard(None)
+    for w in model.walls:
+        if w.material_id is not None and w.material_id not in model.materials:
+            raise model.error(f"wall {w.name}: Material {w.material_id} is not defined", w.line)
+    if len(ids) > 1:
+        raise model.error("walls of different materials are not supported yet: name one "
+                          "Material on every Box/Wall line (or none: rigid)",
+                          model.walls[0].line)
+    return ids.pop() if ids else None
+
+
+def _lightest(model) -> dict[int, tuple[float, float]]:
+    """Per particle material id: (smallest mass kg, the bounding radius of that shape m)."""
+    out: dict[int, tuple[float, float]] = {}
+    pairs = [(s, g.material_id) for g in model.random_groups for s in g.shapes]
+    pairs += [(p.shape_id, p.material_id) for p in model.particles]
+    for sid, mid in pairs:
+        if sid not in model.shapes or mid not in model.materials:
+            continue
+        entry = model.shapes[sid]
+        m = entry.mass(model.materials[mid].density)
+        if m < out.get(mid, (math.inf, 0.0))[0]:
+            out[mid] = (m, float(entry.bounding_radius))
+    return out
+
+
+def _reference_speed(model) -> float:
+    v = 1.0
+    for p in model.particles:
+        r = model.shapes[p.shape_id].bounding_radius if p.shape_id in model.shapes else 0.0
+        v = max(v, float(np.linalg.norm(p.velocity)) + float(np.linalg.norm(p.angular_velocity)) * r)
+    g = np.asarray(model.gravity, float)
+    gn = float(np.linalg.norm(g))
+    if gn > 0:
+        pts = [np.asarray(w.center, float) for w in model.walls]
+        pts += [np.asarray(gr.region_lo, float) for gr in model.random_groups]
+        pts += [np.asarray(gr.region_hi, float) for gr in model.random_groups]
+        pts += [np.asarray(p.position, float) for p in model.particles]
+        if len(pts) > 1:
+            h = np.asarray(pts) @ (g / gn)
+            v = max(v, math.sqrt(2.0 * gn * float(h.max() - h.min())))
+    return v
+
+
+# ---------------------------------------------------------------------------- the kernel
+@njit(cache=True)
+def contact_forces_hm(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
+                      table, spring, h, inv_mass, radius, force, torque, point, f_total, f_damp_n,
+                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs) -> float:
+    """:func:`~nurbsdem.dynamics.forces.contact_forces` for tables with Hertz–Mindlin rows.
+
+    Linear rows (MODEL 0) are evaluated exactly as there; Hertz rows (MODEL 1) with the
+    module's law.  Extra inputs: inv_mass (B,) 1/kg of every body (walls 0); radius (K,) the
+    equivalent radius of each contact (m; unused by linear rows).  Extra output: coeffs (K,4)
+    (k_n, c_n, k_t, c_t) per contact — the tangent stiffnesses (N/m) and damping (N s/m) for
+    the time-step control.
+    """
+    slip_work = 0.0
+    K = body_a.shape[0]
+    for c in range(K):
+        a = body_a[c]
+        b = body_b[c]
+        law = table[material[a], material[b]]
+        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
+        p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
+        p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
+        p2 = 0.5 * (point_a[c, 2] + point_b[c, 2])
+        point[c, 0], point[c, 1], point[c, 2] = p0, p1, p2
+        ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
+        rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
+        wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
+        wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
+        w0 = vel[b, 0] + wb0 - vel[a, 0] - wa0
+        w1 = vel[b, 1] + wb1 - vel[a, 1] - wa1
+        w2 = vel[b, 2] + wb2 - vel[a, 2] - wa2
+        wn = w0 * n0 + w1 * n1 + w2 * n2
+        d = depth[c]
+        ddot = -wn
+        mu = law[MU]
+        if law[MODEL] == HERTZ:
+            dp = d if d > 0.0 else 0.0
+            aa = math.sqrt(radius[c] * dp)
+            knt = 2.0 * law[ESTAR] * aa
+            et = 8.0 * law[GSTAR] * aa
+            imass = inv_mass[a] + inv_mass[b]
+            meff = 1.0 / imass if imass > 0.0 else 0.0
+            cn = 2.0 * law[ZETA] * math.sqrt(knt * meff)
+            ct = 2.0 * law[ZETA] * math.sqrt(et * meff)
+            fel = (2.0 / 3.0) * knt * dp          # (4/3) E* √R δ^{3/2}
+            eel_n = 0.4 * fel * dp
+            coeffs[c, 0] = knt
+        else:
+            en, cn, et, ct = law[EN], law[CN], law[ET], law[CT]
+            fel = en * d
+            eel_n = 0.5 * en * d * d
+            coeffs[c, 0] = en
+        coeffs[c, 1], coeffs[c, 2], coeffs[c, 3] = cn, et, ct
+        fn = fel + cn * ddot
+        if fn < 0.0:
+            fn = 0.0
+        fdn = fn - fel
+        s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
+        smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        sn = s0 * n0 + s1 * n1 + s2 * n2
+        s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
+        spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        if spm > 0.0:
+            sc = smag / spm
+            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
+        wt0, wt1, wt2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
+        s0, s1, s2 = s0 + h * wt0, s1 + h * wt1, s2 + h * wt2
+        fe0, fe1, fe2 = -et * s0, -et * s1, -et * s2
+        fd0, fd1, fd2 = -ct * wt0, -ct * wt1, -ct * wt2
+        ft0, ft1, ft2 = fe0 + fd0, fe1 + fd1, fe2 + fd2
+        ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
+        flim = mu * fn
+        stick[c] = 1
+        if ftm > flim:
+            stick[c] = 0
+            alpha = flim / ftm if ftm > 0.0 else 0.0
+            smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+            slip_work += et * alpha * smag2 * (1.0 - alpha) * smag2
+            s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
+            fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
+            fe0, fe1, fe2 = alpha * fe0, alpha * fe1, alpha * fe2
+            ft0, ft1, ft2 = alpha * ft0, alpha * ft1, alpha * ft2
+        spring[c, 0], spring[c, 1], spring[c, 2] = s0, s1, s2
+        F0, F1, F2 = fn * n0 + ft0, fn * n1 + ft1, fn * n2 + ft2
+        f_total[c, 0], f_total[c, 1], f_total[c, 2] = F0, F1, F2
+        f_damp_n[c, 0], f_damp_n[c, 1], f_damp_n[c, 2] = fdn * n0, fdn * n1, fdn * n2
+        f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
+        f_el_t[c, 0], f_el_t[c, 1], f_el_t[c, 2] = fe0, fe1, fe2
+        fn_out[c] = fn
+        e_el[c, 0] = eel_n
+        e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
+        force[b, 0] += F0
+        force[b, 1] += F1
+        force[b, 2] += F2
+        force[a, 0] -= F0
+        force[a, 1] -= F1
+        force[a, 2] -= F2
+        tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
+        ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
+        torque[b, 0] += tb0
+        torque[b, 1] += tb1
+        torque[b, 2] += tb2
+        torque[a, 0] -= ta0
+        torque[a, 1] -= ta1
+        torque[a, 2] -= ta2
+    return slip_work
+
+
+def has_hertz(table: np.ndarray) -> bool:
+    """Whether a dense interface table (M, M, NCOL) holds a Hertz–Mindlin row."""
+    return bool(table.shape[-1] > MODEL and np.any(table[..., MODEL] == HERTZ))

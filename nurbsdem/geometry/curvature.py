@@ -1,0 +1,359 @@
+"""Differential geometry at contact points, and the equivalent radius of elliptical Hertz contact.
+
+Principal curvatures (do Carmo, ch. 3; The NURBS Book's derivatives)
+--------------------------------------------------------------------
+At a point S(u, v) of a patch with the derivatives S_u, S_v, S_uu, S_uv, S_vv of the compiled
+kernel (:func:`nurbsdem.geometry.kernel.patch_derivs`), the first and second fundamental forms are
+
+    I  = [[S_u·S_u, S_u·S_v], [S_u·S_v, S_v·S_v]]
+    II = [[S_uu·m,  S_uv·m ], [S_uv·m,  S_vv·m ]]      m: the unit **inward** normal
+
+and the shape operator W = I⁻¹ II has the principal curvatures κ1, κ2 (1/m) as eigenvalues,
+its eigenvectors (α, β) give the principal directions α S_u + β S_v.  With the inward normal,
+a convex surface has κ >= 0.  The inward normal is taken from the contact normal (outward of A,
+``-n`` for B), so a patch's orientation does not matter.  The curvature tensor of the surface
+in 3-D is C = κ1 t1 t1ᵀ + κ2 t2 t2ᵀ (t1, t2 unit principal directions in the tangent plane).
+
+At a pole (collapsed edge, |S_u × S_v| -> 0) the forms are singular: the point is moved into
+the patch by 1e-6 of its parameter range, where they are regular (the curvature is continuous
+there on a smooth surface).  A seam or a patch connection uses the patch the LCP ended on.
+
+Relative curvature and the equivalent radius (Johnson, *Contact Mechanics*, §4.1–4.2)
+--------------------------------------------------------------------------------------
+Near the contact the gap between two convex bodies is h = A x² + B y² with A <= B the
+half-eigenvalues of C_A + C_B projected on the common tangent plane (the same as Johnson's
+(4.2)–(4.3) with the angle between the principal directions).  The Hertz pressure
+p = p0 √(1 − x²/a² − y²/b²) on an ellipse with b/a = √(1 − e²) solves it when (Johnson (3.xx),
+E(e), K(e) complete elliptic integrals of modulus e, here of parameter m = e²)
+
+    B/A = [E/(1−e²) − K] / (K − E),     a² = (K − E) δ / (e² A K),     P = 2π a E* δ / (3K).
+
+Hence P = (4/3) E* √R_eff δ^{3/2} with the **force-equivalent radius**
+
+    R_eff = (π / 2K)² (K − E) / (e² K A)        (-> 1/(2A) = R for a sphere, e -> 0),
+
+a function of the curvatures only.  :func:`hertz_radius` solves the first relation for e by
+bisection (K and E from the arithmetic–geometric mean, with K − E from the AGM's own series,
+so there is no cancellation near e = 0) and returns R_eff and b/a.  Johnson's approximation
+R_e = √(R'R'') F(e) is not used: the exact relation costs about 2 µs per contact.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .kernel import MAX_DEGREE, _WS_ROWS, patch_derivs
+
+#: surface kinds of one side of a contact
+KIND_PATCH, KIND_SPHERE, KIND_FLAT = 0, 1, 2
+#: status of a contact's equivalent radius
+OK, DEGENERATED = 0, 1
+
+
+@njit(cache=True)
+def agm_elliptic(m: float) -> tuple[float, float]:
+    """Complete elliptic integrals (K(m), K(m) − E(m)) of parameter m = e² in [0, 1)."""
+    a = 1.0
+    b = math.sqrt(1.0 - m)
+    c2 = m                  # c_0² = m
+    s = 0.5 * m             # Σ 2^(n−1) c_n², n = 0..
+    w = 0.5
+    for _ in range(40):
+        an = 0.5 * (a + b)
+        cn = 0.5 * (a - b)
+        b = math.sqrt(a * b)
+        a = an
+        w *= 2.0
+        c2 = cn * cn
+        s += w * c2
+        if c2 < 1e-34:
+            break
+    k = 0.5 * math.pi / a
+    return k, k * s
+
+
+@njit(cache=True)
+def hertz_radius(A: float, B: float) -> tuple[float, float]:
+    """Force-equivalent radius R_eff (m) and axis ratio b/a of the Hertz contact of a gap
+    h = A x² + B y² (A, B in 1/m, any order).  (nan, nan) when not positive definite."""
+    if A > B:
+        A, B = B, A
+    if not (A > 0.0) or not (B < math.inf):
+        return math.nan, math.nan
+    lam = B / A
+    if lam < 1.0 + 1e-12:
+        return 1.0 / (A + B), 1.0
+    # bisection on ln(b/a) in [ln 1e-12, 0]: g(m) = (m − S)/((1 − m) S) increases with m
+    lo, hi = math.log(1e-12), 0.0
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        kp = math.exp(mid)
+        m = 1.0 - kp * kp
+        k, kme = agm_elliptic(m)
+        s = kme / k
+        g = (m - s) / ((1.0 - m) * s)
+        if g > lam:
+            lo = mid      # too eccentric: larger b/a
+        else:
+            hi = mid
+    kp = math.exp(0.5 * (lo + hi))
+    m = 1.0 - kp * kp
+    k, kme = agm_elliptic(m)
+    s = kme / k
+    r = (0.5 * math.pi / k) ** 2 * (s / m) / A
+    return r, kp
+
+
+@njit(cache=True)
+def _surface_tensor(d, inward, C):
+    """Add the curvature tensor (3×3, 1/m) of the surface with derivatives d (6,3) (file frame),
+    inward unit normal ``inward`` (file frame), to C.  Returns False if the metric is singular."""
+    su0, su1, su2 = d[1, 0], d[1, 1], d[1, 2]
+    sv0, sv1, sv2 = d[2, 0], d[2, 1], d[2, 2]
+    E = su0 * su0 + su1 * su1 + su2 * su2
+    F = su0 * sv0 + su1 * sv1 + su2 * sv2
+    G = sv0 * sv0 + sv1 * sv1 + sv2 * sv2
+    det = E * G - F * F
+    if not (det > 1e-20 * (E * G)) or not (E > 0.0) or not (G > 0.0):
+        return False
+    L = d[3, 0] * inward[0] + d[3, 1] * inward[1] + d[3, 2] * inward[2]
+    M = d[4, 0] * inward[0] + d[4, 1] * inward[1] + d[4, 2] * inward[2]
+    N = d[5, 0] * inward[0] + d[5, 1] * inward[1] + d[5, 2] * inward[2]
+    # the curvature tensor in 3-D: C = J I⁻¹ II I⁻¹ Jᵀ with J = [S_u S_v] (3×2) (symmetric;
+    # its eigenvalues in the tangent plane are the principal curvatures)
+    i00, i01, i11 = G / det, -F / det, E / det
+    # T = I⁻¹ II I⁻¹
+    a00 = i00 * L + i01 * M
+    a01 = i00 * M + i01 * N
+    a10 = i01 * L + i11 * M
+    a11 = i01 * M + i11 * N
+    t00 = a00 * i00 + a01 * i01
+    t01 = a00 * i01 + a01 * i11
+    t11 = a10 * i01 + a11 * i11
+    su = (su0, su1, su2)
+    sv = (sv0, sv1, sv2)
+    for r in range(3):
+        for c in range(3):
+            C[r, c] += (t00 * su[r] * su[c] + t01 * (su[r] * sv[c] + sv[r] * su[c])
+                        + t11 * sv[r] * sv[c])
+    return True
+
+
+@njit(cache=True)
+def _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom,
+                 ip, u, v, Rm, inward_world, ws, d, C, Cw):
+    """Curvature tensor (world) of patch ip at (u, v) of a body with rotation Rm, added to Cw."""
+    inward = np.empty(3)
+    for r in range(3):      # file frame: Rᵀ n
+        inward[r] = Rm[0, r] * inward_world[0] + Rm[1, r] * inward_world[1] + Rm[2, r] * inward_world[2]
+    u0, u1, v0, v1 = tab_dom[ip, 0], tab_dom[ip, 1], tab_dom[ip, 2], tab_dom[ip, 3]
+    good = False
+    for attempt in range(3):
+        patch_derivs(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, ip, u, v, 2, ws, d)
+        C[:, :] = 0.0
+        if _surface_tensor(d, inward, C):
+            good = True
+            break
+        # a pole: move into the patch
+        eps = 1e-6 * 10.0 ** (2 * attempt)
+        u = u + eps * (0.5 * (u0 + u1) - u)
+        v = v + eps * (0.5 * (v0 + v1) - v)
+    if not good:
+        return False
+    # world: R C Rᵀ
+    for r in range(3):
+        for c in range(3):
+            acc = 0.0
+            for i in range(3):
+                for j in range(3):
+                    acc += Rm[r, i] * C[i, j] * Rm[c, j]
+            Cw[r, c] += acc
+    return True
+
+
+@njit(cache=True)
+def contact_radii(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom,
+                  kind_a, kind_b, patch_a, patch_b, params, rot_a, rot_b, sphere_a, sphere_b,
+                  normal, fallback, r_eff, axis_ratio, curv, status):
+    """Force-equivalent Hertz radius of K contacts (module docstring).
+
+    kind_a/kind_b (K,) :data:`KIND_PATCH` | :data:`KIND_SPHERE` | :data:`KIND_FLAT`;
+    patch_a/patch_b (K,) global patch index in the pool ``tab_*`` (KIND_PATCH);
+    params (K,4) (uA, vA, uB, vB); rot_a/rot_b (K,3,3) file->world rotations; sphere_a/_b (K,)
+    radii (KIND_SPHERE); normal (K,3) unit, from A towards B; fallback (K,) radius used where the
+    curvature is degenerate (status DEGENERATED; the caller also passes the LCP's degenerated
+    contacts as ``status`` 1 on input).  Outputs r_eff (K,) m, axis_ratio (K,) b/a, curv (K,2)
+    A, B (1/m), status (K,) 0 | 1.
+    """
+    K = kind_a.shape[0]
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    d = np.zeros((6, 3))
+    C = np.zeros((3, 3))
+    Cw = np.zeros((3, 3))
+    nin = np.empty(3)
+    for c in range(K):
+        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
+        curv[c, 0] = math.nan
+        curv[c, 1] = math.nan
+        if status[c] != OK:
+            r_eff[c] = fallback[c]
+            axis_ratio[c] = 1.0
+            continue
+        Cw[:, :] = 0.0
+        ok = True
+        for side in range(2):
+            kind = kind_a[c] if side == 0 else kind_b[c]
+            sg = -1.0 if side == 0 else 1.0      # inward normal of A is -n, of B is +n
+            if kind == KIND_FLAT:
+                continue
+            if kind == KIND_SPHERE:
+                rs = sphere_a[c] if side == 0 else sphere_b[c]
+                k = 1.0 / rs
+                nn = (n0, n1, n2)
+                for r in range(3):
+                    for q in range(3):
+                        Cw[r, q] += k * ((1.0 if r == q else 0.0) - nn[r] * nn[q])
+                continue
+            nin[0], nin[1], nin[2] = sg * n0, sg * n1, sg * n2
+            if side == 0:
+                ok = _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw,
+                                  tab_dom, patch_a[c], params[c, 0], params[c, 1], rot_a[c],
+                                  nin, ws, d, C, Cw)
+            else:
+                ok = _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw,
+                                  tab_dom, patch_b[c], params[c, 2], params[c, 3], rot_b[c],
+                                  nin, ws, d, C, Cw)
+            if not ok:
+                break
+        if ok:
+            # tangent basis e1, e2 of n; 2×2 projection of Cw and its eigenvalues
+            if abs(n0) < 0.9:
+                e0, e1_, e2 = 0.0, -n2, n1           # n × x̂ ... any vector ⊥ n
+            else:
+                e0, e1_, e2 = n2, 0.0, -n0
+            en = math.sqrt(e0 * e0 + e1_ * e1_ + e2 * e2)
+            e0, e1_, e2 = e0 / en, e1_ / en, e2 / en
+            f0, f1, f2 = n1 * e2 - n2 * e1_, n2 * e0 - n0 * e2, n0 * e1_ - n1 * e0
+            ev = (e0, e1_, e2)
+            fv = (f0, f1, f2)
+            p00 = 0.0
+            p01 = 0.0
+            p11 = 0.0
+            for r in range(3):
+                for q in range(3):
+                    p00 += ev[r] * Cw[r, q] * ev[q]
+                    p01 += ev[r] * Cw[r, q] * fv[q]
+                    p11 += fv[r] * Cw[r, q] * fv[q]
+            tr = 0.5 * (p00 + p11)
+            dis = math.sqrt(0.25 * (p00 - p11) ** 2 + p01 * p01)
+            A = 0.5 * (tr - dis)
+            B = 0.5 * (tr + dis)
+            curv[c, 0] = A
+            curv[c, 1] = B
+            r, q = hertz_radius(A, B)
+            # a flat or ruled contact (A -> 0, a line contact): Hertz does not apply
+            if math.isfinite(r) and A > 1e-9 * B:
+                r_eff[c] = r
+                axis_ratio[c] = q
+                continue
+        status[c] = DEGENERATED
+        r_eff[c] = fallback[c]
+        axis_ratio[c] = 1.0
+
+
+def principal_curvatures(patch, u: float, v: float, inward: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Principal curvatures (2,) (1/m, ascending) and unit principal directions (2,3) of a
+    :class:`~nurbsdem.geometry.nurbs.Patch` at (u, v), with the vectorised kernel (tests and
+    reports).  ``inward``: the normal the curvatures are measured against (default
+    −S_u × S_v normalised, i.e. the inward normal of an outward-oriented patch)."""
+    d = np.asarray(patch.evaluate(np.array([u]), np.array([v]), order=2), float).reshape(6, 3)
+    nrm = np.cross(d[1], d[2])
+    nrm /= np.linalg.norm(nrm)
+    m = -nrm if inward is None else np.asarray(inward, float) / np.linalg.norm(inward)
+    I = np.array([[d[1] @ d[1], d[1] @ d[2]], [d[1] @ d[2], d[2] @ d[2]]])
+    II = np.array([[d[3] @ m, d[4] @ m], [d[4] @ m, d[5] @ m]])
+    w, vec = np.linalg.eig(np.linalg.solve(I, II))
+    order = np.argsort(w.real)
+    dirs = (np.column_stack([d[1], d[2]]) @ vec.real[:, order]).T
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    return w.real[order], dirs
+
+
+def equivalent_radii(table, rows_a_shape: np.ndarray, kind_a, kind_b, patch_a, patch_b, params,
+                     rot_a, rot_b, sphere_a, sphere_b, normal, fallback, degenerated
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Python front of :func:`contact_radii` over a :class:`~nurbsdem.contact.detect.ContactTable`:
+    patch_a/patch_b are **local** patch indices of the shapes ``rows_a_shape`` (K,2) (shape of
+    A, shape of B; -1 where not a patch).  Returns r_eff, axis_ratio, curv (K,2), status."""
+    K = kind_a.shape[0]
+    deg, ncp, koff, coff, knots, cpw, dom, _ = table.tab
+    first = table.info[:, 0]
+    ga = np.where(kind_a == KIND_PATCH, first[np.maximum(rows_a_shape[:, 0], 0)] + patch_a, 0)
+    gb = np.where(kind_b == KIND_PATCH, first[np.maximum(rows_a_shape[:, 1], 0)] + patch_b, 0)
+    r_eff, ratio = np.empty(K), np.empty(K)
+    curv = np.empty((K, 2))
+    status = (np.asarray(degenerated) != 0).astype(np.int64)
+    contact_radii(deg, ncp, koff, coff, knots, cpw, dom, np.ascontiguousarray(kind_a, np.int64),
+                  np.ascontiguousarray(kind_b, np.int64), np.ascontiguousarray(ga, np.int64),
+                  np.ascontiguousarray(gb, np.int64), np.ascontiguousarray(params, float),
+                  np.ascontiguousarray(rot_a, float), np.ascontiguousarray(rot_b, float),
+                  np.ascontiguousarray(sphere_a, float), np.ascontiguousarray(sphere_b, float),
+                  np.ascontiguousarray(normal, float), np.ascontiguousarray(fallback, float),
+                  r_eff, ratio, curv, status)
+    return r_eff, ratio, curv, status
+
+
+def scene_radii(provider, cs, R: np.ndarray, n_particles: int):
+    """Equivalent radii of the contacts ``cs`` of a :class:`~nurbsdem.contact.scene.SceneContacts`
+    provider (its ContactSet with ``params``, ``patch_a``, ``patch_b``), R (N,3,3) the bodies'
+    rotations.  Exact spheres (patch −1: closed forms) have curvature 1/r, walls are flat,
+    degenerated contacts (LCP level > 0) and degenerate curvature take the bounding-sphere
+    radius r_A r_B / (r_A + r_B) (r_A for a wall).  Returns (r_eff, status, curv)."""
+    a = np.asarray(cs.body_a, np.int64)
+    b = np.asarray(cs.body_b, np.int64)
+    K = a.shape[0]
+    N = n_particles
+    shp = provider.body_shape
+    wall_b = b >= N
+    bb = np.minimum(b, N - 1)
+    sa, sb = shp[a], np.where(wall_b, -1, shp[bb])
+    pa = np.asarray(getattr(cs, "patch_a", np.full(K, -1)), np.int64)
+    pb = np.asarray(getattr(cs, "patch_b", np.full(K, -1)), np.int64)
+    sr = provider.sphere_radius
+    kind_a = np.where(pa >= 0, KIND_PATCH, KIND_SPHERE)
+    kind_b = np.where(wall_b, KIND_FLAT, np.where(pb >= 0, KIND_PATCH, KIND_SPHERE))
+    sph_a = np.where(kind_a == KIND_SPHERE, sr[sa], 1.0)
+    sph_b = np.where(kind_b == KIND_SPHERE, sr[np.maximum(sb, 0)], 1.0)
+    ra = provider.radius[a]
+    rb = np.where(wall_b, np.inf, provider.radius[bb])
+    fallback = np.where(wall_b, ra, ra * rb / (ra + np.where(wall_b, 1.0, rb)))
+    rot_b = np.where(wall_b[:, None, None], np.eye(3)[None], R[bb])
+    params = np.asarray(getattr(cs, "params", np.zeros((K, 4))), float)
+    r_eff, _, curv, status = equivalent_radii(
+        provider.table, np.column_stack([sa, sb]), kind_a, kind_b, pa, pb, params, R[a], rot_b,
+        sph_a, sph_b, cs.normal, fallback, cs.degenerated)
+    return r_eff, status, curv
+
+
+def contact_radii_for(provider, cs, bodies, K: int) -> tuple[np.ndarray, int]:
+    """Equivalent Hertz radius (K,) of each contact of ``cs`` and the number that fell back to
+    the bounding-sphere radius: a ContactSet with its own ``radius`` (test providers) gives it;
+    a :class:`~nurbsdem.contact.scene.SceneContacts` provider the exact curvature
+    (:func:`scene_radii`); any other provider the bounding-sphere radii (all counted)."""
+    if K == 0:
+        return np.zeros(0), 0
+    own = getattr(cs, "radius", None)
+    if own is not None:
+        return np.ascontiguousarray(own, float), 0
+    N = bodies.n
+    if hasattr(provider, "body_shape") and hasattr(provider, "table"):
+        r, status, _ = scene_radii(provider, cs, bodies.rotations(), N)
+        return r, int(np.count_nonzero(status))
+    a = np.asarray(cs.body_a, np.int64)
+    b = np.asarray(cs.body_b, np.int64)
+    ra = bodies.radius[a]
+    rb = np.where(b >= N, np.inf, bodies.radius[np.minimum(b, N - 1)])
+    return np.where(b >= N, ra, ra * rb / (ra + np.where(b >= N, 1.0, rb))), K
