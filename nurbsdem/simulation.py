@@ -203,26 +203,38 @@ class Simulation:
                              f"shapes, particles, walls and interfaces before the first step)")
 
     # ------------------------------------------------------------------ the scene
-    def add_material(self, id: int, density: float) -> int:
-        """``Material ID Density RHO`` (kg/m^3). Returns the id."""
+    def add_material(self, id: int, density: float, young_modulus: float | None = None,
+                     poisson_ratio: float = 0.0) -> int:
+        """``Material ID Density RHO [YoungModulus E] [PoissonRatio NU]`` (kg/m^3, Pa, -; the
+        elastic constants are used by Hertz–Mindlin interfaces). Returns the id."""
         self._editable("add_material")
         mid = self._id(id, "add_material")
         if mid in self.model.materials:
             raise InputError(f"add_material: material {mid} is already defined")
-        rho = self._number("Density", density, f"material {mid}", positive=True)
-        self.model.materials[mid] = Material(mid, rho)
+        what = f"material {mid}"
+        rho = self._number("Density", density, what, positive=True)
+        E = (self._number("YoungModulus", young_modulus, what, positive=True)
+             if young_modulus is not None else None)
+        nu = self._number("PoissonRatio", poisson_ratio, what)
+        if not -1.0 < nu < 0.5:
+            raise InputError(f"{what}: PoissonRatio must lie in (-1, 0.5), got {nu:g}")
+        self.model.materials[mid] = Material(mid, rho, 0, E, nu)
         return mid
 
-    def add_interface(self, normal_penalty: float, tangential_penalty: float = 0.0,
+    def add_interface(self, normal_penalty: float | None = None, tangential_penalty: float = 0.0,
                       normal_damping: float = 0.0, tangential_damping: float = 0.0,
                       friction: float = 0.0, between: str | None = None,
-                      materials: Sequence[int] | None = None, id: int | None = None) -> int:
-        """``Interface``: contact law (paper Eqs. 16-17) of the pairs it covers.
+                      materials: Sequence[int] | None = None, id: int | None = None,
+                      model: str = "LinearPenalty", restitution: float | None = None) -> int:
+        """``Interface``: contact law of the pairs it covers.
 
-        normal_penalty, tangential_penalty (N/m), normal_damping, tangential_damping (N s/m),
-        friction (Coulomb, -). between: ``None`` (all pairs), ``"particle-particle"`` or
-        ``"particle-wall"``. materials: ``(m1, m2)`` or ``(m,)`` as in the deck. Later
-        interfaces override earlier ones. Returns the id (default: the next free one).
+        ``model="LinearPenalty"`` (paper Eqs. 16-17): normal_penalty, tangential_penalty (N/m),
+        normal_damping, tangential_damping (N s/m). ``model="HertzMindlin"``: restitution
+        (0 < e <= 1), the stiffness from the materials' young_modulus and poisson_ratio (walls:
+        the ``material`` of add_box / add_wall, default rigid). Both: friction (Coulomb, -);
+        between: ``None`` (all pairs), ``"particle-particle"`` or ``"particle-wall"``;
+        materials: ``(m1, m2)`` or ``(m,)`` as in the deck. Later interfaces override earlier
+        ones. Returns the id (default: the next free one).
         """
         self._editable("add_interface")
         used = {i.id for i in self.model.interfaces}
@@ -230,12 +242,39 @@ class Simulation:
         if iid in used:
             raise InputError(f"add_interface: interface {iid} is already defined")
         what = f"interface {iid}"
-        vals = dict(normal_penalty=self._number("NormalPenalty", normal_penalty, what, positive=True))
-        for key, attr, val in (("TangentialPenalty", "tangential_penalty", tangential_penalty),
-                               ("NormalDamping", "normal_damping", normal_damping),
-                               ("TangentialDamping", "tangential_damping", tangential_damping),
-                               ("Friction", "friction", friction)):
-            vals[attr] = self._number(key, val, what, nonnegative=True)
+        kind = str(model).lower().replace("-", "").replace("_", "")
+        if kind not in ("linearpenalty", "linear", "hertzmindlin", "hertz"):
+            raise InputError(f"{what}: model must be 'LinearPenalty' or 'HertzMindlin', got "
+                             f"{model!r}")
+        hertz = kind.startswith("hertz")
+        if hertz:
+            given = [k for k, v in (("normal_penalty", normal_penalty),
+                                    ("tangential_penalty", tangential_penalty),
+                                    ("normal_damping", normal_damping),
+                                    ("tangential_damping", tangential_damping)) if v]
+            if given:
+                raise InputError(f"{what}: {given[0]} does not apply to a HertzMindlin interface "
+                                 f"(its stiffness and damping come from the materials and the "
+                                 f"restitution)")
+            if restitution is None:
+                raise InputError(f"{what}: a HertzMindlin interface needs restitution")
+            rest = self._number("Restitution", restitution, what)
+            if not 0.0 < rest <= 1.0:
+                raise InputError(f"{what}: restitution must lie in (0, 1], got {rest:g}")
+            vals = dict(normal_penalty=0.0, friction=self._number("Friction", friction, what,
+                                                                   nonnegative=True))
+        else:
+            if restitution is not None:
+                raise InputError(f"{what}: restitution applies to model='HertzMindlin' only")
+            if normal_penalty is None:
+                raise InputError(f"{what}: normal_penalty is missing")
+            vals = dict(normal_penalty=self._number("NormalPenalty", normal_penalty, what,
+                                                    positive=True))
+            for key, attr, val in (("TangentialPenalty", "tangential_penalty", tangential_penalty),
+                                   ("NormalDamping", "normal_damping", normal_damping),
+                                   ("TangentialDamping", "tangential_damping", tangential_damping),
+                                   ("Friction", "friction", friction)):
+                vals[attr] = self._number(key, val, what, nonnegative=True)
         if between is not None:
             if not isinstance(between, str) or between.lower() not in PAIR_KINDS:
                 raise InputError(f"{what}: between must be 'particle-particle' or "
@@ -255,8 +294,9 @@ class Simulation:
                 if m not in self.model.materials:
                     raise InputError(f"{what}: unknown material {m} (add_material first)")
             between = kind
+        extra = {"model": "hertz", "restitution": rest} if hertz else {}
         self.model.interfaces.append(Interface(iid, vals.pop("normal_penalty"), **vals,
-                                               between=between, materials=mats))
+                                               between=between, materials=mats, **extra))
         return iid
 
     def _shape_id(self, shape: Any) -> int:
@@ -316,8 +356,9 @@ class Simulation:
         omg = (self._vector("AngularVelocity", angular_velocity, what)
                if angular_velocity is not None else z.copy())
         sid = self._shape_id(shape)
+        # line: the id, so that messages name the later of two particles first, as for a deck
         self.model.particles.append(ParticleSpec(pid, sid, mid, pos, rotation=rot, velocity=vel,
-                                                 angular_velocity=omg))
+                                                 angular_velocity=omg, line=pid))
         return pid
 
     def _next_wall_id(self) -> int:
@@ -328,11 +369,22 @@ class Simulation:
             raise InputError(f"{what}: a wall named {w.name!r} exists already")
         self.model.walls.append(w)
 
-    def add_box(self, min: Sequence[float], max: Sequence[float], top: bool = False) -> list[str]:
+    def _wall_material(self, material: int | None, what: str) -> int | None:
+        if material is None:
+            return None
+        mid = self._id(material, f"{what}: material")
+        if mid not in self.model.materials:
+            raise InputError(f"{what}: unknown material {mid} (add_material first)")
+        return mid
+
+    def add_box(self, min: Sequence[float], max: Sequence[float], top: bool = False,
+                material: int | None = None) -> list[str]:
         """``Box``: the walls of the box [min, max] (m), normals inwards; returns their names
-        (``bottom, x_min, x_max, y_min, y_max`` and ``top`` with ``top=True``)."""
+        (``bottom, x_min, x_max, y_min, y_max`` and ``top`` with ``top=True``). material: the
+        walls' material for Hertz–Mindlin interfaces (default rigid)."""
         from .geometry.generators import box_walls
         self._editable("add_box")
+        wmat = self._wall_material(material, "add_box")
         lo = self._vector("Min", min, "add_box")
         hi = self._vector("Max", max, "add_box")
         if np.any(hi <= lo):
@@ -340,20 +392,24 @@ class Simulation:
         bid = self._next_wall_id()
         names = []
         for k, (name, patch) in enumerate(box_walls(lo, hi, top=bool(top)).items()):
-            self._add_wall_spec(WallSpec(bid + k, name, patch, kind="box"), "add_box")
+            self._add_wall_spec(WallSpec(bid + k, name, patch, kind="box", material_id=wmat),
+                                "add_box")
             names.append(name)
-        self._boxes.append((bid, lo, hi, bool(top)))
+        self._boxes.append((bid, lo, hi, bool(top), wmat))
         return names
 
     def add_wall(self, name: str, point: Sequence[float], normal: Sequence[float],
-                 size: Sequence[float], axis: Sequence[float] | None = None) -> str:
+                 size: Sequence[float], axis: Sequence[float] | None = None,
+                 material: int | None = None) -> str:
         """``Wall``: a flat rectangle centred at ``point`` (m), ``size`` (lu, lv) (m), its
-        ``normal`` pointing to the particles; ``axis`` orients the first side. Returns the name."""
+        ``normal`` pointing to the particles; ``axis`` orients the first side; ``material``
+        as for :meth:`add_box`. Returns the name."""
         from .geometry.generators import flat_wall
         self._editable("add_wall")
         if not isinstance(name, str) or not name or any(c.isspace() for c in name):
             raise InputError(f"add_wall: name must be a word (no blanks), got {name!r}")
         what = f"wall {name!r}"
+        wmat = self._wall_material(material, what)
         p = self._vector("Point", point, what)
         n = self._vector("Normal", normal, what)
         if not np.linalg.norm(n) > 0:
@@ -368,7 +424,7 @@ class Simulation:
             if np.linalg.norm(t) < 1e-12 * np.linalg.norm(ax) or not np.linalg.norm(ax) > 0:
                 raise InputError(f"{what}: axis must not be parallel to the normal (or zero)")
         self._add_wall_spec(WallSpec(self._next_wall_id(), name, flat_wall(p, n, size, ax),
-                                     kind="wall"), "add_wall")
+                                     kind="wall", material_id=wmat), "add_wall")
         self._wall_args[name] = (p, n, size, ax)
         return name
 
@@ -558,11 +614,13 @@ class Simulation:
         old_scene, old_steps = _split_deck(deck)
         new_scene, _ = _split_deck(self.deck_text)
         if old_scene != new_scene:
-            diff = [a for a, b in zip(old_scene + [""] * len(new_scene),
-                                      new_scene + [""] * len(old_scene)) if a != b]
-            raise InputError(f"the checkpoint was written for a different scene (first "
-                             f"difference: {diff[0].strip() or '(end)'!r}); build the scene "
-                             f"that wrote it", path=str(path))
+            here = [x.strip() for x in new_scene if x not in old_scene]
+            there = [x.strip() for x in old_scene if x not in new_scene]
+            what = (f"here, not in the checkpoint: {here[0]!r}" if here
+                    else f"in the checkpoint, not here: {there[0]!r}" if there
+                    else "the order of its entries")
+            raise InputError(f"the checkpoint was written for a different scene ({what}); "
+                             f"build the scene that wrote it", path=str(path))
         self._ckpt_steps = old_steps
         return st
 
@@ -699,7 +757,11 @@ class Simulation:
             return m.text
         out = ["# scene built in Python (nurbsdem.Simulation)", "Environment",
                f"  Gravity {_v(m.gravity)}", "Materials"]
-        out += [f"  Material {k} Density {_f(mat.density)}" for k, mat in sorted(m.materials.items())]
+        for k, mat in sorted(m.materials.items()):
+            E = getattr(mat, "young_modulus", None)
+            out.append(f"  Material {k} Density {_f(mat.density)}" + (
+                f" YoungModulus {_f(E)} PoissonRatio {_f(mat.poisson_ratio)}" if E is not None
+                else ""))
         out.append("Shapes")
         for sid, e in sorted(m.shapes.items()):
             if e.kind == "sphere":
@@ -722,18 +784,27 @@ class Simulation:
         args = self._wall_args
         for w in m.walls:
             if w.id in boxes:
-                bid, lo, hi, top = boxes[w.id]
-                out.append(f"  Box {bid} Min {_v(lo)} Max {_v(hi)} Top {'yes' if top else 'no'}")
+                bid, lo, hi, top, wmat = boxes[w.id]
+                mat = f" Material {wmat}" if wmat is not None else ""
+                out.append(f"  Box {bid} Min {_v(lo)} Max {_v(hi)} Top {'yes' if top else 'no'}"
+                           f"{mat}")
             elif w.kind == "wall":
                 p, n, size, ax = args[w.name]
                 axis = f" Axis {_v(ax)}" if ax is not None else ""
+                mat = (f" Material {w.material_id}"
+                       if getattr(w, "material_id", None) is not None else "")
                 out.append(f"  Wall {w.id} Name {w.name} Point {_v(p)} Normal {_v(n)} "
-                           f"Size {_v(size)}{axis}")
+                           f"Size {_v(size)}{axis}{mat}")
         out.append("Contact")
         for i in m.interfaces:
-            line = (f"  Interface {i.id} NormalPenalty {_f(i.normal_penalty)} TangentialPenalty "
-                    f"{_f(i.tangential_penalty)} NormalDamping {_f(i.normal_damping)} "
-                    f"TangentialDamping {_f(i.tangential_damping)} Friction {_f(i.friction)}")
+            if getattr(i, "model", "linear") == "hertz":
+                line = (f"  Interface {i.id} Model HertzMindlin Restitution "
+                        f"{_f(i.restitution)} Friction {_f(i.friction)}")
+            else:
+                line = (f"  Interface {i.id} NormalPenalty {_f(i.normal_penalty)} "
+                        f"TangentialPenalty {_f(i.tangential_penalty)} NormalDamping "
+                        f"{_f(i.normal_damping)} TangentialDamping "
+                        f"{_f(i.tangential_damping)} Friction {_f(i.friction)}")
             if i.materials:
                 line += " Materials " + " ".join(map(str, i.materials))
             elif i.between:
