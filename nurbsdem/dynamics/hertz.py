@@ -29,9 +29,15 @@ with G* = 1/((2−ν_A)/G_A + (2−ν_B)/G_B), G = E/(2(1+ν)), the existing spr
 (rotated into the current tangent plane), and the Coulomb limit |f_t| <= μ f_n by the same
 return mapping as the linear law.  a = √(R δ) is the radius of the circle with the normal
 tangent stiffness of the ellipse (dP/dδ = 2E* a); Mindlin's elliptical compliance differs from
-it by the (small) ellipticity terms, not modelled.  The spring force uses the current k_t
-(the usual DEM simplification of Mindlin–Deresiewicz, as in LIGGGHTS): the energy ledger stays
-closed because the friction dissipation is the exact spring work minus the stored ½ k_t |s|².
+it by the (small) ellipticity terms, not modelled.  The history is incremental in the force,
+as Mindlin–Deresiewicz with a growing contact asks (Thornton, Cummins & Cleary 2011): while the
+overlap grows the force already built keeps its value and only the increment takes the new
+stiffness (the stored s is scaled by k_t,old / k_t,new, with δ_old = δ − h δ̇); while it shrinks
+s is kept, so the force falls with k_t and vanishes with the contact.  The plain total form
+f_t = −k_t(δ) s (LIGGGHTS' shear history) creates energy while k_t grows: at 2° incidence in
+Chung & Ooi's test 4 it returned e_t = 1.003 (tangential energy gained).  The energy ledger
+stays closed either way: the friction dissipation is the exact spring work minus the stored
+½ k_t |s|².
 
 Elastic energies: (2/5) f_el δ normal (exact while R is constant), ½ k_t |s|² tangential.
 
@@ -300,6 +306,8 @@ def contact_forces_hm(body_a, body_b, point_a, point_b, normal, depth, pos, vel,
         d = depth[c]
         ddot = -wn
         mu = law[MU]
+        aa = 0.0
+        dp = 0.0
         if law[MODEL] == HERTZ:
             dp = d if d > 0.0 else 0.0
             aa = math.sqrt(radius[c] * dp)
@@ -329,6 +337,12 @@ def contact_forces_hm(body_a, body_b, point_a, point_b, normal, depth, pos, vel,
         spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         if spm > 0.0:
             sc = smag / spm
+            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
+        if law[MODEL] == HERTZ and ddot > 0.0 and aa > 0.0:
+            # loading: the force so far keeps its value, the increment takes the new stiffness
+            # (k_t,old s = k_t,new s'); unloading keeps s, so the force falls with k_t
+            d_old = dp - h * ddot
+            sc = math.sqrt(radius[c] * d_old) / aa if d_old > 0.0 else 0.0
             s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
         wt0, wt1, wt2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
         s0, s1, s2 = s0 + h * wt0, s1 + h * wt1, s2 + h * wt2
