@@ -338,6 +338,9 @@ class Solver:
             cs = self.scene.last if self.scene is not None else None
             if cs is not None:
                 writers.monitors.contacts(t, cs.monitored, cs.active, cs.degenerated_count, cs.failed)
+                if s.c_coeffs.ndim == 2 and s.c_coeffs.shape[0] == s.c_a.shape[0]:   # Hertz
+                    writers.monitors.hertz(t, s.c_a.shape[0], getattr(s, "hertz_fallback", 0),
+                                           s.c_radius, s.c_coeffs[:, 0])
             reaction = s.wall_reaction
             for k, w in enumerate(self.model.walls):
                 writers.monitors.wall(w.name, t, s.wall_displacement[k], reaction[k])
@@ -360,9 +363,12 @@ class Solver:
         tab = s.contact_table()
         n = cs.normal
         fn = tab["fn"][:, None] * n
-        return dict(point=tab["point"], force_normal=fn, force_tangential=tab["force"] - fn,
-                    penetration=cs.depth, degenerated=cs.degenerated,
-                    body_a=cs.body_a, body_b=cs.body_b)
+        out = dict(point=tab["point"], force_normal=fn, force_tangential=tab["force"] - fn,
+                   penetration=cs.depth, degenerated=cs.degenerated,
+                   body_a=cs.body_a, body_b=cs.body_b)
+        if s.c_coeffs.ndim == 2 and s.c_coeffs.shape[0] == cs.active:   # Hertz–Mindlin laws
+            out.update(stiffness_normal=s.c_coeffs[:, 0], contact_radius=s.c_radius)
+        return out
 
     # ------------------------------------------------------------------ checkpoints
     def _checkpoint(self, writers: OutputWriters) -> None:

@@ -7,6 +7,7 @@ In the output directory (``Output Directory``, default ``results`` next to the d
     monitors/energy.csv                        time,kinetic,potential,elastic,dissipated,
                                                external_work,mechanical,balance_error
     monitors/contacts.csv                      time,monitored,active,degenerated,failed
+    monitors/hertz.csv (Hertz-Mindlin runs)    time,active,fallback_radius,radius_min,radius_median,radius_max,stiffness_normal_max
     monitors/wall_<name>.csv                   time,displacement_x,displacement_y,
                                                displacement_z,reaction_x,reaction_y,reaction_z
     results.h5                                 every sample's body states (see ResultsWriter)
@@ -57,6 +58,8 @@ if TYPE_CHECKING:  # pragma: no cover
 ENERGY_COLUMNS = ("time", "kinetic", "potential", "elastic", "dissipated", "external_work",
                   "mechanical", "balance_error")
 CONTACT_COLUMNS = ("time", "monitored", "active", "degenerated", "failed")
+HERTZ_COLUMNS = ("time", "active", "fallback_radius", "radius_min", "radius_median",
+                 "radius_max", "stiffness_normal_max")
 WALL_COLUMNS = ("time", "displacement_x", "displacement_y", "displacement_z",
                 "reaction_x", "reaction_y", "reaction_z")
 #: Series names (``<name>.pvd``, ``vtk/<name>_NNNNNN.vtu``).
@@ -344,7 +347,9 @@ class ParaViewWriter:
         contacts: mapping (or object with attributes) with ``point`` (K, 3) or both
         ``point_a``, ``point_b`` (K, 3) (world, m); ``force_normal``, ``force_tangential``
         (K, 3) N; ``penetration`` (K,) m; ``degenerated`` (K,) int; optional ``body_a``,
-        ``body_b`` (K,) int. ``None``: no contacts.
+        ``body_b`` (K,) int, ``stiffness_normal`` (K,) N/m (the normal stiffness used: the
+        penalty, or Hertz's tangent stiffness) and ``contact_radius`` (K,) m (Hertz's
+        equivalent radius of curvature; NaN for the linear law). ``None``: no contacts.
         """
         c = contacts
         if c is None or (_get(c, "point") is None and _get(c, "point_a") is None):
@@ -360,6 +365,9 @@ class ParaViewWriter:
               "degenerated": _arr(c, "degenerated", (k,), np.int64),
               "body_a": _arr(c, "body_a", (k,), np.int64),
               "body_b": _arr(c, "body_b", (k,), np.int64)}
+        for key in ("stiffness_normal", "contact_radius"):
+            if _get(c, key) is not None:
+                pd[key] = _arr(c, key, (k,), float)
         cells = [("vertex", np.arange(k, dtype=np.int64).reshape(-1, 1))]
         return self.series["contacts"].write(time, pts, cells, pd)
 
@@ -463,6 +471,8 @@ class MonitorWriter:
         self.contacts_csv = CsvMonitor(self.dir / "contacts.csv", CONTACT_COLUMNS, restart_time)
         self.wall_csv = {name: CsvMonitor(self.dir / f"wall_{name}.csv", WALL_COLUMNS, restart_time)
                          for name in wall_names}
+        self.hertz_csv: CsvMonitor | None = None       # made by the first hertz() row
+        self._restart_time = restart_time
         self._reference: float | None = None
         if self.energy_csv.rows_at_start:
             r = self.energy_csv.rows_at_start[0]
@@ -496,6 +506,20 @@ class MonitorWriter:
         failed contacts, paper Fig. 5)."""
         self.contacts_csv.append([time, int(monitored), int(active), int(degenerated), int(failed)])
 
+    def hertz(self, time: float, active: int, fallback: int, radius: np.ndarray,
+              stiffness: np.ndarray) -> None:
+        """Append a row to ``monitors/hertz.csv`` (runs with Hertz–Mindlin interfaces): active
+        contacts, how many took the bounding-sphere radius (degenerated contact or curvature),
+        the smallest / median / largest equivalent radius (m) and the largest normal tangent
+        stiffness (N/m) used (NaN without contacts)."""
+        if self.hertz_csv is None:
+            self.hertz_csv = CsvMonitor(self.dir / "hertz.csv", HERTZ_COLUMNS, self._restart_time)
+        r = np.asarray(radius, float)
+        k = np.asarray(stiffness, float)
+        stats = ([float(r.min()), float(np.median(r)), float(r.max()), float(k.max())]
+                 if r.size else [math.nan] * 4)
+        self.hertz_csv.append([time, int(active), int(fallback), *stats])
+
     def wall(self, name: str, time: float, displacement: Sequence[float],
              reaction: Sequence[float]) -> None:
         """Append a row to ``wall_<name>.csv``: displacement from the deck position (m) and
@@ -506,7 +530,8 @@ class MonitorWriter:
         self.wall_csv[name].append([time, *d, *r])
 
     def _all(self) -> list[CsvMonitor]:
-        return [self.energy_csv, self.contacts_csv, *self.wall_csv.values()]
+        return [self.energy_csv, self.contacts_csv, *self.wall_csv.values(),
+                *([self.hertz_csv] if self.hertz_csv is not None else [])]
 
     def sync(self) -> None:
         for m in self._all():

@@ -1,0 +1,112 @@
+"""Hertz–Mindlin in the deck: Material YoungModulus/PoissonRatio, Interface Model HertzMindlin,
+Box/Wall Material; the input errors; a run that writes the contact radius and stiffness."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from nurbsdem.dynamics.hertz import HertzMindlinLaw, effective_moduli
+from nurbsdem.errors import InputError
+from nurbsdem.io.deck import parse_deck
+from nurbsdem.solver import Solver
+
+DECK = """\
+Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700 YoungModulus 7e9 PoissonRatio 0.3
+  Material 2 Density 7800 YoungModulus 2e11 PoissonRatio 0.29
+Shapes
+  Shape 1 Ellipsoid SemiAxes 0.02 0.015 0.01
+  Shape 2 Sphere Radius 0.012
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.05 0.05 0.0100001 Rotation 0 0 0
+  Particle 2 Shape 2 Material 1 Position 0.05 0.05 0.05
+Walls
+  Box 1 Min 0 0 0 Max 0.1 0.1 0.2 {box}
+Contact
+  {iface}
+Steps
+  Step 1 Dynamic Duration 0.02 TimeStep 1e-3
+Output
+  Directory results
+  VTK Every 0.01 Resolution 4
+"""
+
+HM = "Interface 1 Model HertzMindlin Restitution 0.5 Friction 0.3"
+
+
+def _write(tmp_path: Path, iface: str = HM, box: str = "", mats: str | None = None) -> Path:
+    text = DECK.format(iface=iface, box=box)
+    if mats is not None:
+        text = text.replace("  Material 1 Density 2700 YoungModulus 7e9 PoissonRatio 0.3\n", mats)
+    p = tmp_path / "h.inp"
+    p.write_text(text)
+    return p
+
+
+def test_deck_keys_parse(tmp_path):
+    m = parse_deck(_write(tmp_path, box="Material 2"))
+    assert m.materials[1].young_modulus == 7e9 and m.materials[1].poisson_ratio == 0.3
+    itf = m.interfaces[0]
+    assert itf.model == "hertz" and itf.restitution == 0.5 and itf.friction == 0.3
+    assert {w.material_id for w in m.walls} == {2}
+    # the linear default is unchanged
+    m2 = parse_deck(_write(tmp_path, iface="Interface 1 NormalPenalty 1e5 Friction 0.5"))
+    assert m2.interfaces[0].model == "linear" and m2.interfaces[0].normal_penalty == 1e5
+    m3 = parse_deck(_write(tmp_path, iface="Interface 1 Model LinearPenalty NormalPenalty 1e5"))
+    assert m3.interfaces[0].model == "linear"
+
+
+@pytest.mark.parametrize("iface, box, mats, message", [
+    ("Interface 1 Model HertzMindlin Friction 0.3", "", None, "Restitution"),
+    ("Interface 1 Model HertzMindlin Restitution 1.5", "", None, r"Restitution must lie in \(0, 1\]"),
+    ("Interface 1 Model HertzMindlin Restitution 0.5 NormalPenalty 1e5", "", None,
+     "NormalPenalty does not apply to a HertzMindlin interface"),
+    ("Interface 1 NormalPenalty 1e5 Restitution 0.5", "", None, "Restitution applies to Model HertzMindlin"),
+    ("Interface 1 Model Hooke Restitution 0.5", "", None, "Model must be LinearPenalty or HertzMindlin"),
+    (HM, "", "  Material 1 Density 2700 PoissonRatio 0.6\n", "PoissonRatio must lie in"),
+    (HM, "", "  Material 1 Density 2700 YoungModulus -1\n", "YoungModulus must be > 0"),
+])
+def test_deck_errors(tmp_path, iface, box, mats, message):
+    with pytest.raises(InputError, match=message) as info:
+        parse_deck(_write(tmp_path, iface=iface, box=box, mats=mats))
+    assert str(info.value).startswith(str(tmp_path / "h.inp") + ":") or "h.inp:" in str(info.value)
+
+
+def test_solver_needs_young_modulus(tmp_path):
+    p = _write(tmp_path, mats="  Material 1 Density 2700\n")
+    with pytest.raises(InputError, match="needs YoungModulus on Material 1"):
+        Solver(parse_deck(p), output=tmp_path / "out", quiet=True)
+
+
+def test_wall_material_sets_the_effective_modulus(tmp_path):
+    rigid = Solver(parse_deck(_write(tmp_path)), output=tmp_path / "o1", quiet=True)
+    steel = Solver(parse_deck(_write(tmp_path, box="Material 2")), output=tmp_path / "o2",
+                   quiet=True)
+    lw_r = rigid.interfaces.get(rigid.mat_index[1], rigid.wall_material)
+    lw_s = steel.interfaces.get(steel.mat_index[1], steel.wall_material)
+    assert isinstance(lw_r, HertzMindlinLaw)
+    assert lw_r.e_star == pytest.approx(7e9 / (1 - 0.09))
+    assert lw_s.e_star == pytest.approx(effective_moduli(7e9, 0.3, 2e11, 0.29)[0])
+    lpp = rigid.interfaces.get(rigid.mat_index[1], rigid.mat_index[1])
+    assert lpp.e_star == pytest.approx(7e9 / (1 - 0.09) / 2)
+
+
+def test_run_writes_radius_and_stiffness(tmp_path):
+    p = _write(tmp_path)
+    s = Solver(parse_deck(p), output=tmp_path / "out", quiet=True)
+    s.run()
+    mon = np.genfromtxt(tmp_path / "out" / "monitors" / "hertz.csv", delimiter=",", names=True)
+    assert mon["active"].max() >= 1
+    hit = mon["active"] > 0
+    # the ellipsoid lies on its flat side: radii of curvature a²/c = 0.04, b²/c = 0.0225 m
+    assert np.nanmax(mon["radius_max"][hit]) > 0.02
+    vtus = sorted((tmp_path / "out" / "vtk").glob("contacts_*.vtu"))
+    data = meshio.read(vtus[-1]).point_data
+    assert "contact_radius" in data and "stiffness_normal" in data
+    assert np.all(np.isfinite(data["contact_radius"]))
