@@ -697,7 +697,8 @@ class Simulation:
         """The energies of ``monitors/energy.csv`` (J) at the end of the last dynamic step:
         time, kinetic, potential, elastic, dissipated, external_work, mechanical,
         balance_error (dissipated and external work cumulative since the start). Before any
-        step, or after a Replicate or MoveWall ToContact step: the kinetic and potential
+        step: the kinetic and potential energy of the bodies, the rest 0. After a Replicate
+        or MoveWall ToContact step (until the next dynamic step): the kinetic and potential
         energy of the bodies, elastic 0 and balance_error NaN (not measured there)."""
         s = self.solver
         e = s.end_energy if s is not None else None

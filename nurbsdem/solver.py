@@ -163,6 +163,7 @@ class Solver:
         self.write_output = bool(write_output)
         self.restart_check = restart_check
         self._writers = None
+        self._results_deck = model.text
         self._finished_once = False
         self._restored: dict | None = None
         self._wall0 = time.perf_counter()
@@ -583,6 +584,10 @@ class Solver:
         if self.write_output:
             self._writers = OutputWriters(self.model, restart_time=(
                 self.time if (self._restored or resumed) else None))
+            if self._restored:
+                self._results_deck = None       # the checkpointed run's deck: written anew
+            elif not resumed:
+                self._results_deck = self.model.text
         else:
             self._writers = _NoWriters()
         self._motion_spec = {}
@@ -655,6 +660,10 @@ class Solver:
     def _checkpoint_end_of_step(self, writers: OutputWriters) -> None:
         self._motion_spec = {}
         self._checkpoint(writers)
+        if self.write_output and self.model.text != self._results_deck:
+            # a model extended step by step: results.h5 keeps the deck of the steps run so far
+            text = self._results_deck = self.model.text
+            writers.results._rewrite(lambda f: f.attrs.__setitem__("deck", text))
 
 
 class _NoWriters:

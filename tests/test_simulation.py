@@ -192,14 +192,12 @@ def test_restart_from_a_checkpoint_through_the_api(runs, tmp_path, monkeypatch):
         if self.time > 0.071:             # in step 5 (the lid moving), after a checkpoint
             raise Killed
     monkeypatch.setattr(Solver, "_sample", dying_sample)
+    killed = build_scene(output=out)
     with pytest.raises(Killed):
-        run_steps(build_scene(output=out))
+        run_steps(killed)
     monkeypatch.setattr(Solver, "_sample", original)
-    with pytest.raises(InputError, match="stopped after an error"):
-        build_scene(output=out)  # fine: a new scene
-        sim = build_scene(output=out)
-        sim._failed = RuntimeError("x")
-        sim.run_dynamic(0.01, 1e-3)
+    with pytest.raises(InputError, match="stopped after an error.*restart="):
+        killed.run_dynamic(0.01, 1e-3)
     sim = run_steps(build_scene(output=out, restart=out / "checkpoint.h5"))
     sim.close()
     np.testing.assert_array_equal(sim.positions, runs[3].positions)
@@ -324,3 +322,69 @@ def test_simulation_is_exposed_lazily():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert float(r.stdout) < 1.0
+
+
+def test_closed_then_continued_and_results_h5_keeps_the_whole_deck(tmp_path):
+    import h5py
+    sim = small_scene_with_output(tmp_path / "out")
+    sim.run_dynamic(0.02, 1e-3)
+    sim.close()
+    sim.run_dynamic(0.02, 1e-3)
+    summary = sim.close()
+    assert summary.simulated_time == pytest.approx(0.04)
+    np.testing.assert_allclose(read_results_times(tmp_path / "out" / "results.h5"),
+                               [0.0, 0.01, 0.02, 0.03, 0.04], atol=1e-12)
+    rows = (tmp_path / "out" / "monitors" / "energy.csv").read_text().splitlines()
+    assert len(rows) == 1 + 21 and rows[-1].startswith("0.04")
+    with h5py.File(tmp_path / "out" / "results.h5") as f:
+        assert f.attrs["deck"] == sim.deck_text and "Step 2 Dynamic" in sim.deck_text
+
+
+def small_scene_with_output(out) -> Simulation:
+    sim = Simulation(gravity=(0, 0, -9.81), output=out, monitors_every=0.002)
+    sim.add_material(1, 2700)
+    sim.add_interface(normal_penalty=1e5, normal_damping=50)
+    sim.add_box((0, 0, 0), (0.1, 0.1, 0.1))
+    sim.add_particle(nurbsdem.shapes.sphere(0.01), 1, (0.05, 0.05, 0.012))
+    return sim
+
+
+HERTZ_DECK = """
+Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2500 YoungModulus 1e7 PoissonRatio 0.3
+  Material 2 Density 7800 YoungModulus 2e9 PoissonRatio 0.25
+Shapes
+  Shape 1 Sphere Radius 0.01
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.05 0.05 0.0101 Velocity 0 0 -0.2
+  Particle 2 Shape 1 Material 1 Position 0.05 0.05 0.04
+Walls
+  Box 1 Min 0 0 0 Max 0.1 0.1 0.1 Material 2
+Contact
+  Interface 1 Model HertzMindlin Restitution 0.6 Friction 0.4
+Steps
+  Step 1 Dynamic Duration 0.03 TimeStep 5e-4
+"""
+
+
+def test_hertz_mindlin_scene_matches_its_deck(tmp_path):
+    deck = tmp_path / "hertz.inp"
+    deck.write_text(HERTZ_DECK)
+    ref = Simulation.from_deck(deck, output=tmp_path / "deck")
+    ref.run()
+    sim = Simulation(gravity=(0, 0, -9.81))
+    sim.add_material(1, 2500, young_modulus=1e7, poisson_ratio=0.3)
+    sim.add_material(2, 7800, young_modulus=2e9, poisson_ratio=0.25)
+    ball = nurbsdem.shapes.sphere(0.01)
+    sim.add_particle(ball, 1, (0.05, 0.05, 0.0101), velocity=(0, 0, -0.2))
+    sim.add_particle(ball, 1, (0.05, 0.05, 0.04))
+    sim.add_box((0, 0, 0), (0.1, 0.1, 0.1), material=2)
+    sim.add_interface(model="HertzMindlin", restitution=0.6, friction=0.4)
+    sim.run_dynamic(0.03, 5e-4)
+    np.testing.assert_array_equal(sim.positions, ref.positions)
+    np.testing.assert_array_equal(sim.velocities, ref.velocities)
+    assert model_differences(build_model(sim.deck_text, str(deck)), ref.model) == []
+    with pytest.raises(InputError, match="normal_penalty does not apply to a HertzMindlin"):
+        Simulation().add_interface(normal_penalty=1e5, model="HertzMindlin", restitution=0.5)
