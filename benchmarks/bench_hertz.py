@@ -1,0 +1,184 @@
+"""Hertz–Mindlin with the exact local curvature (issue 12): what the exact curvature changes,
+what it costs, and the benchmark impacts.
+
+    .venv/bin/python benchmarks/bench_hertz.py [--quick]
+
+1. Equivalent radius: for sampled contact points over the surface of ellipsoids and the paper
+   particles, the exact force-equivalent Hertz radius (both surfaces' principal curvatures and
+   directions, :mod:`nurbsdem.geometry.curvature`) against a flat wall and against a randomly
+   turned copy of the same shape, and the force error of the volume-equivalent-radius
+   approximation at equal overlap: F ∝ √R, so the error is √(R_v / R) − 1 (R_v = (3V/4π)^{1/3}
+   against a wall, R_v / 2 for a pair).
+2. Cost of the curvature per contact (compiled, one thread).
+3. Chung & Ooi (2011) test 4: tangential restitution, spin and contact-point rebound angle of
+   an aluminium-oxide sphere on a rigid plane at 3.9 m/s, 5–85°, against rigid-body sliding
+   theory where the sphere slides throughout (θ > atan 7μ).
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import REPO  # noqa: E402
+
+from nurbsdem import load_shape, shapes  # noqa: E402
+from nurbsdem.contact.detect import ContactTable  # noqa: E402
+from nurbsdem.geometry.curvature import KIND_FLAT, KIND_PATCH, equivalent_radii  # noqa: E402
+
+
+def surface_samples(shape, n: int):
+    """(patch (S,), uv (S,2), points (S,3), outward normals (S,3)) on an n × n grid per patch
+    (cell centres, so no sample sits on a patch edge or pole)."""
+    pids, uvs, pts, nrm = [], [], [], []
+    for ip, p in enumerate(shape.patches):
+        u0, u1, v0, v1 = p.domain
+        s = (np.arange(n) + 0.5) / n
+        U, V = np.meshgrid(u0 + s * (u1 - u0), v0 + s * (v1 - v0), indexing="ij")
+        U, V = U.ravel(), V.ravel()
+        x = np.asarray(p.points(U, V), float).reshape(-1, 3)
+        nn = np.asarray(p.normals(U, V), float).reshape(-1, 3)
+        out = np.sign(np.einsum("ij,ij->i", x - shape.centroid, nn))[:, None]
+        pids.append(np.full(U.size, ip))
+        uvs.append(np.column_stack([U, V]))
+        pts.append(x)
+        nrm.append(nn * out)
+    return (np.concatenate(pids), np.concatenate(uvs), np.concatenate(pts),
+            np.concatenate(nrm))
+
+
+def _align(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A rotation taking unit vector a to unit vector b."""
+    v = np.cross(a, b)
+    c = float(a @ b)
+    if c < -1 + 1e-12:
+        p = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
+        p /= np.linalg.norm(p)
+        return 2 * np.outer(p, p) - np.eye(3)
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1 + c)
+
+
+def wall_radii(shape, n: int):
+    """Exact equivalent radius (S,) of the shape resting on a flat wall at each sample, and the
+    status (S,) (1: degenerate curvature, bounding-sphere fallback)."""
+    table = ContactTable([shape])
+    pid, uv, _, nrm = surface_samples(shape, n)
+    S = pid.size
+    eye = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+    r, _, _, st = equivalent_radii(
+        table, np.column_stack([np.zeros(S, np.int64), -np.ones(S, np.int64)]),
+        np.full(S, KIND_PATCH), np.full(S, KIND_FLAT), pid, np.zeros(S, np.int64),
+        np.column_stack([uv, np.zeros((S, 2))]), eye, eye, np.ones(S), np.ones(S), nrm,
+        np.full(S, shape.bounding_radius), np.zeros(S, np.int64))
+    return r, st
+
+
+def pair_radii(shape, n: int, seed: int = 0, timing: list | None = None):
+    """Exact equivalent radius of two copies of the shape touching at random sample points,
+    B turned so that its normal opposes A's and spun randomly about it; and the status."""
+    table = ContactTable([shape])
+    pid, uv, _, nrm = surface_samples(shape, n)
+    S = pid.size
+    rng = np.random.default_rng(seed)
+    j = rng.permutation(S)
+    rot_b = np.empty((S, 3, 3))
+    for k in range(S):
+        R = _align(nrm[j[k]], -nrm[k])
+        th = rng.uniform(0, 2 * np.pi)
+        ax = nrm[k]
+        K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
+        spin = np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+        rot_b[k] = spin @ R
+    eye = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+    t0 = time.perf_counter()
+    r, _, _, st = equivalent_radii(
+        table, np.zeros((S, 2), np.int64), np.full(S, KIND_PATCH), np.full(S, KIND_PATCH),
+        pid, pid[j], np.column_stack([uv, uv[j]]), eye, rot_b, np.ones(S), np.ones(S), nrm,
+        np.full(S, shape.bounding_radius / 2), np.zeros(S, np.int64))
+    if timing is not None:
+        timing.append(time.perf_counter() - t0)
+    return r, st
+
+
+def test_shapes(quick: bool) -> list[tuple[str, object]]:
+    out = [("sphere r 10 mm", shapes.sphere(0.01)),
+           ("ellipsoid 20×15×10 mm", shapes.ellipsoid(0.02, 0.015, 0.01)),
+           ("ellipsoid 30×10×10 mm", shapes.ellipsoid(0.03, 0.01, 0.01))]
+    for name in ("A", "B", "C"):
+        p = REPO / "inputs" / "shapes" / f"{name}.yaml"
+        if p.is_file():
+            out.append((f"paper particle {name}", load_shape(p)))
+    return out
+
+
+def radius_table(quick: bool) -> list[dict]:
+    """Section 1 rows: per shape and contact kind, the exact radius against R_v and the force
+    error √(R_v/R) − 1 of the volume-equivalent radius at equal overlap."""
+    n = 6 if quick else 16
+    rows = []
+    for name, sh in test_shapes(quick):
+        rv = (3 * sh.volume / (4 * math.pi)) ** (1 / 3)
+        for kind, fn, ref in (("wall", wall_radii, rv), ("pair", pair_radii, rv / 2)):
+            r, st = fn(sh, n)
+            ok = st == 0
+            err = np.sqrt(ref / r[ok]) - 1.0
+            rows.append(dict(shape=name, kind=kind, samples=int(r.size), fallback=int((~ok).sum()),
+                             r_v=ref, r_min=float(r[ok].min()), r_med=float(np.median(r[ok])),
+                             r_max=float(r[ok].max()), err_med=float(np.median(np.abs(err))),
+                             err_lo=float(err.min()), err_hi=float(err.max())))
+    return rows
+
+
+def curvature_cost(n_contacts: int = 20000) -> float:
+    """µs per contact of the compiled curvature + elliptic radius (paper particle pairs)."""
+    p = REPO / "inputs" / "shapes" / "A.yaml"
+    sh = load_shape(p) if p.is_file() else shapes.ellipsoid(0.02, 0.015, 0.01)
+    pair_radii(sh, 2)                    # compile
+    n = int(math.sqrt(n_contacts / len(sh.patches))) + 1
+    t: list = []
+    r, _ = pair_radii(sh, n, timing=t)
+    return 1e6 * t[0] / r.size
+
+
+def oblique_test4(angles) -> list[dict]:
+    """Chung & Ooi (2011) test 4 with the Hertz–Mindlin law (see tests/test_hertz.py)."""
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_hertz import _oblique
+    out = []
+    for a in angles:
+        o = _oblique(float(a))
+        mu, vt, vn = o["mu"], o["vt"], o["vn"]
+        slide = math.tan(math.radians(a)) > 7 * mu
+        out.append(dict(angle=a, et=o["et"], omega=o["omega"], rebound=o["rebound"],
+                        et_slide=1 - 2 * mu * vn / vt if slide else math.nan,
+                        omega_slide=5 * mu * vn / o["r"] if slide else math.nan,
+                        rebound_slide=(math.degrees(math.atan((vt - 7 * mu * vn) / vn))
+                                       if slide else math.nan)))
+    return out
+
+
+def main(argv=None) -> int:
+    quick = "--quick" in (argv if argv is not None else sys.argv[1:])
+    print("1. equivalent radius: exact curvature vs volume-equivalent radius (force error at "
+          "equal overlap = sqrt(R_v/R) - 1)")
+    for r in radius_table(quick):
+        print(f"  {r['shape']:24s} {r['kind']:4s} n={r['samples']:5d} fallback={r['fallback']:3d} "
+              f"R_v={r['r_v']:.4g} R exact {r['r_min']:.4g}..{r['r_med']:.4g}..{r['r_max']:.4g} m; "
+              f"error median {100 * r['err_med']:.1f} %, range {100 * r['err_lo']:+.1f} .. "
+              f"{100 * r['err_hi']:+.1f} %")
+    print(f"2. curvature cost: {curvature_cost():.2f} us per contact (paper particle pairs)")
+    print("3. Chung & Ooi test 4 (Al oxide, 3.9 m/s): angle, e_t, omega (rad/s), rebound (deg); "
+          "sliding theory")
+    for r in oblique_test4([5, 10, 20, 30, 40, 50, 60, 70, 80] if quick else range(5, 90, 5)):
+        print(f"  {r['angle']:3.0f}  {r['et']:.4f} {r['omega']:8.1f} {r['rebound']:7.2f}   "
+              f"{r['et_slide']:.4f} {r['omega_slide']:8.1f} {r['rebound_slide']:7.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
