@@ -319,9 +319,15 @@ class Simulation:
             from .io.shapefile import load_shape
             entry = ShapeEntry(sid, "file", load_shape(file), source=str(file), file=file)
         else:
-            r = _generated_sphere_radius(shape)
-            entry = (ShapeEntry(sid, "sphere", shape, params=(r,)) if r is not None
-                     else ShapeEntry(sid, "object", shape))
+            src = getattr(shape, "source", None)     # load_shape(path) remembers its file
+            r = _generated_sphere_radius(shape) if src is None else None
+            if src is not None and Path(src).is_file():
+                file = Path(src).resolve()
+                entry = ShapeEntry(sid, "file", shape, source=str(file), file=file)
+            elif r is not None:
+                entry = ShapeEntry(sid, "sphere", shape, params=(r,))
+            else:
+                entry = ShapeEntry(sid, "object", shape)
         self.model.shapes[sid] = entry
         self._shape_ids[key] = sid
         return sid
@@ -492,6 +498,9 @@ class Simulation:
         """Run the steps not run yet (a deck's steps), then close the files; returns the
         :class:`~nurbsdem.solver.RunSummary`. This is what ``nurbsdem solve`` does."""
         self._usable()
+        if self.solver is None:
+            raise InputError("nothing to run: a scene built in Python runs its steps as they "
+                             "are called (run_dynamic, replicate, move_wall)")
         try:
             if not self.solver.started:
                 self._start()

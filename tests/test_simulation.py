@@ -62,7 +62,7 @@ def build_scene(output=None, restart=None) -> Simulation:
     sim.add_material(2, density=1000)
     sphere = nurbsdem.shapes.sphere(0.01)
     assert sim.add_particle(sphere, 1, (0.03, 0.03, 0.011)) == 1
-    sim.add_particle(str(C_FILE), 1, (0.07, 0.06, 0.025), rotation=(0, 0, 0.5))
+    sim.add_particle(nurbsdem.load_shape(C_FILE), 1, (0.07, 0.06, 0.025), rotation=(0, 0, 0.5))
     sim.add_particle(sphere, 2, (0.03, 0.075, 0.02), velocity=(0.1, 0, 0),
                      angular_velocity=(0, 3, 0))
     assert sim.add_box(min=(0, 0, 0), max=(0.1, 0.1, 0.12)) == ["bottom", "x_min", "x_max",
@@ -303,6 +303,10 @@ def test_bad_input_is_an_input_error_with_a_clear_message(call, message):
 
 def test_a_refused_step_leaves_the_simulation_usable():
     sim = small_scene()
+    with pytest.raises(InputError, match="nothing to run"):
+        sim.run()
+    assert sim.add_particle(str(C_FILE), 1, (0.075, 0.075, 0.03)) == 2
+    assert sim.model.shapes[2].kind == "file"
     with pytest.raises(InputError, match="not a whole number"):
         sim.run_dynamic(0.01, 3e-3)
     sim.run_dynamic(0.01, 1e-3)
