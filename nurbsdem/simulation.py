@@ -566,6 +566,14 @@ class Simulation:
             self._check_restart_step(step)
             self.solver.run_pending()
         except InputError as exc:
+            instantaneous = isinstance(step, ReplicateStep) or (
+                isinstance(step, MoveWallStep) and step.to_contact)
+            if instantaneous and self.solver.started and \
+                    self.solver.step_index == len(model.steps) - 1:
+                # refused before it changed anything (e.g. copies behind a wall): not run
+                model.steps.pop()
+                model.text = self.deck_text
+                raise _strip_location(exc) from None
             self._fail(exc)
             raise _strip_location(exc) from None
         except BaseException as exc:

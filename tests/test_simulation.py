@@ -392,3 +392,15 @@ def test_hertz_mindlin_scene_matches_its_deck(tmp_path):
     assert model_differences(build_model(sim.deck_text, str(deck)), ref.model) == []
     with pytest.raises(InputError, match="normal_penalty does not apply to a HertzMindlin"):
         Simulation().add_interface(normal_penalty=1e5, model="HertzMindlin", restitution=0.5)
+
+
+def test_a_replicate_refused_while_running_leaves_the_simulation_usable():
+    sim = small_scene()
+    sim.add_wall("lid", point=(0.05, 0.05, 0.08), normal=(0, 0, -1), size=(0.1, 0.1))
+    sim.run_dynamic(0.005, 1e-3)
+    with pytest.raises(InputError, match="Step 2: after replication, particle 2 .* is behind"):
+        sim.replicate(layers=2, height=0.09)
+    sim.replicate(layers=2, height=0.04)
+    sim.run_dynamic(0.005, 1e-3)
+    assert len(sim.positions) == 2 and [s.kind for s in sim.model.steps] == [
+        "dynamic", "replicate", "dynamic"]
