@@ -404,3 +404,32 @@ def test_a_replicate_refused_while_running_leaves_the_simulation_usable():
     sim.run_dynamic(0.005, 1e-3)
     assert len(sim.positions) == 2 and [s.kind for s in sim.model.steps] == [
         "dynamic", "replicate", "dynamic"]
+
+
+def test_cli_restart_goes_through_the_simulation(runs, tmp_path, monkeypatch):
+    """`nurbsdem solve --restart` (Simulation.from_deck(restart=...)) continues bit for bit."""
+    from click.testing import CliRunner
+
+    from nurbsdem.cli import main
+    d, deck_sim = runs[0], runs[1]
+    deck = d / "case.inp"
+    out = tmp_path / "out"
+    original = Solver._sample
+
+    def dying_sample(self, writers, force=False):
+        original(self, writers, force)
+        if self.time > 0.051:             # in step 3, after the checkpoint at 0.05 s
+            raise KeyboardInterrupt
+    monkeypatch.setattr(Solver, "_sample", dying_sample)
+    r = CliRunner().invoke(main, ["solve", str(deck), "--quiet", "--output", str(out)])
+    assert r.exit_code == 130, r.output
+    monkeypatch.setattr(Solver, "_sample", original)
+    r = CliRunner().invoke(main, ["solve", str(deck), "--quiet", "--output", str(out),
+                                  "--restart", str(out / "checkpoint.h5")])
+    assert r.exit_code == 0, r.output
+    a = read_results_sample(out / "results.h5", -1)
+    b = read_results_sample(d / "deck" / "results.h5", -1)
+    for key in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(a[key], b[key])
+    for name in MONITORS:
+        assert (out / "monitors" / name).read_text() == (d / "deck" / "monitors" / name).read_text()
