@@ -568,9 +568,10 @@ class Simulation:
         except InputError as exc:
             instantaneous = isinstance(step, ReplicateStep) or (
                 isinstance(step, MoveWallStep) and step.to_contact)
-            if instantaneous and self.solver.started and \
-                    self.solver.step_index == len(model.steps) - 1:
-                # refused before it changed anything (e.g. copies behind a wall): not run
+            if not self.solver.started or (instantaneous and
+                                           self.solver.step_index == len(model.steps) - 1):
+                # refused before it changed anything (no such checkpoint; copies behind a
+                # wall): not run
                 model.steps.pop()
                 model.text = self.deck_text
                 raise _strip_location(exc) from None

@@ -433,3 +433,10 @@ def test_cli_restart_goes_through_the_simulation(runs, tmp_path, monkeypatch):
         np.testing.assert_array_equal(a[key], b[key])
     for name in MONITORS:
         assert (out / "monitors" / name).read_text() == (d / "deck" / "monitors" / name).read_text()
+
+
+def test_a_missing_checkpoint_is_a_clean_error(tmp_path):
+    sim = build_scene(output=tmp_path / "out", restart=tmp_path / "nope.h5")
+    with pytest.raises(InputError, match="nope.h5: no such checkpoint file"):
+        sim.run_dynamic(0.01, 1e-3)
+    assert sim.model.steps == []
