@@ -228,3 +228,60 @@ def test_ellipsoid_resting_on_each_axis(axis):
     net = s._network()
     d = float(s.last_contacts.depth[0])
     assert net[4][0, 0] == pytest.approx(2 * law.e_star * math.sqrt(Rth * d), rel=1e-12)
+
+
+# ---------------------------------------------------------------------------- special points
+def test_pole_and_seam_of_a_single_patch_sphere():
+    """At a pole (collapsed edge) and on the seam the curvature of the patch the LCP ended on is
+    used; a sphere of radius r on a wall gives R = r there too."""
+    from nurbsdem.contact.detect import ContactTable
+    from nurbsdem.geometry.curvature import KIND_FLAT, KIND_PATCH, equivalent_radii
+    r = 0.02
+    sh = shapes.single_patch_sphere(r)
+    p = sh.patches[0]
+    u0, u1, v0, v1 = p.domain
+    uv = np.array([[u0, v0], [u1, v1], [u0, 0.5 * (v0 + v1)], [0.3 * u1, 0.6 * v1]])
+    x = np.asarray(p.points(uv[:, 0], uv[:, 1]), float).reshape(-1, 3)
+    nrm = (x - sh.centroid) / np.linalg.norm(x - sh.centroid, axis=1)[:, None]
+    S = uv.shape[0]
+    eye = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+    R, _, _, st = equivalent_radii(
+        ContactTable([sh]), np.column_stack([np.zeros(S, np.int64), -np.ones(S, np.int64)]),
+        np.full(S, KIND_PATCH), np.full(S, KIND_FLAT), np.zeros(S, np.int64),
+        np.zeros(S, np.int64), np.column_stack([uv, np.zeros((S, 2))]), eye, eye, np.ones(S),
+        np.ones(S), nrm, np.full(S, 99.0), np.array([0, 0, 0, 1]))
+    assert np.all(st[:3] == 0)
+    assert R[:3] == pytest.approx(r, rel=1e-5)      # the poles: moved 1e-5 into the patch
+    # a contact the LCP reports as degenerated (crease, 3-patch node) takes the fallback
+    assert st[3] == 1 and R[3] == 99.0
+
+
+def test_linear_rows_of_the_hertz_kernel_equal_the_linear_kernel():
+    """Mixed decks: linear interfaces evaluated by the Hertz kernel give the same bits."""
+    from nurbsdem.dynamics import ContactLaw
+    from nurbsdem.dynamics.forces import contact_forces
+    from nurbsdem.dynamics.hertz import contact_forces_hm
+    rng = np.random.default_rng(3)
+    K, B = 7, 5
+    tab = InterfaceTable(default=ContactLaw(en=1e5, cn=30.0, et=4e4, ct=2.0, mu=0.4)).as_array(1)
+    a = rng.integers(0, 2, K)
+    b = a + 1 + rng.integers(0, 2, K)
+    args = [a, b, rng.normal(size=(K, 3)), rng.normal(size=(K, 3))]
+    n = rng.normal(size=(K, 3))
+    args += [n / np.linalg.norm(n, axis=1)[:, None], rng.uniform(0, 1e-3, K),
+             rng.normal(size=(B, 3)), rng.normal(size=(B, 3)), rng.normal(size=(B, 3)),
+             np.zeros(B, np.int64), tab]
+    spring = rng.normal(size=(K, 3)) * 1e-4
+
+    def outs():
+        return [np.zeros((B, 3)), np.zeros((B, 3)), np.empty((K, 3)), np.empty((K, 3)),
+                np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty(K),
+                np.empty((K, 2)), np.empty(K, np.int64)]
+    o1, o2 = outs(), outs()
+    s1, s2 = spring.copy(), spring.copy()
+    w1 = contact_forces(*args, s1, 1e-4, *o1)
+    w2 = contact_forces_hm(*args, s2, 1e-4, np.ones(B), np.full(K, 0.01), *o2, np.empty((K, 4)))
+    assert w1 == w2
+    np.testing.assert_array_equal(s1, s2)
+    for x, y in zip(o1, o2):
+        np.testing.assert_array_equal(x, y)

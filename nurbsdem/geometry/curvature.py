@@ -15,7 +15,7 @@ a convex surface has κ >= 0.  The inward normal is taken from the contact norma
 in 3-D is C = κ1 t1 t1ᵀ + κ2 t2 t2ᵀ (t1, t2 unit principal directions in the tangent plane).
 
 At a pole (collapsed edge, |S_u × S_v| -> 0) the forms are singular: the point is moved into
-the patch by 1e-6 of its parameter range, where they are regular (the curvature is continuous
+the patch by 1e-5 of its parameter range, where they are regular (the curvature is continuous
 there on a smooth surface).  A seam or a patch connection uses the patch the LCP ended on.
 
 Relative curvature and the equivalent radius (Johnson, *Contact Mechanics*, §4.1–4.2)
@@ -137,19 +137,29 @@ def hertz_radius(A: float, B: float) -> tuple[float, float]:
 
 @njit(cache=True)
 def _surface_tensor(d, inward, C):
-    """Add the curvature tensor (3×3, 1/m) of the surface with derivatives d (6,3) (file frame),
-    inward unit normal ``inward`` (file frame), to C.  Returns False if the metric is singular."""
+    """Add the curvature tensor (3×3, 1/m) of the surface with derivatives d (6,3) (file frame)
+    to C, measured against its unit normal on the side of ``inward`` (file frame).  Returns
+    False if the metric is singular."""
     su0, su1, su2 = d[1, 0], d[1, 1], d[1, 2]
     sv0, sv1, sv2 = d[2, 0], d[2, 1], d[2, 2]
     E = su0 * su0 + su1 * su1 + su2 * su2
     F = su0 * sv0 + su1 * sv1 + su2 * sv2
     G = sv0 * sv0 + sv1 * sv1 + sv2 * sv2
     det = E * G - F * F
-    if not (det > 1e-20 * (E * G)) or not (E > 0.0) or not (G > 0.0):
+    if not (det > 1e-14 * (E + G) * (E + G)):      # a pole (a collapsed edge) or worse
         return False
-    L = d[3, 0] * inward[0] + d[3, 1] * inward[1] + d[3, 2] * inward[2]
-    M = d[4, 0] * inward[0] + d[4, 1] * inward[1] + d[4, 2] * inward[2]
-    N = d[5, 0] * inward[0] + d[5, 1] * inward[1] + d[5, 2] * inward[2]
+    # the surface's own unit normal at the point, turned to agree with ``inward`` (the contact
+    # normal: at a pole the point was moved, and the normal moved with it)
+    m0 = su1 * sv2 - su2 * sv1
+    m1 = su2 * sv0 - su0 * sv2
+    m2 = su0 * sv1 - su1 * sv0
+    mm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    if m0 * inward[0] + m1 * inward[1] + m2 * inward[2] < 0.0:
+        mm = -mm
+    m0, m1, m2 = m0 / mm, m1 / mm, m2 / mm
+    L = d[3, 0] * m0 + d[3, 1] * m1 + d[3, 2] * m2
+    M = d[4, 0] * m0 + d[4, 1] * m1 + d[4, 2] * m2
+    N = d[5, 0] * m0 + d[5, 1] * m1 + d[5, 2] * m2
     # the curvature tensor in 3-D: C = J I⁻¹ II I⁻¹ Jᵀ with J = [S_u S_v] (3×2) (symmetric;
     # its eigenvalues in the tangent plane are the principal curvatures)
     i00, i01, i11 = G / det, -F / det, E / det
@@ -186,7 +196,7 @@ def _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_d
             good = True
             break
         # a pole: move into the patch
-        eps = 1e-6 * 10.0 ** (2 * attempt)
+        eps = 1e-5 * 10.0 ** (2 * attempt)
         u = u + eps * (0.5 * (u0 + u1) - u)
         v = v + eps * (0.5 * (v0 + v1) - v)
     if not good:
