@@ -79,9 +79,11 @@ def test_deck_errors(tmp_path, iface, box, mats, message):
 
 
 def test_solver_needs_young_modulus(tmp_path):
-    p = _write(tmp_path, mats="  Material 1 Density 2700\n")
+    """The deck check refuses it (below); a model built otherwise is refused by the solver."""
+    model = parse_deck(_write(tmp_path))
+    model.materials[1].young_modulus = None
     with pytest.raises(InputError, match="needs YoungModulus on Material 1"):
-        Solver(parse_deck(p), output=tmp_path / "out", quiet=True)
+        Solver(model, output=tmp_path / "out", quiet=True)
 
 
 def test_wall_material_sets_the_effective_modulus(tmp_path):
@@ -145,3 +147,23 @@ def test_restart_is_bit_for_bit(tmp_path, monkeypatch):
         np.testing.assert_array_equal(a[key], b[key])
     for name in ("energy.csv", "contacts.csv", "hertz.csv"):
         assert (out / "monitors" / name).read_text() == (ref / "monitors" / name).read_text()
+
+
+@pytest.mark.parametrize("box, mats, message", [
+    ("", "  Material 1 Density 2700\n", "covers material 1, which needs a YoungModulus"),
+    ("Material 7", None, "wall bottom: unknown material 7"),
+    ("Material 3", "  Material 1 Density 2700 YoungModulus 7e9\n  Material 3 Density 1000\n",
+     "needs a YoungModulus to be a wall material"),
+])
+def test_check_refuses_missing_constants(tmp_path, box, mats, message):
+    with pytest.raises(InputError, match=message):
+        parse_deck(_write(tmp_path, box=box, mats=mats))
+
+
+def test_walls_of_different_materials_are_refused(tmp_path):
+    p = _write(tmp_path, box="Material 2")
+    text = p.read_text().replace(
+        "Walls\n", "Walls\n  Wall 20 Name lid Point 0.05 0.05 0.19 Normal 0 0 -1 Size 0.1 0.1 Material 1\n")
+    p.write_text(text)
+    with pytest.raises(InputError, match="walls of different materials"):
+        parse_deck(p)

@@ -853,11 +853,36 @@ class _Builder:
         if m.walls:
             pairs += [("particle-wall", (a,)) for a in mats]
         for kind, mm in pairs:
-            if m.interface(kind, mm) is None:
+            itf = m.interface(kind, mm)
+            if itf is None:
                 what = " and ".join(map(str, mm))
                 self.fail(f"no contact Interface covers {kind} pairs of "
                           f"material{'s' if len(mm) > 1 else ''} {what}",
                           self.first_use(mm[-1]))
+            if itf.model == "hertz":
+                for mid in mm:
+                    if m.materials[mid].young_modulus is None:
+                        self.fail(f"Interface {itf.id} (Model HertzMindlin) covers material "
+                                  f"{mid}, which needs a YoungModulus (Material {mid}, line "
+                                  f"{m.materials[mid].line})", itf.line)
+        self.check_wall_materials()
+
+    def check_wall_materials(self) -> None:
+        """Box/Wall ``Material m``: defined, one for all walls (for now), with a YoungModulus
+        where a Hertz–Mindlin interface meets it."""
+        m = self.model
+        named = [w for w in m.walls if w.material_id is not None]
+        for w in named:
+            if w.material_id not in m.materials:
+                self.fail(f"wall {w.name}: unknown material {w.material_id}"
+                          f"{self.known(m.materials, 'materials')}", w.line)
+            if m.materials[w.material_id].young_modulus is None:
+                self.fail(f"wall {w.name}: Material {w.material_id} needs a YoungModulus to be "
+                          f"a wall material", w.line)
+        if len({w.material_id for w in m.walls}) > 1:
+            self.fail("walls of different materials are not supported yet: name the same "
+                      "Material on every Box/Wall line, or none (rigid walls)",
+                      (named[0] if named else m.walls[0]).line)
 
     def first_use(self, material: int) -> int:
         """Line of the first particle entry of that material."""
