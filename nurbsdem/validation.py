@@ -28,8 +28,7 @@ from .errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.shape import Shape
-    from .model import Model, WallSpec
-    from .placement import Bodies
+    from .model import Bodies, Model, WallSpec
 
 #: Overlaps (and wall penetrations) up to this fraction of the smaller bounding radius are
 #: accepted as touching (round-off of positions written with a few digits).

@@ -266,7 +266,8 @@ class ParaViewWriter:
     the body's centroid velocity), ``angular_velocity`` (rad/s) — constant over a body;
     cell data ``patch_id``. ``walls``: point data ``wall_id``, ``displacement`` (m); cell
     data ``wall_id``. ``contacts``: one vertex per active contact at the midpoint of its two
-    contact points, point data ``force_normal``, ``force_tangential`` (N, force on body A),
+    contact points, point data ``force_normal``, ``force_tangential`` (N, the force on body
+    B, the second body of the pair — for a particle–wall contact the wall: the particle's push),
     ``penetration`` (m), ``degenerated`` (level), ``body_a``, ``body_b``.
     """
 
