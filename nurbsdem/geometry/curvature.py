@@ -213,6 +213,59 @@ def _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_d
 
 
 @njit(cache=True)
+def _one_radius(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom, ka, kb, pa, pb,
+                ua, va, ub, vb, rot_a, rot_b, sa, sb, n0, n1, n2, ws, d, C, Cw, nin):
+    """One contact of :func:`contact_radii`: (R_eff, b/a, A, B, ok)."""
+    Cw[:, :] = 0.0
+    for side in range(2):
+        kind = ka if side == 0 else kb
+        sg = -1.0 if side == 0 else 1.0      # inward normal of A is -n, of B is +n
+        if kind == KIND_FLAT:
+            continue
+        if kind == KIND_SPHERE:
+            k = 1.0 / (sa if side == 0 else sb)
+            nn = (n0, n1, n2)
+            for r in range(3):
+                for q in range(3):
+                    Cw[r, q] += k * ((1.0 if r == q else 0.0) - nn[r] * nn[q])
+            continue
+        nin[0], nin[1], nin[2] = sg * n0, sg * n1, sg * n2
+        if side == 0:
+            ok = _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom,
+                              pa, ua, va, rot_a, nin, ws, d, C, Cw)
+        else:
+            ok = _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom,
+                              pb, ub, vb, rot_b, nin, ws, d, C, Cw)
+        if not ok:
+            return math.nan, 1.0, math.nan, math.nan, False
+    # tangent basis e, f of n; the 2×2 projection of Cw and its eigenvalues
+    if abs(n0) < 0.9:
+        e0, e1_, e2 = 0.0, -n2, n1
+    else:
+        e0, e1_, e2 = n2, 0.0, -n0
+    en = math.sqrt(e0 * e0 + e1_ * e1_ + e2 * e2)
+    e0, e1_, e2 = e0 / en, e1_ / en, e2 / en
+    f0, f1, f2 = n1 * e2 - n2 * e1_, n2 * e0 - n0 * e2, n0 * e1_ - n1 * e0
+    ev = (e0, e1_, e2)
+    fv = (f0, f1, f2)
+    p00 = 0.0
+    p01 = 0.0
+    p11 = 0.0
+    for r in range(3):
+        for q in range(3):
+            p00 += ev[r] * Cw[r, q] * ev[q]
+            p01 += ev[r] * Cw[r, q] * fv[q]
+            p11 += fv[r] * Cw[r, q] * fv[q]
+    tr = 0.5 * (p00 + p11)
+    dis = math.sqrt(0.25 * (p00 - p11) ** 2 + p01 * p01)
+    A = 0.5 * (tr - dis)
+    B = 0.5 * (tr + dis)
+    r, q = hertz_radius(A, B)
+    # a flat or ruled contact (A -> 0, a line contact): Hertz does not apply
+    return r, q, A, B, bool(math.isfinite(r) and A > 1e-9 * B)
+
+
+@njit(cache=True)
 def contact_radii(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom,
                   kind_a, kind_b, patch_a, patch_b, params, rot_a, rot_b, sphere_a, sphere_b,
                   normal, fallback, r_eff, axis_ratio, curv, status):
@@ -233,73 +286,75 @@ def contact_radii(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_
     Cw = np.zeros((3, 3))
     nin = np.empty(3)
     for c in range(K):
-        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
         curv[c, 0] = math.nan
         curv[c, 1] = math.nan
-        if status[c] != OK:
-            r_eff[c] = fallback[c]
-            axis_ratio[c] = 1.0
-            continue
-        Cw[:, :] = 0.0
-        ok = True
-        for side in range(2):
-            kind = kind_a[c] if side == 0 else kind_b[c]
-            sg = -1.0 if side == 0 else 1.0      # inward normal of A is -n, of B is +n
-            if kind == KIND_FLAT:
-                continue
-            if kind == KIND_SPHERE:
-                rs = sphere_a[c] if side == 0 else sphere_b[c]
-                k = 1.0 / rs
-                nn = (n0, n1, n2)
-                for r in range(3):
-                    for q in range(3):
-                        Cw[r, q] += k * ((1.0 if r == q else 0.0) - nn[r] * nn[q])
-                continue
-            nin[0], nin[1], nin[2] = sg * n0, sg * n1, sg * n2
-            if side == 0:
-                ok = _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw,
-                                  tab_dom, patch_a[c], params[c, 0], params[c, 1], rot_a[c],
-                                  nin, ws, d, C, Cw)
-            else:
-                ok = _side_tensor(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw,
-                                  tab_dom, patch_b[c], params[c, 2], params[c, 3], rot_b[c],
-                                  nin, ws, d, C, Cw)
-            if not ok:
-                break
-        if ok:
-            # tangent basis e1, e2 of n; 2×2 projection of Cw and its eigenvalues
-            if abs(n0) < 0.9:
-                e0, e1_, e2 = 0.0, -n2, n1           # n × x̂ ... any vector ⊥ n
-            else:
-                e0, e1_, e2 = n2, 0.0, -n0
-            en = math.sqrt(e0 * e0 + e1_ * e1_ + e2 * e2)
-            e0, e1_, e2 = e0 / en, e1_ / en, e2 / en
-            f0, f1, f2 = n1 * e2 - n2 * e1_, n2 * e0 - n0 * e2, n0 * e1_ - n1 * e0
-            ev = (e0, e1_, e2)
-            fv = (f0, f1, f2)
-            p00 = 0.0
-            p01 = 0.0
-            p11 = 0.0
-            for r in range(3):
-                for q in range(3):
-                    p00 += ev[r] * Cw[r, q] * ev[q]
-                    p01 += ev[r] * Cw[r, q] * fv[q]
-                    p11 += fv[r] * Cw[r, q] * fv[q]
-            tr = 0.5 * (p00 + p11)
-            dis = math.sqrt(0.25 * (p00 - p11) ** 2 + p01 * p01)
-            A = 0.5 * (tr - dis)
-            B = 0.5 * (tr + dis)
+        if status[c] == OK:
+            r, q, A, B, ok = _one_radius(
+                tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom, kind_a[c],
+                kind_b[c], patch_a[c], patch_b[c], params[c, 0], params[c, 1], params[c, 2],
+                params[c, 3], rot_a[c], rot_b[c], sphere_a[c], sphere_b[c], normal[c, 0],
+                normal[c, 1], normal[c, 2], ws, d, C, Cw, nin)
             curv[c, 0] = A
             curv[c, 1] = B
-            r, q = hertz_radius(A, B)
-            # a flat or ruled contact (A -> 0, a line contact): Hertz does not apply
-            if math.isfinite(r) and A > 1e-9 * B:
+            if ok:
                 r_eff[c] = r
                 axis_ratio[c] = q
                 continue
         status[c] = DEGENERATED
         r_eff[c] = fallback[c]
         axis_ratio[c] = 1.0
+
+
+@njit(cache=True)
+def scene_contact_radii(tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom,
+                        first_patch, body_shape, sphere_radius, bound_radius, R, body_a, body_b,
+                        patch_a, patch_b, params, normal, degenerated, r_eff):
+    """:func:`contact_radii` for the contacts of a scene in one compiled call (what
+    the scene needs): bodies b >= N are flat walls, patch −1 a closed-form sphere
+    (radius ``sphere_radius[shape]``); fallback r_A r_B/(r_A + r_B) (r_A on a wall) of the
+    bounding radii.  Writes r_eff (K,); returns the number of fallbacks."""
+    K = body_a.shape[0]
+    N = body_shape.shape[0]
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    d = np.zeros((6, 3))
+    C = np.zeros((3, 3))
+    Cw = np.zeros((3, 3))
+    nin = np.empty(3)
+    eye = np.eye(3)
+    n_fall = 0
+    for c in range(K):
+        a = body_a[c]
+        b = body_b[c]
+        sa = body_shape[a]
+        wall = b >= N
+        ka = KIND_PATCH if patch_a[c] >= 0 else KIND_SPHERE
+        ga = first_patch[sa] + patch_a[c] if ka == KIND_PATCH else 0
+        if wall:
+            kb = KIND_FLAT
+            gb = 0
+            srb = 1.0
+            fall = bound_radius[a]
+            rot_b = eye
+        else:
+            sb = body_shape[b]
+            kb = KIND_PATCH if patch_b[c] >= 0 else KIND_SPHERE
+            gb = first_patch[sb] + patch_b[c] if kb == KIND_PATCH else 0
+            srb = sphere_radius[sb]
+            fall = bound_radius[a] * bound_radius[b] / (bound_radius[a] + bound_radius[b])
+            rot_b = R[b]
+        ok = False
+        if degenerated[c] == 0:
+            r, q, A, B, ok = _one_radius(
+                tab_deg, tab_ncp, tab_koff, tab_coff, tab_knots, tab_cpw, tab_dom, ka, kb, ga,
+                gb, params[c, 0], params[c, 1], params[c, 2], params[c, 3], R[a], rot_b,
+                sphere_radius[sa], srb, normal[c, 0], normal[c, 1], normal[c, 2], ws, d, C, Cw,
+                nin)
+        if ok:
+            r_eff[c] = r
+        else:
+            r_eff[c] = fall
+            n_fall += 1
+    return n_fall
 
 
 def principal_curvatures(patch, u: float, v: float, inward: np.ndarray | None = None
@@ -345,43 +400,12 @@ def equivalent_radii(table, rows_a_shape: np.ndarray, kind_a, kind_b, patch_a, p
     return r_eff, ratio, curv, status
 
 
-def scene_radii(provider, cs, R: np.ndarray, n_particles: int):
-    """Equivalent radii of the contacts ``cs`` of a :class:`~nurbsdem.contact.scene.SceneContacts`
-    provider (its ContactSet with ``params``, ``patch_a``, ``patch_b``), R (N,3,3) the bodies'
-    rotations.  Exact spheres (patch −1: closed forms) have curvature 1/r, walls are flat,
-    degenerated contacts (LCP level > 0) and degenerate curvature take the bounding-sphere
-    radius r_A r_B / (r_A + r_B) (r_A for a wall).  Returns (r_eff, status, curv)."""
-    a = np.asarray(cs.body_a, np.int64)
-    b = np.asarray(cs.body_b, np.int64)
-    K = a.shape[0]
-    N = n_particles
-    shp = provider.body_shape
-    wall_b = b >= N
-    bb = np.minimum(b, N - 1)
-    sa, sb = shp[a], np.where(wall_b, -1, shp[bb])
-    pa = np.asarray(getattr(cs, "patch_a", np.full(K, -1)), np.int64)
-    pb = np.asarray(getattr(cs, "patch_b", np.full(K, -1)), np.int64)
-    sr = provider.sphere_radius
-    kind_a = np.where(pa >= 0, KIND_PATCH, KIND_SPHERE)
-    kind_b = np.where(wall_b, KIND_FLAT, np.where(pb >= 0, KIND_PATCH, KIND_SPHERE))
-    sph_a = np.where(kind_a == KIND_SPHERE, sr[sa], 1.0)
-    sph_b = np.where(kind_b == KIND_SPHERE, sr[np.maximum(sb, 0)], 1.0)
-    ra = provider.radius[a]
-    rb = np.where(wall_b, np.inf, provider.radius[bb])
-    fallback = np.where(wall_b, ra, ra * rb / (ra + np.where(wall_b, 1.0, rb)))
-    rot_b = np.where(wall_b[:, None, None], np.eye(3)[None], R[bb])
-    params = np.asarray(getattr(cs, "params", np.zeros((K, 4))), float)
-    r_eff, _, curv, status = equivalent_radii(
-        provider.table, np.column_stack([sa, sb]), kind_a, kind_b, pa, pb, params, R[a], rot_b,
-        sph_a, sph_b, cs.normal, fallback, cs.degenerated)
-    return r_eff, status, curv
-
-
 def contact_radii_for(provider, cs, bodies, K: int) -> tuple[np.ndarray, int]:
     """Equivalent Hertz radius (K,) of each contact of ``cs`` and the number that fell back to
     the bounding-sphere radius: a ContactSet with its own ``radius`` (test providers) gives it;
     a :class:`~nurbsdem.contact.scene.SceneContacts` provider the exact curvature
-    (:func:`scene_radii`); any other provider the bounding-sphere radii (all counted)."""
+    (:func:`scene_contact_radii`; its ContactSet carries ``params``, ``patch_a``, ``patch_b``);
+    any other provider the bounding-sphere radii (all counted)."""
     if K == 0:
         return np.zeros(0), 0
     own = getattr(cs, "radius", None)
@@ -389,8 +413,19 @@ def contact_radii_for(provider, cs, bodies, K: int) -> tuple[np.ndarray, int]:
         return np.ascontiguousarray(own, float), 0
     N = bodies.n
     if hasattr(provider, "body_shape") and hasattr(provider, "table"):
-        r, status, _ = scene_radii(provider, cs, bodies.rotations(), N)
-        return r, int(np.count_nonzero(status))
+        deg, ncp, koff, coff, knots, cpw, dom, _ = provider.table.tab
+        r = np.empty(K)
+        k = min(K, np.asarray(cs.params).shape[0])
+        n_fall = scene_contact_radii(
+            deg, ncp, koff, coff, knots, cpw, dom, provider.table.info[:, 0], provider.body_shape,
+            provider.sphere_radius, provider.radius, bodies.rotations(),
+            np.asarray(cs.body_a, np.int64), np.asarray(cs.body_b, np.int64),
+            np.asarray(cs.patch_a, np.int64), np.asarray(cs.patch_b, np.int64),
+            np.ascontiguousarray(cs.params, float), np.ascontiguousarray(cs.normal, float),
+            np.asarray(cs.degenerated, np.int64), r) if k == K else None
+        if n_fall is None:
+            raise ValueError("the ContactSet lacks params/patch_a/patch_b for the Hertz curvature")
+        return r, int(n_fall)
     a = np.asarray(cs.body_a, np.int64)
     b = np.asarray(cs.body_b, np.int64)
     ra = bodies.radius[a]
