@@ -285,3 +285,24 @@ def test_linear_rows_of_the_hertz_kernel_equal_the_linear_kernel():
     np.testing.assert_array_equal(s1, s2)
     for x, y in zip(o1, o2):
         np.testing.assert_array_equal(x, y)
+
+
+def test_patch_indices_of_a_second_shape():
+    """The LCP's local patch index is mapped to the scene's pool (a shape after another one):
+    an ellipsoid listed second, resting on its c axis, gets the radius of its principal radii."""
+    ax = np.array([0.03, 0.02, 0.01])
+    rho, E, nu, g = 1000.0, 1e7, 0.3, 9.81
+    first = shapes.single_patch_sphere(0.01)     # one patch: shifts the ellipsoid's indices
+    sh = shapes.ellipsoid(*ax)
+    m = rho * sh.volume
+    law = _law(E, nu, 0.05, r=0.01, m=m, v=0.05)
+    s = DemSystem(dt=2e-4, gravity=(0, 0, -g), interfaces=InterfaceTable(default=law))
+    s.add_particle(m, rho * sh.inertia, [0, 0, ax[2] + 1e-9], centroid_file=sh.centroid,
+                   radius=sh.bounding_radius)
+    s.add_wall()
+    s.set_contact_provider(SceneContacts([first, sh], np.array([1]),
+                                         walls=[flat_wall([0, 0, 0], [0, 0, 1], [1, 1])]))
+    s.advance(20)
+    Rth = elliptic_hertz_radius(ax[2] / (2 * ax[0] ** 2), ax[2] / (2 * ax[1] ** 2))
+    assert s.c_radius[0] == pytest.approx(Rth, rel=1e-9)
+    assert s.hertz_fallback == 0
