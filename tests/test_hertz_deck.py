@@ -167,3 +167,14 @@ def test_walls_of_different_materials_are_refused(tmp_path):
     p.write_text(text)
     with pytest.raises(InputError, match="walls of different materials"):
         parse_deck(p)
+
+
+def test_random_groups_give_the_reference_linearisation(tmp_path):
+    """The a-priori linearisation takes the lightest particle of Random groups too."""
+    p = _write(tmp_path)
+    p.write_text(p.read_text().replace(
+        "  Particle 2 Shape 2 Material 1 Position 0.05 0.05 0.05\n",
+        "  Random 5 Shapes 2 Counts 3 Material 1 Region 0.02 0.02 0.06 0.08 0.08 0.15 Seed 2\n"))
+    s = Solver(parse_deck(p), output=tmp_path / "out", quiet=True)
+    law = s.interfaces.get(s.mat_index[1], s.mat_index[1])
+    assert law.en > 0 and law.cn > 0 and law.et > 0

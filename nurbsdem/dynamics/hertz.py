@@ -241,7 +241,7 @@ def _wall_material(model) -> int | None:
 def _lightest(model) -> dict[int, tuple[float, float]]:
     """Per particle material id: (smallest mass kg, the bounding radius of that shape m)."""
     out: dict[int, tuple[float, float]] = {}
-    pairs = [(s, g.material_id) for g in model.random_groups for s in g.shapes]
+    pairs = [(s, g.material_id) for g in model.random_groups for s in g.shape_ids]
     pairs += [(p.shape_id, p.material_id) for p in model.particles]
     for sid, mid in pairs:
         if sid not in model.shapes or mid not in model.materials:
