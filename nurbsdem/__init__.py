@@ -11,9 +11,15 @@ the compiled kernels are imported only when a shape is built or loaded)::
 from __future__ import annotations
 
 import importlib
+import os
 from typing import Any
 
 from .errors import GeometryError, InputError, NurbsdemError
+
+# numba's parallel kernels run on its own work queue unless the user chose a layer: with the
+# TBB layer (picked whenever a libtbb is installed, e.g. by Debian's yade) a long run was seen
+# to hang at interpreter exit, spinning in TBB's finaliser after all its output was written.
+os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
 __version__ = "0.1.0"
 
