@@ -306,3 +306,27 @@ def test_patch_indices_of_a_second_shape():
     Rth = elliptic_hertz_radius(ax[2] / (2 * ax[0] ** 2), ax[2] / (2 * ax[1] ** 2))
     assert s.c_radius[0] == pytest.approx(Rth, rel=1e-9)
     assert s.hertz_fallback == 0
+
+
+#: MFIX DEM-05 (the same benchmark as Chung & Ooi's test 4 with Kharaz et al.'s (2001) glass
+#: anvil: aluminium-oxide sphere 5 mm, 3.9 m/s, on soda-lime glass E 70 GPa, ν 0.25, e 0.98,
+#: μ 0.092): tangential restitution against incidence (°), from the MFIX verification manual
+#: (https://mfix.netl.doe.gov/doc/vvuq-manual/main/html/dem/dem-05.html, values as digitised in
+#: Lethe's oblique-wall-impact example)
+MFIX_DEM05 = [(8.49, 0.7507), (12.183, 0.657), (19.777, 0.617), (25.575, 0.641),
+              (30.416, 0.687), (39.107, 0.7773), (49.977, 0.844), (60.747, 0.897)]
+
+
+@pytest.mark.parametrize("angle, et_ref", MFIX_DEM05)
+def test_oblique_impact_on_glass_against_the_mfix_benchmark(angle, et_ref):
+    """Stick, microslip and sliding regimes: e_t within 0.015 of the published DEM curve from
+    8.5° on (below ~6° the published codes differ among themselves and from Kharaz et al.'s
+    measurements; our 0.86 at 3° lies between MFIX's 0.97 and the measured 0.75)."""
+    r, rho, E, nu, mu, v = 2.5e-3, 4000.0, 3.8e11, 0.23, 0.092, 3.9
+    m = rho * 4 / 3 * math.pi * r ** 3
+    law = _law(E, nu, 0.98, mu=mu, E_b=7e10, nu_b=0.25, r=r, m=m, v=v)
+    th = hertz_impact(law.e_star, r, m, v * math.cos(math.radians(angle)))
+    s, _ = _sphere_system(law, r, rho, v, th["duration"] / 400, wall=True, angle=angle)
+    _run_impact(s, 2000)
+    et = s.bodies.v[0, 0] / (v * math.sin(math.radians(angle)))
+    assert et == pytest.approx(et_ref, abs=0.015)
