@@ -148,6 +148,9 @@ def test_restitution_map_is_velocity_independent_and_beats_the_linear_formula():
         out.append(s.bodies.v[0, 2] / v)
     assert out[0] == pytest.approx(out[1], rel=2e-3)
     assert out[0] == pytest.approx(0.6, rel=1e-2)
+    # the linear oscillator's mapping (LIGGGHTS/EDEM) would miss it by far more
+    from nurbsdem.dynamics.hertz import _impact_restitution, linear_beta_zeta
+    assert abs(_impact_restitution(linear_beta_zeta(0.6)) - 0.6) > 0.02
 
 
 # ---------------------------------------------------------------------------- oblique (Chung & Ooi)

@@ -16,10 +16,11 @@ restitution of a Hertz impact does not depend on the impact velocity (Antypov & 
 the impact equation becomes x'' = −x^{3/2} − 2√(3/2) ζ x^{1/4} x' in the units δ0 =
 (m* v0² / K)^{2/5}, t0 = δ0/v0), which is what a restitution coefficient asks for; a constant
 dashpot would make e fall with the speed.  The ζ of a given e is **not** taken from the linear
-oscillator's β = −ln e / √(ln² e + π²) (√(5/6) β in LIGGGHTS/EDEM, which misses the target by
-up to several per cent for Hertz); it is the root of that dimensionless impact equation, solved
-once per interface (:func:`damping_ratio`), with the same no-tension clip as the force kernel,
-so an impact returns the deck's e to the accuracy of the integration.
+oscillator's β = −ln e / √(ln² e + π²) (√(5/6) β in LIGGGHTS/EDEM: with the no-tension clip it
+returns e = 0.40 for 0.3, 0.55 for 0.5, 0.21 for 0.05); it is the root of that dimensionless
+impact equation, solved once per interface (:func:`damping_ratio`, 0.2–0.6 s), with the same
+no-tension clip as the force kernel, so an impact returns the deck's e to the accuracy of the
+integration.
 
 Tangential force (Mindlin, no-slip stiffness of the same contact size)::
 
