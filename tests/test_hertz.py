@@ -15,6 +15,7 @@ from nurbsdem.contact.scene import SceneContacts
 from nurbsdem.dynamics import DemSystem, InterfaceTable
 from nurbsdem.dynamics.hertz import (HertzMindlinLaw, damping_ratio, effective_moduli,
                                      hertz_impact, reference_linearisation)
+from nurbsdem.dynamics.rigid import omega_world
 from nurbsdem.geometry.curvature import hertz_radius, principal_curvatures
 from nurbsdem.geometry.generators import flat_wall
 
@@ -64,7 +65,7 @@ def test_principal_curvatures_of_an_ellipsoid_at_its_tips():
 
 
 # ---------------------------------------------------------------------------- impacts
-def _sphere_system(law, r, rho, v, dt, wall, mu_spin=None, angle=0.0):
+def _sphere_system(law, r, rho, v, dt, wall, angle=0.0):
     sh = shapes.sphere(r)
     m = rho * sh.volume
     J = rho * sh.inertia
@@ -164,10 +165,7 @@ def _oblique(angle_deg):
     s, _ = _sphere_system(law, r, rho, v, th["duration"] / 400, wall=True, angle=angle_deg)
     _run_impact(s, 2000)
     vx, vz = s.bodies.v[0, 0], s.bodies.v[0, 2]
-    w = s.bodies.omega_world()[0, 1] if hasattr(s.bodies, "omega_world") else None
-    if w is None:
-        from nurbsdem.dynamics.rigid import omega_world
-        w = omega_world(s.bodies.q, s.bodies.L, 1.0 / s.bodies.I)[0, 1]
+    w = omega_world(s.bodies.q, s.bodies.L, 1.0 / s.bodies.I)[0, 1]
     vt, vn = v * math.sin(math.radians(angle_deg)), v * math.cos(math.radians(angle_deg))
     return dict(et=vx / vt, en=vz / vn, omega=w, rebound=math.degrees(math.atan((vx - r * w) / vz)),
                 vt=vt, vn=vn, r=r, mu=mu)

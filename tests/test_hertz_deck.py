@@ -2,7 +2,6 @@
 Box/Wall Material; the input errors; a run that writes the contact radius and stiffness."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import meshio
