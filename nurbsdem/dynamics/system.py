@@ -541,7 +541,10 @@ class DemSystem:
         eel = np.empty((K, 2))
         stick = np.empty(K, dtype=np.int64)
         pos, vel, omg = self._all_kinematics()
-        if not has_hertz(self._table):
+        hertz = self.__dict__.get("_hertz_table")
+        if hertz is None:        # the table is fixed once initialised
+            hertz = self._hertz_table = has_hertz(self._table)
+        if not hertz:
             slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
                                   spring, h, force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick)
             self.c_coeffs = self.c_radius = np.zeros((0,))     # _network: the table's
