@@ -331,3 +331,24 @@ def test_oblique_impact_on_glass_against_the_mfix_benchmark(angle, et_ref):
     _run_impact(s, 2000)
     et = s.bodies.v[0, 0] / (v * math.sin(math.radians(angle)))
     assert et == pytest.approx(et_ref, abs=0.015)
+
+
+def test_step_control_follows_the_nonlinear_stiffness():
+    """A sphere at rest on a wall under 100× the load: the tangent stiffness 2E*√(Rδ) grows as
+    F^{1/3}, so the network's critical step falls as F^{-1/6} (ζ is constant)."""
+    r, rho, E, nu = 0.01, 1000.0, 1e7, 0.3
+    sh = shapes.sphere(r)
+    m = rho * sh.volume
+    law = _law(E, nu, 0.5, r=r, m=m, v=0.1)
+    out = []
+    for g in (9.81, 981.0):
+        s = DemSystem(dt=2e-4, gravity=(0, 0, -g), interfaces=InterfaceTable(default=law))
+        s.add_particle(m, rho * sh.inertia, [0, 0, r + 1e-9], centroid_file=sh.centroid,
+                       radius=sh.bounding_radius)
+        s.add_wall()
+        s.set_contact_provider(SceneContacts([sh], np.array([0]),
+                                             walls=[flat_wall([0, 0, 0], [0, 0, 1], [1, 1])]))
+        s.advance(200)
+        s._control_step(initial=True)        # an exact (Lanczos) estimate now
+        out.append(s.dt_network)
+    assert out[0] / out[1] == pytest.approx(100 ** (1 / 6), rel=2e-2)
