@@ -450,12 +450,13 @@ class DemSystem:
         zeta = self._apriori_zeta if self.dt_apriori <= self.dt_network else self._network_zeta
         if zeta > 1.0:
             lever = (f"the damping limits it (zeta {zeta:.3g} > 1: the dashpots' rate, not the "
-                     f"springs, sets the step): a smaller NormalDamping / TangentialDamping "
-                     f"would allow a larger one")
+                     f"springs, sets the step): less damping (NormalDamping / TangentialDamping; "
+                     f"Hertz-Mindlin: a higher Restitution) would allow a larger one")
         else:
-            lever = ("the stiffness limits it: a softer NormalPenalty / TangentialPenalty or "
-                     "heavier particles would allow a larger one")
-        log.warning("the deck's TimeStep %.4g s is sub-stepped %d times (internal step %.4g s, "
+            lever = ("the stiffness limits it: softer contacts (NormalPenalty / "
+                     "TangentialPenalty; Hertz-Mindlin: YoungModulus) or heavier particles would "
+                     "allow a larger one")
+        log.warning("the time step %.4g s is sub-stepped %d times (internal step %.4g s, "
                     "%.2f of the critical step): %s; %s", self.dt, self.substeps,
                     self.dt_internal, self.dt_internal / self.dt_critical, lever, why)
 
