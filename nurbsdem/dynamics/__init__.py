@@ -2,7 +2,8 @@
 energy accounting and time-step control.  See :mod:`nurbsdem.dynamics.system` for the API."""
 from __future__ import annotations
 
-from .analytic_contact import SimpleContactSet, SpherePlaneProvider, sphere_inertia
+from .analytic_contact import SpherePlaneProvider, sphere_inertia
+from .contactset import ContactSet
 from .energy import EnergyLedger, EnergySample
 from .forces import ContactLaw, InterfaceTable
 from .rigid import PrescribedMotion, RigidBodies, Walls, principal_frame
@@ -10,5 +11,5 @@ from .system import DemSystem, InstabilityError, Kinematics, critical_step
 
 __all__ = ["DemSystem", "InstabilityError", "Kinematics", "critical_step", "ContactLaw",
            "InterfaceTable", "PrescribedMotion", "RigidBodies", "Walls", "principal_frame",
-           "EnergySample", "EnergyLedger", "SpherePlaneProvider", "SimpleContactSet",
+           "EnergySample", "EnergyLedger", "SpherePlaneProvider", "ContactSet",
            "sphere_inertia"]

@@ -1,6 +1,6 @@
 """Analytic contact providers (spheres and planes) to verify the dynamics without NURBS.
 
-:class:`SpherePlaneProvider` returns a :class:`SimpleContactSet` (the DEVNOTES ContactSet fields)
+:class:`SpherePlaneProvider` returns a :class:`~nurbsdem.dynamics.contactset.ContactSet`
 for spheres of given radii (centred on the particle centroids) and half-space walls (a plane
 through ``point`` with unit normal ``normal`` pointing into the domain, translated by the wall's
 prescribed displacement).  Pair convention: sphere–sphere i < j gives body_a = i, body_b = j;
@@ -9,27 +9,9 @@ sphere–wall gives body_a = particle, body_b = wall, normal from the sphere tow
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-
-@dataclass
-class SimpleContactSet:
-    """Arrays over K active contacts (DEVNOTES ContactSet)."""
-
-    body_a: np.ndarray
-    body_b: np.ndarray
-    point_a: np.ndarray
-    point_b: np.ndarray
-    normal: np.ndarray
-    depth: np.ndarray
-    key: np.ndarray
-    degenerated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    monitored: int = 0
-    active: int = 0
-    degenerated_count: int = 0
-    failed: int = 0
+from .contactset import ContactSet
 
 
 class SpherePlaneProvider:
@@ -46,7 +28,7 @@ class SpherePlaneProvider:
             nrm = nrm / np.linalg.norm(nrm, axis=1)[:, None]
         self.plane_normals = nrm
 
-    def __call__(self, kin) -> SimpleContactSet:
+    def __call__(self, kin) -> ContactSet:
         x = kin.x
         r = self.radii
         N = x.shape[0]
@@ -76,14 +58,13 @@ class SpherePlaneProvider:
                 PA.append(x[idx] - r[idx][:, None] * nw[None])
                 PB.append(x[idx] - h[idx][:, None] * nw[None])
         if not A:
-            z3 = np.zeros((0, 3)); zi = np.zeros(0, dtype=np.int64)
-            return SimpleContactSet(zi, zi.copy(), z3, z3.copy(), z3.copy(), np.zeros(0), zi.copy())
+            return ContactSet.empty()
         a = np.concatenate(A).astype(np.int64)
         b = np.concatenate(B).astype(np.int64)
         K = a.size
-        return SimpleContactSet(a, b, np.concatenate(PA), np.concatenate(PB), np.concatenate(NR),
-                                np.concatenate(D), a * nb + b, np.zeros(K, dtype=np.int64),
-                                monitored=K, active=K)
+        return ContactSet(a, b, np.concatenate(PA), np.concatenate(PB), np.concatenate(NR),
+                          np.concatenate(D), a * nb + b, np.zeros(K, dtype=np.int64),
+                          monitored=K, active=K)
 
 
 def sphere_inertia(mass: float, radius: float) -> np.ndarray:
