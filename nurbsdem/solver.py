@@ -37,7 +37,7 @@ from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
 from .geometry.rotation import matrix_to_quat, quat_to_matrix
-from .io.checkpoint import load_checkpoint, save_checkpoint
+from .io.checkpoint import save_checkpoint
 from .io.writers import OutputWriters
 from .model import Bodies, DynamicStep, Model, MoveWallStep, ReplicateStep
 from .placement import replicate_step
@@ -167,10 +167,13 @@ class Solver:
         self._finished_once = False
         self._restored: dict | None = None
         self._wall0 = time.perf_counter()
-        # materials: deck ids -> 0..M-1; walls get material M
+        # materials: deck ids -> 0..M-1; walls: M + k, k the index of their material among the
+        # walls' materials (None, rigid walls, first)
         mats = sorted(model.materials)
         self.mat_index = {m: i for i, m in enumerate(mats)}
-        self.wall_material = len(mats)
+        wall_mats = sorted({w.material_id for w in model.walls},
+                           key=lambda m: (m is not None, m if m is not None else 0))
+        self.wall_index = {wm: len(mats) + k for k, wm in enumerate(wall_mats)}
         self.shape_ids = sorted(model.shapes)
         self.shape_index = {s: i for i, s in enumerate(self.shape_ids)}
         self.shapes = [model.shapes[s].shape for s in self.shape_ids]
@@ -200,9 +203,9 @@ class Solver:
         table = InterfaceTable(default=None)
         mats = sorted(self.mat_index)
 
-        def law(itf, ma, mb=None):
-            if itf.model == "hertz":     # Hertz–Mindlin (mb None: the walls)
-                return hertz_law_from_deck(self.model, itf, ma, mb)
+        def law(itf, ma, mb=None, wall=None):
+            if itf.model == "hertz":     # Hertz–Mindlin (mb None: a wall of material `wall`)
+                return hertz_law_from_deck(self.model, itf, ma, mb, wall)
             return ContactLaw(en=itf.normal_penalty, cn=itf.normal_damping,
                               et=itf.tangential_penalty, ct=itf.tangential_damping,
                               mu=itf.friction)
@@ -213,7 +216,8 @@ class Solver:
                     table.set(self.mat_index[ma], self.mat_index[mb], law(itf, ma, mb))
             itf = self.model.interface("particle-wall", (ma,))
             if itf is not None:
-                table.set(self.mat_index[ma], self.wall_material, law(itf, ma))
+                for wm, k in self.wall_index.items():
+                    table.set(self.mat_index[ma], k, law(itf, ma, wall=wm))
         return table
 
     def _compliance(self, shape_id: int, rho: float) -> tuple[float, float]:
@@ -246,7 +250,7 @@ class Solver:
                               centroid_file=entry.centroid, radius=entry.bounding_radius,
                               compliance=self._compliance(int(b.shape_id[i]), rho))
         for k, w in enumerate(model.walls):
-            sysm.add_wall(motions[k], material=self.wall_material, name=w.name)
+            sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
         body_shape = np.array([self.shape_index[int(s)] for s in b.shape_id], np.int64)
         if self.scene is None or self.scene.n != len(b):
             self.scene = SceneContacts(self.shapes, body_shape, self._wall_patches(),

@@ -89,8 +89,8 @@ def test_wall_material_sets_the_effective_modulus(tmp_path):
     rigid = Solver(parse_deck(_write(tmp_path)), output=tmp_path / "o1", quiet=True)
     steel = Solver(parse_deck(_write(tmp_path, box="Material 2")), output=tmp_path / "o2",
                    quiet=True)
-    lw_r = rigid.interfaces.get(rigid.mat_index[1], rigid.wall_material)
-    lw_s = steel.interfaces.get(steel.mat_index[1], steel.wall_material)
+    lw_r = rigid.interfaces.get(rigid.mat_index[1], rigid.wall_index[None])
+    lw_s = steel.interfaces.get(steel.mat_index[1], steel.wall_index[2])
     assert isinstance(lw_r, HertzMindlinLaw)
     assert lw_r.e_star == pytest.approx(7e9 / (1 - 0.09))
     assert lw_s.e_star == pytest.approx(effective_moduli(7e9, 0.3, 2e11, 0.29)[0])
@@ -165,13 +165,26 @@ def test_check_refuses_missing_constants(tmp_path, box, mats, message):
         parse_deck(_write(tmp_path, box=box, mats=mats))
 
 
-def test_walls_of_different_materials_are_refused(tmp_path):
+def test_each_wall_takes_its_own_material(tmp_path):
+    """A steel box with a lid of material 1 and a rigid wall: three wall materials, each with
+    its own effective modulus against the particles (the lid, named on its line only, does not
+    turn the box into material 1, nor the box the rigid wall into steel)."""
     p = _write(tmp_path, box="Material 2")
     text = p.read_text().replace(
-        "Walls\n", "Walls\n  Wall 20 Name lid Point 0.05 0.05 0.19 Normal 0 0 -1 Size 0.1 0.1 Material 1\n")
+        "Walls\n", "Walls\n  Wall 20 Name lid Point 0.05 0.05 0.19 Normal 0 0 -1 Size 0.1 0.1 "
+        "Material 1\n  Wall 21 Name plate Point 0.05 0.05 0.18 Normal 0 0 -1 Size 0.02 0.02\n")
     p.write_text(text)
-    with pytest.raises(InputError, match="walls of different materials"):
-        parse_deck(p)
+    s = Solver(parse_deck(p), output=tmp_path / "out", quiet=True)
+    m1 = s.mat_index[1]
+    lid, box, plate = (s.interfaces.get(m1, s.wall_index[k]) for k in (1, 2, None))
+    assert lid.e_star == pytest.approx(effective_moduli(7e9, 0.3, 7e9, 0.3)[0])
+    assert box.e_star == pytest.approx(effective_moduli(7e9, 0.3, 2e11, 0.29)[0])
+    assert plate.e_star == pytest.approx(7e9 / (1 - 0.09))
+    walls = {w.name: k for k, w in enumerate(s.model.walls)}
+    sysm = s._build_system(1e-3, s._fixed_motions())
+    mats = sysm.walls.material
+    assert mats[walls["lid"]] == s.wall_index[1] and mats[walls["bottom"]] == s.wall_index[2]
+    assert mats[walls["plate"]] == s.wall_index[None]
 
 
 def test_random_groups_give_the_reference_linearisation(tmp_path):

@@ -189,16 +189,18 @@ class HertzMindlinLaw:
         return row
 
 
-def law_from_deck(model, itf, mat_a: int, mat_b: int | None) -> HertzMindlinLaw:
+def law_from_deck(model, itf, mat_a: int, mat_b: int | None,
+                  wall_material: int | None = None) -> HertzMindlinLaw:
     """The Hertz–Mindlin law of deck interface ``itf`` between particle materials mat_a and
-    mat_b (deck ids; mat_b None: the walls), with its reference linearisation from the lightest
-    particles of those materials, their bounding radii and a reference speed: the largest of
-    1 m/s, the particles' initial speeds and the free-fall speed over the scene's height."""
+    mat_b (deck ids; mat_b None: a wall of material ``wall_material``, None: rigid), with its
+    reference linearisation from the lightest particles of those materials, their bounding
+    radii and a reference speed: the largest of 1 m/s, the particles' initial speeds and the
+    free-fall speed over the scene's height."""
     mats = model.materials
     ma = mats[mat_a]
     E_a, nu_a = _elastic(model, ma, itf)
     if mat_b is None:
-        wm = _wall_material(model)
+        wm = wall_material
         E_b, nu_b = (math.inf, 0.0) if wm is None else _elastic(model, mats[wm], itf)
     else:
         E_b, nu_b = _elastic(model, mats[mat_b], itf)
@@ -224,19 +226,6 @@ def _elastic(model, mat, itf) -> tuple[float, float]:
         raise model.error(f"Interface {itf.id} (Model HertzMindlin) needs YoungModulus on "
                           f"Material {mat.id} (line {mat.line})", itf.line)
     return float(E), float(getattr(mat, "poisson_ratio", 0.0) or 0.0)
-
-
-def _wall_material(model) -> int | None:
-    ids = {getattr(w, "material_id", None) for w in model.walls}
-    ids.discard(None)
-    for w in model.walls:
-        if w.material_id is not None and w.material_id not in model.materials:
-            raise model.error(f"wall {w.name}: Material {w.material_id} is not defined", w.line)
-    if len(ids) > 1:
-        raise model.error("walls of different materials are not supported yet: name one "
-                          "Material on every Box/Wall line (or none: rigid)",
-                          model.walls[0].line)
-    return ids.pop() if ids else None
 
 
 def _lightest(model) -> dict[int, tuple[float, float]]:

@@ -868,8 +868,8 @@ class _Builder:
         self.check_wall_materials()
 
     def check_wall_materials(self) -> None:
-        """Box/Wall ``Material m``: defined, one for all walls (for now), with a YoungModulus
-        where a Hertz–Mindlin interface meets it."""
+        """Box/Wall ``Material m``: defined, with a YoungModulus (a wall's material matters only
+        to Hertz–Mindlin interfaces; walls without one are rigid)."""
         m = self.model
         named = [w for w in m.walls if w.material_id is not None]
         for w in named:
@@ -879,10 +879,6 @@ class _Builder:
             if m.materials[w.material_id].young_modulus is None:
                 self.fail(f"wall {w.name}: Material {w.material_id} needs a YoungModulus to be "
                           f"a wall material", w.line)
-        if len({w.material_id for w in m.walls}) > 1:
-            self.fail("walls of different materials are not supported yet: name the same "
-                      "Material on every Box/Wall line, or none (rigid walls)",
-                      (named[0] if named else m.walls[0]).line)
 
     def first_use(self, material: int) -> int:
         """Line of the first particle entry of that material."""
