@@ -102,7 +102,7 @@ def check_body_overlaps(model: "Model", bodies: "Bodies", index: Sequence[int] |
 
 def _overlap_text(bodies: "Bodies", i: int, j: int, depth: float, tol: float) -> str:
     what = ("is at the same place as" if math.isinf(depth)
-            else f"overlaps particle")
+            else "overlaps particle")
     if math.isinf(depth):
         return (f"particle {bodies.id[i]} {what} particle {bodies.id[j]} (their centroids "
                 f"coincide)")

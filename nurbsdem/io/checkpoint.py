@@ -205,8 +205,6 @@ def save_checkpoint(path: str | Path, state: Mapping[str, Any]) -> None:
     The file is HDF5: a group per dict/list, a dataset per value, each tagged with its kind;
     file attributes ``format`` and ``nurbsdem_version``.
     """
-    import h5py
-
     from .. import __version__
 
     if not isinstance(state, Mapping):

@@ -585,8 +585,6 @@ class ResultsWriter:
             self._create(deck_text, deck_path)
 
     def _create(self, deck_text: str, deck_path: str) -> None:
-        import h5py
-
         from .. import __version__
 
         def fill(f) -> None:
@@ -609,8 +607,6 @@ class ResultsWriter:
 
     def _rewrite(self, edit) -> None:
         """Copy the file, apply ``edit(h5file)``, fsync, rename into place."""
-        import h5py
-
         pending = sum(d[k].nbytes for _, d in self._pending for k in d)
         ensure_space(self.path.parent, 2 * (self.path.stat().st_size + pending) + 1024 * 1024)
         write_hdf5_atomically(self.path, edit, source=self.path)
