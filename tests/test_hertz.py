@@ -257,37 +257,6 @@ def test_pole_and_seam_of_a_single_patch_sphere():
     assert st[3] == 1 and R[3] == 99.0
 
 
-def test_linear_rows_of_the_hertz_kernel_equal_the_linear_kernel():
-    """Mixed decks: linear interfaces evaluated by the Hertz kernel give the same bits."""
-    from nurbsdem.dynamics import ContactLaw
-    from nurbsdem.dynamics.forces import contact_forces
-    from nurbsdem.dynamics.hertz import contact_forces_hm
-    rng = np.random.default_rng(3)
-    K, B = 7, 5
-    tab = InterfaceTable(default=ContactLaw(en=1e5, cn=30.0, et=4e4, ct=2.0, mu=0.4)).as_array(1)
-    a = rng.integers(0, 2, K)
-    b = a + 1 + rng.integers(0, 2, K)
-    args = [a, b, rng.normal(size=(K, 3)), rng.normal(size=(K, 3))]
-    n = rng.normal(size=(K, 3))
-    args += [n / np.linalg.norm(n, axis=1)[:, None], rng.uniform(0, 1e-3, K),
-             rng.normal(size=(B, 3)), rng.normal(size=(B, 3)), rng.normal(size=(B, 3)),
-             np.zeros(B, np.int64), tab]
-    spring = rng.normal(size=(K, 3)) * 1e-4
-
-    def outs():
-        return [np.zeros((B, 3)), np.zeros((B, 3)), np.empty((K, 3)), np.empty((K, 3)),
-                np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty(K),
-                np.empty((K, 2)), np.empty(K, np.int64)]
-    o1, o2 = outs(), outs()
-    s1, s2 = spring.copy(), spring.copy()
-    w1 = contact_forces(*args, s1, 1e-4, *o1)
-    w2 = contact_forces_hm(*args, s2, 1e-4, np.ones(B), np.full(K, 0.01), *o2, np.empty((K, 4)))
-    assert w1 == w2
-    np.testing.assert_array_equal(s1, s2)
-    for x, y in zip(o1, o2):
-        np.testing.assert_array_equal(x, y)
-
-
 def test_patch_indices_of_a_second_shape():
     """The LCP's local patch index is mapped to the scene's pool (a shape after another one):
     an ellipsoid listed second, resting on its c axis, gets the radius of its principal radii."""

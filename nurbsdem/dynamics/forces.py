@@ -55,6 +55,8 @@ from ..errors import InputError
 EN, CN, ET, CT, MU = 0, 1, 2, 3, 4
 #: Hertz–Mindlin columns (:mod:`nurbsdem.dynamics.hertz`): model id, E* (Pa), G* (Pa), ζ (-)
 MODEL, ESTAR, GSTAR, ZETA = 5, 6, 7, 8
+#: values of the MODEL column
+LINEAR, HERTZ = 0, 1
 #: number of columns
 NCOL = 9
 
@@ -155,27 +157,26 @@ def _cross(a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
-def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
-                   point_b: np.ndarray, normal: np.ndarray, depth: np.ndarray,
-                   pos: np.ndarray, vel: np.ndarray, omg: np.ndarray, material: np.ndarray,
-                   table: np.ndarray, spring: np.ndarray, h: float,
-                   force: np.ndarray, torque: np.ndarray,
-                   point: np.ndarray, f_total: np.ndarray, f_damp_n: np.ndarray,
-                   f_damp_t: np.ndarray, f_el_t: np.ndarray, fn_out: np.ndarray,
-                   e_el: np.ndarray, stick: np.ndarray) -> float:
-    """Evaluate Eq. 16–17 for K contacts and accumulate loads on the bodies.
+def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
+                      table, spring, h, inv_mass, radius, force, torque, point, f_total, f_damp_n,
+                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs) -> float:
+    """Evaluate the contact law of each of K contacts and accumulate loads on the bodies:
+    Eq. 16–17 (module docstring) for linear rows of the table (MODEL 0), Hertz–Mindlin
+    (:mod:`nurbsdem.dynamics.hertz`) for MODEL 1 rows.
 
     Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
-    angular velocity; material (B,) ids; table (M,M,5); spring (K,3) history from the previous
+    angular velocity; material (B,) ids; table (M,M,9); spring (K,3) history from the previous
     evaluation (updated **in place** to the new spring); h (s) the time since that evaluation
-    (0 for the initial evaluation: no spring increment).
+    (0 for the initial evaluation: no spring increment); inv_mass (B,) 1/kg (walls 0) and radius
+    (K,) the equivalent contact radius (m), both used by Hertz rows only.
 
     Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
     f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts
-    (normal: (f_n − εn d) n, includes the clip), f_el_t (K,3) its tangential elastic (spring)
-    part, fn_out (K,) f_n (N), e_el (K,2) elastic energies
-    ½ εn d² and ½ εt |s|² (J), stick (K,) 1 stick / 0 slip.  Returns the return mapping's
-    slip-work estimate (J) (a diagnostic; the energy ledger uses the exact spring work instead).
+    (normal: (f_n − elastic) n, includes the clip), f_el_t (K,3) its tangential elastic (spring)
+    part, fn_out (K,) f_n (N), e_el (K,2) normal and tangential elastic energies (J), stick (K,)
+    1 stick / 0 slip, coeffs (K,4) (k_n, c_n, k_t, c_t): the tangent stiffnesses (N/m) and
+    damping (N s/m) for the time-step control.  Returns the return mapping's slip-work estimate
+    (J) (a diagnostic; the energy ledger uses the exact spring work instead).
     """
     slip_work = 0.0
     K = body_a.shape[0]
@@ -183,7 +184,6 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
         a = body_a[c]
         b = body_b[c]
         law = table[material[a], material[b]]
-        en, cn, et, ct, mu = law[0], law[1], law[2], law[3], law[4]
         n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
         p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
         p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
@@ -199,12 +199,31 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
         wn = w0 * n0 + w1 * n1 + w2 * n2
         d = depth[c]
         ddot = -wn
-        fel = en * d
+        mu = law[MU]
+        aa = 0.0
+        dp = 0.0
+        if law[MODEL] == HERTZ:
+            dp = d if d > 0.0 else 0.0
+            aa = math.sqrt(radius[c] * dp)
+            knt = 2.0 * law[ESTAR] * aa
+            et = 8.0 * law[GSTAR] * aa
+            imass = inv_mass[a] + inv_mass[b]
+            meff = 1.0 / imass if imass > 0.0 else 0.0
+            cn = 2.0 * law[ZETA] * math.sqrt(knt * meff)
+            ct = 2.0 * law[ZETA] * math.sqrt(et * meff)
+            fel = (2.0 / 3.0) * knt * dp          # (4/3) E* √R δ^{3/2}
+            eel_n = 0.4 * fel * dp
+            coeffs[c, 0] = knt
+        else:
+            en, cn, et, ct = law[EN], law[CN], law[ET], law[CT]
+            fel = en * d
+            eel_n = 0.5 * en * d * d
+            coeffs[c, 0] = en
+        coeffs[c, 1], coeffs[c, 2], coeffs[c, 3] = cn, et, ct
         fn = fel + cn * ddot
         if fn < 0.0:
             fn = 0.0
         fdn = fn - fel
-        # tangential spring: rotate into the current tangent plane, keep length
         s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
         smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         sn = s0 * n0 + s1 * n1 + s2 * n2
@@ -212,6 +231,12 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
         spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         if spm > 0.0:
             sc = smag / spm
+            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
+        if law[MODEL] == HERTZ and ddot > 0.0 and aa > 0.0:
+            # loading: the force so far keeps its value, the increment takes the new stiffness
+            # (k_t,old s = k_t,new s'); unloading keeps s, so the force falls with k_t
+            d_old = dp - h * ddot
+            sc = math.sqrt(radius[c] * d_old) / aa if d_old > 0.0 else 0.0
             s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
         wt0, wt1, wt2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
         s0, s1, s2 = s0 + h * wt0, s1 + h * wt1, s2 + h * wt2
@@ -237,7 +262,7 @@ def contact_forces(body_a: np.ndarray, body_b: np.ndarray, point_a: np.ndarray,
         f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
         f_el_t[c, 0], f_el_t[c, 1], f_el_t[c, 2] = fe0, fe1, fe2
         fn_out[c] = fn
-        e_el[c, 0] = 0.5 * en * d * d
+        e_el[c, 0] = eel_n
         e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
         force[b, 0] += F0
         force[b, 1] += F1

@@ -55,13 +55,11 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
 
 from ..errors import InputError
-from .forces import CN, CT, EN, ET, ESTAR, GSTAR, MODEL, MU, ZETA, _cross
+from .forces import CN, CT, EN, ET, ESTAR, GSTAR, HERTZ, MODEL, MU, ZETA
 
 #: model ids in the table's MODEL column
-LINEAR, HERTZ = 0, 1
 
 
 # ---------------------------------------------------------------------------- material pairs
@@ -262,121 +260,6 @@ def _reference_speed(model) -> float:
 
 
 # ---------------------------------------------------------------------------- the kernel
-@njit(cache=True)
-def contact_forces_hm(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
-                      table, spring, h, inv_mass, radius, force, torque, point, f_total, f_damp_n,
-                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs) -> float:
-    """:func:`~nurbsdem.dynamics.forces.contact_forces` for tables with Hertz–Mindlin rows.
-
-    Linear rows (MODEL 0) are evaluated exactly as there; Hertz rows (MODEL 1) with the
-    module's law.  Extra inputs: inv_mass (B,) 1/kg of every body (walls 0); radius (K,) the
-    equivalent radius of each contact (m; unused by linear rows).  Extra output: coeffs (K,4)
-    (k_n, c_n, k_t, c_t) per contact — the tangent stiffnesses (N/m) and damping (N s/m) for
-    the time-step control.
-    """
-    slip_work = 0.0
-    K = body_a.shape[0]
-    for c in range(K):
-        a = body_a[c]
-        b = body_b[c]
-        law = table[material[a], material[b]]
-        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
-        p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
-        p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
-        p2 = 0.5 * (point_a[c, 2] + point_b[c, 2])
-        point[c, 0], point[c, 1], point[c, 2] = p0, p1, p2
-        ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
-        rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
-        wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
-        wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
-        w0 = vel[b, 0] + wb0 - vel[a, 0] - wa0
-        w1 = vel[b, 1] + wb1 - vel[a, 1] - wa1
-        w2 = vel[b, 2] + wb2 - vel[a, 2] - wa2
-        wn = w0 * n0 + w1 * n1 + w2 * n2
-        d = depth[c]
-        ddot = -wn
-        mu = law[MU]
-        aa = 0.0
-        dp = 0.0
-        if law[MODEL] == HERTZ:
-            dp = d if d > 0.0 else 0.0
-            aa = math.sqrt(radius[c] * dp)
-            knt = 2.0 * law[ESTAR] * aa
-            et = 8.0 * law[GSTAR] * aa
-            imass = inv_mass[a] + inv_mass[b]
-            meff = 1.0 / imass if imass > 0.0 else 0.0
-            cn = 2.0 * law[ZETA] * math.sqrt(knt * meff)
-            ct = 2.0 * law[ZETA] * math.sqrt(et * meff)
-            fel = (2.0 / 3.0) * knt * dp          # (4/3) E* √R δ^{3/2}
-            eel_n = 0.4 * fel * dp
-            coeffs[c, 0] = knt
-        else:
-            en, cn, et, ct = law[EN], law[CN], law[ET], law[CT]
-            fel = en * d
-            eel_n = 0.5 * en * d * d
-            coeffs[c, 0] = en
-        coeffs[c, 1], coeffs[c, 2], coeffs[c, 3] = cn, et, ct
-        fn = fel + cn * ddot
-        if fn < 0.0:
-            fn = 0.0
-        fdn = fn - fel
-        s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
-        smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        sn = s0 * n0 + s1 * n1 + s2 * n2
-        s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
-        spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        if spm > 0.0:
-            sc = smag / spm
-            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
-        if law[MODEL] == HERTZ and ddot > 0.0 and aa > 0.0:
-            # loading: the force so far keeps its value, the increment takes the new stiffness
-            # (k_t,old s = k_t,new s'); unloading keeps s, so the force falls with k_t
-            d_old = dp - h * ddot
-            sc = math.sqrt(radius[c] * d_old) / aa if d_old > 0.0 else 0.0
-            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
-        wt0, wt1, wt2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
-        s0, s1, s2 = s0 + h * wt0, s1 + h * wt1, s2 + h * wt2
-        fe0, fe1, fe2 = -et * s0, -et * s1, -et * s2
-        fd0, fd1, fd2 = -ct * wt0, -ct * wt1, -ct * wt2
-        ft0, ft1, ft2 = fe0 + fd0, fe1 + fd1, fe2 + fd2
-        ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
-        flim = mu * fn
-        stick[c] = 1
-        if ftm > flim:
-            stick[c] = 0
-            alpha = flim / ftm if ftm > 0.0 else 0.0
-            smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-            slip_work += et * alpha * smag2 * (1.0 - alpha) * smag2
-            s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
-            fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
-            fe0, fe1, fe2 = alpha * fe0, alpha * fe1, alpha * fe2
-            ft0, ft1, ft2 = alpha * ft0, alpha * ft1, alpha * ft2
-        spring[c, 0], spring[c, 1], spring[c, 2] = s0, s1, s2
-        F0, F1, F2 = fn * n0 + ft0, fn * n1 + ft1, fn * n2 + ft2
-        f_total[c, 0], f_total[c, 1], f_total[c, 2] = F0, F1, F2
-        f_damp_n[c, 0], f_damp_n[c, 1], f_damp_n[c, 2] = fdn * n0, fdn * n1, fdn * n2
-        f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
-        f_el_t[c, 0], f_el_t[c, 1], f_el_t[c, 2] = fe0, fe1, fe2
-        fn_out[c] = fn
-        e_el[c, 0] = eel_n
-        e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
-        force[b, 0] += F0
-        force[b, 1] += F1
-        force[b, 2] += F2
-        force[a, 0] -= F0
-        force[a, 1] -= F1
-        force[a, 2] -= F2
-        tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
-        ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
-        torque[b, 0] += tb0
-        torque[b, 1] += tb1
-        torque[b, 2] += tb2
-        torque[a, 0] -= ta0
-        torque[a, 1] -= ta1
-        torque[a, 2] -= ta2
-    return slip_work
-
-
 def has_hertz(table: np.ndarray) -> bool:
     """Whether a dense interface table (M, M, NCOL) holds a Hertz–Mindlin row."""
     return bool(table.shape[-1] > MODEL and np.any(table[..., MODEL] == HERTZ))

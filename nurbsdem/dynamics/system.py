@@ -69,7 +69,7 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from .energy import EnergyLedger, EnergySample, potential_energy
 from .forces import InterfaceTable, contact_forces, match_history, store_history
-from .hertz import contact_forces_hm, has_hertz
+from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, critical_step,
@@ -545,18 +545,16 @@ class DemSystem:
         hertz = self.__dict__.get("_hertz_table")
         if hertz is None:        # the table is fixed once initialised
             hertz = self._hertz_table = has_hertz(self._table)
-        if not hertz:
-            slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
-                                  spring, h, force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick)
-            self.c_coeffs = self.c_radius = np.zeros((0,))     # _network: the table's
-        else:   # Hertz–Mindlin interfaces (nurbsdem.dynamics.hertz): the exact curvature radii
+            self._inv_mass_all = np.concatenate([self._inv_mass, np.zeros(self.walls.n)])
+        if hertz:   # Hertz–Mindlin interfaces (nurbsdem.dynamics.hertz): the exact curvature radii
             from ..geometry.curvature import contact_radii_for
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
-            self.c_coeffs = np.empty((K, 4))
-            inv_m = np.concatenate([self._inv_mass, np.zeros(self.walls.n)])
-            slip = contact_forces_hm(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all,
-                                     self._table, spring, h, inv_m, self.c_radius, force, torque,
-                                     point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs)
+        else:
+            self.c_radius = np.zeros(K)
+        self.c_coeffs = np.empty((K, 4))
+        slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
+                              spring, h, self._inv_mass_all, self.c_radius, force, torque, point,
+                              ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs)
         self.last_slip_work = slip
         self.hist_keys, self.hist_springs = store_history(key, spring)
         force[: b.n] += b.mass[:, None] * self.gravity[None, :]
