@@ -35,8 +35,8 @@ particles: C–C Δt_cr = 4.7e-4 s).  A deck step is split into ``substeps`` int
   operators, with each contact's true lever arms), so that a body with many contacts, or an
   off-centre contact on a flat body, is seen.  After every deck step a rigorous bound (block
   Gershgorin, O(K)) is compared with its value at the last Lanczos estimate; the Lanczos
-  estimate is repeated when the bound shows a stiffer network, and every
-  ``NETWORK_RECHECK_STEPS`` deck steps.
+  estimate is repeated when the bound shows a stiffer network that the present count might
+  not cover, and every ``NETWORK_RECHECK_STEPS`` deck steps.
 
 The count rises at once when the network needs it and falls again (with 20 % hysteresis) when
 the pack loosens; every change is logged on logger ``'nurbsdem'`` with the reason (the particle
@@ -405,9 +405,12 @@ class DemSystem:
             return
         net = self._network()
         bound = self._network_bound(net)
-        if (not initial and self.step_count % NETWORK_RECHECK_STEPS
-                and bound >= (1.0 - NETWORK_BOUND_SLACK) * self.dt_bound):
-            return      # the network is no stiffer than at the last exact estimate
+        if not initial and self.step_count % NETWORK_RECHECK_STEPS:
+            if bound >= (1.0 - NETWORK_BOUND_SLACK) * self.dt_bound:
+                return      # the network is no stiffer than at the last exact estimate
+            safe = self.safety * min(self.dt_apriori, bound)
+            if self._needed_substeps(safe) * self.refine <= self.substeps:
+                return      # even the rigorous bound allows the present count
         self.dt_bound = bound
         self.dt_network, net_why = self._network_limit(net)
         self.dt_critical = min(self.dt_apriori, self.dt_network)
