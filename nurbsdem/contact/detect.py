@@ -151,6 +151,10 @@ class ContactTable:
         self.centroid = np.ascontiguousarray([np.asarray(s.centroid, float) for s in shapes]).reshape(-1, 3)
         self.radius = np.array([float(s.bounding_radius) for s in shapes])
         self.seeds = (cat(sx, float), cat(sp, np.int64), cat(suv, float))
+        #: (S,) non-convexity height of each shape (m; 0 for convex ones): how far its surface
+        #: rises above its own tangent planes (:mod:`nurbsdem.geometry.connectivity`)
+        self.nonconvexity = np.array([float(getattr(getattr(s, "convexity", None), "height", 0.0)
+                                            or 0.0) for s in shapes])
         self.shapes = shapes
 
     def __len__(self) -> int:
@@ -240,6 +244,7 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
             rf, ri = np.array(previous.row_f), np.array(previous.row_i)
         ri[I_FAIL] = 1
         ri[I_VALID] = 0
+    _accept_within_nonconvexity(ta.nonconvexity + tb.nonconvexity, rf[None], ri[None])
     return ContactResult.from_rows(rf, ri)
 
 
@@ -328,7 +333,23 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
         _batch_kernel(*args, numba.get_num_threads())
     elif K:
         _solve_chunk(*args, 0, K)
+    _accept_within_nonconvexity(table.nonconvexity[sa] + table.nonconvexity[sb], *out)
     return out
+
+
+def _accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.ndarray) -> None:
+    """A direction search that stalls on a *nearly* convex shape (a saddle at a CAD patch
+    corner makes the support function non-smooth there) is accepted, not counted as failed,
+    when its valid result lies within the two shapes' non-convexity heights of touching,
+    |signed distance| <= h_A + h_B: the contact is grazing to within the geometric tolerance
+    the shapes were accepted with (a force of at most εn (h_A + h_B)).  Convex shapes have
+    h = 0: nothing changes for them.  tol (K,) = h_A + h_B per row (m); rows (K, NF), (K, NI)
+    updated in place."""
+    if not tol.any():
+        return
+    failed = (res_i[:, I_FAIL] == 1) & (res_i[:, I_VALID] == 1)
+    if failed.any():
+        res_i[failed & (np.abs(res_f[:, F_SD]) <= tol), I_FAIL] = 0
 
 
 # --------------------------------------------------------------------------- stage 1 alone
