@@ -282,25 +282,6 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
 
 
 @njit(cache=True)
-def contact_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
-                       pos: np.ndarray, vel: np.ndarray, omg: np.ndarray) -> np.ndarray:
-    """(K,3) velocity of B relative to A at each contact point (m/s)."""
-    K = body_a.shape[0]
-    out = np.empty((K, 3))
-    for c in range(K):
-        a = body_a[c]
-        b = body_b[c]
-        ra0, ra1, ra2 = point[c, 0] - pos[a, 0], point[c, 1] - pos[a, 1], point[c, 2] - pos[a, 2]
-        rb0, rb1, rb2 = point[c, 0] - pos[b, 0], point[c, 1] - pos[b, 1], point[c, 2] - pos[b, 2]
-        wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
-        wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
-        out[c, 0] = vel[b, 0] + wb0 - vel[a, 0] - wa0
-        out[c, 1] = vel[b, 1] + wb1 - vel[a, 1] - wa1
-        out[c, 2] = vel[b, 2] + wb2 - vel[a, 2] - wa2
-    return out
-
-
-@njit(cache=True)
 def kick_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
               w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
               f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,

@@ -513,11 +513,11 @@ class DemSystem:
                           wall_displacement=self.wall_d.copy(), wall_velocity=self.wall_u.copy(),
                           n_particles=b.n, n_bodies=self.n_bodies)
 
-    def _all_kinematics(self, wall_u: np.ndarray | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _all_kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and angular velocities (B,3) of particles then walls."""
         b = self.bodies
         pos = np.concatenate([b.x, self.wall_d])
-        vel = np.concatenate([b.v, self.wall_u if wall_u is None else wall_u])
+        vel = np.concatenate([b.v, self.wall_u])
         omg = np.concatenate([omega_world(b.q, b.L, self._inv_I), np.zeros((self.walls.n, 3))])
         return pos, vel, omg
 
