@@ -45,6 +45,8 @@ from .placement import replicate_step
 log = logging.getLogger("nurbsdem")
 
 CHECKPOINT_NAME = "checkpoint.h5"
+#: most deck steps handed to DemSystem.steps at once (compiled scenes; progress granularity)
+MAX_COMPILED_STEPS = 200
 
 
 @dataclass
@@ -150,8 +152,9 @@ class Solver:
                  restart: str | Path | None = None, quiet: bool = False,
                  safety: float = 0.5, progress_stream=None,
                  contact_options: dict | None = None, write_output: bool = True,
-                 restart_check=None) -> None:
+                 restart_check=None, compiled_steps: bool = True) -> None:
         self.model = model
+        self.compiled_steps = bool(compiled_steps)
         if output is not None:
             model.output.directory = Path(output)
         self.outdir = Path(model.output.directory)
@@ -239,6 +242,7 @@ class Solver:
         model = self.model
         sysm = DemSystem(dt=dt, gravity=model.gravity, interfaces=self.interfaces,
                          safety=self.safety, t0=self.time)
+        sysm.compiled_steps = self.compiled_steps
         b = self.bodies
         Rs = b.rotation_matrices()
         for i in range(len(b)):
@@ -453,7 +457,7 @@ class Solver:
             t_before = time.perf_counter()
             g0, l0, n0 = self.scene.timers.global_search, self.scene.timers.lcp, self.scene.timers.lcps
             try:
-                sysm.step()
+                done = sysm.steps(self._steps_to_event(n_total - self.step_progress, ck_every))
             except InstabilityError:
                 self.time = sysm.time
                 self._sync_bodies_from_system()
@@ -465,14 +469,15 @@ class Solver:
             self.timers["global search"] += g
             self.timers["LCP"] += lc
             self.timers["forces + integration"] += dt_wall - g - lc
-            self.step_progress += 1
+            self.step_progress += done
             self.time = sysm.time
-            self.summary.steps += 1
+            self.summary.steps += done
             self.summary.lcps += self.scene.timers.lcps - n0
-            self.summary.substeps += sysm.substeps
             cs = self.scene.last
-            self.summary.active_max = max(self.summary.active_max, cs.active)
-            self.summary.active_total += cs.active
+            tally = sysm.last_steps
+            self.summary.substeps += tally.substeps
+            self.summary.active_max = max(self.summary.active_max, tally.active_max)
+            self.summary.active_total += tally.active_sum
             self.summary.degenerated += cs.degenerated_count
             self.summary.failed += cs.failed
             self._sample(writers)
@@ -487,6 +492,17 @@ class Solver:
             self.wall_offset = sysm.wall_displacement.copy()
         self._snapshot()
         self._close_system()
+
+    def _steps_to_event(self, left: int, ck_every: float) -> int:
+        """Deck steps from now to the next one at which output or a checkpoint falls due, or to
+        the end of the solution step (``left`` deck steps), at most MAX_COMPILED_STEPS."""
+        out = self.model.output
+        sysm = self.system
+        n = min(left, MAX_COMPILED_STEPS)
+        for every in (out.monitors_every, out.vtk_every, out.results_interval, ck_every):
+            if every > 0:
+                n = min(n, _steps_to_due(sysm.t0, sysm.step_count, sysm.dt, every, n))
+        return n
 
     def _run_replicate(self, step: ReplicateStep, writers: OutputWriters) -> None:
         before = self._mechanical_of(self.bodies)
@@ -692,8 +708,23 @@ class _NoWriters:
 
 
 def _constant_motion(d: np.ndarray) -> PrescribedMotion:
-    d = np.array(d, float)
-    return PrescribedMotion(lambda t: (d.copy(), np.zeros(3)))
+    return PrescribedMotion.fixed(d)
+
+
+def _steps_to_due(t0: float, count: int, dt: float, every: float, n_max: int) -> int:
+    """The first k in 1..n_max with time t0 + (count + k)·dt on a multiple of ``every`` (the
+    test of :func:`_due`), n_max if none: found from the next multiple, then checked."""
+    t = t0 + count * dt
+    guess = round(((math.floor(t / every * (1 + 1e-12)) + 1) * every - t) / dt)
+    for k in sorted({max(1, int(guess) + d) for d in (-1, 0, 1)}):
+        if k <= n_max and _due(t0 + (count + k) * dt, every):
+            return k
+    if guess > n_max + 1:
+        return n_max
+    for k in range(1, n_max + 1):          # dt not commensurate with ``every``: scan
+        if _due(t0 + (count + k) * dt, every):
+            return k
+    return n_max
 
 
 def _due(t: float, every: float) -> bool:

@@ -66,6 +66,7 @@ from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pa
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_VALID, NF, NI
+from .verlet import active_and_near, advance_odometers, carry_rows, list_is_stale, renew_certificates
 from .wall import detect_wall_batch, wall_frame
 
 log = logging.getLogger("nurbsdem")
@@ -182,19 +183,10 @@ class SceneContacts:
             return
         _, R, wall, x = pose
         _, R0, wall0, x0 = self.prev_pose
-        N = self.n
-        step = np.empty(self.nb)
-        if N:
-            chord = np.sqrt(((R - R0) ** 2).sum(axis=(1, 2)) / 2.0)     # 2 sin(θ/2)
-            step[:N] = np.linalg.norm(x - x0, axis=1) + chord * self.radius
-        if self.nb > N:
-            step[N:] = np.linalg.norm(wall - wall0, axis=1)
-        self.odo = self.odo + step
+        self.odo = advance_odometers(self.odo, x, x0, R, R0, self.radius, wall, wall0)
 
     def _list_is_stale(self) -> bool:
-        if self.built_odo is None or self.skin <= 0:
-            return True
-        return bool(np.any(self.odo - self.built_odo > 0.5 * self.skin))
+        return self.built_odo is None or list_is_stale(self.odo, self.built_odo, self.skin)
 
     def _build_list(self, kin, pos: np.ndarray, R: np.ndarray) -> None:
         """Neighbour list with the skin (levels 1–2), carrying over the per-pair arrays."""
@@ -346,27 +338,30 @@ class SceneContacts:
                            "the pair is left out of the force evaluation")
         rows_f, rows_i, budget = ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy()
         rows_f[due], rows_i[due] = rf, ri
-        sd = rf[:, F_SD]
-        apart = (ri[:, I_VALID] == 1) & (ri[:, I_ACTIVE] == 0) & ~failed & (sd > 0)
-        budget[due] = np.where(apart, sd * (1.0 - 1e-9) + reach[due], -np.inf)
-        self.pairs = ps = ps.replaced(rows_f, rows_i, budget, reused)
+        renew_certificates(budget, due, rf, ri, reach)
+        self.pairs = ps.replaced(rows_f, rows_i, budget, reused)
         self.prev_pose = pose
-        valid = rows_i[:, I_VALID] == 1
-        act = (rows_i[:, I_ACTIVE] == 1) & valid
-        sel = np.nonzero(act)[0]
-        near = np.nonzero(valid & ~act & (rows_f[:, F_SD] > 0))[0]
-        gap = np.minimum(rows_f[near, F_SD], np.maximum(budget[near] - reach[near], 0.0))
+        return self.contact_set(reach, monitored=int(due.shape[0]), failed=int(failed.sum()),
+                                dropped=np.array(dropped, np.int64))
+
+    def contact_set(self, reach: np.ndarray, monitored: int, failed: int = 0,
+                    dropped: np.ndarray | None = None) -> ContactSet:
+        """The ContactSet of the listed pairs' current rows (reach (L,): the sums of the pairs'
+        odometers, for the gaps certified pairs leave)."""
+        ps = self.pairs
+        rows_f, rows_i, keys = ps.rows_f, ps.rows_i, ps.keys
+        dropped = np.zeros(0, np.int64) if dropped is None else dropped
+        sel, near, gap = active_and_near(rows_f, rows_i, ps.budget, reach)
         deg = rows_i[sel, I_DEG]
-        n_failed = int(failed.sum())
         return ContactSet(body_a=ps.a[sel].copy(), body_b=ps.b[sel].copy(),
                           point_a=rows_f[sel, F_PA:F_PA + 3].copy(),
                           point_b=rows_f[sel, F_PB:F_PB + 3].copy(),
                           normal=rows_f[sel, F_N:F_N + 3].copy(), depth=-rows_f[sel, F_SD],
                           key=keys[sel].copy(), degenerated=deg.astype(np.int64),
-                          monitored=int(due.shape[0]), active=int(sel.shape[0]),
-                          degenerated_count=int(np.count_nonzero(deg)), failed=n_failed,
-                          reused=int(reused.sum()), dropped=len(dropped),
-                          dropped_keys=np.array(dropped, np.int64),
+                          monitored=monitored, active=int(sel.shape[0]),
+                          degenerated_count=int(np.count_nonzero(deg)), failed=failed,
+                          reused=int(ps.reused.sum()), dropped=len(dropped),
+                          dropped_keys=dropped,
                           near_a=ps.a[near].copy(), near_b=ps.b[near].copy(),
                           near_point=0.5 * (rows_f[near, F_PA:F_PA + 3] + rows_f[near, F_PB:F_PB + 3]),
                           near_normal=rows_f[near, F_N:F_N + 3].copy(), near_gap=gap,
@@ -437,14 +432,8 @@ class _PairState:
         """A new list; the arrays of pairs already listed are carried over (sorted merge)."""
         order = np.argsort(keys, kind="stable")
         a, b, keys, mask_a, mask_b = a[order], b[order], keys[order], mask_a[order], mask_b[order]
-        L = keys.shape[0]
-        rows_f, rows_i = np.zeros((L, NF)), np.zeros((L, NI), np.int64)
-        budget, reused = np.full(L, -np.inf), np.zeros(L, bool)
-        if self.keys.shape[0] and L:
-            j = np.minimum(np.searchsorted(self.keys, keys), self.keys.shape[0] - 1)
-            hit = self.keys[j] == keys
-            rows_f[hit], rows_i[hit] = self.rows_f[j[hit]], self.rows_i[j[hit]]
-            budget[hit], reused[hit] = self.budget[j[hit]], self.reused[j[hit]]
+        rows_f, rows_i, budget, reused = carry_rows(self.keys, self.rows_f, self.rows_i,
+                                                    self.budget, self.reused, keys)
         return _PairState(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, reused)
 
     def replaced(self, rows_f, rows_i, budget, reused) -> "_PairState":

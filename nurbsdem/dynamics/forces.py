@@ -125,6 +125,7 @@ class InterfaceTable:
         return tab
 
 
+@njit(cache=True)
 def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """Springs (K,3) for the current contacts: the stored one for a persisting key, 0 for a new one.
 
@@ -132,12 +133,14 @@ def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndar
     """
     k = keys.shape[0]
     out = np.zeros((k, 3))
-    if k == 0 or prev_keys.shape[0] == 0:
+    m = prev_keys.shape[0]
+    if k == 0 or m == 0:
         return out
-    idx = np.searchsorted(prev_keys, keys)
-    idx_c = np.minimum(idx, prev_keys.shape[0] - 1)
-    hit = prev_keys[idx_c] == keys
-    out[hit] = prev_springs[idx_c[hit]]
+    for c in range(k):
+        j = min(np.searchsorted(prev_keys, keys[c]), m - 1)
+        if prev_keys[j] == keys[c]:
+            for d in range(3):
+                out[c, d] = prev_springs[j, d]
     return out
 
 

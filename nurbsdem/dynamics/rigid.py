@@ -128,12 +128,13 @@ class RigidBodies:
 
     def rotations(self) -> np.ndarray:
         """(N,3,3) file->world rotations R = Q P^T (the pose rotation of DEVNOTES)."""
-        return np.einsum("nij,nkj->nik", self.principal_rotations(), self.P)
+        return body_poses(self.q, self.P, self.x, self.centroid_file)[0]
 
     def pose_positions(self, R: np.ndarray | None = None) -> np.ndarray:
         """(N,3) pose positions x - R c (m): where the file-frame origin is in the world."""
-        R = self.rotations() if R is None else R
-        return self.x - np.einsum("nij,nj->ni", R, self.centroid_file)
+        if R is None:
+            return body_poses(self.q, self.P, self.x, self.centroid_file)[1]
+        return pose_positions_of(R, self.x, self.centroid_file)
 
     def omega(self) -> np.ndarray:
         """(N,3) world angular velocity (rad/s) from L: omega = Q diag(1/I) Q^T L."""
@@ -143,6 +144,35 @@ class RigidBodies:
         """(N,3,3) inertia about the centroid in the world frame, Q diag(I) Q^T (kg m^2)."""
         Q = self.principal_rotations()
         return np.einsum("nij,nj,nkj->nik", Q, self.I, Q)
+
+
+@njit(cache=True)
+def pose_positions_of(R: np.ndarray, x: np.ndarray, centroid_file: np.ndarray) -> np.ndarray:
+    """(N,3) pose positions x − R c (m) for rotations R (N,3,3) and file-frame centroids c."""
+    n = x.shape[0]
+    pos = np.empty((n, 3))
+    for i in range(n):
+        for j in range(3):
+            pos[i, j] = x[i, j] - (R[i, j, 0] * centroid_file[i, 0] + R[i, j, 1] * centroid_file[i, 1]
+                                   + R[i, j, 2] * centroid_file[i, 2])
+    return pos
+
+
+@njit(cache=True)
+def body_poses(q: np.ndarray, P: np.ndarray, x: np.ndarray,
+               centroid_file: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """File->world rotations R = Q Pᵀ (N,3,3) and pose positions x − R c (N,3) (m) from the
+    quaternions q (N,4) (principal->world), principal axes P (N,3,3) and centroids c (N,3) in
+    the file frame: the one kernel every path uses, so that all see the same bits."""
+    n = q.shape[0]
+    R = np.empty((n, 3, 3))
+    Q = np.empty((3, 3))
+    for i in range(n):
+        quat_to_matrix_into(q[i], Q)
+        for j in range(3):
+            for k in range(3):
+                R[i, j, k] = Q[j, 0] * P[i, k, 0] + Q[j, 1] * P[i, k, 1] + Q[j, 2] * P[i, k, 2]
+    return R, pose_positions_of(R, x, centroid_file)
 
 
 @njit(cache=True)
@@ -175,17 +205,25 @@ class PrescribedMotion:
     """
 
     function: MotionFunction | None = None
+    #: the displacement (3,) m of a wall at rest (used when ``function`` is None; None: 0)
+    rest: np.ndarray | None = None
 
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         if self.function is None:
-            return np.zeros(3), np.zeros(3)
+            return (np.zeros(3) if self.rest is None else self.rest.copy()), np.zeros(3)
         d, u = self.function(float(t))
         return np.asarray(d, dtype=float).reshape(3), np.asarray(u, dtype=float).reshape(3)
 
+    @property
+    def at_rest(self) -> bool:
+        """Whether the wall never moves."""
+        return self.function is None
+
     @staticmethod
-    def fixed() -> "PrescribedMotion":
-        """A wall that does not move."""
-        return PrescribedMotion(None)
+    def fixed(displacement=None) -> "PrescribedMotion":
+        """A wall that does not move (held at ``displacement`` (3,) m, default 0)."""
+        rest = None if displacement is None else np.array(displacement, float).reshape(3)
+        return PrescribedMotion(None, rest)
 
     @staticmethod
     def linear(velocity: np.ndarray, t0: float = 0.0) -> "PrescribedMotion":
@@ -237,6 +275,20 @@ class Walls:
         self.material = np.append(self.material, np.int64(material))
         self.names.append(name or f"wall{self.n - 1}")
         return self.n - 1
+
+    def kinematics_at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T,W,3) displacements (m) and velocities (m/s) at the times (T,) s (walls at rest are
+        not called for every time)."""
+        T = len(times)
+        d = np.zeros((T, self.n, 3))
+        u = np.zeros((T, self.n, 3))
+        for k, m in enumerate(self.motions):
+            if m.at_rest:
+                d[:, k] = m(0.0)[0]
+                continue
+            for r, t in enumerate(times):
+                d[r, k], u[r, k] = m(float(t))
+        return d, u
 
     def kinematics(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(W,3) displacements (m) and (W,3) velocities (m/s) at time t (s)."""

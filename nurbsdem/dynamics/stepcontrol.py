@@ -27,7 +27,7 @@ damping operator A_C is the same with (cn, ct).  ω² = λmax(A_K), γ = λmax(A
 damping proportional to stiffness, as in every interface of the paper, the two maxima belong to
 the same mode and (1) is exact; otherwise it is conservative).
 
-λmax is computed matrix-free by Lanczos iteration (:func:`lanczos_max`, a few tens of
+λmax is computed matrix-free by Lanczos iteration (:func:`network_lanczos`, a few tens of
 products, each O(K)) from a fixed start vector, so the result is deterministic and a restart
 reproduces it bit for bit.  The operator includes, besides the active contacts, the separated
 pairs that can close within the next deck step ("near" pairs), so the sub-step count rises
@@ -50,7 +50,6 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.linalg import eigh_tridiagonal
 
 #: consecutive reversing internal steps that make period-2 motion
 ALTERNATION_STEPS = 10
@@ -72,6 +71,7 @@ def critical_step(k: float, c: float, m: float) -> tuple[float, float, float]:
     return omega, zeta, (2.0 / omega) * (math.sqrt(1.0 + zeta * zeta) - zeta)
 
 
+@njit(cache=True)
 def critical_step_from_rates(omega2: float, gamma: float) -> float:
     """Eq. (1): Δt_cr (s) from the largest squared frequency ω² (1/s²) and damping rate γ (1/s)."""
     if omega2 <= 0 and gamma <= 0:
@@ -193,31 +193,36 @@ def network_apply(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, point: 
 
 
 @njit(cache=True)
+def _compliance_row(i, r, d, Q, inv_I):
+    """c = Qᵀ (r × d) of body i, and Σ_k c_k² / I_k."""
+    x0 = r[1] * d[2] - r[2] * d[1]
+    x1 = r[2] * d[0] - r[0] * d[2]
+    x2 = r[0] * d[1] - r[1] * d[0]
+    c0 = Q[i, 0, 0] * x0 + Q[i, 1, 0] * x1 + Q[i, 2, 0] * x2
+    c1 = Q[i, 0, 1] * x0 + Q[i, 1, 1] * x1 + Q[i, 2, 1] * x2
+    c2 = Q[i, 0, 2] * x0 + Q[i, 1, 2] * x1 + Q[i, 2, 2] * x2
+    g = 0.0 + c0 * c0 * inv_I[i, 0]
+    g += c1 * c1 * inv_I[i, 1]
+    g += c2 * c2 * inv_I[i, 2]
+    return c0, c1, c2, g
+
+
+@njit(cache=True)
 def _side_norms(i, n_part, r, n, Q, inv_m, inv_I, t1, t2):
     """(|ĵ_n|, ||ĵ_t||) of one side of a contact: the square roots of the normal and the
-    largest tangential point compliance n·G n, λmax(Tᵀ G T), G = 1/m + [r]ₓᵀ I⁻¹ [r]ₓ."""
+    largest tangential point compliance n·G n, λmax(Tᵀ G T), G = 1/m + [r]ₓᵀ I⁻¹ [r]ₓ.
+    With c = Qᵀ (r × d) for d = n, t1, t2: d·G d' = (1/m) d·d' + Σ_k c_k c'_k / I_k."""
     if i >= n_part:
         return 0.0, 0.0
-    g = np.empty(3)
-    # c = Qᵀ (r × d) for d = n, t1, t2; d·G d' = (1/m) d·d' + Σ_k c_k c'_k / I_k
-    cs = np.empty((3, 3))
-    for row in range(3):
-        d = n if row == 0 else (t1 if row == 1 else t2)
-        x0 = r[1] * d[2] - r[2] * d[1]
-        x1 = r[2] * d[0] - r[0] * d[2]
-        x2 = r[0] * d[1] - r[1] * d[0]
-        for k in range(3):
-            cs[row, k] = Q[i, 0, k] * x0 + Q[i, 1, k] * x1 + Q[i, 2, k] * x2
-    for row in range(3):
-        g[row] = 0.0
-        for k in range(3):
-            g[row] += cs[row, k] * cs[row, k] * inv_I[i, k]
-    g12 = 0.0
-    for k in range(3):
-        g12 += cs[1, k] * cs[2, k] * inv_I[i, k]
-    a11, a22 = inv_m[i] + g[1], inv_m[i] + g[2]
+    _, _, _, g0 = _compliance_row(i, r, n, Q, inv_I)
+    a0, a1, a2, g1 = _compliance_row(i, r, t1, Q, inv_I)
+    b0, b1, b2, g2 = _compliance_row(i, r, t2, Q, inv_I)
+    g12 = 0.0 + a0 * b0 * inv_I[i, 0]
+    g12 += a1 * b1 * inv_I[i, 1]
+    g12 += a2 * b2 * inv_I[i, 2]
+    a11, a22 = inv_m[i] + g1, inv_m[i] + g2
     lam = 0.5 * (a11 + a22) + math.sqrt(0.25 * (a11 - a22) ** 2 + g12 * g12)
-    return math.sqrt(inv_m[i] + g[0]), math.sqrt(lam)
+    return math.sqrt(inv_m[i] + g0), math.sqrt(lam)
 
 
 @njit(cache=True)
@@ -235,6 +240,7 @@ def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
     r = np.empty(3)
     t1 = np.empty(3)
     t2 = np.empty(3)
+    norms = np.empty((2, 2))          # |ĵ| of side A / B, normal / tangential
     for c in range(body_a.shape[0]):
         n = normal[c]
         # a tangent basis
@@ -248,7 +254,6 @@ def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
         t2[0] = n[1] * t1[2] - n[2] * t1[1]
         t2[1] = n[2] * t1[0] - n[0] * t1[2]
         t2[2] = n[0] * t1[1] - n[1] * t1[0]
-        norms = np.zeros((2, 2))
         for side in range(2):
             i = body_a[c] if side == 0 else body_b[c]
             if i < n_part:
@@ -272,14 +277,87 @@ def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
     return wk, wc
 
 
-def lanczos_max(apply, dim: int, steps: int = LANCZOS_STEPS,
-                rtol: float = 1e-4) -> tuple[float, np.ndarray]:
-    """Largest eigenvalue of a symmetric positive semi-definite operator and its Ritz vector.
+@njit(cache=True)
+def body_speeds(v: np.ndarray, omega: np.ndarray, ell: np.ndarray, wall_u: np.ndarray) -> np.ndarray:
+    """(N+W,) the largest speed of any point of each body (m/s): |v| + ℓ|ω| for particles
+    (ℓ its size), |u| for walls."""
+    n = v.shape[0]
+    out = np.empty(n + wall_u.shape[0])
+    for i in range(n):
+        out[i] = (math.sqrt(v[i, 0] ** 2 + v[i, 1] ** 2 + v[i, 2] ** 2)
+                  + ell[i] * math.sqrt(omega[i, 0] ** 2 + omega[i, 1] ** 2 + omega[i, 2] ** 2))
+    for w in range(wall_u.shape[0]):
+        out[n + w] = math.sqrt(wall_u[w, 0] ** 2 + wall_u[w, 1] ** 2 + wall_u[w, 2] ** 2)
+    return out
 
-    ``apply(y) -> A y`` on (dim,) vectors; Lanczos with full re-orthogonalisation from a fixed
-    start vector (deterministic), at most ``steps`` products, stopping early when the largest
-    Ritz value changes by less than ``rtol`` over 5 steps.  The Ritz value is a lower bound of
-    λmax that converges from below (to round-off within a few tens of steps here)."""
+
+@njit(cache=True)
+def contact_network(c_a: np.ndarray, c_b: np.ndarray, c_point: np.ndarray, c_normal: np.ndarray,
+                    c_coeffs: np.ndarray, near_a: np.ndarray, near_b: np.ndarray,
+                    near_point: np.ndarray, near_normal: np.ndarray, near_gap: np.ndarray,
+                    speed: np.ndarray, dt: float, g: float, table: np.ndarray,
+                    material: np.ndarray):
+    """The linearised network of the time-step control: the K contacts of the last evaluation
+    (their own tangent coefficients c_coeffs (K,4): εn, cn, εt, ct) and the separated pairs
+    whose gap (m) can close within one deck step dt (s): gap ≤ 2 (s_a + s_b) dt + g dt² with
+    s the bodies' point speeds (:func:`body_speeds`, m/s) and g = |gravity| (m/s²); those take
+    the coefficients of their interface (table (M,M,≥4) by material).  Returns (a, b, point,
+    normal, coeffs) arrays."""
+    K = c_a.shape[0]
+    take = np.empty(near_a.shape[0], np.int64)
+    m = 0
+    for r in range(near_a.shape[0]):
+        if near_gap[r] <= 2.0 * (speed[near_a[r]] + speed[near_b[r]]) * dt + g * dt * dt:
+            take[m] = r
+            m += 1
+    a = np.empty(K + m, np.int64)
+    b = np.empty(K + m, np.int64)
+    p = np.empty((K + m, 3))
+    n = np.empty((K + m, 3))
+    coeffs = np.empty((K + m, 4))
+    for c in range(K):
+        a[c], b[c] = c_a[c], c_b[c]
+        for k in range(3):
+            p[c, k], n[c, k] = c_point[c, k], c_normal[c, k]
+        for k in range(4):
+            coeffs[c, k] = c_coeffs[c, k]
+    for s in range(m):
+        r = take[s]
+        c = K + s
+        a[c], b[c] = near_a[r], near_b[r]
+        for k in range(3):
+            p[c, k], n[c, k] = near_point[r, k], near_normal[r, k]
+        for k in range(4):
+            coeffs[c, k] = table[material[a[c]], material[b[c]], k]
+    return a, b, p, n, coeffs
+
+
+@njit(cache=True)
+def _largest_ritz(alpha: np.ndarray, beta: np.ndarray, m: int) -> tuple[float, np.ndarray]:
+    """Largest eigenpair of the m×m symmetric tridiagonal matrix (diagonal alpha[:m],
+    off-diagonal beta[:m-1])."""
+    T = np.zeros((m, m))
+    for i in range(m):
+        T[i, i] = alpha[i]
+        if i + 1 < m:
+            T[i, i + 1] = T[i + 1, i] = beta[i]
+    w, y = np.linalg.eigh(T)
+    return w[m - 1], np.ascontiguousarray(y[:, m - 1])
+
+
+@njit(cache=True)
+def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                    normal: np.ndarray, k_n: np.ndarray, k_t: np.ndarray, x: np.ndarray,
+                    Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray, steps: int = LANCZOS_STEPS,
+                    rtol: float = 1e-4) -> tuple[float, np.ndarray]:
+    """Largest eigenvalue and Ritz vector (6N,) of the network operator of
+    :func:`network_apply` (symmetric positive semi-definite).
+
+    Lanczos with full re-orthogonalisation from a fixed start vector (deterministic), at most
+    ``steps`` products, stopping early when the largest Ritz value changes by less than
+    ``rtol`` over 5 steps.  The Ritz value is a lower bound of λmax that converges from below
+    (to round-off within a few tens of steps here)."""
+    dim = 6 * x.shape[0]
     if dim == 0:
         return 0.0, np.zeros(0)
     v = 1.0 + 0.5 * np.sin(np.arange(dim) * 1.2345 + 0.1)
@@ -289,34 +367,27 @@ def lanczos_max(apply, dim: int, steps: int = LANCZOS_STEPS,
     alpha = np.zeros(m)
     beta = np.zeros(m)
     last = -1.0
-    k = 0
+    size = 0
     for k in range(m):
+        size = k + 1
         V[k] = v
-        w = apply(v)
-        alpha[k] = v @ w
-        w = w - V[: k + 1].T @ (V[: k + 1] @ w)          # full re-orthogonalisation
-        w = w - V[: k + 1].T @ (V[: k + 1] @ w)
-        nb = float(np.linalg.norm(w))
+        w = network_apply(v, body_a, body_b, point, normal, k_n, k_t, x, Q, sq_m, sq_I)
+        alpha[k] = np.dot(v, w)
+        basis = V[:size]
+        for _ in range(2):                                  # full re-orthogonalisation
+            w = w - np.dot(basis.T, np.dot(basis, w))
+        nb = np.linalg.norm(w)
         beta[k] = nb
-        if nb <= 1e-12 * max(abs(alpha[: k + 1]).max(), 1e-300):
+        if nb <= 1e-12 * max(np.abs(alpha[:size]).max(), 1e-300):
             break
         if k % 5 == 4:
-            ritz = _largest_ritz(alpha[: k + 1], beta[:k])[0]
+            ritz = _largest_ritz(alpha, beta, size)[0]
             if abs(ritz - last) <= rtol * ritz:
                 break
             last = ritz
         v = w / nb
-    lam, y = _largest_ritz(alpha[: k + 1], beta[:k])
-    return max(lam, 0.0), V[: k + 1].T @ y
-
-
-def _largest_ritz(alpha: np.ndarray, beta: np.ndarray) -> tuple[float, np.ndarray]:
-    """Largest eigenpair of the symmetric tridiagonal matrix (diagonal alpha, off-diagonal beta)."""
-    n = alpha.shape[0]
-    if n == 1:
-        return float(alpha[0]), np.ones(1)
-    w, y = eigh_tridiagonal(alpha, beta, select="i", select_range=(n - 1, n - 1))
-    return float(w[0]), y[:, 0]
+    lam, y = _largest_ritz(alpha, beta, size)
+    return max(lam, 0.0), np.dot(V[:size].T, y)
 
 
 def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
@@ -330,14 +401,11 @@ def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
         return 0.0, 0.0, -1
     sq_m, sq_I = np.sqrt(mass), np.sqrt(I)
     args = (body_a, body_b, point, normal)
-
-    def op(kn, kt):
-        return lambda y: network_apply(y, *args, kn, kt, x, Q, sq_m, sq_I)
     kn, cn, kt, ct = (np.ascontiguousarray(coeffs[:, j]) for j in range(4))
-    omega2, vec = lanczos_max(op(kn, kt), 6 * N)
-    gamma = lanczos_max(op(cn, ct), 6 * N)[0] if (cn.any() or ct.any()) else 0.0
+    omega2, vec = network_lanczos(*args, kn, kt, x, Q, sq_m, sq_I)
+    gamma = network_lanczos(*args, cn, ct, x, Q, sq_m, sq_I)[0] if (cn.any() or ct.any()) else 0.0
     share = (vec.reshape(N, 6) ** 2).sum(axis=1)
-    return omega2, gamma, int(np.argmax(share))
+    return float(omega2), float(gamma), int(np.argmax(share))
 
 
 # --------------------------------------------------------------------------- period-2 guard

@@ -71,9 +71,11 @@ from .energy import EnergyLedger, EnergySample, potential_energy
 from .forces import InterfaceTable, contact_forces, match_history, store_history
 from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
-from .rigid import PrescribedMotion, RigidBodies, Walls, omega_world
-from .stepcontrol import (ALTERNATION_STEPS, alternation_update, critical_step,
-                          critical_step_from_rates, network_gershgorin, network_rates)
+from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
+from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
+from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
+                          critical_step, critical_step_from_rates, network_gershgorin,
+                          network_rates)
 
 log = logging.getLogger("nurbsdem")
 
@@ -162,6 +164,17 @@ NETWORK_BOUND_SLACK = 0.05
 FALL_HYSTERESIS = 0.8
 
 
+@dataclass(frozen=True)
+class StepTally:
+    """What the last :meth:`DemSystem.steps` did: internal steps (the sub-steps actually run;
+    a repeated deck step counts once, with the count that passed), and the sum and maximum
+    over its deck steps of the active contacts at their ends."""
+
+    substeps: int = 0
+    active_sum: int = 0
+    active_max: int = 0
+
+
 class DemSystem:
     """Particles, walls, contact laws and a contact provider; advanced by deck steps of ``dt``.
 
@@ -221,6 +234,10 @@ class DemSystem:
         self._compliance: list[tuple[float, float] | None] = []
         self._initialized = False
         self._peak = 0.0
+        #: run scenes of exact spheres in compiled deck steps (:meth:`steps`)
+        self.compiled_steps = True
+        self._sphere_steps = None
+        self.last_steps = StepTally()
         #: (keys, springs) of tangential springs to start from (set before initialize()).
         self.initial_history: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -329,22 +346,28 @@ class DemSystem:
         self._apriori_zeta = worst.zeta if worst else 0.0
 
     def _network(self):
-        """The contacts of the last evaluation plus the pairs that can close within one deck
-        step: (a, b, point, normal, coeffs (K,4)), or None when there is none."""
-        a, bb, p, n = self.c_a, self.c_b, self.c_point, self.c_normal
-        near = self._near_pairs()
-        if near is not None:
-            a, bb = np.concatenate([a, near[0]]), np.concatenate([bb, near[1]])
-            p, n = np.concatenate([p, near[2]]), np.concatenate([n, near[3]])
-        if a.shape[0] == 0:
-            return None
-        # the contacts' own (tangent) coefficients from the force evaluation (Hertz: they grow
-        # with the overlap); the table's for the near pairs (Hertz: its reference linearisation)
-        coeffs = self._table[self._mat_all[a], self._mat_all[bb]][:, :4]
-        k = self.c_a.shape[0]
-        if k and self.c_coeffs.shape[0] == k and self.c_coeffs.ndim == 2:
-            coeffs[:k] = self.c_coeffs
-        return a, bb, p, n, np.ascontiguousarray(coeffs)
+        """The contacts of the last evaluation plus the separated pairs that can close within
+        one deck step (:func:`~nurbsdem.dynamics.stepcontrol.contact_network`): (a, b, point,
+        normal, coeffs (K,4)), or None when there is none.  The contacts keep their own
+        (tangent) coefficients from the force evaluation (Hertz: they grow with the overlap)."""
+        a, bb = self.c_a, self.c_b
+        k = a.shape[0]
+        coeffs = self.c_coeffs
+        if coeffs.ndim != 2 or coeffs.shape[0] != k:
+            coeffs = np.ascontiguousarray(self._table[self._mat_all[a], self._mat_all[bb]][:, :4])
+        cs = self.last_contacts
+        if getattr(cs, "near_gap", None) is not None and len(cs.near_gap):
+            near = (np.asarray(cs.near_a, np.int64), np.asarray(cs.near_b, np.int64),
+                    np.asarray(cs.near_point, float), np.asarray(cs.near_normal, float),
+                    np.asarray(cs.near_gap, float))
+        else:
+            near = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
+                    np.zeros((0, 3)), np.zeros(0))
+        b = self.bodies
+        speed = body_speeds(b.v, omega_world(b.q, b.L, self._inv_I), self._ell, self.wall_u)
+        net = contact_network(a, bb, self.c_point, self.c_normal, coeffs, *near, speed, self.dt,
+                              self._g_norm, self._table, self._mat_all)
+        return net if net[0].shape[0] else None
 
     def _network_bound(self, net) -> float:
         """A lower bound (s) of the network's critical step, from the Gershgorin bounds of its
@@ -372,27 +395,6 @@ class DemSystem:
                f"centred on particle {body} with {n_contacts} contacts")
         return dt, why
 
-    def _near_pairs(self):
-        """Separated pairs reported by the provider (``near_*`` fields of its ContactSet) whose
-        gap can close within one deck step: (a, b, point, normal), or None."""
-        cs = self.last_contacts
-        gap = getattr(cs, "near_gap", None)
-        if gap is None or len(gap) == 0:
-            return None
-        a, bb = np.asarray(cs.near_a, np.int64), np.asarray(cs.near_b, np.int64)
-        b = self.bodies
-        N = b.n
-        speed = np.zeros(self.n_bodies)
-        speed[:N] = np.linalg.norm(b.v, axis=1) + self._ell * np.linalg.norm(
-            omega_world(b.q, b.L, self._inv_I), axis=1)
-        speed[N:] = np.linalg.norm(self.wall_u, axis=1)
-        g = float(np.linalg.norm(self.gravity))
-        reach = 2.0 * (speed[a] + speed[bb]) * self.dt + g * self.dt * self.dt
-        sel = np.asarray(gap) <= reach
-        if not sel.any():
-            return None
-        return (a[sel], bb[sel], np.asarray(cs.near_point)[sel], np.asarray(cs.near_normal)[sel])
-
     def _needed_substeps(self, dt_safe: float) -> int:
         """Sub-steps that keep the internal step within the safe step dt_safe (s)."""
         if not math.isfinite(dt_safe):
@@ -405,7 +407,7 @@ class DemSystem:
             return
         net = self._network()
         bound = self._network_bound(net)
-        if not initial and self.step_count % NETWORK_RECHECK_STEPS:
+        if not initial and not self._periodic_recheck():
             if bound >= (1.0 - NETWORK_BOUND_SLACK) * self.dt_bound:
                 return      # the network is no stiffer than at the last exact estimate
             safe = self.safety * min(self.dt_apriori, bound)
@@ -447,6 +449,13 @@ class DemSystem:
                      "the contact network stiffened" if self.substeps > old else "the pack loosened",
                      why + (f", refined x{self.refine} by the guard" if self.refine > 1 else ""))
 
+    def _periodic_recheck(self) -> bool:
+        """Whether this deck step is one of the regular exact estimates: every
+        NETWORK_RECHECK_STEPS deck steps, when the count could fall (it is above the guard's
+        refinement by more than the hysteresis)."""
+        return (self.step_count % NETWORK_RECHECK_STEPS == 0
+                and self.refine < FALL_HYSTERESIS * self.substeps)
+
     def _warn_heavy(self, why: str) -> None:
         """One warning per system when the deck step is sub-stepped heavily: what limits the
         step and what the user could change (like LIGGGHTS' and Yade's step-size warnings)."""
@@ -479,6 +488,7 @@ class DemSystem:
         self._mat_all = np.concatenate([b.material, self.walls.material]).astype(np.int64)
         ell = np.where(b.radius > 0, b.radius, np.sqrt(b.I.sum(axis=1) / (2 * b.mass)))
         self._ell = ell
+        self._g_norm = float(np.linalg.norm(self.gravity))
         self._scale_floor = max(float(np.sum(b.mass * np.linalg.norm(self.gravity) * ell)), 1e-300)
         # period-2 guard: round-off floors of a step's displacement (m) and rotation (kg m²)
         self._alt_floor_x = 1e-9 * ell
@@ -507,8 +517,8 @@ class DemSystem:
     # ------------------------------------------------------------------ force evaluation
     def _kinematics(self, t: float) -> Kinematics:
         b = self.bodies
-        R = b.rotations()
-        return Kinematics(t=t, x=b.x.copy(), R=R, position=b.pose_positions(R), v=b.v.copy(),
+        R, position = body_poses(b.q, b.P, b.x, b.centroid_file)
+        return Kinematics(t=t, x=b.x.copy(), R=R, position=position, v=b.v.copy(),
                           omega=omega_world(b.q, b.L, self._inv_I),
                           wall_displacement=self.wall_d.copy(), wall_velocity=self.wall_u.copy(),
                           n_particles=b.n, n_bodies=self.n_bodies)
@@ -632,6 +642,7 @@ class DemSystem:
             n_sub, refine = self.substeps, self.refine
             try:
                 e = self._try_step()
+                self.last_substeps = n_sub
                 break
             except _Unstable as exc:
                 self.set_state(good)
@@ -654,6 +665,47 @@ class DemSystem:
             self.calm_steps = 0
         self._control_step()
         return e
+
+    def steps(self, n_max: int) -> int:
+        """Advance up to ``n_max`` deck steps (at least one) and return how many were done.
+
+        A scene of exact spheres (:class:`~nurbsdem.dynamics.sphere_steps.SphereSteps`) runs
+        them in compiled code, with the same results as :meth:`step`; it returns early when
+        the time-step control needs its exact estimate, and a deck step on which a guard fires
+        is repeated by :meth:`step` (which refines it or raises).  Other scenes: one
+        :meth:`step`."""
+        self.initialize()
+        if self.compiled_steps and n_max >= 1 and self._sphere_steps is None:
+            self._sphere_steps = SphereSteps.for_system(self) or False
+        fast = self._sphere_steps if self.compiled_steps else None
+        self.last_steps = StepTally()
+        if not fast:
+            self._tallied_step()
+            return 1
+        good = self.get_state()
+        snap = self.provider.snapshot()
+        n_sub = self.substeps
+        status, done, counters = fast.run(int(n_max))
+        if status == GUARD:
+            self.set_state(good)
+            self.provider.restore(snap)
+            for _ in range(done + 1):
+                self._tallied_step()
+            return done + 1
+        self.last_steps = StepTally(done * n_sub, int(counters[ACTIVE_SUM]),
+                                    int(counters[ACTIVE_MAX]))
+        if status == CONTROL:
+            self._control_step()
+        return done
+
+    def _tallied_step(self) -> None:
+        """:meth:`step`, counted in :attr:`last_steps`."""
+        self.step()
+        n_sub = self.last_substeps
+        active = int(getattr(self.last_contacts, "active", 0) or 0)
+        t = self.last_steps
+        self.last_steps = StepTally(t.substeps + n_sub, t.active_sum + active,
+                                    max(t.active_max, active))
 
     def _try_step(self) -> EnergySample:
         """The internal steps of one deck step and the guards; raises _Unstable."""

@@ -1,0 +1,116 @@
+"""Compiled bookkeeping of the neighbour list with a skin (Verlet list) and the separation
+certificates of :mod:`nurbsdem.contact.scene`: odometers, the carry-over of per-pair rows on a
+rebuild, the renewal of certificates, and the split of the listed pairs into active contacts
+and separated ("near") pairs.
+
+These are plain functions over arrays, shared by the scene's Python orchestration and the
+compiled deck steps of :mod:`nurbsdem.dynamics.sphere_steps`, so that both paths see the same
+bits.  Units: metres; rows in the column layout of :mod:`nurbsdem.contact.lcp`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .lcp import F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI
+
+#: a certificate is kept this fraction short of the distance it was solved for (round-off)
+CERTIFICATE_SHRINK = 1.0 - 1e-9
+
+
+@njit(cache=True)
+def advance_odometers(odo: np.ndarray, x: np.ndarray, x0: np.ndarray, R: np.ndarray,
+                      R0: np.ndarray, radius: np.ndarray, wall: np.ndarray,
+                      wall0: np.ndarray) -> np.ndarray:
+    """New odometers (B,) m: odo + the largest displacement of any point of each body since the
+    previous poses, |Δx| + 2 sin(Δθ/2)·r for particles (x centroids (N,3), R rotations
+    (N,3,3), r bounding radii (N,)), |Δd| for walls (wall displacements (W,3))."""
+    n = x.shape[0]
+    out = odo.copy()
+    for i in range(n):
+        s = 0.0
+        for j in range(3):
+            for k in range(3):
+                d = R[i, j, k] - R0[i, j, k]
+                s += d * d
+        chord = math.sqrt(s / 2.0)                    # 2 sin(θ/2) = ‖R − R0‖_F / √2
+        dx0, dx1, dx2 = x[i, 0] - x0[i, 0], x[i, 1] - x0[i, 1], x[i, 2] - x0[i, 2]
+        out[i] += math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2) + chord * radius[i]
+    for w in range(wall.shape[0]):
+        d0, d1, d2 = wall[w, 0] - wall0[w, 0], wall[w, 1] - wall0[w, 1], wall[w, 2] - wall0[w, 2]
+        out[n + w] += math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return out
+
+
+@njit(cache=True)
+def list_is_stale(odo: np.ndarray, built_odo: np.ndarray, skin: float) -> bool:
+    """Whether some body has moved more than half the skin since the list was built."""
+    if skin <= 0.0:
+        return True
+    for i in range(odo.shape[0]):
+        if odo[i] - built_odo[i] > 0.5 * skin:
+            return True
+    return False
+
+
+@njit(cache=True)
+def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
+               old_budget: np.ndarray, old_reused: np.ndarray, keys: np.ndarray):
+    """Rows, certificates and reused flags of a new sorted list ``keys`` (L,): carried over
+    from the old sorted list where a key was listed before (zeros / −inf / False otherwise)."""
+    L = keys.shape[0]
+    rows_f = np.zeros((L, NF))
+    rows_i = np.zeros((L, NI), np.int64)
+    budget = np.full(L, -np.inf)
+    reused = np.zeros(L, np.bool_)
+    M = old_keys.shape[0]
+    if M == 0:
+        return rows_f, rows_i, budget, reused
+    for r in range(L):
+        j = min(np.searchsorted(old_keys, keys[r]), M - 1)
+        if old_keys[j] == keys[r]:
+            rows_f[r] = old_f[j]
+            rows_i[r] = old_i[j]
+            budget[r] = old_budget[j]
+            reused[r] = old_reused[j]
+    return rows_f, rows_i, budget, reused
+
+
+@njit(cache=True)
+def renew_certificates(budget: np.ndarray, due: np.ndarray, rf: np.ndarray, ri: np.ndarray,
+                       reach: np.ndarray) -> None:
+    """Certificates (in place) of the pairs ``due`` just solved (rows rf, ri): a pair found
+    apart by d cannot touch until its bodies' odometers have grown by d together."""
+    for r in range(due.shape[0]):
+        j = due[r]
+        sd = rf[r, F_SD]
+        apart = ri[r, I_VALID] == 1 and ri[r, I_ACTIVE] == 0 and ri[r, I_FAIL] == 0 and sd > 0.0
+        budget[j] = sd * CERTIFICATE_SHRINK + reach[j] if apart else -np.inf
+
+
+@njit(cache=True)
+def active_and_near(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
+                    reach: np.ndarray):
+    """Indices of the listed pairs in contact (valid and active) and of the separated ones
+    (valid, gap > 0), and the gaps of the latter: the row's distance, or for a certified pair
+    the lower bound its certificate leaves, whichever is smaller (m)."""
+    L = rows_f.shape[0]
+    sel = np.empty(L, np.int64)
+    near = np.empty(L, np.int64)
+    ns = nn = 0
+    for j in range(L):
+        if rows_i[j, I_VALID] != 1:
+            continue
+        if rows_i[j, I_ACTIVE] == 1:
+            sel[ns] = j
+            ns += 1
+        elif rows_f[j, F_SD] > 0.0:
+            near[nn] = j
+            nn += 1
+    gap = np.empty(nn)
+    for r in range(nn):
+        j = near[r]
+        gap[r] = min(rows_f[j, F_SD], max(budget[j] - reach[j], 0.0))
+    return sel[:ns].copy(), near[:nn].copy(), gap

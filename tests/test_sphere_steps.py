@@ -1,0 +1,156 @@
+"""Compiled deck steps for scenes of exact spheres (nurbsdem.dynamics.sphere_steps): the same
+bits as the Python path, for every step kind, with the guard and restart."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbsdem.dynamics import system as system_module
+from nurbsdem.io.deck import parse_deck
+from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.solver import Solver
+
+
+def _sphere_deck() -> str:
+    """24 spheres of two sizes falling into a box, a lid brought to contact, pressed, lifted."""
+    rng = np.random.default_rng(7)
+    lines = []
+    pts: list[np.ndarray] = []
+    while len(pts) < 24:
+        p = rng.uniform([0.016, 0.016, 0.016], [0.094, 0.094, 0.12])
+        if all(np.linalg.norm(p - q) > 0.032 for q in pts):
+            pts.append(p)
+    for i, p in enumerate(pts):
+        v = rng.normal(size=3) * 0.2
+        lines.append(f"  Particle {i + 1} Shape {1 + i % 2} Material 1 Position "
+                     f"{p[0]:.6f} {p[1]:.6f} {p[2]:.6f} Velocity {v[0]:.4f} {v[1]:.4f} {v[2]:.4f}")
+    return ("""Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 Sphere Radius 0.015
+  Shape 2 Sphere Radius 0.011
+Particles
+""" + "\n".join(lines) + """
+Walls
+  Box 1 Min 0 0 0 Max 0.11 0.11 0.14
+  Wall 6 Name lid Point 0.055 0.055 0.14 Normal 0 0 -1 Size 0.11 0.11
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.2 TimeStep 1e-3
+  Step 2 MoveWall lid ToContact Gap 0.001
+  Step 3 MoveWall lid Displacement 0 0 -0.004 Duration 0.05 TimeStep 1e-3
+  Step 4 MoveWall lid Displacement 0 0 0.004 Duration 0.03 TimeStep 1e-3
+Output
+  Directory results
+  VTK Every 0.05 Resolution 4
+  Monitors Every 0.005
+  Checkpoint Every 0.1
+""")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("spheres")
+    deck = d / "spheres.inp"
+    deck.write_text(_sphere_deck())
+    out = {}
+    for compiled in (False, True):
+        o = d / ("compiled" if compiled else "python")
+        s = Solver(parse_deck(deck), output=o, quiet=True, compiled_steps=compiled)
+        out[compiled] = (o, s.run(), s)
+    return deck, out
+
+
+def _same_results(a: Path, b: Path) -> None:
+    times = read_results_times(a / "results.h5")
+    np.testing.assert_array_equal(times, read_results_times(b / "results.h5"))
+    for k in range(len(times)):
+        ra, rb = read_results_sample(a / "results.h5", k), read_results_sample(b / "results.h5", k)
+        for key in ("position", "quaternion", "velocity", "angular_velocity"):
+            np.testing.assert_array_equal(ra[key], rb[key])          # bit for bit
+    for name in ("energy.csv", "contacts.csv", "wall_lid.csv"):
+        assert (a / "monitors" / name).read_text() == (b / "monitors" / name).read_text()
+
+
+def test_compiled_steps_equal_the_python_path_bit_for_bit(runs):
+    """Deposition, a lid moved to contact, pressed and lifted: every sample of results.h5 and
+    every monitor line equal; the same counts of internal steps, LCPs and contacts."""
+    _, out = runs
+    (py, s_py, solver_py), (cc, s_cc, solver_cc) = out[False], out[True]
+    _same_results(py, cc)
+    for key in ("steps", "substeps", "lcps", "active_total", "active_max"):
+        assert getattr(s_py, key) == getattr(s_cc, key), key
+    assert s_cc.active_max > 10                       # a real pack, pressed by the lid
+    assert solver_cc.system is None and solver_cc.end_energy == solver_py.end_energy
+
+
+def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
+    """The compiled path really ran (most deck steps in compiled loops of many steps)."""
+    deck, _ = runs
+    calls = []
+    original = system_module.DemSystem.steps
+
+    def counting(self, n_max):
+        done = original(self, n_max)
+        calls.append((done, self._sphere_steps is not False))
+        return done
+    monkeypatch.setattr(system_module.DemSystem, "steps", counting)
+    Solver(parse_deck(deck), write_output=False, quiet=True).run()
+    assert all(fast for _, fast in calls)
+    assert sum(done for done, _ in calls) == 280 and len(calls) < 280 / 2
+
+
+def test_guard_inside_the_compiled_loop_falls_back_to_the_python_step(tmp_path):
+    """A guard that fires inside the compiled loop (here: an energy tolerance of 1e-14, so it
+    fires on round-off) hands the deck step to the Python path, which repeats it with more
+    sub-steps and finally raises: the same outcome as the Python path alone."""
+    deck = tmp_path / "spheres.inp"
+    deck.write_text(_sphere_deck())
+    outcomes = []
+    for compiled in (False, True):
+        s = Solver(parse_deck(deck), write_output=False, quiet=True, compiled_steps=compiled)
+        original = system_module.DemSystem.__init__
+
+        def tight(self, *a, **k):
+            original(self, *a, **k)
+            self.energy_tolerance = 1e-14
+        system_module.DemSystem.__init__ = tight
+        try:
+            with pytest.raises(system_module.InstabilityError) as exc:
+                s.run()
+        finally:
+            system_module.DemSystem.__init__ = original
+        outcomes.append((exc.value.time, str(exc.value), s.bodies.position.copy()))
+    assert outcomes[0][0] == outcomes[1][0] and outcomes[0][1] == outcomes[1][1]
+    np.testing.assert_array_equal(outcomes[0][2], outcomes[1][2])
+
+
+def test_compiled_restart_reaches_the_same_final_state(runs, tmp_path, monkeypatch):
+    """Killed mid-deposition after a checkpoint, restarted: bit for bit the uninterrupted run."""
+    deck, out = runs
+    ref = out[True][0]
+    o = tmp_path / "out"
+
+    class Killed(Exception):
+        pass
+    original = Solver._sample
+
+    def dying(self, writers, force=False):
+        original(self, writers, force)
+        if self.time > 0.15:
+            raise Killed
+    monkeypatch.setattr(Solver, "_sample", dying)
+    with pytest.raises(Killed):
+        Solver(parse_deck(deck), output=o, quiet=True).run()
+    monkeypatch.setattr(Solver, "_sample", original)
+    Solver(parse_deck(deck), output=o, restart=o / "checkpoint.h5", quiet=True).run()
+    times = read_results_times(o / "results.h5")
+    a = read_results_sample(o / "results.h5", len(times) - 1)
+    b = read_results_sample(ref / "results.h5", len(times) - 1)
+    for key in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(a[key], b[key])
