@@ -105,12 +105,50 @@ def _sort_pairs(buf, n, nmax):
 
 
 # --------------------------------------------------------------------------- level 1
+#: up to this many bodies the all-pairs test is faster than the grid (same pairs, same order)
+ALL_PAIRS_MAX = 160
+
+
+@njit(cache=True)
+def _near_each_other(centers, radii, margin, i, j) -> bool:
+    """The comparison of :func:`sphere_pairs_jit` for bodies i, j."""
+    ex = centers[j, 0] - centers[i, 0]
+    ey = centers[j, 1] - centers[i, 1]
+    ez = centers[j, 2] - centers[i, 2]
+    t = (radii[i] + 0.5 * margin) + (radii[j] + 0.5 * margin)
+    return t > 0.0 and ex * ex + ey * ey + ez * ez < t * t
+
+
+@njit(cache=True)
+def _sphere_pairs_all(centers, radii, margin):
+    """All-pairs version of :func:`sphere_pairs_jit` for few bodies: the same comparison in
+    the same floating-point operations, so the same pairs, in lexicographic order (counted
+    first, then written: a growing buffer in the inner loop costs more than the test)."""
+    n = centers.shape[0]
+    count = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            if _near_each_other(centers, radii, margin, i, j):
+                count += 1
+    out = np.empty((count, 2), dtype=np.int64)
+    k = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            if _near_each_other(centers, radii, margin, i, j):
+                out[k, 0] = i
+                out[k, 1] = j
+                k += 1
+    return out
+
+
 @njit(cache=True)
 def sphere_pairs_jit(centers, radii, margin):
     """Compiled core of :func:`sphere_pairs` (no input checks). Returns int64 (K, 2)."""
     n = centers.shape[0]
     if n < 2:
         return np.empty((0, 2), dtype=np.int64)
+    if n <= ALL_PAIRS_MAX:
+        return _sphere_pairs_all(centers, radii, margin)
 
     # ---- size levels: level k holds radii in [rb 2^k, rb 2^(k+1)), rb = rmax 2^-(L-1)
     rmax = 0.0

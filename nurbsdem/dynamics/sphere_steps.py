@@ -50,8 +50,8 @@ from ..geometry.rotation import quats_to_matrices
 from .forces import contact_forces, match_history
 from .integrator import drift, kick_with_work, kinetic_energies
 from .rigid import body_poses, omega_world
-from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
-                          critical_step_from_rates, network_gershgorin)
+from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds,
+                          critical_step_from_rates, network_bound)
 
 #: the loop did all its deck steps / stopped for the time-step control / a guard fired
 DONE, CONTROL, GUARD = 0, 1, 2
@@ -156,8 +156,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
         built = odo.copy()
         counters[BUILDS] += 1
-    else:
-        rows_f, rows_i, budget = pl.rows_f.copy(), pl.rows_i.copy(), pl.budget.copy()
+    else:       # updated in place: the loop owns these arrays (copied at its start)
+        rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
     reach = odo[a] + odo[b]
     due = np.empty(a.shape[0], np.int64)
     n_due = 0
@@ -182,6 +182,22 @@ def _interfaces_defined(bc, a: np.ndarray, b: np.ndarray) -> bool:
 
 
 @njit(cache=True)
+def _gather_contacts(rows_f: np.ndarray, sel: np.ndarray):
+    """Points on A and B, normals (K,3) and depths −sd (K,) of the rows ``sel``."""
+    K = sel.shape[0]
+    pa, pb, nrm = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
+    dep = np.empty(K)
+    for c in range(K):
+        row = rows_f[sel[c]]
+        for k in range(3):
+            pa[c, k] = row[F_PA + k]
+            pb[c, k] = row[F_PB + k]
+            nrm[c, k] = row[F_N + k]
+        dep[c] = -row[F_SD]
+    return pa, pb, nrm, dep
+
+
+@njit(cache=True)
 def _evaluate(bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: np.ndarray,
               q: np.ndarray, L: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17) of the active pairs
@@ -192,11 +208,7 @@ def _evaluate(bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: n
     if not _interfaces_defined(bc, a, b):
         return False, ev
     K = sel.shape[0]
-    rows = pl.rows_f[sel]
-    pa = np.ascontiguousarray(rows[:, F_PA:F_PA + 3])
-    pb = np.ascontiguousarray(rows[:, F_PB:F_PB + 3])
-    nrm = np.ascontiguousarray(rows[:, F_N:F_N + 3])
-    dep = -rows[:, F_SD]
+    pa, pb, nrm, dep = _gather_contacts(pl.rows_f, sel)
     key = pl.keys[sel]
     spring = match_history(ev.hist_keys, ev.hist_springs, key)
     N, W = x.shape[0], wall_d.shape[0]
@@ -215,12 +227,11 @@ def _evaluate(bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: n
     for i in range(N):
         for k in range(3):
             force[i, k] += bc.mass[i] * bc.gravity[k]
-    rn = pl.rows_f[near]
-    near_point = 0.5 * (rn[:, F_PA:F_PA + 3] + rn[:, F_PB:F_PB + 3])
+    near_pa, near_pb, near_normal, _ = _gather_contacts(pl.rows_f, near)
+    near_point = 0.5 * (near_pa + near_pb)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
-                      key.copy(), spring.copy(), force, torque, slip, pl.a[near], pl.b[near],
-                      near_point, np.ascontiguousarray(rn[:, F_N:F_N + 3]), gap, reach,
-                      monitored)
+                            key.copy(), spring.copy(), force, torque, slip, pl.a[near],
+                            pl.b[near], near_point, near_normal, gap, reach, monitored)
 
 
 # --------------------------------------------------------------------------- integration
@@ -280,14 +291,11 @@ def _gate_passes(bc, cc, ev, x, v, q, L, wall_u, substeps: int, counters) -> boo
     if counters[STEP_COUNT] % cc.recheck == 0 and counters[REFINE] < cc.fall * substeps:
         return False            # DemSystem._periodic_recheck
     speed = body_speeds(v, omega_world(q, L, bc.inv_I), bc.ell, wall_u)
-    net = contact_network(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a, ev.near_b,
-                          ev.near_point, ev.near_normal, ev.near_gap, speed, cc.dt, bc.g_norm,
-                          bc.table, bc.material)
-    bound = math.inf
-    if net[0].shape[0]:
-        omega2, gamma = network_gershgorin(net[0], net[1], net[2], net[3], net[4], x,
-                                           quats_to_matrices(q), bc.inv_mass, bc.inv_I)
-        bound = critical_step_from_rates(omega2, gamma)
+    omega2, gamma, size = network_bound(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
+                                        ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
+                                        speed, cc.dt, bc.g_norm, bc.table, bc.material, x,
+                                        quats_to_matrices(q), bc.inv_mass, bc.inv_I)
+    bound = critical_step_from_rates(omega2, gamma) if size else math.inf
     if bound >= (1.0 - cc.bound_slack) * cc.dt_bound:
         return True
     safe = cc.safety * min(cc.dt_apriori, bound)
@@ -391,7 +399,7 @@ class SphereSteps:
         sc = self.scene
         ps = sc.pairs
         pos, R, wall, x = sc.prev_pose
-        return PairList(ps.a, ps.b, ps.keys, ps.rows_f, ps.rows_i, ps.budget, sc.odo,
+        return PairList(ps.a, ps.b, ps.keys, ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy(), sc.odo,
                         sc.built_odo, np.ascontiguousarray(pos, float),
                         np.ascontiguousarray(R, float), np.ascontiguousarray(wall, float),
                         np.ascontiguousarray(x, float))

@@ -333,6 +333,24 @@ def contact_network(c_a: np.ndarray, c_b: np.ndarray, c_point: np.ndarray, c_nor
 
 
 @njit(cache=True)
+def network_bound(c_a: np.ndarray, c_b: np.ndarray, c_point: np.ndarray, c_normal: np.ndarray,
+                  c_coeffs: np.ndarray, near_a: np.ndarray, near_b: np.ndarray,
+                  near_point: np.ndarray, near_normal: np.ndarray, near_gap: np.ndarray,
+                  speed: np.ndarray, dt: float, g: float, table: np.ndarray,
+                  material: np.ndarray, x: np.ndarray, Q: np.ndarray, inv_m: np.ndarray,
+                  inv_I: np.ndarray) -> tuple[float, float, int]:
+    """:func:`network_gershgorin` of :func:`contact_network`'s network: (ω², γ, number of
+    pairs in the network)."""
+    a, b, p, n, coeffs = contact_network(c_a, c_b, c_point, c_normal, c_coeffs, near_a, near_b,
+                                         near_point, near_normal, near_gap, speed, dt, g, table,
+                                         material)
+    if a.shape[0] == 0:
+        return 0.0, 0.0, 0
+    wk, wc = network_gershgorin(a, b, p, n, coeffs, x, Q, inv_m, inv_I)
+    return wk, wc, a.shape[0]
+
+
+@njit(cache=True)
 def _largest_ritz(alpha: np.ndarray, beta: np.ndarray, m: int) -> tuple[float, np.ndarray]:
     """Largest eigenpair of the m×m symmetric tridiagonal matrix (diagonal alpha[:m],
     off-diagonal beta[:m-1])."""
