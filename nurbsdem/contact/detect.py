@@ -152,7 +152,8 @@ class ContactTable:
         self.radius = np.array([float(s.bounding_radius) for s in shapes])
         self.seeds = (cat(sx, float), cat(sp, np.int64), cat(suv, float))
         #: (S,) non-convexity height of each shape (m; 0 for convex ones): how far its surface
-        #: rises above its own tangent planes (:mod:`nurbsdem.geometry.connectivity`)
+        #: rises above its own tangent planes (:mod:`nurbsdem.geometry.connectivity`); the
+        #: LCP kernel gets h_A + h_B of each pair (saddle stalls, :func:`lcp.solve_pair`)
         self.nonconvexity = np.array([float(getattr(getattr(s, "convexity", None), "height", 0.0)
                                             or 0.0) for s in shapes])
         self.shapes = shapes
@@ -238,7 +239,8 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
     try:
         solve_pair(ta.tab, ta.info[0], ta.centroid[0], float(ta.radius[0]),
                    tb.tab, tb.info[0], tb.centroid[0], float(tb.radius[0]),
-                   pa, Ra, pb, Rb, pf, pi, ma, mb, ta.seeds, tb.seeds, ws, wf, wi, wfs, w4, rf, ri)
+                   pa, Ra, pb, Rb, pf, pi, ma, mb, ta.seeds, tb.seeds, ws, wf, wi, wfs, w4, rf, ri,
+                   float(ta.nonconvexity[0] + tb.nonconvexity[0]))
     except Exception:  # pragma: no cover - never abort the simulation
         if previous is not None and previous.row_f is not None:
             rf, ri = np.array(previous.row_f), np.array(previous.row_i)
@@ -255,10 +257,11 @@ PARALLEL_MIN_PAIRS = 32
 
 
 @njit(cache=True)
-def _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
+def _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
                  prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1):
     """LCPs of pairs k0..k1-1 with one set of workspaces (one thread). ``mask_a/b`` (K, P)
-    candidate patches per pair for cold starts (P = 0: no candidates given)."""
+    candidate patches per pair for cold starts (P = 0: no candidates given); ``nc`` (S,)
+    non-convexity heights of the shapes (m)."""
     ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
     wf = np.zeros((lcp.WORK_ROWS, 3))
     wi = np.zeros((4, 4), np.int64)
@@ -269,18 +272,19 @@ def _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
         b = sb[k]
         solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
                    pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
-                   mask_a[k], mask_b[k], seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k])
+                   mask_a[k], mask_b[k], seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k],
+                   nc[a] + nc[b])
 
 
 @njit(cache=True, parallel=True)
-def _batch_kernel(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
+def _batch_kernel(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
                   prev_f, prev_i, mask_a, mask_b, res_f, res_i, nt):
     K = sa.shape[0]
     if nt > K:
         nt = max(K, 1)
     chunk = (K + nt - 1) // nt
     for t in prange(nt):
-        _solve_chunk(tab, info, cen, rad, seeds, sa, pos_a, rot_a, sb, pos_b, rot_b,
+        _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
                      prev_f, prev_i, mask_a, mask_b, res_f, res_i, t * chunk,
                      min(K, (t + 1) * chunk))
 
@@ -325,7 +329,7 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     no_mask = np.zeros((K, 0), np.bool_)
     mask_a = no_mask if mask_a is None else np.ascontiguousarray(mask_a, dtype=np.bool_)
     mask_b = no_mask if mask_b is None else np.ascontiguousarray(mask_b, dtype=np.bool_)
-    args = (table.tab, table.info, table.centroid, table.radius, table.seeds,
+    args = (table.tab, table.info, table.centroid, table.radius, table.seeds, table.nonconvexity,
             sa, pos_a, rot_a, sb, pos_b, rot_b,
             np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
             mask_a, mask_b, out[0], out[1])
@@ -342,9 +346,10 @@ def _accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.nd
     corner makes the support function non-smooth there) is accepted, not counted as failed,
     when its valid result lies within the two shapes' non-convexity heights of touching,
     |signed distance| <= h_A + h_B: the contact is grazing to within the geometric tolerance
-    the shapes were accepted with (a force of at most εn (h_A + h_B)).  Convex shapes have
-    h = 0: nothing changes for them.  tol (K,) = h_A + h_B per row (m); rows (K, NF), (K, NI)
-    updated in place."""
+    the shapes were accepted with (a force of at most εn (h_A + h_B)); stalls at deeper
+    contacts are handled in the kernel (:func:`lcp.solve_pair`, "saddle stall").  Convex
+    shapes have h = 0: nothing changes for them.  tol (K,) = h_A + h_B per row (m); rows
+    (K, NF), (K, NI) updated in place."""
     if not tol.any():
         return
     failed = (res_i[:, I_FAIL] == 1) & (res_i[:, I_VALID] == 1)

@@ -63,6 +63,10 @@ u + (du/de) (e' − e), so each support mapping takes 1–2 Newton iterations ne
 Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale; a last Newton step
 below 1e-7 rad is taken by a Taylor update (points moved by dp/de, depth by the quadratic
 model) instead of two more support mappings — its error is second order (~1e-14).
+Nearly convex shapes (a non-convexity height h > 0): a search that stalls at a saddle, where
+the support mapping can return a lower local maximum, moves to the higher one or is
+accepted within h_A + h_B (:func:`solve_pair`, "saddle stall"); convex shapes never take
+that path.
 
 Result rows (``resF`` float, ``resI`` int) use the column constants below. Lengths in metres.
 """
@@ -114,6 +118,16 @@ MODE_COLD, MODE_WARM, MODE_S1, MODE_NORMALS = 0, 1, 2, 3
 #: iterations, at the same distance (relative to the scale) and the same points
 S1_CERT_IT = 3
 S1_CERT_TOL = 1e-9
+#: saddle stall of a nearly convex pair (``tol_nc`` > 0, :func:`solve_pair`): the trust
+#: radius (rad) below which a search that cannot move counts as stalled; the relative
+#: change of phi (× scale) over the last 10–20 iterations below which phi has converged;
+#: how often the search may move to a higher local maximum of the support problem, the
+#: iterations each such move adds and the trust radius (rad) it restarts with
+SADDLE_STALL_ANGLE = 1e-8
+SADDLE_PHI_TOL = 1e-10
+SADDLE_MAX_MOVES = 2
+SADDLE_EXTRA_IT = 40
+SADDLE_DELTA = 1e-3
 
 # rows of the float work array (rows of 3)
 _PA, _MA, _GA, _PB, _MB, _GB = 0, 1, 4, 6, 7, 10
@@ -299,7 +313,7 @@ def _copy_trial(wf, wi, wfs):
 @njit(cache=True)
 def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
                posA, RA, posB, RB, prevF, prevI, maskA, maskB, seedsA, seedsB,
-               ws, wf, wi, wfs, w4, resF, resI):
+               ws, wf, wi, wfs, w4, resF, resI, tol_nc):
     """Solve the LCP of one body pair (module docstring); writes ``resF``/``resI`` rows.
 
     Parameters
@@ -312,6 +326,31 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     maskA, maskB: bool per patch, allowed starting patches (empty: all).
     seedsA, seedsB: (x (S, 3), patch (S,), uv (S, 2)) surface samples for cold starts.
     ws, wf, wi, wfs, w4: per-thread workspaces (kernel.make_workspace, make_work()).
+    tol_nc: h_A + h_B, the two shapes' non-convexity heights (m; 0 for convex shapes, which
+        turns the saddle-stall rule below off: their results do not depend on it).
+
+    **Saddle stall** (nearly convex shapes only, ``tol_nc`` > 0). At a saddle (a CAD patch
+    corner) e·x can have several local maxima on one body, about its non-convexity height h
+    apart (the higher point rises above the lower one's supporting plane; h is measured on
+    samples, and at a crease that plane is no tangent plane, so the gap can exceed h a
+    little), and the support mapping, a local Newton method, may return the lower one:
+    the computed phi is then too small and not smooth. The search notices it when it has
+    stalled (trust radius <= ``SADDLE_STALL_ANGLE``) and a trial a vanishing angle xn away
+    lands on a maximum higher by J > 2·scale·xn — more than the support function of bodies
+    within their bounding spheres can change (|grad phi| = |p_A − p_B| <= 2 scale):
+
+    1. the current support point was not the maximum: the search goes on from the higher
+       one (trust radius ``SADDLE_DELTA``, ``SADDLE_EXTRA_IT`` more iterations), at most
+       ``SADDLE_MAX_MOVES`` times;
+    2. after that, a search that stalls again is accepted (not failed) when J <= ``tol_nc``,
+       phi has converged (unchanged to ``SADDLE_PHI_TOL`` × scale over the last 10–20
+       iterations) and the support pair jumped by at least the remaining tangential
+       gradient (the residual is of the size of the support set, not a descent the search
+       missed). Both support pairs are J-support points of the CSO; the contact points are
+       their convex combination with the smallest tangential gap (the point of the support
+       set nearest to stationarity), so (p_A − p_B)·n = phi stays the reported depth and
+       lies between the two maxima (within J <= tol_nc of either). Parameters and patches
+       stay those of the current support point (the warm-start state).
     """
     for k in range(resF.shape[0]):
         resF[k] = 0.0
@@ -461,7 +500,18 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     converged = False
     it = 0
     gnorm = 0.0
-    for it in range(1, MAX_OUTER_IT + 1):
+    # saddle stall (tol_nc > 0): last support jump at a vanishing step (its size, the trial's
+    # world support points) and phi 10 and 20 iterations ago
+    jump = -1.0
+    qa0 = qa1 = qa2 = qb0 = qb1 = qb2 = 0.0
+    phi_m1 = np.inf
+    phi_m2 = np.inf
+    nadopt = 0
+    while it < MAX_OUTER_IT + SADDLE_EXTRA_IT * nadopt:
+        it += 1
+        if it % 10 == 0:
+            phi_m2 = phi_m1
+            phi_m1 = phi
         _tangent_basis(d, t1, t2)
         # gradient G = pA_w - pB_w (world); tangential components
         g1 = 0.0
@@ -521,6 +571,33 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
             ok = okn
             if rho > 0.75 and xn >= 0.9 * delta:
                 delta = min(2.0 * delta, 1.0)
+            if xn > SADDLE_STALL_ANGLE:
+                jump = -1.0
+        elif (tol_nc > 0.0 and xn <= SADDLE_STALL_ANGLE
+              and phin - phi > 2.0 * scale * xn + 4.0 * noise):
+            # the support jumped to a higher local maximum (docstring: saddle stall)
+            jump = phin - phi
+            if nadopt < SADDLE_MAX_MOVES:
+                # the current support point is not the maximum: go on from the higher one
+                nadopt += 1
+                _copy_trial(wf, wi, wfs)
+                for c in range(3):
+                    d[c] = dt[c]
+                phi = phin
+                ok = okn
+                delta = SADDLE_DELTA
+                jump = -1.0
+                phi_m1 = np.inf
+                phi_m2 = np.inf
+                continue
+            pT = wf[_TRIAL + _PA]
+            qa0 = posA[0] + RA[0, 0] * pT[0] + RA[0, 1] * pT[1] + RA[0, 2] * pT[2]
+            qa1 = posA[1] + RA[1, 0] * pT[0] + RA[1, 1] * pT[1] + RA[1, 2] * pT[2]
+            qa2 = posA[2] + RA[2, 0] * pT[0] + RA[2, 1] * pT[1] + RA[2, 2] * pT[2]
+            pT = wf[_TRIAL + _PB]
+            qb0 = posB[0] + RB[0, 0] * pT[0] + RB[0, 1] * pT[1] + RB[0, 2] * pT[2]
+            qb1 = posB[1] + RB[1, 0] * pT[0] + RB[1, 1] * pT[1] + RB[1, 2] * pT[2]
+            qb2 = posB[2] + RB[2, 0] * pT[0] + RB[2, 1] * pT[1] + RB[2, 2] * pT[2]
         if rho < 0.25:
             delta = 0.25 * xn
             if delta < 1e-14:
@@ -536,6 +613,40 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     resF[F_PAR + 2] = wfs[1, 0]
     resF[F_PAR + 3] = wfs[1, 1]
     resF[F_GRAD] = gnorm
+    if (not converged and tol_nc > 0.0 and 0.0 <= jump <= tol_nc and delta <= SADDLE_STALL_ANGLE
+            and abs(phi - phi_m2) <= SADDLE_PHI_TOL * scale):
+        # saddle stall (docstring): the current support pair and the one it jumped to,
+        # differences ja, jb (world; scratch rows, free after the loop)
+        ja = wf[_EV2]
+        jb = wf[_EV2 + 1]
+        ja[0] = qa0 - resF[F_PA]
+        ja[1] = qa1 - resF[F_PA + 1]
+        ja[2] = qa2 - resF[F_PA + 2]
+        jb[0] = qb0 - resF[F_PB]
+        jb[1] = qb1 - resF[F_PB + 1]
+        jb[2] = qb2 - resF[F_PB + 2]
+        _tangent_basis(d, t1, t2)
+        r1 = r2 = s1_ = s2_ = 0.0      # tangential gap now, and its change to the other pair
+        for c in range(3):
+            r1 += t1[c] * (resF[F_PA + c] - resF[F_PB + c])
+            r2 += t2[c] * (resF[F_PA + c] - resF[F_PB + c])
+            s1_ += t1[c] * (ja[c] - jb[c])
+            s2_ += t2[c] * (ja[c] - jb[c])
+        if norm3(ja) + norm3(jb) >= math.sqrt(r1 * r1 + r2 * r2):
+            ss = s1_ * s1_ + s2_ * s2_
+            lam = 0.0
+            if ss > 0.0:
+                lam = min(max(-(r1 * s1_ + r2 * s2_) / ss, 0.0), 1.0)
+            phi = 0.0
+            for c in range(3):
+                resF[F_PA + c] += lam * ja[c]
+                resF[F_PB + c] += lam * jb[c]
+                phi += d[c] * (resF[F_PA + c] - resF[F_PB + c])
+            resF[F_SD] = -phi
+            r1 += lam * s1_
+            r2 += lam * s2_
+            resF[F_GRAD] = math.sqrt(r1 * r1 + r2 * r2)
+            converged = True
     resI[I_PA] = wi[0, 0] - pA0
     resI[I_PB] = wi[1, 0] - pB0
     deg = 0
