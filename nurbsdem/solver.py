@@ -142,6 +142,10 @@ class Solver:
     restart_check: ``check(path) -> state``, reads the restart checkpoint and checks that it
         belongs to this model (default :func:`~nurbsdem.io.checkpoint.restart_state`: the
         decks compared; a model whose steps are added while it runs passes its own).
+    compiled_steps: run scenes of exact spheres in compiled deck steps
+        (:mod:`~nurbsdem.dynamics.sphere_steps`; the same results, bit for bit: a test says so).
+    background_output: write the ParaView files from a worker thread while the time loop
+        goes on (the same files, byte for byte; a checkpoint waits for them).
 
     :meth:`run` runs every step; it is :meth:`start`, :meth:`run_pending` (or
     :meth:`run_step` per step) and :meth:`finish`, which a model extended step by step calls
@@ -152,9 +156,11 @@ class Solver:
                  restart: str | Path | None = None, quiet: bool = False,
                  safety: float = 0.5, progress_stream=None,
                  contact_options: dict | None = None, write_output: bool = True,
-                 restart_check=None, compiled_steps: bool = True) -> None:
+                 restart_check=None, compiled_steps: bool = True,
+                 background_output: bool = True) -> None:
         self.model = model
         self.compiled_steps = bool(compiled_steps)
+        self.background_output = bool(background_output)
         if output is not None:
             model.output.directory = Path(output)
         self.outdir = Path(model.output.directory)
@@ -603,7 +609,8 @@ class Solver:
             self._restored = self._load_restart()
         if self.write_output:
             self._writers = OutputWriters(self.model, restart_time=(
-                self.time if (self._restored or resumed) else None))
+                self.time if (self._restored or resumed) else None),
+                background=self.background_output)
             if self._restored:
                 self._results_deck = None       # the checkpointed run's deck: written anew
             elif not resumed:
@@ -665,7 +672,9 @@ class Solver:
         """Close the writers and return the summary of the run."""
         writers, self._writers = self._writers, None
         if writers is not None:
-            writers.close()
+            t0 = time.perf_counter()
+            writers.close()             # waits for the background writes
+            self.timers["output"] += time.perf_counter() - t0
             self._finished_once = True
         s = self.summary
         s.wall_time = time.perf_counter() - self._wall0

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import errno
 import functools
+from concurrent.futures import Future, ThreadPoolExecutor
 import math
 import os
 import zlib
@@ -197,16 +198,68 @@ def read_pvd(path: str | Path) -> list[tuple[float, str]]:
                          f"move it away to continue (its series restarts)", path=str(path)) from None
 
 
+class BackgroundWriter:
+    """One worker thread that runs file writes in the order they are submitted, so that the
+    time loop does not wait for them (VTU compression releases the GIL).  The files are the
+    same, byte for byte, as when written in the foreground.  An error of a write is raised
+    in the caller's thread at the next :meth:`submit`, :meth:`wait` or :meth:`close`; at most
+    ``depth`` writes are queued (a further submit waits for the oldest)."""
+
+    def __init__(self, depth: int = 4) -> None:
+        self.depth = int(depth)
+        self._pool: ThreadPoolExecutor | None = None
+        self._pending: list[Future] = []
+
+    def submit(self, job, *args) -> None:
+        """Queue ``job(*args)`` (its arguments must not be changed afterwards)."""
+        self._collect(block=len(self._pending) >= self.depth)
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="nurbsdem-output")
+        self._pending.append(self._pool.submit(job, *args))
+
+    def _collect(self, block: bool) -> None:
+        """Drop finished writes from the queue, raising the first error; with ``block``, wait
+        for the oldest first."""
+        if block and self._pending:
+            self._pending[0].result()
+        while self._pending and self._pending[0].done():
+            self._pending.pop(0).result()
+
+    def wait(self) -> None:
+        """Wait until everything queued is written (raises the first error)."""
+        while self._pending:
+            self._pending.pop(0).result()
+
+    def close(self) -> None:
+        """:meth:`wait`, then stop the worker."""
+        try:
+            self.wait()
+        finally:
+            self.abandon()
+
+    def abandon(self) -> None:
+        """Let the queued writes finish, ignoring their errors, and stop the worker."""
+        for f in self._pending:
+            f.exception()
+        self._pending = []
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
 class PvdSeries:
     """One time series ``<outdir>/<name>.pvd`` of ``<outdir>/vtk/<name>_NNNNNN.vtu`` files.
 
     restart_time: ``None`` for a fresh series (old files of this name are removed), else
     the entries after that time (s) are dropped (and their files deleted).
+    background: a :class:`BackgroundWriter` that writes the samples (None: at once).
     """
 
-    def __init__(self, outdir: str | Path, name: str, restart_time: float | None = None) -> None:
+    def __init__(self, outdir: str | Path, name: str, restart_time: float | None = None,
+                 background: BackgroundWriter | None = None) -> None:
         self.outdir = Path(outdir)
         self.name = name
+        self.background = background
         self.pvd = self.outdir / f"{name}.pvd"
         self.vtkdir = self.outdir / VTK_DIR
         self.vtkdir.mkdir(parents=True, exist_ok=True)
@@ -239,15 +292,24 @@ class PvdSeries:
     def commit(self, time: float, rel: str) -> None:
         """Record a written sample and rewrite the .pvd atomically."""
         self.entries.append((float(time), rel))
-        self._next += 1
         atomic_write_text(self.pvd, pvd_text(self.entries))
 
     def write(self, time: float, points, cells, point_data=None, cell_data=None) -> Path:
-        """Write one sample (see :func:`write_vtu`) and add it to the collection."""
+        """Write one sample (see :func:`write_vtu`) and add it to the collection (in the
+        background when the series has a :class:`BackgroundWriter`: the .pvd lists a sample
+        only once its file is complete)."""
         path, rel = self.next_path()
+        self._next += 1
+        if self.background is None:
+            self._write(path, rel, time, points, cells, point_data, cell_data)
+        else:
+            self.background.submit(self._write, path, rel, time, points, cells,
+                                   dict(point_data or {}), dict(cell_data or {}))
+        return path
+
+    def _write(self, path, rel, time, points, cells, point_data, cell_data) -> None:
         write_vtu(path, points, cells, point_data, cell_data)
         self.commit(time, rel)
-        return path
 
 
 class ParaViewWriter:
@@ -273,10 +335,13 @@ class ParaViewWriter:
 
     def __init__(self, outdir: str | Path, shapes: Mapping[int, "Shape"],
                  walls: Sequence["WallSpec"] = (), resolution: int = 8,
-                 restart_time: float | None = None) -> None:
+                 restart_time: float | None = None, background: bool = False) -> None:
         self.outdir = Path(outdir)
         self.resolution = int(resolution)
-        self.series = {name: PvdSeries(self.outdir, name, restart_time) for name in SERIES}
+        #: the worker that writes the samples when ``background`` (None: written at once)
+        self.background = BackgroundWriter() if background else None
+        self.series = {name: PvdSeries(self.outdir, name, restart_time, self.background)
+                       for name in SERIES}
         self._shape_mesh: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for sid, shape in shapes.items():
             pts, quads, pid = tessellate_patches(shape.patches, self.resolution)
@@ -377,7 +442,29 @@ class ParaViewWriter:
         """One sample of all three series."""
         self.write_particles(time, bodies)
         self.write_walls(time, wall_displacement)
-        self.write_contacts(time, contacts)
+        self.write_contacts(time, _copied(contacts))
+
+    def sync(self) -> None:
+        """Wait until every sample is written (background mode; raises a write's error)."""
+        if self.background is not None:
+            self.background.wait()
+
+    def close(self) -> None:
+        """Write what is queued and stop the background worker."""
+        if self.background is not None:
+            self.background.close()
+
+    def abandon(self) -> None:
+        """Stop the background worker after its queued writes, ignoring their errors."""
+        if self.background is not None:
+            self.background.abandon()
+
+
+def _copied(contacts: Any) -> Any:
+    """A mapping's arrays copied (a background write must not see them change)."""
+    if contacts is None or not isinstance(contacts, Mapping):
+        return contacts
+    return {k: np.array(v, copy=True) for k, v in contacts.items()}
 
 
 def _get(obj: Any, key: str) -> Any:
@@ -769,7 +856,7 @@ class OutputWriters:
     """
 
     def __init__(self, model: "Model", restart_time: float | None = None,
-                 flush_every: int = 20) -> None:
+                 flush_every: int = 20, background: bool = False) -> None:
         assert model.output is not None
         self.directory = Path(model.output.directory)
         if self.directory.exists() and not self.directory.is_dir():
@@ -782,7 +869,8 @@ class OutputWriters:
         try:
             shapes = {sid: e.shape for sid, e in model.shapes.items()}
             self.paraview = ParaViewWriter(self.directory, shapes, model.walls,
-                                           model.output.vtk_resolution, restart_time)
+                                           model.output.vtk_resolution, restart_time,
+                                           background)
             self.monitors = MonitorWriter(self.directory, model.wall_names, restart_time)
             self.results = ResultsWriter(self.directory / RESULTS_NAME, model.text, model.path,
                                          restart_time, flush_every, after_append=self._commit)
@@ -810,6 +898,7 @@ class OutputWriters:
 
     def sync(self) -> None:
         """Make everything written so far durable (call before saving a checkpoint)."""
+        self.paraview.sync()
         self.results.flush()
         self.monitors.sync()
         self._commit()
@@ -817,6 +906,9 @@ class OutputWriters:
     def abort(self) -> None:
         """The run failed: close the files and, if this run has no complete sample yet, put
         the previous run's results back. Never raises."""
+        pv = getattr(self, "paraview", None)
+        if pv is not None:
+            pv.abandon()
         for m in (getattr(self, "monitors", None),):
             try:
                 if m is not None:
@@ -834,6 +926,7 @@ class OutputWriters:
         """Flush and close (after :meth:`abort`: nothing more is written)."""
         if getattr(self, "_aborted", False):
             return
+        self.paraview.close()
         self.results.close()
         self.monitors.close()
         self._commit()
