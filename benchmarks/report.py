@@ -875,6 +875,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
         fig.tight_layout(rect=(0, 0.03, 1, 1))
         rep.figure(fig, "scaling.png", "cost per deck step (1e-3 s) against the number of "
                    "particles (falling particles, see the LCP counts in the table)")
+    section_spheres(rep)
     # the paper's example
     rep.add("### The paper's example\n")
     if quick:
@@ -896,9 +897,46 @@ def section_cost(rep: Report, workdir: Path) -> None:
             f"time), {s.degenerated} degenerated, {s.failed} failed; energy-balance error "
             f"{abs(s.balance_error):.3e} J ({abs(s.balance_error) / max(s.balance_scale, 1e-300):.2e} "
             "of the energy turned over).\n\n" +
-            md_table(["part", "s", "%"], rows) + "\n")
+            md_table(["part", "s", "%"], rows) + "\n" +
+            f"Before the step engine of issue 10 (numbers of record on this machine class): "
+            f"{BEFORE['paper_s']:.0f} s, {BEFORE['paper_split']}.\n")
     rep.headline["paper"] = dict(wall=s.wall_time, timers=t, lcps=s.lcps, steps=s.steps,
                                  particles=s.particles, failed=s.failed)
+
+
+#: numbers of record before the step engine of issue 10 (the issue's text): the paper example
+#: and the 112 spheres against Yade, on the same 2-core machine class
+BEFORE = {"paper_s": 106.0, "paper_split": "LCP 37 %, global search 24 %, forces + integration "
+          "17 %, output 23 % (5 sub-steps per deck step in the dense pack)",
+          "spheres_ratio": 47.0}
+
+
+def section_spheres(rep: Report) -> None:
+    """112 exact spheres against the real Yade (benchmarks/bench_yade.py), and the numbers of
+    record before the compiled step engine."""
+    import bench_yade
+    rep.add("### 112 spheres against Yade\n")
+    r = bench_yade.main(["--quick"] if rep.quick else [])
+    nd, yd = r["nurbsdem"], r["yade"]
+    rows = [["nurbsdem (compiled deck steps)", fmt(nd["loop"], ".2f"), nd["substeps"],
+             fmt(nd["height"], ".4f")]]
+    if isinstance(yd, dict):
+        rows.append(["Yade " + "(`-j1`)", fmt(yd["wall"], ".2f"), "", fmt(yd["height"], ".4f")])
+    rep.add(f"`benchmarks/bench_yade.py`: the paper's box and contact law with 112 exact spheres "
+            f"(volume-equivalent radii of A, B, C), released at rest, {r['T']} s at dt 1e-4 s, "
+            "one thread each, the same positions; time of the time loop (compiled kernels "
+            "cached: a warm-up run first).\n\n" +
+            md_table(["code", "time loop s", "internal steps", "mean height at the end m"], rows)
+            + "\n")
+    if isinstance(yd, dict):
+        ratio = nd["loop"] / yd["wall"]
+        rep.add(f"Ratio nurbsdem / Yade: **{ratio:.2f}** (before the compiled deck steps: "
+                f"{BEFORE['spheres_ratio']:.0f}); mean heights differ by "
+                f"{100 * abs(nd['height'] / yd['height'] - 1):.2f} %.\n")
+        rep.headline["spheres"] = dict(ratio=ratio, nurbsdem=nd["loop"], yade=yd["wall"])
+    else:
+        rep.add(f"{yd}.\n")
+        rep.headline["spheres"] = dict(ratio=None, nurbsdem=nd["loop"], yade=None)
 
 
 # =========================================================================== 6. fit
@@ -1065,9 +1103,14 @@ def _headline_md(rep: Report) -> str:
         out.append(f"* Hertz–Mindlin: the exact curvature costs {hz['us']:.1f} µs per contact; "
                    f"the volume-equivalent radius errs by up to {100 * hz['ell_err']:+.0f} % in "
                    "force on ellipsoids against a wall (section 7).")
+    sp = h.get("spheres")
+    if sp and sp.get("ratio") is not None:
+        out.append(f"* 112 spheres against Yade (one thread each): {sp['ratio']:.2f} x Yade's "
+                   f"time (before: {BEFORE['spheres_ratio']:.0f} x), section 5.")
     p = h.get("paper")
     if p:
-        out.append(f"* Paper example: {p['wall']:.0f} s wall time, {p['lcps']} LCPs, "
+        out.append(f"* Paper example: {p['wall']:.0f} s wall time (before the step engine "
+                   f"of issue 10: {BEFORE['paper_s']:.0f} s), {p['lcps']} LCPs, "
                    f"{p['failed']} failed.")
     return "\n".join(out) + "\n"
 

@@ -36,7 +36,7 @@ from .dynamics.hertz import law_from_deck as hertz_law_from_deck
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
-from .geometry.rotation import matrix_to_quat, quat_to_matrix
+from .geometry.rotation import quat_to_matrix
 from .io.checkpoint import save_checkpoint
 from .io.writers import OutputWriters
 from .model import Bodies, DynamicStep, Model, MoveWallStep, ReplicateStep
@@ -276,13 +276,8 @@ class Solver:
 
     def _sync_bodies_from_system(self) -> None:
         """Copy the system's body state into ``self.bodies`` (positions, orientations, velocities)."""
-        s = self.system
         b = self.bodies
-        kin = s._kinematics(s.time)
-        b.position = kin.x.copy()
-        b.quaternion = np.array([matrix_to_quat(R) for R in kin.R]).reshape(-1, 4)
-        b.velocity = kin.v.copy()
-        b.angular_velocity = kin.omega.copy()
+        b.position, b.quaternion, b.velocity, b.angular_velocity = self.system.body_state()
 
     # ------------------------------------------------------------------ energies
     def _energy_row(self) -> dict:

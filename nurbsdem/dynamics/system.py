@@ -67,6 +67,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 from ..errors import InputError, NurbsdemError
+from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger, EnergySample, potential_energy
 from .forces import InterfaceTable, contact_forces, match_history, store_history
 from .hertz import has_hertz
@@ -801,6 +802,15 @@ class DemSystem:
                             dissipated_tangential=lg.dissipated_tangential,
                             dissipated_friction=lg.tangential_spring_work - float(eel[1]),
                             external_work=lg.external_work, initial_mechanical=lg.initial_mechanical)
+
+    def body_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The particles' state as the model and the writers hold it (copies): centroids
+        (N,3) m, file->world quaternions (N,4) (w, x, y, z), velocities (N,3) m/s and angular
+        velocities (N,3) rad/s, world frame."""
+        b = self.bodies
+        R, _ = body_poses(b.q, b.P, b.x, b.centroid_file)
+        return (b.x.copy(), matrix_to_quat(R).reshape(-1, 4), b.v.copy(),
+                omega_world(b.q, b.L, self._inv_I))
 
     @property
     def wall_contact_force(self) -> np.ndarray:
