@@ -101,6 +101,15 @@ class ContactResult:
 
 
 # --------------------------------------------------------------------------- packed shapes
+def _nonconvexity(shape) -> float:
+    """Non-convexity height of a shape (m) for the LCP: 0 without a measurement or when it is
+    convex up to round-off (its height, ~1e-18 m for a sphere, is no non-convexity)."""
+    cv = getattr(shape, "convexity", None)
+    if cv is None or getattr(cv, "convex", False):
+        return 0.0
+    return float(getattr(cv, "height", 0.0) or 0.0)
+
+
 class ContactTable:
     """Shapes packed for the compiled LCP: one pool of patches with global indices.
 
@@ -151,11 +160,11 @@ class ContactTable:
         self.centroid = np.ascontiguousarray([np.asarray(s.centroid, float) for s in shapes]).reshape(-1, 3)
         self.radius = np.array([float(s.bounding_radius) for s in shapes])
         self.seeds = (cat(sx, float), cat(sp, np.int64), cat(suv, float))
-        #: (S,) non-convexity height of each shape (m; 0 for convex ones): how far its surface
-        #: rises above its own tangent planes (:mod:`nurbsdem.geometry.connectivity`); the
-        #: LCP kernel gets h_A + h_B of each pair (saddle stalls, :func:`lcp.solve_pair`)
-        self.nonconvexity = np.array([float(getattr(getattr(s, "convexity", None), "height", 0.0)
-                                            or 0.0) for s in shapes])
+        #: (S,) non-convexity height of each shape (m; exactly 0 for shapes convex up to
+        #: round-off): how far its surface rises above its own tangent planes
+        #: (:mod:`nurbsdem.geometry.connectivity`); the LCP kernel gets h_A + h_B of each pair
+        #: (saddle stalls, :func:`lcp.solve_pair`; 0 turns them off)
+        self.nonconvexity = np.array([_nonconvexity(s) for s in shapes])
         self.shapes = shapes
 
     def __len__(self) -> int:

@@ -119,12 +119,14 @@ MODE_COLD, MODE_WARM, MODE_S1, MODE_NORMALS = 0, 1, 2, 3
 S1_CERT_IT = 3
 S1_CERT_TOL = 1e-9
 #: saddle stall of a nearly convex pair (``tol_nc`` > 0, :func:`solve_pair`): the trust
-#: radius (rad) below which a search that cannot move counts as stalled; the relative
-#: change of phi (× scale) over the last 10–20 iterations below which phi has converged;
-#: how often the search may move to a higher local maximum of the support problem, the
-#: iterations each such move adds and the trust radius (rad) it restarts with
+#: radius (rad) below which a search that cannot move counts as stalled; phi has converged
+#: when it stayed within this change (× scale) of one value over the last SADDLE_PHI_IT
+#: iterations or more; how often the search may move to a higher local maximum of the
+#: support problem, the iterations each such move adds and the trust radius (rad) it
+#: restarts with
 SADDLE_STALL_ANGLE = 1e-8
 SADDLE_PHI_TOL = 1e-10
+SADDLE_PHI_IT = 10
 SADDLE_MAX_MOVES = 2
 SADDLE_EXTRA_IT = 40
 SADDLE_DELTA = 1e-3
@@ -332,22 +334,25 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     **Saddle stall** (nearly convex shapes only, ``tol_nc`` > 0). At a saddle (a CAD patch
     corner) e·x can have several local maxima on one body, about its non-convexity height h
     apart (the higher point rises above the lower one's supporting plane; h is measured on
-    samples, and at a crease that plane is no tangent plane, so the gap can exceed h a
-    little), and the support mapping, a local Newton method, may return the lower one:
-    the computed phi is then too small and not smooth. The search notices it when it has
-    stalled (trust radius <= ``SADDLE_STALL_ANGLE``) and a trial a vanishing angle xn away
-    lands on a maximum higher by J > 2·scale·xn — more than the support function of bodies
-    within their bounding spheres can change (|grad phi| = |p_A − p_B| <= 2 scale):
+    samples and refined to its local maximum, and at a crease that plane is no tangent
+    plane, so the gap can exceed h a little), and the support mapping, a local Newton
+    method, may return the lower one: the computed phi is then too small and not smooth.
+    The search notices it when it has stalled (trust radius <= ``SADDLE_STALL_ANGLE``) and
+    a trial a vanishing angle xn away lands on a maximum higher by J > 2·scale·xn — more
+    than the support function of bodies within their bounding spheres can change
+    (|grad phi| = |p_A − p_B| <= 2 scale):
 
     1. the current support point was not the maximum: the search goes on from the higher
        one (trust radius ``SADDLE_DELTA``, ``SADDLE_EXTRA_IT`` more iterations), at most
        ``SADDLE_MAX_MOVES`` times;
     2. after that, a search that stalls again is accepted (not failed) when J <= ``tol_nc``,
-       phi has converged (unchanged to ``SADDLE_PHI_TOL`` × scale over the last 10–20
-       iterations) and the support pair jumped by at least the remaining tangential
-       gradient (the residual is of the size of the support set, not a descent the search
-       missed). Both support pairs are J-support points of the CSO; the contact points are
-       their convex combination with the smallest tangential gap (the point of the support
+       phi has converged (within ``SADDLE_PHI_TOL`` × scale of one value over the last
+       ``SADDLE_PHI_IT`` iterations or more: a search still creeping down the lower branch
+       by ever smaller steps counts once the steps add up to less than that) and the
+       support pair jumped by at least the remaining tangential gradient (the residual is
+       of the size of the support set, not a descent the search missed). Both support
+       pairs are J-support points of the CSO; the contact points are their convex
+       combination with the smallest tangential gap (the point of the support
        set nearest to stationarity), so (p_A − p_B)·n = phi stays the reported depth and
        lies between the two maxima (within J <= tol_nc of either). Parameters and patches
        stay those of the current support point (the warm-start state).
@@ -501,17 +506,18 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     it = 0
     gnorm = 0.0
     # saddle stall (tol_nc > 0): last support jump at a vanishing step (its size, the trial's
-    # world support points) and phi 10 and 20 iterations ago
+    # world support points) and the value phi has stayed within SADDLE_PHI_TOL × scale of
+    # since iteration it_ref
     jump = -1.0
     qa0 = qa1 = qa2 = qb0 = qb1 = qb2 = 0.0
-    phi_m1 = np.inf
-    phi_m2 = np.inf
+    phi_ref = np.inf
+    it_ref = 0
     nadopt = 0
     while it < MAX_OUTER_IT + SADDLE_EXTRA_IT * nadopt:
         it += 1
-        if it % 10 == 0:
-            phi_m2 = phi_m1
-            phi_m1 = phi
+        if tol_nc > 0.0 and not abs(phi - phi_ref) <= SADDLE_PHI_TOL * scale:
+            phi_ref = phi
+            it_ref = it
         _tangent_basis(d, t1, t2)
         # gradient G = pA_w - pB_w (world); tangential components
         g1 = 0.0
@@ -587,8 +593,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
                 ok = okn
                 delta = SADDLE_DELTA
                 jump = -1.0
-                phi_m1 = np.inf
-                phi_m2 = np.inf
+                phi_ref = np.inf
                 continue
             pT = wf[_TRIAL + _PA]
             qa0 = posA[0] + RA[0, 0] * pT[0] + RA[0, 1] * pT[1] + RA[0, 2] * pT[2]
@@ -614,7 +619,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     resF[F_PAR + 3] = wfs[1, 1]
     resF[F_GRAD] = gnorm
     if (not converged and tol_nc > 0.0 and 0.0 <= jump <= tol_nc and delta <= SADDLE_STALL_ANGLE
-            and abs(phi - phi_m2) <= SADDLE_PHI_TOL * scale):
+            and abs(phi - phi_ref) <= SADDLE_PHI_TOL * scale and it - it_ref >= SADDLE_PHI_IT):
         # saddle stall (docstring): the current support pair and the one it jumped to,
         # differences ja, jb (world; scratch rows, free after the loop)
         ja = wf[_EV2]
