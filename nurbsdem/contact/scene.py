@@ -27,8 +27,11 @@ found (up to the round-off of a different warm start).
 
 **Only the work a scene needs**: a pair of exact spheres (recognised from their NURBS
 surfaces, :func:`~nurbsdem.geometry.analytic.exact_sphere`) and an exact sphere against a
-flat wall are solved in closed form (:mod:`nurbsdem.contact.analytic`), NURBS against NURBS
-or a flat wall by the LCP.
+flat wall are solved in closed form (:mod:`nurbsdem.contact.analytic`), an exact sphere
+against a NURBS particle as a point-to-surface problem in 2 parameters
+(:mod:`nurbsdem.contact.point_surface`; the LCP where that does not apply: the sphere's centre
+inside the particle, a closest point on a crease or another patch), NURBS against NURBS or
+a flat wall by the LCP.
 
 Bookkeeping is in flat arrays aligned with the list (sorted pair keys a·(N+W) + b): previous
 solutions, certificates, reused flags; a rebuild carries them over by a merge of sorted keys.
@@ -65,7 +68,9 @@ from .analytic import sphere_centres, sphere_sphere_rows, sphere_wall_rows
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
-from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_VALID, NF, NI
+from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_STAGE,
+                  I_VALID, NF, NI)
+from .point_surface import STAGE_POINT, sphere_nurbs_rows
 from .verlet import active_and_near, advance_odometers, carry_rows, list_is_stale, renew_certificates
 from .wall import detect_wall_batch, wall_frame
 
@@ -99,10 +104,13 @@ class SceneContacts:
     skin: Verlet skin s (m) of the neighbour list; None: 5 % of the smallest bounding radius;
         0: the list is built at every evaluation.
     certificates: skip the LCPs of pairs certified apart (module docstring).
+    point_surface: solve an exact sphere against a NURBS particle as a point-to-surface
+        problem (module docstring); False: by the LCP.
     """
 
     def __init__(self, shapes: Sequence, body_shape: np.ndarray, walls: Sequence = (),
-                 margin: float = 0.0, skin: float | None = None, certificates: bool = True) -> None:
+                 margin: float = 0.0, skin: float | None = None, certificates: bool = True,
+                 point_surface: bool = True) -> None:
         self.shapes = list(shapes)
         self.table = ContactTable(self.shapes)
         self.boxes, self.box_offsets = pack_boxes(self.shapes)
@@ -115,6 +123,9 @@ class SceneContacts:
         self.nb = self.n + W
         self.skin = (0.05 * float(self.radius.min()) if self.n else 0.0) if skin is None else float(skin)
         self.certificates = bool(certificates)
+        self.point_surface = bool(point_surface)
+        #: pairs solved by the point-to-surface problem (the rest of ``timers.lcps``: LCPs)
+        self.point_solves = 0
         self.wall_center = np.zeros((W, 3))
         self.wall_axes = np.zeros((W, 3, 3))
         self.wall_half = np.zeros((W, 2))
@@ -270,11 +281,20 @@ class SceneContacts:
         a, b = ps.a[due], ps.b[due]
         sph = self.is_sphere
         wall_pair = b >= N
-        closed = sph[a] & (wall_pair | sph[np.minimum(b, N - 1)])
-        part = np.nonzero(~wall_pair & ~closed)[0]
+        sph_b = ~wall_pair & sph[np.minimum(b, N - 1)]
+        closed = sph[a] & (wall_pair | sph_b)
+        mixed = ~wall_pair & (sph[a] != sph_b) if self.point_surface else np.zeros(len(a), bool)
         wall = np.nonzero(wall_pair & ~closed)[0]
         self._closed_forms(np.nonzero(~wall_pair & closed)[0], np.nonzero(wall_pair & closed)[0],
                            a, b, pos, R, wall_d, rf, ri)
+        prev_f, prev_i = ps.rows_f[due], ps.rows_i[due]
+        part = np.nonzero(~wall_pair & ~closed & ~mixed)[0]
+        if mixed.any():
+            left = self._sphere_nurbs(np.nonzero(mixed)[0], a, b, pos, R, prev_f, prev_i, rf, ri)
+            part = np.union1d(part, left)
+            # a row of the point-to-surface solver cannot warm-start the LCP (no sphere patch)
+            prev_i = prev_i.copy()
+            prev_i[left[prev_i[left, I_STAGE] == STAGE_POINT], I_VALID] = 0
         if part.size:
             pa, pb, idx = a[part], b[part], due[part]
 
@@ -282,7 +302,7 @@ class SceneContacts:
                 return detect_batch(self.table, self.body_shape[pa[k]], pos[pa[k]], R[pa[k]],
                                     self.body_shape[pb[k]], pos[pb[k]], R[pb[k]], prev_f, prev_i,
                                     mask_a=ps.mask_a[idx[k]], mask_b=ps.mask_b[idx[k]])
-            rf[part], ri[part] = _retry_failed_cold(solve_pairs, ps.rows_f[idx], ps.rows_i[idx])
+            rf[part], ri[part] = _retry_failed_cold(solve_pairs, prev_f[part], prev_i[part])
         if wall.size:
             wa, w, idx = a[wall], b[wall] - N, due[wall]
             org = self.wall_origin[w] + wall_d[w]
@@ -293,6 +313,26 @@ class SceneContacts:
                                          self.wall_dom[w[k]], prev_f, prev_i)
             rf[wall], ri[wall] = _retry_failed_cold(solve_walls, ps.rows_f[idx], ps.rows_i[idx])
         return rf, ri
+
+    def _sphere_nurbs(self, mixed, a, b, pos, R, prev_f, prev_i, rf, ri) -> np.ndarray:
+        """Rows of the pairs ``mixed`` (indices of a, b: an exact sphere and a NURBS particle)
+        by the point-to-surface problem (:mod:`nurbsdem.contact.point_surface`); returns the
+        indices it left to the LCP."""
+        ia, ib = a[mixed], b[mixed]
+        sphere_is_a = self.is_sphere[ia]
+        ball = np.where(sphere_is_a, ia, ib)
+        body = np.where(sphere_is_a, ib, ia)
+        c = sphere_centres(ball, pos, R, self.body_shape, self.sphere_center)
+        r = self.sphere_radius[self.body_shape[ball]]
+        f, i = np.empty((mixed.size, NF)), np.empty((mixed.size, NI), np.int64)
+        t = self.table
+        ok = sphere_nurbs_rows(t.tab, t.info, t.centroid, t.radius, t.seeds, self.body_shape[body],
+                               c, r, np.ascontiguousarray(pos[body]), np.ascontiguousarray(R[body]),
+                               sphere_is_a, np.ascontiguousarray(prev_f[mixed]),
+                               np.ascontiguousarray(prev_i[mixed]), f, i)
+        rf[mixed[ok]], ri[mixed[ok]] = f[ok], i[ok]
+        self.point_solves += int(ok.sum())
+        return mixed[~ok]
 
     def _closed_forms(self, pp, pw, a, b, pos, R, wall_d, rf, ri) -> None:
         """Rows of the sphere–sphere (indices pp of a, b) and sphere–wall (pw) pairs."""
