@@ -15,6 +15,8 @@ the world (see docs/DEVNOTES.md: pose position = position - R @ centroid_file).
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 import weakref
 from typing import TYPE_CHECKING, Mapping, Sequence
@@ -161,6 +163,37 @@ def check_explicit_overlaps(model: "Model", bodies: Bodies) -> None:
     check_body_overlaps(model, bodies)
 
 
+class _SphereGrid:
+    """Spheres placed so far, hashed on a grid of cells at least as large as any two radii
+    together, so that a candidate is tested against its 27 neighbouring cells only: O(1) per
+    test instead of O(placed), with the same outcome as testing every sphere (any sphere it
+    could overlap lies in those cells)."""
+
+    def __init__(self, cell: float) -> None:
+        self.cell = cell
+        self.cells: dict[tuple[int, int, int], list[tuple[float, float, float, float]]] = {}
+
+    def _key(self, c) -> tuple[int, int, int]:
+        return (math.floor(c[0] / self.cell), math.floor(c[1] / self.cell),
+                math.floor(c[2] / self.cell))
+
+    def add(self, c, r: float) -> None:
+        self.cells.setdefault(self._key(c), []).append((float(c[0]), float(c[1]), float(c[2]), r))
+
+    def clear(self, c, r: float) -> bool:
+        """Whether a sphere (c, r) is clear of every sphere placed: |c − c_j| ≥ r_j + r."""
+        i, j, k = self._key(c)
+        x, y, z = float(c[0]), float(c[1]), float(c[2])
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                for dk in (-1, 0, 1):
+                    for cx, cy, cz, rj in self.cells.get((i + di, j + dj, k + dk), ()):
+                        dx, dy, dz = cx - x, cy - y, cz - z
+                        if math.sqrt(dx * dx + dy * dy + dz * dz) < rj + r:
+                            return False
+        return True
+
+
 def place_random_group(model: "Model", group: "RandomGroup",
                        obstacles: tuple[np.ndarray, np.ndarray]) -> Bodies:
     """Place one ``Random`` group.
@@ -184,18 +217,19 @@ def place_random_group(model: "Model", group: "RandomGroup",
             raise model.error(f"Random {group.id}: the region is too small for shape {sid} "
                               f"(bounding radius {r:.4g} m needs at least {2 * r:.4g} m in "
                               f"each direction)", group.line)
-    centres = list(np.asarray(obstacles[0], float).reshape(-1, 3))
-    rads = list(np.asarray(obstacles[1], float).reshape(-1))
+    radii_all = np.concatenate([np.asarray(obstacles[1], float).reshape(-1), radii])
+    placed_spheres = _SphereGrid(2.0 * float(radii_all.max()) if radii_all.size else 1.0)
+    for c, r in zip(np.asarray(obstacles[0], float).reshape(-1, 3),
+                    np.asarray(obstacles[1], float).reshape(-1)):
+        placed_spheres.add(c, float(r))
     position = np.zeros((n, 3))
     quats = random_quaternions(rng, n)
     order = np.argsort(-radii, kind="stable")
     for placed, k in enumerate(order):
         r = radii[k]
-        C = np.array(centres).reshape(-1, 3)
-        Rs = np.array(rads)
         for _ in range(group.max_attempts):
             c = rng.uniform(lo + r, hi - r)
-            if C.shape[0] == 0 or np.all(np.linalg.norm(C - c, axis=1) >= Rs + r):
+            if placed_spheres.clear(c, float(r)):
                 break
         else:
             raise model.error(
@@ -203,8 +237,7 @@ def place_random_group(model: "Model", group: "RandomGroup",
                 f"{shape_ids[k]}) without overlap after {group.max_attempts} attempts "
                 f"({placed} of {n} placed); enlarge Region or reduce Counts", group.line)
         position[k] = c
-        centres.append(c)
-        rads.append(r)
+        placed_spheres.add(c, float(r))
     z = np.zeros((n, 3))
     return Bodies(id=np.arange(group.id, group.id + n), shape_id=shape_ids,
                   material_id=np.full(n, group.material_id), position=position,
