@@ -251,14 +251,17 @@ class Solver:
         sysm.compiled_steps = self.compiled_steps
         b = self.bodies
         Rs = b.rotation_matrices()
+        particles = []
         for i in range(len(b)):
             entry = model.shapes[int(b.shape_id[i])]
             rho = model.materials[int(b.material_id[i])].density
-            sysm.add_particle(entry.mass(rho), entry.mass_inertia(rho), b.position[i], R=Rs[i],
-                              v=b.velocity[i], omega=b.angular_velocity[i],
-                              material=self.mat_index[int(b.material_id[i])],
-                              centroid_file=entry.centroid, radius=entry.bounding_radius,
-                              compliance=self._compliance(int(b.shape_id[i]), rho))
+            particles.append(dict(mass=entry.mass(rho), J0=entry.mass_inertia(rho),
+                                  x=b.position[i], R=Rs[i], v=b.velocity[i],
+                                  omega=b.angular_velocity[i],
+                                  material=self.mat_index[int(b.material_id[i])],
+                                  centroid_file=entry.centroid, radius=entry.bounding_radius,
+                                  compliance=self._compliance(int(b.shape_id[i]), rho)))
+        sysm.add_particles(particles)
         for k, w in enumerate(model.walls):
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
         body_shape = np.array([self.shape_index[int(s)] for s in b.shape_id], np.int64)

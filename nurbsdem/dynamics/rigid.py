@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 from numba import njit
@@ -95,6 +95,34 @@ class RigidBodies:
         (the centroid in the file frame; default 0); radius (m) bounding radius about the centroid
         (used only by the time-step estimate).
         """
+        self.add_many([dict(mass=mass, J0=J0, x=x, R=R, v=v, omega=omega, material=material,
+                            centroid_file=centroid_file, radius=radius)])
+        return self.n - 1
+
+    def add_many(self, particles: Sequence[Mapping]) -> None:
+        """Append particles given as mappings of :meth:`add`'s arguments (the arrays are
+        grown once, so adding N particles costs O(N))."""
+        rows = [self._row(**p) for p in particles]
+        if not rows:
+            return
+        cols = list(zip(*rows))
+        self.mass = np.append(self.mass, np.array(cols[0], float))
+        self.J0 = np.concatenate([self.J0, np.array(cols[1])])
+        self.I = np.concatenate([self.I, np.array(cols[2])])
+        self.P = np.concatenate([self.P, np.array(cols[3])])
+        self.centroid_file = np.concatenate([self.centroid_file, np.array(cols[4])])
+        self.material = np.append(self.material, np.array(cols[5], np.int64))
+        self.radius = np.append(self.radius, np.array(cols[6], float))
+        self.x = np.concatenate([self.x, np.array(cols[7])])
+        self.q = np.concatenate([self.q, np.array(cols[8])])
+        self.v = np.concatenate([self.v, np.array(cols[9])])
+        self.L = np.concatenate([self.L, np.array(cols[10])])
+
+    @staticmethod
+    def _row(mass: float, J0: np.ndarray, x: np.ndarray, R: np.ndarray | None = None,
+             v: np.ndarray | None = None, omega: np.ndarray | None = None, material: int = 0,
+             centroid_file: np.ndarray | None = None, radius: float = 0.0) -> tuple:
+        """One particle's entries of every array (checked; see :meth:`add`)."""
         if not (mass > 0 and math.isfinite(mass)):
             raise InputError(f"particle mass must be positive, got {mass}")
         I, P = principal_frame(J0)
@@ -107,19 +135,11 @@ class RigidBodies:
         quat_to_matrix_into(q, Qm)
         omega = np.zeros(3) if omega is None else np.asarray(omega, dtype=float)
         L = Qm @ (I * (Qm.T @ omega))
-        self.mass = np.append(self.mass, float(mass))
-        self.J0 = np.concatenate([self.J0, 0.5 * (np.asarray(J0, float) + np.asarray(J0, float).T)[None]])
-        self.I = np.concatenate([self.I, I[None]])
-        self.P = np.concatenate([self.P, P[None]])
+        J0 = np.asarray(J0, float)
         c = np.zeros(3) if centroid_file is None else np.asarray(centroid_file, dtype=float)
-        self.centroid_file = np.concatenate([self.centroid_file, c[None]])
-        self.material = np.append(self.material, np.int64(material))
-        self.radius = np.append(self.radius, float(radius))
-        self.x = np.concatenate([self.x, np.asarray(x, dtype=float).reshape(1, 3)])
-        self.q = np.concatenate([self.q, q[None]])
-        self.v = np.concatenate([self.v, (np.zeros(3) if v is None else np.asarray(v, float)).reshape(1, 3)])
-        self.L = np.concatenate([self.L, L[None]])
-        return self.n - 1
+        return (float(mass), 0.5 * (J0 + J0.T), I, P, c.reshape(3), np.int64(material),
+                float(radius), np.asarray(x, dtype=float).reshape(3), q,
+                (np.zeros(3) if v is None else np.asarray(v, float)).reshape(3), L)
 
     # ---------------------------------------------------------------- derived kinematics
     def principal_rotations(self) -> np.ndarray:

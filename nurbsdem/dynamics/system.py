@@ -258,6 +258,16 @@ class DemSystem:
                                 (float(compliance[0]), float(compliance[1])))
         return i
 
+    def add_particles(self, particles: list[dict]) -> None:
+        """Add many particles at once (each a mapping of :meth:`add_particle`'s arguments;
+        O(N) where N calls of :meth:`add_particle` cost O(N²))."""
+        self._check_not_initialized()
+        rows = [dict(p) for p in particles]
+        compliance = [r.pop("compliance", None) for r in rows]
+        self.bodies.add_many(rows)
+        self._compliance.extend(None if g is None else (float(g[0]), float(g[1]))
+                                for g in compliance)
+
     def add_wall(self, motion: PrescribedMotion | None = None, material: int = 0, name: str = "") -> int:
         """Add a fixed (motion None) or prescribed-motion wall; returns its **global** index N+k
         (valid once all particles are added: add walls after particles)."""
