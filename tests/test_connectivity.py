@@ -187,7 +187,7 @@ def test_slightly_concave_face_is_rejected():
     cp[2, 2] = 0.0
     patches[4] = Patch(4, 4, p.knots_u, p.knots_v, cp, p.weights)
     with pytest.raises(GeometryError, match=r"patch 4: not convex: the surface rises .* m "
-                       r"\(1\.4e-06 of the particle size 4\.34 m\).*outward normal curvature"):
+                       r"\(1\.4\d?e-06 of the particle size 4\.34 m\).*outward normal curvature"):
         Shape(patches, convexity_tol=0.0)               # strict: any non-convexity refused
     sh = Shape(patches)                                  # 1.4e-6 of the size: accepted, warned
     assert sh.warnings and "patch 4: nearly convex" in sh.warnings[0]

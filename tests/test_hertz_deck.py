@@ -12,6 +12,7 @@ from nurbsdem.dynamics.hertz import HertzMindlinLaw, effective_moduli
 from nurbsdem.errors import InputError
 from nurbsdem.io.deck import parse_deck
 from nurbsdem.solver import Solver
+from runs import assert_same_final_state, killed_and_restarted
 
 DECK = """\
 Environment
@@ -122,7 +123,6 @@ def test_run_writes_radius_and_stiffness(tmp_path):
 def test_restart_is_bit_for_bit(tmp_path, monkeypatch):
     """A Hertz run killed after a checkpoint and restarted ends in the same state, with the
     same monitors (the per-contact coefficients and radii are part of the state)."""
-    from nurbsdem.io.writers import read_results_sample, read_results_times
     text = DECK.format(iface=HM, box="").replace("Duration 0.02", "Duration 0.04").replace(
         "Position 0.05 0.05 0.011", "Position 0.05 0.05 0.0100001").replace(
         "  VTK Every 0.01 Resolution 4\n", "  VTK Every 0.01 Resolution 4\n  Checkpoint Every 0.01\n")
@@ -130,28 +130,8 @@ def test_restart_is_bit_for_bit(tmp_path, monkeypatch):
     deck.write_text(text)
     ref, out = tmp_path / "ref", tmp_path / "out"
     Solver(parse_deck(deck), output=ref, quiet=True).run()
-
-    class Killed(Exception):
-        pass
-    original = Solver._sample
-
-    def dying(self, writers, force=False):
-        original(self, writers, force)
-        if self.time > 0.025:
-            raise Killed
-    monkeypatch.setattr(Solver, "_sample", dying)
-    with pytest.raises(Killed):
-        Solver(parse_deck(deck), output=out, quiet=True).run()
-    monkeypatch.setattr(Solver, "_sample", original)
-    Solver(parse_deck(deck), output=out, restart=out / "checkpoint.h5", quiet=True).run()
-    times = read_results_times(out / "results.h5")
-    np.testing.assert_array_equal(times, read_results_times(ref / "results.h5"))
-    a = read_results_sample(out / "results.h5", len(times) - 1)
-    b = read_results_sample(ref / "results.h5", len(times) - 1)
-    for key in ("position", "quaternion", "velocity", "angular_velocity"):
-        np.testing.assert_array_equal(a[key], b[key])
-    for name in ("energy.csv", "contacts.csv", "hertz.csv"):
-        assert (out / "monitors" / name).read_text() == (ref / "monitors" / name).read_text()
+    killed_and_restarted(deck, out, 0.025, monkeypatch)
+    assert_same_final_state(out, ref, ("energy.csv", "contacts.csv", "hertz.csv"))
 
 
 @pytest.mark.parametrize("box, mats, message", [

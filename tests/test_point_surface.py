@@ -14,6 +14,7 @@ from nurbsdem.contact.point_surface import sphere_nurbs_rows
 from nurbsdem.geometry.generators import ellipsoid
 from nurbsdem.geometry.particles import paper_particle_shape
 from nurbsdem.shapes import sphere
+from runs import spread_points
 
 R_S = 0.01
 AXES = (0.03, 0.02, 0.012)
@@ -113,12 +114,8 @@ def test_scene_with_spheres_and_particles_matches_the_lcp(tmp_path):
     from nurbsdem.solver import Solver
     shapes = Path(__file__).resolve().parents[1] / "inputs" / "shapes"
     lines = []
-    rng = np.random.default_rng(3)
-    pts: list[np.ndarray] = []
-    while len(pts) < 14:
-        p = rng.uniform([0.02, 0.02, 0.02], [0.09, 0.09, 0.16])
-        if all(np.linalg.norm(p - q) > 0.04 for q in pts):
-            pts.append(p)
+    pts = spread_points(np.random.default_rng(3), 14, [0.02, 0.02, 0.02], [0.09, 0.09, 0.16],
+                        0.04)
     for i, p in enumerate(pts):
         lines.append(f"  Particle {i + 1} Shape {1 + i % 2} Material 1 Position "
                      f"{p[0]:.6f} {p[1]:.6f} {p[2]:.6f}")

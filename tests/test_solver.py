@@ -15,8 +15,9 @@ from click.testing import CliRunner
 import nurbsdem
 from nurbsdem.cli import main
 from nurbsdem.io.deck import parse_deck
-from nurbsdem.io.writers import read_pvd, read_results_sample, read_results_times
+from nurbsdem.io.writers import read_pvd
 from nurbsdem.solver import Solver
+from runs import assert_same_final_state, killed_and_restarted
 
 ROOT = Path(__file__).resolve().parents[1]
 SHAPES = ROOT / "inputs" / "shapes"
@@ -91,30 +92,8 @@ def test_outputs_are_what_paraview_and_scripts_read(lid_run):
 def test_restart_reaches_the_same_final_state(lid_run, tmp_path, monkeypatch):
     deck, ref_out, _ = lid_run
     out = tmp_path / "out"
-
-    class Killed(Exception):
-        pass
-
-    original = Solver._sample
-
-    def dying_sample(self, writers, force=False):
-        original(self, writers, force)
-        if self.time > 0.100:             # mid step 3 (the lid moving), after a checkpoint
-            raise Killed
-    monkeypatch.setattr(Solver, "_sample", dying_sample)
-    with pytest.raises(Killed):
-        Solver(parse_deck(deck), output=out, quiet=True).run()
-    monkeypatch.setattr(Solver, "_sample", original)
-    Solver(parse_deck(deck), output=out, restart=out / "checkpoint.h5", quiet=True).run()
-
-    times = read_results_times(out / "results.h5")
-    np.testing.assert_array_equal(times, read_results_times(ref_out / "results.h5"))
-    a = read_results_sample(out / "results.h5", len(times) - 1)
-    b = read_results_sample(ref_out / "results.h5", len(times) - 1)
-    for key in ("position", "quaternion", "velocity", "angular_velocity"):
-        np.testing.assert_array_equal(a[key], b[key])          # bit for bit
-    for name in ("energy.csv", "contacts.csv", "wall_lid.csv"):
-        assert (out / "monitors" / name).read_text() == (ref_out / "monitors" / name).read_text()
+    killed_and_restarted(deck, out, 0.100, monkeypatch)   # mid step 3 (the lid moving)
+    assert_same_final_state(out, ref_out, ("energy.csv", "contacts.csv", "wall_lid.csv"))
 
 
 def test_check_prints_a_summary():

@@ -11,17 +11,14 @@ from nurbsdem.dynamics import system as system_module
 from nurbsdem.io.deck import parse_deck
 from nurbsdem.io.writers import read_results_sample, read_results_times
 from nurbsdem.solver import Solver
+from runs import STATE_KEYS, assert_same_final_state, killed_and_restarted, spread_points
 
 
 def _sphere_deck() -> str:
     """24 spheres of two sizes falling into a box, a lid brought to contact, pressed, lifted."""
     rng = np.random.default_rng(7)
     lines = []
-    pts: list[np.ndarray] = []
-    while len(pts) < 24:
-        p = rng.uniform([0.016, 0.016, 0.016], [0.094, 0.094, 0.12])
-        if all(np.linalg.norm(p - q) > 0.032 for q in pts):
-            pts.append(p)
+    pts = spread_points(rng, 24, [0.016, 0.016, 0.016], [0.094, 0.094, 0.12], 0.032)
     for i, p in enumerate(pts):
         v = rng.normal(size=3) * 0.2
         lines.append(f"  Particle {i + 1} Shape {1 + i % 2} Material 1 Position "
@@ -67,14 +64,12 @@ def runs(tmp_path_factory):
 
 
 def _same_results(a: Path, b: Path) -> None:
-    times = read_results_times(a / "results.h5")
-    np.testing.assert_array_equal(times, read_results_times(b / "results.h5"))
-    for k in range(len(times)):
+    """Every sample equal bit for bit, and the monitors."""
+    assert_same_final_state(a, b, ("energy.csv", "contacts.csv", "wall_lid.csv"))
+    for k in range(len(read_results_times(a / "results.h5"))):
         ra, rb = read_results_sample(a / "results.h5", k), read_results_sample(b / "results.h5", k)
-        for key in ("position", "quaternion", "velocity", "angular_velocity"):
+        for key in STATE_KEYS:
             np.testing.assert_array_equal(ra[key], rb[key])          # bit for bit
-    for name in ("energy.csv", "contacts.csv", "wall_lid.csv"):
-        assert (a / "monitors" / name).read_text() == (b / "monitors" / name).read_text()
 
 
 def test_compiled_steps_equal_the_python_path_bit_for_bit(runs):
@@ -133,24 +128,5 @@ def test_guard_inside_the_compiled_loop_falls_back_to_the_python_step(tmp_path):
 def test_compiled_restart_reaches_the_same_final_state(runs, tmp_path, monkeypatch):
     """Killed mid-deposition after a checkpoint, restarted: bit for bit the uninterrupted run."""
     deck, out = runs
-    ref = out[True][0]
-    o = tmp_path / "out"
-
-    class Killed(Exception):
-        pass
-    original = Solver._sample
-
-    def dying(self, writers, force=False):
-        original(self, writers, force)
-        if self.time > 0.15:
-            raise Killed
-    monkeypatch.setattr(Solver, "_sample", dying)
-    with pytest.raises(Killed):
-        Solver(parse_deck(deck), output=o, quiet=True).run()
-    monkeypatch.setattr(Solver, "_sample", original)
-    Solver(parse_deck(deck), output=o, restart=o / "checkpoint.h5", quiet=True).run()
-    times = read_results_times(o / "results.h5")
-    a = read_results_sample(o / "results.h5", len(times) - 1)
-    b = read_results_sample(ref / "results.h5", len(times) - 1)
-    for key in ("position", "quaternion", "velocity", "angular_velocity"):
-        np.testing.assert_array_equal(a[key], b[key])
+    killed_and_restarted(deck, tmp_path / "out", 0.15, monkeypatch)
+    assert_same_final_state(tmp_path / "out", out[True][0], ("energy.csv", "contacts.csv"))
