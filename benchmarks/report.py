@@ -899,7 +899,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
             f"time), {s.degenerated} degenerated, {s.failed} failed; energy-balance error "
             f"{abs(s.balance_error):.3e} J ({abs(s.balance_error) / max(s.balance_scale, 1e-300):.2e} "
             "of the energy turned over).\n\n" +
-            md_table(["part", "s", "%"], rows) + "\n" +
+            md_table(["part", "s", "%"], rows) + "\n\n" +
             f"Before the step engine of issue 10 (numbers of record on this machine class): "
             f"{BEFORE['paper_s']:.0f} s, {BEFORE['paper_split']}.\n")
     rep.headline["paper"] = dict(wall=s.wall_time, timers=t, lcps=s.lcps, steps=s.steps,
