@@ -17,6 +17,7 @@ SCRIPT = REPO / "benchmarks" / "report.py"
 SECTIONS = ("## Headline numbers", "## 1. Contact accuracy against cost",
             "## 2. Exact geometry against facets", "## 3. Robustness: randomised hard cases",
             "## 4. Time step against error", "## 5. Cost of a run", "### 112 spheres against Yade",
+            "### An exact sphere against a NURBS particle",
             "### The paper's example",
             "## 6. Fit to meshes", "## 7. Hertz–Mindlin with the exact curvature")
 FIGURES = ("lcp_accuracy.png", "facets.png", "timestep.png", "scaling.png")
