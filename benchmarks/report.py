@@ -951,8 +951,8 @@ def section_point_surface(rep: Report) -> None:
             "pairs (signed distance / bounding radius, normal in rad) and, for the ellipsoid, "
             "against the closed-form distance (m).\n\n" +
             md_table(["particle", "pairs", "penetrating", "LCP cold", "LCP warm",
-                      "point cold", "point warm", "solved % cold / warm", "|Δsd|/R vs LCP",
-                      "normal vs LCP", "|Δsd| vs closed form"], table) + "\n")
+                      "point cold", "point warm", "solved % cold / warm", "max Δsd/R vs LCP",
+                      "max normal error vs LCP", "max Δsd vs closed form (m)"], table) + "\n")
     rep.headline["point_surface"] = rows
 
 
