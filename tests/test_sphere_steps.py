@@ -84,6 +84,27 @@ def test_compiled_steps_equal_the_python_path_bit_for_bit(runs):
     assert solver_cc.system is None and solver_cc.end_energy == solver_py.end_energy
 
 
+def test_compiled_hertz_mindlin_equals_the_python_path(tmp_path):
+    """Hertz–Mindlin spheres (exact equivalent radii, tangent coefficients in the step
+    control): the compiled deck steps give the Python path's results bit for bit."""
+    text = _sphere_deck().replace(
+        "Material 1 Density 2700", "Material 1 Density 2700 YoungModulus 1e8 PoissonRatio 0.3"
+    ).replace("Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 "
+              "TangentialDamping 0 Friction 0.5",
+              "Interface 1 Model HertzMindlin Restitution 0.5 Friction 0.5").replace(
+        "Step 1 Dynamic Duration 0.2", "Step 1 Dynamic Duration 0.12")
+    deck = tmp_path / "hertz.inp"
+    deck.write_text(text)
+    outs = []
+    for compiled in (False, True):
+        o = tmp_path / ("compiled" if compiled else "python")
+        summary = Solver(parse_deck(deck), output=o, quiet=True, compiled_steps=compiled).run()
+        outs.append((o, summary))
+    (py, s_py), (cc, s_cc) = outs
+    assert_same_final_state(cc, py, ("energy.csv", "contacts.csv", "hertz.csv", "wall_lid.csv"))
+    assert s_py.substeps == s_cc.substeps and s_cc.active_max > 10
+
+
 def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
     """The compiled path really ran (most deck steps in compiled loops of many steps)."""
     deck, _ = runs

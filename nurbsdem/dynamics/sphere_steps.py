@@ -43,11 +43,13 @@ from numba import njit
 
 from ..contact.analytic import sphere_centres, sphere_sphere_rows, sphere_wall_rows
 from ..contact.broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
-from ..contact.lcp import F_N, F_PA, F_PB, F_SD, NF, NI
+from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_PA, I_PB, NF, NI
 from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, list_is_stale,
                               renew_certificates)
+from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from .forces import contact_forces, match_history
+from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds,
@@ -59,7 +61,7 @@ DONE, CONTROL, GUARD = 0, 1, 2
 #: the scene's constant geometry (exact spheres, flat walls)
 SphereScene = namedtuple("SphereScene", "n nb radius skin margin certificates body_shape "
                          "sphere_center sphere_radius wall_center wall_axes wall_half "
-                         "wall_origin wall_a wall_b wall_dom")
+                         "wall_origin wall_a wall_b wall_dom hertz tab first_patch")
 #: the neighbour list and its per-pair arrays, odometers and the previous poses
 PairList = namedtuple("PairList", "a b keys rows_f rows_i budget odo built_odo "
                       "prev_pos prev_R prev_wall prev_x")
@@ -68,8 +70,8 @@ BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass
                        "table gravity g_norm alt_floor_x alt_floor_L")
 #: the last force evaluation: per-contact arrays, histories and loads
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
-                        "hist_keys hist_springs force torque slip near_a near_b near_point "
-                        "near_normal near_gap reach monitored")
+                        "radius fallback hist_keys hist_springs force torque slip near_a near_b "
+                        "near_point near_normal near_gap reach monitored")
 #: step-control and guard settings (floats and flags)
 Control = namedtuple("Control", "dt refine_decay safety dt_apriori dt_bound forced recheck fall "
                      "bound_slack energy_tolerance scale_floor check_energy watch_period2")
@@ -198,17 +200,38 @@ def _gather_contacts(rows_f: np.ndarray, sel: np.ndarray):
 
 
 @njit(cache=True)
-def _evaluate(bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: np.ndarray,
-              q: np.ndarray, L: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float):
-    """DemSystem._evaluate after the search: contact forces (Eq. 16–17) of the active pairs
-    with their tangential histories, and gravity.  Returns (True, the new Evaluation), or
-    (False, ev) when a contact has no interface (the Python path raises the error)."""
+def _hertz_radii(sc, pl, sel, a, b, nrm, R):
+    """Equivalent Hertz radii (K,) of the contacts ``sel`` and the number of fallbacks
+    (:func:`~nurbsdem.geometry.curvature.scene_contact_radii`, as the Python path calls it;
+    zeros and 0 for linear laws)."""
+    K = sel.shape[0]
+    r_eff = np.zeros(K)
+    if not sc.hertz or K == 0:
+        return r_eff, 0
+    t = sc.tab
+    n_fall = scene_contact_radii(t[0], t[1], t[2], t[3], t[4], t[5], t[6], sc.first_patch,
+                                 sc.body_shape, sc.sphere_radius, sc.radius, R, a, b,
+                                 pl.rows_i[sel, I_PA], pl.rows_i[sel, I_PB],
+                                 np.ascontiguousarray(pl.rows_f[sel, F_PAR:F_PAR + 4]), nrm,
+                                 pl.rows_i[sel, I_DEG], r_eff)
+    return r_eff, n_fall
+
+
+@njit(cache=True)
+def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: np.ndarray,
+              q: np.ndarray, L: np.ndarray, R: np.ndarray, wall_d: np.ndarray,
+              wall_u: np.ndarray, h: float):
+    """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
+    the contacts' equivalent radii) of the active pairs with their tangential histories, and
+    gravity.  Returns (True, the new Evaluation), or (False, ev) when a contact has no
+    interface (the Python path raises the error)."""
     sel, near, gap = active_and_near(pl.rows_f, pl.rows_i, pl.budget, reach)
     a, b = pl.a[sel], pl.b[sel]
     if not _interfaces_defined(bc, a, b):
         return False, ev
     K = sel.shape[0]
     pa, pb, nrm, dep = _gather_contacts(pl.rows_f, sel)
+    radius, n_fall = _hertz_radii(sc, pl, sel, a, b, nrm, R)
     key = pl.keys[sel]
     spring = match_history(ev.hist_keys, ev.hist_springs, key)
     N, W = x.shape[0], wall_d.shape[0]
@@ -222,7 +245,7 @@ def _evaluate(bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: n
     fn, eel, stick = np.empty(K), np.empty((K, 2)), np.empty(K, np.int64)
     coeffs = np.empty((K, 4))
     slip = contact_forces(a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material,
-                          bc.table, spring, h, bc.inv_mass_all, np.zeros(K), force, torque, point,
+                          bc.table, spring, h, bc.inv_mass_all, radius, force, torque, point,
                           ftot, fdn, fdt, fet, fn, eel, stick, coeffs)
     for i in range(N):
         for k in range(3):
@@ -230,7 +253,7 @@ def _evaluate(bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: n
     near_pa, near_pb, near_normal, _ = _gather_contacts(pl.rows_f, near)
     near_point = 0.5 * (near_pa + near_pb)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
-                            key.copy(), spring.copy(), force, torque, slip, pl.a[near],
+                            radius, n_fall, key.copy(), spring.copy(), force, torque, slip, pl.a[near],
                             pl.b[near], near_point, near_normal, gap, reach, monitored)
 
 
@@ -333,7 +356,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             pl, reach, monitored = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
             counters[EVALS] += 1
             counters[MONITORED] += monitored
-            ok, ev = _evaluate(bc, pl, reach, monitored, ev, x, v, q, L, wall_d, wall_u, h)
+            ok, ev = _evaluate(sc, bc, pl, reach, monitored, ev, x, v, q, L, R, wall_d, wall_u, h)
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u
             _kick(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger, wall_work)
@@ -369,7 +392,9 @@ class SphereSteps:
                               np.ascontiguousarray(scene.sphere_radius),
                               scene.wall_center, scene.wall_axes,
                               np.ascontiguousarray(scene.wall_half[:, :2]), scene.wall_origin,
-                              scene.wall_a, scene.wall_b, scene.wall_dom)
+                              scene.wall_a, scene.wall_b, scene.wall_dom, has_hertz(s._table),
+                              scene.table.tab[:7],
+                              np.ascontiguousarray(scene.table.info[:, 0], np.int64))
         self.bc = BodyConst(b.mass, s._inv_mass, s._inv_I, b.P, b.centroid_file, s._ell,
                             s._inv_mass_all, s._mat_all, s._table, s.gravity, s._g_norm,
                             s._alt_floor_x, s._alt_floor_L)
@@ -379,11 +404,9 @@ class SphereSteps:
         """The compiled stepper when every particle is an exact sphere under linear contact
         laws and the provider is a scene that has been called once; else None."""
         from ..contact.scene import SceneContacts
-        from .hertz import has_hertz
         scene = system.provider
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or not scene.is_sphere.all()
-                or has_hertz(system._table) or scene.prev_pose is None
-                or scene.built_odo is None):
+                or scene.prev_pose is None or scene.built_odo is None):
             return None
         return SphereSteps(system, scene)
 
@@ -412,7 +435,9 @@ class SphereSteps:
         coeffs = s.c_coeffs if (s.c_coeffs.ndim == 2 and s.c_coeffs.shape[0] == K) \
             else np.ascontiguousarray(s._table[s._mat_all[s.c_a], s._mat_all[s.c_b]][:, :4])
         return Evaluation(s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot, s.c_fdn, s.c_fdt,
-                          s.c_fet, s.c_fn, s.c_eel, s.c_stick, s.c_key, coeffs, s.hist_keys,
+                          s.c_fet, s.c_fn, s.c_eel, s.c_stick, s.c_key, coeffs,
+                          np.ascontiguousarray(s.c_radius, float),
+                          int(getattr(s, "hertz_fallback", 0)), s.hist_keys,
                           s.hist_springs, s.force, s.torque, float(s.last_slip_work),
                           np.asarray(cs.near_a, np.int64), np.asarray(cs.near_b, np.int64),
                           np.ascontiguousarray(cs.near_point, float),
@@ -467,7 +492,9 @@ class SphereSteps:
         s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot = ev.a, ev.b, ev.point, ev.normal, ev.ftot
         s.c_fdn, s.c_fdt, s.c_fet, s.c_fn, s.c_eel = ev.fdn, ev.fdt, ev.fet, ev.fn, ev.eel
         s.c_stick, s.c_key, s.c_coeffs = ev.stick, ev.key, ev.coeffs
-        s.c_radius = np.zeros(ev.a.shape[0])
+        s.c_radius = ev.radius
+        if self.sc.hertz:
+            s.hertz_fallback = int(ev.fallback)
         s.hist_keys, s.hist_springs = ev.hist_keys, ev.hist_springs
         s.force, s.torque, s.last_slip_work = ev.force, ev.torque, ev.slip
         s.wall_d, s.wall_u = wall_d, wall_u
