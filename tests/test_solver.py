@@ -236,3 +236,19 @@ def test_background_write_errors_reach_the_caller():
     w.submit(fail)
     w.abandon()                       # an aborting run: queued writes end, errors ignored
     assert done == [1, 2]
+
+
+def test_steps_to_the_next_output_equal_a_scan():
+    """The compiled loop stops exactly where a step-by-step run would write output: the
+    closed-form search of the next due step equals a scan with the same test."""
+    from nurbsdem.solver import _due, _steps_to_due
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        dt = float(rng.choice([1e-3, 1e-4, 2.5e-4, 3e-4, 1e-3 / 3]))
+        every = float(rng.choice([1e-3, 2e-3, 0.01, 0.0015, 0.05, 0.007, 1000.0]))
+        t0 = float(rng.choice([0.0, 0.25, 1.0 / 3]))
+        count = int(rng.integers(0, 5000))
+        n_max = int(rng.integers(1, 300))
+        scan = next((k for k in range(1, n_max + 1) if _due(t0 + (count + k) * dt, every)),
+                    n_max)
+        assert _steps_to_due(t0, count, dt, every, n_max) == scan, (dt, every, t0, count, n_max)

@@ -72,8 +72,8 @@ from .energy import EnergyLedger, EnergySample, potential_energy
 from .forces import InterfaceTable, contact_forces, match_history, store_history
 from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
-from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
+from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           critical_step, critical_step_from_rates, network_gershgorin,
                           network_rates)
