@@ -18,41 +18,18 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from decks import paper_mix_deck
 
 
 def deck_text(n: int, settle: float, measure: int, out: Path) -> str:
     """Region: square base of side L, height L/2 per the packing, bounding-sphere fraction 0.3
-    (bounding radii of A, B, C: ~37, 29, 22 mm)."""
-    shapes = (REPO / "inputs" / "shapes").resolve()
+    (bounding radii of A, B, C: ~37, 29, 22 mm); the box twice as high."""
     r_mean3 = (0.0365 ** 3 + 0.0291 ** 3 + 0.0219 ** 3) / 3
     volume = n * 4 / 3 * math.pi * r_mean3 / 0.3
     side = (2 * volume) ** (1 / 3)
     height = volume / side ** 2
-    c = [n // 3, n // 3, n - 2 * (n // 3)]
-    return f"""Environment
-  Gravity 0 0 -9.81
-Materials
-  Material 1 Density 2700
-Shapes
-  Shape 1 File {shapes}/A.yaml
-  Shape 2 File {shapes}/B.yaml
-  Shape 3 File {shapes}/C.yaml
-Particles
-  Random 1 Shapes 1 2 3 Counts {c[0]} {c[1]} {c[2]} Material 1 Region 0 0 0 {side:.6f} {side:.6f} {height:.6f} Seed 1
-Walls
-  Box 1 Min 0 0 0 Max {side:.6f} {side:.6f} {2 * height:.6f}
-Contact
-  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
-Steps
-  Step 1 Dynamic Duration {settle:.6g} TimeStep 1e-3
-  Step 2 Dynamic Duration {measure * 1e-3:.6g} TimeStep 1e-3
-Output
-  Directory {out}
-  VTK Every 1000 Resolution 2
-  Monitors Every 0.05
-  Checkpoint Every 1000
-"""
+    return paper_mix_deck(n, (side, side, height), 2 * height, [settle, measure * 1e-3], out,
+                          monitors_every=0.05, vtk_resolution=2)
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -788,35 +788,12 @@ def section_dense_pack(rep: Report) -> None:
 
 # =========================================================================== 5. cost
 def _scaling_deck(N: int, steps: int, d: Path) -> Path:
-    shapes = (REPO / "inputs" / "shapes").resolve()
+    """N particles in a box of volume N × 1 L (base side (N/2 L)^(1/3), height twice that)."""
+    from decks import paper_mix_deck
     side = (N * 1.0e-3 / 2) ** (1 / 3)
-    H = 2 * side
-    c = [N // 3, N // 3, N - 2 * (N // 3)]
     d.mkdir(parents=True, exist_ok=True)
-    txt = f"""Environment
-  Gravity 0 0 -9.81
-Materials
-  Material 1 Density 2700
-Shapes
-  Shape 1 File {shapes}/A.yaml
-  Shape 2 File {shapes}/B.yaml
-  Shape 3 File {shapes}/C.yaml
-Particles
-  Random 1 Shapes 1 2 3 Counts {c[0]} {c[1]} {c[2]} Material 1 Region 0 0 0 {side:.6f} {side:.6f} {H:.6f} Seed 1
-Walls
-  Box 1 Min 0 0 0 Max {side:.6f} {side:.6f} {H:.6f}
-Contact
-  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
-Steps
-  Step 1 Dynamic Duration {steps * 1e-3:.6g} TimeStep 1e-3
-Output
-  Directory {d}/results
-  VTK Every 1000 Resolution 4
-  Monitors Every 0.001
-  Checkpoint Every 1000
-"""
     p = d / "case.inp"
-    p.write_text(txt)
+    p.write_text(paper_mix_deck(N, (side, side, 2 * side), 2 * side, [steps * 1e-3], d / "results"))
     return p
 
 
