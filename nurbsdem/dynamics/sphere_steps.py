@@ -12,8 +12,9 @@ deck steps:
 3. drift (:func:`~nurbsdem.dynamics.integrator.drift`),
 4. the contact search of the scene: odometers, the neighbour list with its skin, certificates
    (:mod:`nurbsdem.contact.verlet`), closed-form rows of the pairs not certified apart,
-5. contact forces (paper Eq. 16–17, :func:`~nurbsdem.dynamics.forces.contact_forces`) with the
-   tangential histories, gravity,
+5. contact forces (paper Eq. 16–17, or Hertz–Mindlin with the contacts' exact equivalent
+   radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii`;
+   :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential histories, gravity,
 6. the second half kick;
 
 and after each deck step the guards (finite state, energy) and the Gershgorin gate of the
@@ -25,7 +26,8 @@ The loop returns to Python
 
 * after ``n_deck`` deck steps (the caller stops where output falls due),
 * with :data:`CONTROL` after a deck step whose Gershgorin gate calls for the exact (Lanczos)
-  estimate of the network, or every ``NETWORK_RECHECK_STEPS`` deck steps: the caller then runs
+  estimate of the network, or at a periodic re-estimate (every ``NETWORK_RECHECK_STEPS`` deck
+  steps, when the sub-step count could fall): the caller then runs
   :meth:`DemSystem._control_step` exactly as after a Python deck step;
 * with :data:`GUARD` when a guard fires (or a contact between materials without an interface
   occurs) in deck step ``done + 1``: the caller restores the state of the loop's start and runs
