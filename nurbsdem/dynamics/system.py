@@ -11,6 +11,7 @@ Usage (what the solver does)::
     sysm.set_contact_provider(provider)        # provider(kin: Kinematics) -> ContactSet | None
     sysm.initialize()                          # first force evaluation, time-step control, E(0)
     for _ in range(n): sysm.step()             # one deck step = sysm.substeps internal steps
+    done = sysm.steps(n)                       # or up to n at once (compiled for exact spheres)
     e = sysm.energy(); r = sysm.wall_reaction; st = sysm.get_state(); sysm.set_state(st)
 
 Global body indices in a ContactSet: particles 0..N-1 in the order added, walls N..N+W-1.
