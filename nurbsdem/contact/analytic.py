@@ -23,7 +23,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_PA, I_PB, I_VALID)
+from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_PA, I_PB, I_VALID, NF,
+                  NI)
 
 
 @njit(cache=True)
@@ -108,3 +109,44 @@ def sphere_centres(idx: np.ndarray, pos: np.ndarray, R: np.ndarray, body_shape: 
         for j in range(3):
             out[k, j] = pos[i, j] + R[i, j, 0] * c[0] + R[i, j, 1] * c[1] + R[i, j, 2] * c[2]
     return out
+
+
+@njit(cache=True)
+def scatter_rows(rows_f: np.ndarray, rows_i: np.ndarray, idx: np.ndarray, f: np.ndarray,
+             i: np.ndarray) -> None:
+    """rows_f[idx] = f, rows_i[idx] = i."""
+    for r in range(idx.shape[0]):
+        rows_f[idx[r]] = f[r]
+        rows_i[idx[r]] = i[r]
+
+
+@njit(cache=True)
+def closed_form_rows(a: np.ndarray, b: np.ndarray, n_particles: int, pos: np.ndarray,
+                     R: np.ndarray, wall_d: np.ndarray, body_shape: np.ndarray,
+                     sphere_center: np.ndarray, sphere_radius: np.ndarray,
+                     wall_origin: np.ndarray, wall_a: np.ndarray, wall_b: np.ndarray,
+                     wall_dom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (K,NF), (K,NI) of K pairs of exact spheres (a, b): sphere–sphere where
+    b < n_particles, sphere–flat wall b − n_particles otherwise.  pos (N,3), R (N,3,3): the
+    bodies' poses; wall_d (W,3) the walls' displacements; sphere_center (S,3), sphere_radius
+    (S,) per shape; wall_origin, wall_a, wall_b (W,3), wall_dom (W,4) the walls' frames."""
+    K = a.shape[0]
+    N = n_particles
+    rf = np.zeros((K, NF))
+    ri = np.zeros((K, NI), np.int64)
+    rad = sphere_radius[body_shape]
+    pp = np.nonzero(b < N)[0]
+    pw = np.nonzero(b >= N)[0]
+    if pp.shape[0]:
+        ia, ib = a[pp], b[pp]
+        f, i = np.empty((pp.shape[0], NF)), np.empty((pp.shape[0], NI), np.int64)
+        sphere_sphere_rows(sphere_centres(ia, pos, R, body_shape, sphere_center), rad[ia],
+                           sphere_centres(ib, pos, R, body_shape, sphere_center), rad[ib], f, i)
+        scatter_rows(rf, ri, pp, f, i)
+    if pw.shape[0]:
+        ia, w = a[pw], b[pw] - N
+        f, i = np.empty((pw.shape[0], NF)), np.empty((pw.shape[0], NI), np.int64)
+        sphere_wall_rows(sphere_centres(ia, pos, R, body_shape, sphere_center), rad[ia],
+                         wall_origin[w] + wall_d[w], wall_a[w], wall_b[w], wall_dom[w], f, i)
+        scatter_rows(rf, ri, pw, f, i)
+    return rf, ri

@@ -64,7 +64,7 @@ import numpy as np
 
 from ..dynamics.contactset import ContactSet
 from ..geometry.analytic import exact_sphere
-from .analytic import sphere_centres, sphere_sphere_rows, sphere_wall_rows
+from .analytic import closed_form_rows, sphere_centres
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
@@ -285,8 +285,12 @@ class SceneContacts:
         closed = sph[a] & (wall_pair | sph_b)
         mixed = ~wall_pair & (sph[a] != sph_b) if self.point_surface else np.zeros(len(a), bool)
         wall = np.nonzero(wall_pair & ~closed)[0]
-        self._closed_forms(np.nonzero(~wall_pair & closed)[0], np.nonzero(wall_pair & closed)[0],
-                           a, b, pos, R, wall_d, rf, ri)
+        idx = np.nonzero(closed)[0]
+        if idx.size:
+            rf[idx], ri[idx] = closed_form_rows(a[idx], b[idx], N, pos, R, wall_d,
+                                                self.body_shape, self.sphere_center,
+                                                self.sphere_radius, self.wall_origin,
+                                                self.wall_a, self.wall_b, self.wall_dom)
         prev_f, prev_i = ps.rows_f[due], ps.rows_i[due]
         part = np.nonzero(~wall_pair & ~closed & ~mixed)[0]
         if mixed.any():
@@ -333,25 +337,6 @@ class SceneContacts:
         rf[mixed[ok]], ri[mixed[ok]] = f[ok], i[ok]
         self.point_solves += int(ok.sum())
         return mixed[~ok]
-
-    def _closed_forms(self, pp, pw, a, b, pos, R, wall_d, rf, ri) -> None:
-        """Rows of the sphere–sphere (indices pp of a, b) and sphere–wall (pw) pairs."""
-        N = self.n
-        rad = self.sphere_radius[self.body_shape]
-        if pp.size:
-            ia, ib = a[pp], b[pp]
-            xa = sphere_centres(ia, pos, R, self.body_shape, self.sphere_center)
-            xb = sphere_centres(ib, pos, R, self.body_shape, self.sphere_center)
-            f, i = np.empty((pp.size, NF)), np.empty((pp.size, NI), np.int64)
-            sphere_sphere_rows(xa, rad[ia], xb, rad[ib], f, i)
-            rf[pp], ri[pp] = f, i
-        if pw.size:
-            ia, w = a[pw], b[pw] - N
-            x = sphere_centres(ia, pos, R, self.body_shape, self.sphere_center)
-            f, i = np.empty((pw.size, NF)), np.empty((pw.size, NI), np.int64)
-            sphere_wall_rows(x, rad[ia], self.wall_origin[w] + wall_d[w], self.wall_a[w],
-                             self.wall_b[w], self.wall_dom[w], f, i)
-            rf[pw], ri[pw] = f, i
 
     def _assemble(self, due, rf, ri, reach, pose) -> ContactSet:
         """Store the new rows (failed ones answered by the previous solution moved rigidly,

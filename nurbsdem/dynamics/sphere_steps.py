@@ -43,9 +43,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from ..contact.analytic import sphere_centres, sphere_sphere_rows, sphere_wall_rows
+from ..contact.analytic import closed_form_rows, scatter_rows
 from ..contact.broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
-from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_PA, I_PB, NF, NI
+from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_PA, I_PB
 from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, list_is_stale,
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
@@ -54,8 +54,9 @@ from .forces import contact_forces, match_history
 from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies
 from .rigid import body_poses, omega_world
-from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds,
-                          critical_step_from_rates, network_bound)
+from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, count_stands,
+                          critical_step_from_rates, needed_substeps, network_bound,
+                          periodic_recheck)
 
 #: the loop did all its deck steps / stopped for the time-step control / a guard fired
 DONE, CONTROL, GUARD = 0, 1, 2
@@ -111,43 +112,6 @@ def _sphere_list(sc, x: np.ndarray, wall_d: np.ndarray):
 
 
 @njit(cache=True)
-def _scatter(rows_f: np.ndarray, rows_i: np.ndarray, idx: np.ndarray, f: np.ndarray,
-             i: np.ndarray) -> None:
-    """rows_f[idx] = f, rows_i[idx] = i."""
-    for r in range(idx.shape[0]):
-        rows_f[idx[r]] = f[r]
-        rows_i[idx[r]] = i[r]
-
-
-@njit(cache=True)
-def _closed_form_rows(sc, a: np.ndarray, b: np.ndarray, pos: np.ndarray, R: np.ndarray,
-                      wall_d: np.ndarray):
-    """Rows (K,NF), (K,NI) of the sphere–sphere and sphere–wall pairs (a, b)."""
-    K = a.shape[0]
-    N = sc.n
-    rf = np.zeros((K, NF))
-    ri = np.zeros((K, NI), np.int64)
-    rad = sc.sphere_radius[sc.body_shape]
-    pp = np.nonzero(b < N)[0]
-    pw = np.nonzero(b >= N)[0]
-    if pp.shape[0]:
-        ia, ib = a[pp], b[pp]
-        f, i = np.empty((pp.shape[0], NF)), np.empty((pp.shape[0], NI), np.int64)
-        sphere_sphere_rows(sphere_centres(ia, pos, R, sc.body_shape, sc.sphere_center), rad[ia],
-                           sphere_centres(ib, pos, R, sc.body_shape, sc.sphere_center), rad[ib],
-                           f, i)
-        _scatter(rf, ri, pp, f, i)
-    if pw.shape[0]:
-        ia, w = a[pw], b[pw] - N
-        f, i = np.empty((pw.shape[0], NF)), np.empty((pw.shape[0], NI), np.int64)
-        sphere_wall_rows(sphere_centres(ia, pos, R, sc.body_shape, sc.sphere_center), rad[ia],
-                         sc.wall_origin[w] + wall_d[w], sc.wall_a[w], sc.wall_b[w],
-                         sc.wall_dom[w], f, i)
-        _scatter(rf, ri, pw, f, i)
-    return rf, ri
-
-
-@njit(cache=True)
 def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray,
             counters: np.ndarray):
     """One call of the scene's contact search (SceneContacts.__call__ for exact spheres):
@@ -170,8 +134,10 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
             due[n_due] = j
             n_due += 1
     due = due[:n_due]
-    rf, ri = _closed_form_rows(sc, a[due], b[due], pos, R, wall_d)
-    _scatter(rows_f, rows_i, due, rf, ri)
+    rf, ri = closed_form_rows(a[due], b[due], sc.n, pos, R, wall_d, sc.body_shape,
+                              sc.sphere_center, sc.sphere_radius, sc.wall_origin, sc.wall_a,
+                              sc.wall_b, sc.wall_dom)
+    scatter_rows(rows_f, rows_i, due, rf, ri)
     renew_certificates(budget, due, rf, ri, reach)
     return PairList(a, b, keys, rows_f, rows_i, budget, odo, built, pos, R, wall_d, x), reach, n_due
 
@@ -313,19 +279,16 @@ def _gate_passes(bc, cc, ev, x, v, q, L, wall_u, substeps: int, counters) -> boo
     exact estimate, or allowing the present count anyway)."""
     if cc.forced:
         return True
-    if counters[STEP_COUNT] % cc.recheck == 0 and counters[REFINE] < cc.fall * substeps:
-        return False            # DemSystem._periodic_recheck
+    if periodic_recheck(counters[STEP_COUNT], cc.recheck, counters[REFINE], cc.fall, substeps):
+        return False
     speed = body_speeds(v, omega_world(q, L, bc.inv_I), bc.ell, wall_u)
     omega2, gamma, size = network_bound(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
                                         ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
                                         speed, cc.dt, bc.g_norm, bc.table, bc.material, x,
                                         quats_to_matrices(q), bc.inv_mass, bc.inv_I)
     bound = critical_step_from_rates(omega2, gamma) if size else math.inf
-    if bound >= (1.0 - cc.bound_slack) * cc.dt_bound:
-        return True
-    safe = cc.safety * min(cc.dt_apriori, bound)
-    need = 1 if not math.isfinite(safe) else max(1, math.ceil(cc.dt / safe * (1 - 1e-12)))
-    return need * counters[REFINE] <= substeps
+    need = needed_substeps(cc.dt, cc.safety * min(cc.dt_apriori, bound))
+    return count_stands(bound, cc.dt_bound, cc.bound_slack, need, counters[REFINE], substeps)
 
 
 @njit(cache=True)

@@ -278,6 +278,33 @@ def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
 
 
 @njit(cache=True)
+def needed_substeps(dt: float, dt_safe: float) -> int:
+    """Sub-steps that keep the internal step of a deck step dt (s) within dt_safe (s)."""
+    if not math.isfinite(dt_safe):
+        return 1
+    return max(1, math.ceil(dt / dt_safe * (1 - 1e-12)))
+
+
+@njit(cache=True)
+def periodic_recheck(step_count: int, every: int, refine: int, fall: float,
+                     substeps: int) -> bool:
+    """Whether deck step ``step_count`` is one of the regular exact (Lanczos) estimates: every
+    ``every`` deck steps, when the count could fall (it is above the guard's refinement by
+    more than the hysteresis factor ``fall``)."""
+    return step_count % every == 0 and refine < fall * substeps
+
+
+@njit(cache=True)
+def count_stands(bound: float, dt_bound: float, slack: float, need: int, refine: int,
+                 substeps: int) -> bool:
+    """The gate of the time-step control: whether the present sub-step count stands without
+    an exact estimate, given the network's Gershgorin bound (s) now and at the last exact
+    estimate (dt_bound): the network is no stiffer than then (within ``slack``), or even the
+    count ``need`` that the rigorous bound asks for (× the guard's refinement) is no more."""
+    return bound >= (1.0 - slack) * dt_bound or need * refine <= substeps
+
+
+@njit(cache=True)
 def body_speeds(v: np.ndarray, omega: np.ndarray, ell: np.ndarray, wall_u: np.ndarray) -> np.ndarray:
     """(N+W,) the largest speed of any point of each body (m/s): |v| + ℓ|ω| for particles
     (ℓ its size), |u| for walls."""

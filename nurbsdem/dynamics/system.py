@@ -76,8 +76,8 @@ from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
-                          critical_step, critical_step_from_rates, network_gershgorin,
-                          network_rates)
+                          count_stands, critical_step, critical_step_from_rates,
+                          needed_substeps, network_gershgorin, network_rates, periodic_recheck)
 
 log = logging.getLogger("nurbsdem")
 
@@ -409,9 +409,7 @@ class DemSystem:
 
     def _needed_substeps(self, dt_safe: float) -> int:
         """Sub-steps that keep the internal step within the safe step dt_safe (s)."""
-        if not math.isfinite(dt_safe):
-            return 1
-        return max(1, math.ceil(self.dt / dt_safe * (1 - 1e-12)))
+        return int(needed_substeps(self.dt, dt_safe))
 
     def _control_step(self, initial: bool = False) -> None:
         """Choose the sub-steps of the next deck step from both limits (module docstring)."""
@@ -419,12 +417,12 @@ class DemSystem:
             return
         net = self._network()
         bound = self._network_bound(net)
-        if not initial and not self._periodic_recheck():
-            if bound >= (1.0 - NETWORK_BOUND_SLACK) * self.dt_bound:
-                return      # the network is no stiffer than at the last exact estimate
-            safe = self.safety * min(self.dt_apriori, bound)
-            if self._needed_substeps(safe) * self.refine <= self.substeps:
-                return      # even the rigorous bound allows the present count
+        if not initial and not periodic_recheck(self.step_count, NETWORK_RECHECK_STEPS,
+                                                self.refine, FALL_HYSTERESIS, self.substeps):
+            need = self._needed_substeps(self.safety * min(self.dt_apriori, bound))
+            if count_stands(bound, self.dt_bound, NETWORK_BOUND_SLACK, need, self.refine,
+                            self.substeps):
+                return      # no stiffer than at the last exact estimate, or allowed anyway
         self.dt_bound = bound
         self.dt_network, net_why = self._network_limit(net)
         self.dt_critical = min(self.dt_apriori, self.dt_network)
@@ -460,13 +458,6 @@ class DemSystem:
                      self.time, old, self.substeps, self.dt_internal,
                      "the contact network stiffened" if self.substeps > old else "the pack loosened",
                      why + (f", refined x{self.refine} by the guard" if self.refine > 1 else ""))
-
-    def _periodic_recheck(self) -> bool:
-        """Whether this deck step is one of the regular exact estimates: every
-        NETWORK_RECHECK_STEPS deck steps, when the count could fall (it is above the guard's
-        refinement by more than the hysteresis)."""
-        return (self.step_count % NETWORK_RECHECK_STEPS == 0
-                and self.refine < FALL_HYSTERESIS * self.substeps)
 
     def _warn_heavy(self, why: str) -> None:
         """One warning per system when the deck step is sub-stepped heavily: what limits the
