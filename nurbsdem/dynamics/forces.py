@@ -285,6 +285,31 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
 
 
 @njit(cache=True)
+def contact_loads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
+                  table, spring, h, inv_mass, radius, mass, gravity):
+    """:func:`contact_forces` of K contacts into fresh arrays, plus gravity on the N particles
+    (mass (N,) kg, gravity (3,) m/s²; bodies ≥ N are walls): the loads of one force
+    evaluation.  Returns (force, torque (B,3), point, f_total, f_damp_n, f_damp_t, f_el_t
+    (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip work)."""
+    K = body_a.shape[0]
+    B = pos.shape[0]
+    force = np.zeros((B, 3))
+    torque = np.zeros((B, 3))
+    point, f_total = np.empty((K, 3)), np.empty((K, 3))
+    f_damp_n, f_damp_t, f_el_t = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
+    fn, e_el, stick = np.empty(K), np.empty((K, 2)), np.empty(K, np.int64)
+    coeffs = np.empty((K, 4))
+    slip = contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                          material, table, spring, h, inv_mass, radius, force, torque, point,
+                          f_total, f_damp_n, f_damp_t, f_el_t, fn, e_el, stick, coeffs)
+    for i in range(mass.shape[0]):
+        for k in range(3):
+            force[i, k] += mass[i] * gravity[k]
+    return (force, torque, point, f_total, f_damp_n, f_damp_t, f_el_t, fn, e_el, stick, coeffs,
+            slip)
+
+
+@njit(cache=True)
 def kick_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
               w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
               f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,

@@ -50,7 +50,7 @@ from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, li
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
-from .forces import contact_forces, match_history
+from .forces import contact_loads, match_history
 from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies
 from .rigid import body_poses, omega_world
@@ -197,27 +197,17 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
     a, b = pl.a[sel], pl.b[sel]
     if not _interfaces_defined(bc, a, b):
         return False, ev
-    K = sel.shape[0]
     pa, pb, nrm, dep = _gather_contacts(pl.rows_f, sel)
     radius, n_fall = _hertz_radii(sc, pl, sel, a, b, nrm, R)
     key = pl.keys[sel]
     spring = match_history(ev.hist_keys, ev.hist_springs, key)
-    N, W = x.shape[0], wall_d.shape[0]
-    force = np.zeros((N + W, 3))
-    torque = np.zeros((N + W, 3))
+    W = wall_d.shape[0]
     pos_all = np.concatenate((x, wall_d))
     vel_all = np.concatenate((v, wall_u))
     omg_all = np.concatenate((omega_world(q, L, bc.inv_I), np.zeros((W, 3))))
-    point, ftot = np.empty((K, 3)), np.empty((K, 3))
-    fdn, fdt, fet = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
-    fn, eel, stick = np.empty(K), np.empty((K, 2)), np.empty(K, np.int64)
-    coeffs = np.empty((K, 4))
-    slip = contact_forces(a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material,
-                          bc.table, spring, h, bc.inv_mass_all, radius, force, torque, point,
-                          ftot, fdn, fdt, fet, fn, eel, stick, coeffs)
-    for i in range(N):
-        for k in range(3):
-            force[i, k] += bc.mass[i] * bc.gravity[k]
+    force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
+        a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
+        bc.inv_mass_all, radius, bc.mass, bc.gravity)
     near_pa, near_pb, near_normal, _ = _gather_contacts(pl.rows_f, near)
     near_point = 0.5 * (near_pa + near_pb)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,

@@ -70,7 +70,7 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger, EnergySample, potential_energy
-from .forces import InterfaceTable, contact_forces, match_history, store_history
+from .forces import InterfaceTable, contact_loads, match_history, store_history
 from .hertz import has_hertz
 from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
@@ -546,17 +546,6 @@ class DemSystem:
         if K and np.isnan(self._table[self._mat_all[a], self._mat_all[bb], 0]).any():
             raise InputError("a contact occurred between materials with no contact interface")
         spring = match_history(self.hist_keys, self.hist_springs, key)
-        B = self.n_bodies
-        force = np.zeros((B, 3))
-        torque = np.zeros((B, 3))
-        point = np.empty((K, 3))
-        ftot = np.empty((K, 3))
-        fdn = np.empty((K, 3))
-        fdt = np.empty((K, 3))
-        fet = np.empty((K, 3))
-        fn = np.empty(K)
-        eel = np.empty((K, 2))
-        stick = np.empty(K, dtype=np.int64)
         pos, vel, omg = self._all_kinematics()
         hertz = self.__dict__.get("_hertz_table")
         if hertz is None:        # the table is fixed once initialised
@@ -567,13 +556,12 @@ class DemSystem:
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:
             self.c_radius = np.zeros(K)
-        self.c_coeffs = np.empty((K, 4))
-        slip = contact_forces(a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table,
-                              spring, h, self._inv_mass_all, self.c_radius, force, torque, point,
-                              ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs)
-        self.last_slip_work = slip
+        (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
+         self.last_slip_work) = contact_loads(a, bb, pa, pb, nrm, dep, pos, vel, omg,
+                                              self._mat_all, self._table, spring, h,
+                                              self._inv_mass_all, self.c_radius, b.mass,
+                                              self.gravity)
         self.hist_keys, self.hist_springs = store_history(key, spring)
-        force[: b.n] += b.mass[:, None] * self.gravity[None, :]
         self.force, self.torque = force, torque
         self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
         self.c_fet = fet
