@@ -442,7 +442,7 @@ class ParaViewWriter:
         """One sample of all three series."""
         self.write_particles(time, bodies)
         self.write_walls(time, wall_displacement)
-        self.write_contacts(time, _copied(contacts))
+        self.write_contacts(time, contacts if self.background is None else _copied(contacts))
 
     def sync(self) -> None:
         """Wait until every sample is written (background mode; raises a write's error)."""
