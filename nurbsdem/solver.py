@@ -146,6 +146,10 @@ class Solver:
         (:mod:`~nurbsdem.dynamics.sphere_steps`; the same results, bit for bit: a test says so).
     background_output: write the ParaView files from a worker thread while the time loop
         goes on (the same files, byte for byte; a checkpoint waits for them).
+    comm: an MPI communicator with several ranks: the particles are decomposed over them
+        (:mod:`nurbsdem.parallel`; results bit for bit those of the serial run, written by
+        rank 0); None: the world of ``mpiexec -n P`` when so started
+        (:func:`nurbsdem.parallel.world`), else serial; False: serial.
 
     :meth:`run` runs every step; it is :meth:`start`, :meth:`run_pending` (or
     :meth:`run_step` per step) and :meth:`finish`, which a model extended step by step calls
@@ -157,8 +161,13 @@ class Solver:
                  safety: float = 0.5, progress_stream=None,
                  contact_options: dict | None = None, write_output: bool = True,
                  restart_check=None, compiled_steps: bool = True,
-                 background_output: bool = True) -> None:
+                 background_output: bool = True, comm=None) -> None:
         self.model = model
+        if comm is None:
+            from .parallel import world
+            comm = world()
+        self.comm = comm or None
+        self.rank = int(self.comm.rank) if self.comm is not None else 0
         self.compiled_steps = bool(compiled_steps)
         self.background_output = bool(background_output)
         if output is not None:
@@ -269,10 +278,22 @@ class Solver:
             self.scene = SceneContacts(self.shapes, body_shape, self._wall_patches(),
                                        **self.contact_options)
         sysm.set_contact_provider(self.scene)
+        if self.comm is not None:
+            self._decompose(sysm)
         if self._carry_hist is not None:
             sysm.initial_history = self._carry_hist
         self.timers["setup"] += time.perf_counter() - t0
         return sysm
+
+    def _decompose(self, sysm: DemSystem) -> None:
+        """Decompose the system over the ranks (a scene carried over from the previous step
+        keeps its cut and ghosts)."""
+        from .parallel import Domain
+        old = self.scene.domain
+        sysm.compiled_steps = False
+        dom = Domain(self.comm, sysm, self.scene, owner=None if old is None else old.owner,
+                     plan=None if old is None else old.plan)
+        sysm.domain = self.scene.domain = dom
 
     def _fixed_motions(self) -> list[PrescribedMotion]:
         return [_constant_motion(self.wall_offset[k]) for k in range(len(self.model.walls))]
@@ -396,12 +417,13 @@ class Solver:
             "energy_offset": dict(self.energy_offset),
             "mech0": self.mech0 if self.mech0 is not None else float("nan"),
             "system": self.system.get_state() if self.system is not None else {},
-            "scene": self.scene.state() if self.scene is not None else {},
+            "scene": self.scene.state() if self.scene is not None else {},   # collective
             "carry_hist": ({"keys": self._carry_hist[0], "springs": self._carry_hist[1]}
                            if self._carry_hist is not None else {}),
             "motion": self._motion_spec,
         }
-        save_checkpoint(self.outdir / CHECKPOINT_NAME, state)
+        if self.rank == 0:
+            save_checkpoint(self.outdir / CHECKPOINT_NAME, state)
         self.timers["output"] += time.perf_counter() - t0
 
     def _load_restart(self) -> dict:
@@ -605,7 +627,7 @@ class Solver:
         resumed = self._finished_once     # writers closed by finish(): continue their files
         if self.restart_path is not None and not resumed:
             self._restored = self._load_restart()
-        if self.write_output:
+        if self.write_output and self.rank == 0:
             self._writers = OutputWriters(self.model, restart_time=(
                 self.time if (self._restored or resumed) else None),
                 background=self.background_output)
@@ -687,7 +709,7 @@ class Solver:
     def _checkpoint_end_of_step(self, writers: OutputWriters) -> None:
         self._motion_spec = {}
         self._checkpoint(writers)
-        if self.write_output and self.model.text != self._results_deck:
+        if self.write_output and self.rank == 0 and self.model.text != self._results_deck:
             # a model extended step by step: results.h5 keeps the deck of the steps run so far
             text = self._results_deck = self.model.text
             writers.results._rewrite(lambda f: f.attrs.__setitem__("deck", text))

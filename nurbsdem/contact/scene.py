@@ -156,10 +156,27 @@ class SceneContacts:
         self.timers = SceneTimers()
         self.builds = 0
         self.last: ContactSet = ContactSet.empty()
+        #: the domain decomposition of a run on several MPI ranks (:mod:`nurbsdem.parallel`):
+        #: the list holds the pairs with an owned particle; None: a serial run
+        self.domain = None
 
     # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
-        """Everything a restart needs to continue bit for bit, as arrays."""
+        """Everything a restart needs to continue bit for bit, as arrays (on several ranks:
+        the serial state, gathered; collective)."""
+        st = self.local_state()
+        return st if self.domain is None else self.domain.global_scene_state(st)
+
+    def set_state(self, st: dict) -> None:
+        """Restore :meth:`state` (on several ranks: this rank's part of it; collective)."""
+        if self.domain is None:
+            self.set_local_state(st)
+            return
+        self.set_local_state(self.domain.local_scene_state(st))
+        self.domain.after_build(self.pairs.a, self.pairs.b)
+
+    def local_state(self) -> dict[str, np.ndarray]:
+        """This rank's list and per-body arrays (the whole state on one rank)."""
         st = self.pairs.as_dict()
         st["odo"] = self.odo
         if self.built_odo is not None:
@@ -169,8 +186,8 @@ class SceneContacts:
                       prev_wall=self.prev_pose[2], prev_x=self.prev_pose[3])
         return st
 
-    def set_state(self, st: dict) -> None:
-        """Restore :meth:`state`."""
+    def set_local_state(self, st: dict) -> None:
+        """Restore :meth:`local_state`."""
         self.pairs = _PairState.from_dict(st, self.P)
         self.odo = np.array(st.get("odo", np.zeros(self.nb)), float)
         self.built_odo = np.array(st["built_odo"], float) if "built_odo" in st else None
@@ -181,11 +198,14 @@ class SceneContacts:
     def snapshot(self):
         """What a rolled-back time step must restore (cheap: a call replaces these objects,
         never mutates them)."""
-        return self.pairs, self.odo, self.built_odo, self.prev_pose, self.last
+        plan = self.domain.plan if self.domain is not None else None
+        return self.pairs, self.odo, self.built_odo, self.prev_pose, self.last, plan
 
     def restore(self, snap) -> None:
         """Undo the calls made since :meth:`snapshot`."""
-        self.pairs, self.odo, self.built_odo, self.prev_pose, self.last = snap
+        self.pairs, self.odo, self.built_odo, self.prev_pose, self.last, plan = snap
+        if self.domain is not None:
+            self.domain.plan = plan
 
     # ------------------------------------------------------------------ neighbour list
     def _advance_odometers(self, pose) -> None:
@@ -204,6 +224,8 @@ class SceneContacts:
         N = self.n
         m = self.margin + self.skin
         pairs = sphere_pairs(kin.x, self.radius, m) if N > 1 else np.zeros((0, 2), np.int64)
+        if self.domain is not None:      # this rank lists the pairs with an owned particle
+            pairs = pairs[self.domain.involves_owned(pairs[:, 0], pairs[:, 1])]
         # exact spheres: the bounding-sphere test is exact, no patch boxes needed
         both = self.is_sphere[pairs[:, 0]] & self.is_sphere[pairs[:, 1]]
         spheres, pairs = pairs[both], pairs[~both]
@@ -220,6 +242,8 @@ class SceneContacts:
         if self.walls and N:
             wc = self.wall_center + kin.wall_displacement
             wpairs = sphere_wall_pairs(kin.x, self.radius, wc, self.wall_axes, self.wall_half, m)
+            if self.domain is not None:
+                wpairs = wpairs[self.domain.owned[wpairs[:, 0]]]
             ball = self.is_sphere[wpairs[:, 0]]
             balls, wpairs = wpairs[ball], wpairs[~ball]
             if wpairs.shape[0]:
@@ -255,7 +279,15 @@ class SceneContacts:
         pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
         pose = (pos, R, np.array(kin.wall_displacement, float), np.array(kin.x, float))
         self._advance_odometers(pose)
-        if self._list_is_stale():
+        dom = self.domain
+        stale = self._list_is_stale()
+        if dom is not None and dom.any(stale):
+            kin = dom.sync_for_build(kin)        # every particle's state from its owner
+            pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
+            pose = (pos, R, pose[2], np.array(kin.x, float))
+            self._build_list(kin, pos, R)
+            dom.after_build(self.pairs.a, self.pairs.b)
+        elif dom is None and stale:
             self._build_list(kin, pos, R)
         ps = self.pairs
         reach = self.odo[ps.a] + self.odo[ps.b]
@@ -268,7 +300,11 @@ class SceneContacts:
         self.timers.global_search += t1 - t0
         self.timers.lcp += t2 - t1
         self.timers.calls += 1
-        self.timers.lcps += int(due.shape[0])
+        if dom is None:
+            self.timers.lcps += int(due.shape[0])
+        else:           # each pair counted by one rank (the owner of body A), summed per deck step
+            dom.lcps += int(np.count_nonzero(dom.counted(ps.a[due])))
+            dom.failed += int(np.count_nonzero(dom.counted(ps.a[due]) & (ri[:, I_FAIL] == 1)))
         self.last = cs
         return cs
 
@@ -366,6 +402,11 @@ class SceneContacts:
         renew_certificates(budget, due, rf, ri, reach)
         self.pairs = ps.replaced(rows_f, rows_i, budget, reused)
         self.prev_pose = pose
+        if self.domain is not None:     # the counters count the pairs this rank counts
+            mine = self.domain.counted(ps.a[due])
+            return self.contact_set(reach, monitored=int(mine.sum()),
+                                    failed=int((failed & mine).sum()),
+                                    dropped=np.array(dropped, np.int64))
         return self.contact_set(reach, monitored=int(due.shape[0]), failed=int(failed.sum()),
                                 dropped=np.array(dropped, np.int64))
 
@@ -385,7 +426,10 @@ class SceneContacts:
                           key=keys[sel].copy(), degenerated=deg.astype(np.int64),
                           monitored=monitored, active=int(sel.shape[0]),
                           degenerated_count=int(np.count_nonzero(deg)), failed=failed,
-                          reused=int(ps.reused.sum()), dropped=len(dropped),
+                          reused=int(ps.reused.sum() if self.domain is None
+                                     else (ps.reused & self.domain.counted(ps.a)).sum()),
+                          dropped=int(len(dropped) if self.domain is None
+                                      else self.domain.counted(dropped // self.nb).sum()),
                           dropped_keys=dropped,
                           near_a=ps.a[near].copy(), near_b=ps.b[near].copy(),
                           near_point=0.5 * (rows_f[near, F_PA:F_PA + 3] + rows_f[near, F_PB:F_PB + 3]),

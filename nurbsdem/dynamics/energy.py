@@ -19,7 +19,7 @@ Per sample (:class:`EnergySample`):
 
 Consistency with the integrator: the dashpot dissipation and the wall work are accumulated as
 the *exact discrete work* of the corresponding impulses in each velocity-Verlet half kick
-(:func:`nurbsdem.dynamics.forces.kick_work`), so they carry no quadrature error of their own.
+(:func:`nurbsdem.dynamics.forces.kick_work_terms`), so they carry no quadrature error of their own.
 The friction dissipation is defined from the exact discrete work on the tangential springs, so it
 adds no error either.  What remains in ``balance_error`` is the difference between the discrete
 work of the normal springs and gravity and the change of their potentials, plus the DLM

@@ -30,7 +30,7 @@ displacement accumulated while the contact persists).  Each evaluation (time inc
    (so ``|f_t| = μ f_n`` exactly and the force stays on the Coulomb cone).
 
 Friction dissipation (energy ledger) is *not* estimated from the return mapping: it is the exact
-discrete work done on the tangential springs by the relative motion (:func:`kick_work`) minus the
+discrete work done on the tangential springs by the relative motion (:func:`kick_work_terms`) minus the
 tangential elastic energy still stored, so it includes slip and the spring energy lost when a
 contact ends with a loaded spring, and adds no error of its own to the energy balance.
 
@@ -309,38 +309,83 @@ def contact_loads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg
             slip)
 
 
-@njit(cache=True)
-def kick_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
-              w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
-              f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
-              f_el_t: np.ndarray, hk: float, acc: np.ndarray, wall_work: np.ndarray) -> None:
-    """Exact discrete work of the contact impulses of one half-kick (length hk, s).
+#: columns of the per-contact terms of one half-kick's work (:func:`kick_work_terms`)
+T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_A, T_WALL_B, N_TERMS = 0, 1, 2, 3, 4, 5
 
-    A kick changes velocities linearly at fixed positions, so the kinetic energy change due to an
-    impulse J at a contact equals J · (mean of the relative contact velocities before and after).
-    Accumulates into acc: [0] normal damping dissipation, [1] tangential damping dissipation,
-    [2] external work by walls, [3] work done on the tangential springs (J); wall_work (W,) per wall.  The wall velocity enters through the
-    relative velocity; its share J·u is the work done by the wall (external work).
-    """
+
+@njit(cache=True)
+def kick_work_terms(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
+                    w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
+                    f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
+                    f_el_t: np.ndarray, hk: float) -> np.ndarray:
+    """Per-contact terms (K, N_TERMS) J of the exact discrete work of one half-kick (length
+    hk, s): a kick changes velocities linearly at fixed positions, so the kinetic energy change
+    due to an impulse J at a contact equals J · (mean of the relative contact velocities before
+    and after).  Columns: T_DAMP_N, T_DAMP_T normal and tangential damping (the dissipation is
+    minus them), T_SPRING work on the tangential spring (minus it), T_WALL_A / T_WALL_B the work
+    done by a wall that is body A / body B (the wall velocity enters through the relative
+    velocity; its share J·u is external work), 0 for a particle."""
     K = body_a.shape[0]
+    out = np.zeros((K, N_TERMS))
     for c in range(K):
         m0 = 0.5 * (w_before[c, 0] + w_after[c, 0])
         m1 = 0.5 * (w_before[c, 1] + w_after[c, 1])
         m2 = 0.5 * (w_before[c, 2] + w_after[c, 2])
-        acc[0] -= hk * (f_damp_n[c, 0] * m0 + f_damp_n[c, 1] * m1 + f_damp_n[c, 2] * m2)
-        acc[1] -= hk * (f_damp_t[c, 0] * m0 + f_damp_t[c, 1] * m1 + f_damp_t[c, 2] * m2)
-        acc[3] -= hk * (f_el_t[c, 0] * m0 + f_el_t[c, 1] * m1 + f_el_t[c, 2] * m2)
+        out[c, T_DAMP_N] = hk * (f_damp_n[c, 0] * m0 + f_damp_n[c, 1] * m1 + f_damp_n[c, 2] * m2)
+        out[c, T_DAMP_T] = hk * (f_damp_t[c, 0] * m0 + f_damp_t[c, 1] * m1 + f_damp_t[c, 2] * m2)
+        out[c, T_SPRING] = hk * (f_el_t[c, 0] * m0 + f_el_t[c, 1] * m1 + f_el_t[c, 2] * m2)
         a = body_a[c]
         b = body_b[c]
         if a >= n_particles:   # wall A pushes B with F: work on the particles F·u_A
             k = a - n_particles
-            wk = hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
-                       + f_total[c, 2] * wall_vel[k, 2])
-            acc[2] += wk
-            wall_work[k] += wk
+            out[c, T_WALL_A] = hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
+                                     + f_total[c, 2] * wall_vel[k, 2])
         if b >= n_particles:   # wall B pushes A with -F
             k = b - n_particles
-            wk = -hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
-                        + f_total[c, 2] * wall_vel[k, 2])
-            acc[2] += wk
-            wall_work[k] += wk
+            out[c, T_WALL_B] = -hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
+                                      + f_total[c, 2] * wall_vel[k, 2])
+    return out
+
+
+@njit(cache=True)
+def add_kick_work(terms: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
+                  acc: np.ndarray, wall_work: np.ndarray) -> None:
+    """Add the terms of :func:`kick_work_terms` in contact order: acc (4,) [0] normal damping
+    dissipation, [1] tangential damping dissipation, [2] external work by walls, [3] work done
+    on the tangential springs (J); wall_work (W,) per wall.  The order of the contacts (sorted
+    pair keys) fixes the bits; a domain decomposition replays the same sums."""
+    for c in range(terms.shape[0]):
+        acc[0] -= terms[c, T_DAMP_N]
+        acc[1] -= terms[c, T_DAMP_T]
+        acc[3] -= terms[c, T_SPRING]
+        if body_a[c] >= n_particles:
+            acc[2] += terms[c, T_WALL_A]
+            wall_work[body_a[c] - n_particles] += terms[c, T_WALL_A]
+        if body_b[c] >= n_particles:
+            acc[2] += terms[c, T_WALL_B]
+            wall_work[body_b[c] - n_particles] += terms[c, T_WALL_B]
+
+
+@njit(cache=True)
+def wall_loads(body_b: np.ndarray, point: np.ndarray, f_total: np.ndarray, wall_d: np.ndarray,
+               n_particles: int, force: np.ndarray, torque: np.ndarray) -> None:
+    """Add to the rows of the walls (bodies >= n_particles) of force/torque (B,3) the loads of
+    the contacts whose body B is a wall (point (K,3) application points m, f_total (K,3) N on
+    B, wall_d (W,3) wall displacements m), in contact order: the walls' part of the
+    accumulation of :func:`contact_forces`, same bits (a domain decomposition assembles the
+    walls' loads from the contacts of all ranks with it)."""
+    for c in range(body_b.shape[0]):
+        b = body_b[c]
+        if b < n_particles:
+            continue
+        k = b - n_particles
+        p0, p1, p2 = point[c, 0], point[c, 1], point[c, 2]
+        rb0, rb1, rb2 = p0 - wall_d[k, 0], p1 - wall_d[k, 1], p2 - wall_d[k, 2]
+        F0, F1, F2 = f_total[c, 0], f_total[c, 1], f_total[c, 2]
+        force[b, 0] += F0
+        force[b, 1] += F1
+        force[b, 2] += F2
+        tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
+        torque[b, 0] += tb0
+        torque[b, 1] += tb1
+        torque[b, 2] += tb2

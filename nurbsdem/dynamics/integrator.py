@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 
 from ..geometry.rotation import quat_mul_into
-from .forces import kick_work
+from .forces import add_kick_work, kick_work_terms
 from .rigid import omega_world
 
 
@@ -160,15 +160,15 @@ def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np
 
 
 @njit(cache=True)
-def kick_with_work(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
-                   inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray,
-                   torque: np.ndarray, hk: float, body_a: np.ndarray, body_b: np.ndarray,
-                   point: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
-                   f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
-                   f_el_t: np.ndarray, acc: np.ndarray, wall_work: np.ndarray) -> None:
-    """:func:`half_kick` of length hk (s) and the exact discrete work of its contact impulses
-    (:func:`nurbsdem.dynamics.forces.kick_work`, from the relative contact-point velocities
-    before and after the kick), in one call.  acc (4,) and wall_work (W,) are added to."""
+def kick_with_terms(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
+                    inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray,
+                    torque: np.ndarray, hk: float, body_a: np.ndarray, body_b: np.ndarray,
+                    point: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
+                    f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
+                    f_el_t: np.ndarray) -> np.ndarray:
+    """:func:`half_kick` of length hk (s) and the per-contact terms (K, N_TERMS) of the exact
+    discrete work of its contact impulses (:func:`nurbsdem.dynamics.forces.kick_work_terms`,
+    from the relative contact-point velocities before and after the kick)."""
     K = body_a.shape[0]
     w0 = np.empty((K, 3))
     w1 = np.empty((K, 3))
@@ -179,5 +179,19 @@ def kick_with_work(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
     if K:
         _relative_point_velocities(body_a, body_b, point, x, wall_d, v,
                                    omega_world(q, L, inv_I), wall_u, w1)
-        kick_work(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n, f_damp_t,
-                  f_el_t, hk, acc, wall_work)
+    return kick_work_terms(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n,
+                           f_damp_t, f_el_t, hk)
+
+
+@njit(cache=True)
+def kick_with_work(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
+                   inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray,
+                   torque: np.ndarray, hk: float, body_a: np.ndarray, body_b: np.ndarray,
+                   point: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
+                   f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
+                   f_el_t: np.ndarray, acc: np.ndarray, wall_work: np.ndarray) -> None:
+    """:func:`kick_with_terms`, its work added to acc (4,) and wall_work (W,)
+    (:func:`nurbsdem.dynamics.forces.add_kick_work`)."""
+    terms = kick_with_terms(v, L, x, q, inv_I, inv_mass, force, torque, hk, body_a, body_b,
+                            point, wall_d, wall_u, f_total, f_damp_n, f_damp_t, f_el_t)
+    add_kick_work(terms, body_a, body_b, x.shape[0], acc, wall_work)

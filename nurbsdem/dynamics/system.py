@@ -70,9 +70,9 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger, EnergySample, potential_energy
-from .forces import InterfaceTable, contact_loads, match_history, store_history
+from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
 from .hertz import has_hertz
-from .integrator import drift, kick_with_work, kinetic_energies, state_is_finite
+from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
@@ -242,6 +242,9 @@ class DemSystem:
         self.last_steps = StepTally()
         #: (keys, springs) of tangential springs to start from (set before initialize()).
         self.initial_history: tuple[np.ndarray, np.ndarray] | None = None
+        #: the domain decomposition of a run on several MPI ranks
+        #: (:class:`nurbsdem.parallel.Domain`, set before initialize()); None: serial
+        self.domain = None
 
     # ------------------------------------------------------------------ set-up
     def add_particle(self, mass: float, J0: np.ndarray, x, R=None, v=None, omega=None,
@@ -506,8 +509,12 @@ class DemSystem:
             self.hist_springs = np.array(self.initial_history[1], dtype=float).reshape(-1, 3)
         self.wall_work = np.zeros(self.walls.n)
         self.ledger = EnergyLedger()
+        self.c_a = self.c_key = np.zeros(0, np.int64)     # no previous evaluation
+        self.c_eel = np.zeros((0, 2))
         self._initialized = True
         self._evaluate(self.time, 0.0)
+        if self.domain is not None:
+            self.domain.end_of_deck_step()
         self._apriori_limit()
         self._control_step(initial=True)
         if self.initial_history is not None:
@@ -562,6 +569,8 @@ class DemSystem:
                                               self._inv_mass_all, self.c_radius, b.mass,
                                               self.gravity)
         self.hist_keys, self.hist_springs = store_history(key, spring)
+        if self.domain is not None:          # the owners' loads of this rank's ghosts
+            self.domain.exchange_loads(force, torque)
         self.force, self.torque = force, torque
         self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
         self.c_fet = fet
@@ -571,9 +580,11 @@ class DemSystem:
         """A pair the provider left out after a failed contact problem takes its normal elastic
         energy with it: book it as dissipated (normal), so the energy balance stays closed."""
         dropped = getattr(cs, "dropped_keys", None)
-        if dropped is None or len(dropped) == 0 or getattr(self, "c_key", None) is None:
+        gone = (np.isin(self.c_key, dropped) if dropped is not None and len(dropped)
+                else np.zeros(self.c_key.shape[0], bool))
+        if self.domain is not None:          # booked at the deck end, in the serial order
+            self.domain.log_dropped(self.c_a[gone], self.c_key[gone], self.c_eel[gone, 0])
             return
-        gone = np.isin(self.c_key, dropped)
         if gone.any():
             self.ledger.dissipated_normal += float(self.c_eel[gone, 0].sum())
 
@@ -584,10 +595,14 @@ class DemSystem:
         so that the external work adds up to force × the walls' exact displacement (trapezoidal
         in the force, no error at kinks of a piecewise-linear motion)."""
         b = self.bodies
+        terms = kick_with_terms(b.v, b.L, b.x, b.q, self._inv_I, self._inv_mass, self.force,
+                                self.torque, hk, self.c_a, self.c_b, self.c_point, self.wall_d,
+                                wall_u, self.c_ftot, self.c_fdn, self.c_fdt, self.c_fet)
+        if self.domain is not None:          # added at the deck end, in the serial order
+            self.domain.log_kick(self.c_a, self.c_b, self.c_key, terms)
+            return
         acc = np.zeros(4)
-        kick_with_work(b.v, b.L, b.x, b.q, self._inv_I, self._inv_mass, self.force, self.torque,
-                       hk, self.c_a, self.c_b, self.c_point, self.wall_d, wall_u, self.c_ftot,
-                       self.c_fdn, self.c_fdt, self.c_fet, acc, self.wall_work)
+        add_kick_work(terms, self.c_a, self.c_b, b.n, acc, self.wall_work)
         if self.c_a.shape[0]:
             self.ledger.dissipated_normal += acc[0]
             self.ledger.dissipated_tangential += acc[1]
@@ -611,10 +626,13 @@ class DemSystem:
             return
         worst = alternation_update(b.v, b.L, self.alt_prev_v, self.alt_prev_L, self.alt_count,
                                    self._alt_floor_x, self._alt_floor_L, 1.0 / h)
-        if worst >= 0 and self.alt_count[worst] >= ALTERNATION_STEPS:
-            amp = float(np.linalg.norm(b.v[worst])) * h
+        count = int(self.alt_count[worst]) if worst >= 0 else 0
+        amp = float(np.linalg.norm(b.v[worst])) * h if worst >= 0 else 0.0
+        if self.domain is not None:
+            worst, count, amp = self.domain.worst_alternation(worst, count, amp)
+        if worst >= 0 and count >= ALTERNATION_STEPS:
             raise _Unstable(f"period-2 motion of particle {worst}: its motion reversed at each "
-                            f"of the last {int(self.alt_count[worst])} internal steps (displacement "
+                            f"of the last {count} internal steps (displacement "
                             f"{amp:.3g} m per step), a mode beyond the stability limit")
 
     # ------------------------------------------------------------------ stepping
@@ -654,6 +672,8 @@ class DemSystem:
         if self.refine > 1 and self.calm_steps >= REFINE_DECAY_STEPS:
             self.refine //= 2
             self.calm_steps = 0
+        if self.domain is not None:
+            self.domain.after_deck_step()      # re-cut the domain when due
         self._control_step()
         return e
 
@@ -666,9 +686,10 @@ class DemSystem:
         is repeated by :meth:`step` (which refines it or raises).  Other scenes: one
         :meth:`step`."""
         self.initialize()
-        if self.compiled_steps and n_max >= 1 and self._sphere_steps is None:
+        if (self.compiled_steps and self.domain is None and n_max >= 1
+                and self._sphere_steps is None):
             self._sphere_steps = SphereSteps.for_system(self) or False
-        fast = self._sphere_steps if self.compiled_steps else None
+        fast = self._sphere_steps if self.compiled_steps and self.domain is None else None
         self.last_steps = StepTally()
         if not fast:
             self._tallied_step()
@@ -703,15 +724,22 @@ class DemSystem:
         t_start = self.time
         n = self.substeps
         self.failed_in_step = 0
+        if self.domain is not None:
+            self.domain.begin_deck_step()
         for k in range(1, n + 1):
             t_new = t_start + self.dt * k / n
             with np.errstate(all="ignore"):
                 self._internal_step(t_new, self.dt_internal)
             self.failed_in_step += int(getattr(self.last_contacts, "failed", 0) or 0)
             b = self.bodies
-            if not (state_is_finite(b.x, b.v, b.q, b.L) and np.isfinite(self.force).all()):
+            finite = state_is_finite(b.x, b.v, b.q, b.L) and bool(np.isfinite(self.force).all())
+            if self.domain is not None:
+                finite = self.domain.all(finite)
+            if not finite:
                 raise _Unstable(f"non-finite state at t = {t_new:.6g} s")
         self.step_count += 1
+        if self.domain is not None:
+            self.domain.end_of_deck_step()     # every rank: the serial state
         e = self.energy()
         self._check_energy(e)
         return e

@@ -1,0 +1,416 @@
+"""Domain decomposition of a :class:`~nurbsdem.dynamics.DemSystem` over the ranks of an MPI
+communicator, **bit for bit equal to the serial run**.
+
+Ownership
+---------
+Space is cut by recursive coordinate bisection (:func:`decompose`): the particles are split
+at the median of the longest extent of their centroids, recursively, into P groups of equal
+count (ties broken by particle index, so every rank computes the same cut).  A rank *owns* the
+particles of its group: it integrates them and decides everything about them.  The cut is
+redone (particles *migrate*) after an accepted deck step when the ghost count has grown by
+half since the last cut, or every :data:`REBALANCE_EVERY` deck steps: rebalanced by particle
+count as the pack settles.
+
+Contacts and ghosts
+-------------------
+A rank lists (neighbour list of :class:`~nurbsdem.contact.scene.SceneContacts`) only the pairs
+with at least one owned particle; a pair across the cut is listed and solved on both its
+ranks, from the same inputs, so with the same bits.  Its *ghosts* are the other bodies of its
+pairs: exactly the particles within reach (bounding radii + skin) of an owned one, the
+minimal ghost layer.  A ghost is advanced on every rank that holds it from the same state by
+the same kernels, with the loads its owner computed: after each force evaluation the owners
+send their ghosts' force and torque (non-blocking point-to-point messages of NumPy buffers,
+:meth:`Domain.exchange_loads`), so a ghost's state equals its owner's bit for bit without
+sending it.  Particles that are neither owned nor ghosts are frozen on a rank (no velocity,
+no load) until the next synchronisation.
+
+Synchronisation
+---------------
+* At a neighbour-list rebuild (decided by all ranks together: some particle moved more than
+  half the skin) every rank receives the owners' state of all particles (allgather), builds
+  its list and plans its ghosts anew (an all-to-all of the ghost requests).
+* At the end of each deck step (:meth:`Domain.end_of_deck_step`) the owners' state of every
+  particle and every rank's *counted* contacts (those whose body A it owns: each contact is
+  counted by exactly one rank) are gathered and merged in the order of their pair keys, the
+  serial order; the walls' loads are summed from them in that order; the energy ledger replays
+  the exact-work terms of every half kick of the deck step in that order
+  (:func:`~nurbsdem.dynamics.forces.add_kick_work`).  After it, every rank holds the serial
+  system's state bit for bit: energies, guards, the time-step control (Lanczos over the whole
+  network), monitors, output and checkpoints run unchanged.
+
+Global decisions (the period-2 and finite-state guards after every internal step, the rebuild
+of the neighbour list) are reduced over the ranks, so every rank takes the serial run's
+decision at the same point.  A checkpoint holds the gathered (serial) state: it restarts on any
+number of ranks.
+
+Memory and communication: state arrays keep global indices (O(N) memory per rank, sized for
+10^6 particles per node); per internal step the messages are the ghosts' loads (6 doubles per
+ghost) and two small reductions; per deck step and per rebuild an O(N + K) gather.  The model
+of the report (section 6) gives the volume per step and the efficiency it predicts.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..dynamics.contactset import ContactSet
+from ..dynamics.forces import add_kick_work, wall_loads
+
+#: deck steps between re-cuts at the latest; a re-cut also happens when the ghosts have grown
+#: by GHOST_GROWTH since the last cut
+REBALANCE_EVERY = 200
+GHOST_GROWTH = 1.5
+
+#: per-contact arrays of a DemSystem's last evaluation, merged by pair key at each deck end
+ROW_FIELDS = ("c_a", "c_b", "c_key", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet",
+              "c_fn", "c_eel", "c_stick", "c_coeffs", "c_radius")
+#: per-particle arrays of a DemSystem that a rank receives from the owners
+BODY_FIELDS = ("x", "q", "v", "L")
+SYSTEM_BODY_FIELDS = ("alt_count", "alt_prev_v", "alt_prev_L")
+#: ContactSet arrays over the active contacts and over the separated ("near") pairs
+CS_ACTIVE = ("body_a", "body_b", "point_a", "point_b", "normal", "depth", "key", "degenerated",
+             "params", "patch_a", "patch_b")
+CS_NEAR = ("near_a", "near_b", "near_point", "near_normal", "near_gap")
+#: counters of a ContactSet that ranks count for their counted pairs (summed over ranks)
+CS_COUNTERS = ("monitored", "failed", "reused", "dropped")
+#: _PairState arrays of the scene's neighbour list
+PAIR_FIELDS = ("list_a", "list_b", "keys", "mask_a", "mask_b", "rows_f", "rows_i", "budget",
+               "reused")
+
+_TAG_LOADS = 11
+
+
+def decompose(x: np.ndarray, parts: int) -> np.ndarray:
+    """Owner rank (N,) of each particle: recursive coordinate bisection of the centroids x (N,3)
+    m into ``parts`` groups of equal count (±1), cut at the median of the longest extent, ties
+    by particle index (deterministic)."""
+    owner = np.zeros(x.shape[0], np.int64)
+    _bisect(x, np.arange(x.shape[0]), 0, parts, owner)
+    return owner
+
+
+def _bisect(x: np.ndarray, ids: np.ndarray, first: int, parts: int, owner: np.ndarray) -> None:
+    if parts == 1 or ids.size == 0:
+        owner[ids] = first
+        return
+    pts = x[ids]
+    axis = int(np.argmax(pts.max(axis=0) - pts.min(axis=0)))
+    order = ids[np.lexsort((ids, pts[:, axis]))]
+    left = parts // 2
+    k = (ids.size * left) // parts
+    _bisect(x, order[:k], first, left, owner)
+    _bisect(x, order[k:], first + left, parts - left, owner)
+
+
+@dataclass
+class GhostPlan:
+    """Who holds what between two list rebuilds: tracked (N,) owned or ghost particles;
+    recv {rank: ghost indices it owns}; send {rank: owned indices that are ghosts there}."""
+
+    tracked: np.ndarray
+    recv: dict
+    send: dict
+
+    @property
+    def ghosts(self) -> int:
+        return int(sum(v.size for v in self.recv.values()))
+
+
+def merge_by_key(pieces: list[dict], key: str) -> dict:
+    """Concatenate the arrays of per-rank dicts and sort them by ``key`` (unique keys: each
+    row counted by one rank): the serial row order."""
+    out = {name: np.concatenate([p[name] for p in pieces]) for name in pieces[0]}
+    order = np.argsort(out[key], kind="stable")
+    return {name: arr[order] for name, arr in out.items()}
+
+
+class Domain:
+    """The decomposition of one DemSystem (and its scene) over ``comm`` (module docstring).
+
+    owner: (N,) ranks to start from (a scene carried over from the previous solution step
+    keeps its cut); None: :func:`decompose` of the current centroids."""
+
+    def __init__(self, comm: Any, system: Any, scene: Any, owner: np.ndarray | None = None,
+                 plan: GhostPlan | None = None) -> None:
+        from mpi4py import MPI
+        self._MPI = MPI
+        self.comm = comm
+        self.rank = int(comm.rank)
+        self.size = int(comm.size)
+        self.system = system
+        self.scene = scene
+        self.n = int(system.n_particles)
+        self.nb = int(system.n_bodies)
+        self._set_owner(decompose(system.bodies.x, self.size) if owner is None
+                        else np.asarray(owner, np.int64))
+        self.plan = plan if plan is not None else GhostPlan(self.owned.copy(), {}, {})
+        self._ghosts_at_cut = -1
+        self._steps_since_cut = 0
+        self.cuts = 1
+        self.events: list[tuple] = []
+        self.lcps = 0                  # counted LCPs since the last deck end
+        self.failed = 0                # counted failed LCPs since the last deck end
+
+    def _set_owner(self, owner: np.ndarray) -> None:
+        self.owner = owner
+        self.owned = owner == self.rank
+        self.owned_ids = np.nonzero(self.owned)[0]
+
+    # ------------------------------------------------------------------ reductions
+    def any(self, flag: bool) -> bool:
+        """Whether ``flag`` holds on some rank."""
+        return bool(self.comm.allreduce(bool(flag), op=self._MPI.LOR))
+
+    def all(self, flag: bool) -> bool:
+        """Whether ``flag`` holds on every rank."""
+        return bool(self.comm.allreduce(bool(flag), op=self._MPI.LAND))
+
+    def total(self, count: int) -> int:
+        return int(self.comm.allreduce(int(count), op=self._MPI.SUM))
+
+    def worst_alternation(self, worst: int, count: int, amplitude: float) -> tuple[int, int, float]:
+        """The serial period-2 verdict: the particle with the longest run of reversals (lowest
+        index on ties) over all ranks, its count and its displacement per step (m)."""
+        code = count * (self.n + 1) + (self.n - worst) if worst >= 0 else 0
+        best = max(self.comm.allgather((code, amplitude)))
+        if best[0] == 0:
+            return -1, 0, 0.0
+        return self.n - best[0] % (self.n + 1), best[0] // (self.n + 1), best[1]
+
+    # ------------------------------------------------------------------ rows
+    def counted(self, a: np.ndarray) -> np.ndarray:
+        """Rows this rank counts: those whose body A (always a particle) it owns."""
+        return self.owned[np.asarray(a, np.int64)]
+
+    def involves_owned(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Pairs with an owned body (b may be a wall, index >= N)."""
+        own_b = np.zeros(b.shape[0], bool)
+        part = b < self.n
+        own_b[part] = self.owned[b[part]]
+        return self.owned[a] | own_b
+
+    # ------------------------------------------------------------------ ghosts
+    def plan_ghosts(self, a: np.ndarray, b: np.ndarray) -> None:
+        """Ghosts of the listed pairs (a, b) and who sends their loads (collective)."""
+        partners = np.concatenate([a, b[b < self.n]])
+        tracked = self.owned.copy()
+        tracked[partners] = True
+        ghosts = np.nonzero(tracked & ~self.owned)[0]
+        wanted = [ghosts[self.owner[ghosts] == r] for r in range(self.size)]
+        asked = self.comm.alltoall(wanted)
+        self.plan = GhostPlan(tracked,
+                              {r: w for r, w in enumerate(wanted) if w.size},
+                              {r: np.asarray(s, np.int64) for r, s in enumerate(asked) if len(s)})
+
+    def begin_deck_step(self) -> None:
+        """Before the internal steps of a deck step (also when one is repeated): a fresh log,
+        and the idle particles frozen."""
+        self.events = []
+        self.failed = 0
+        self.freeze()
+
+    def freeze(self) -> None:
+        """Stop the particles this rank neither owns nor holds as ghosts (no velocity, no load):
+        their copies wait, unchanged, for the next synchronisation."""
+        s = self.system
+        b = s.bodies
+        idle = ~self.plan.tracked
+        b.v[idle] = 0.0
+        b.L[idle] = 0.0
+        s.force[:self.n][idle] = 0.0
+        s.torque[:self.n][idle] = 0.0
+
+    def exchange_loads(self, force: np.ndarray, torque: np.ndarray) -> None:
+        """After a force evaluation: the owners' force and torque (B,3) of this rank's ghosts
+        (non-blocking point-to-point), and none on the idle particles."""
+        MPI = self._MPI
+        idle = ~self.plan.tracked
+        force[:self.n][idle] = 0.0
+        torque[:self.n][idle] = 0.0
+        requests, inbox, outbox = [], {}, []
+        for r, idx in self.plan.recv.items():
+            buf = np.empty((idx.size, 6))
+            requests.append(self.comm.Irecv(buf, source=r, tag=_TAG_LOADS))
+            inbox[r] = buf
+        for r, idx in self.plan.send.items():
+            buf = np.ascontiguousarray(np.concatenate([force[idx], torque[idx]], axis=1))
+            outbox.append(buf)
+            requests.append(self.comm.Isend(buf, dest=r, tag=_TAG_LOADS))
+        MPI.Request.Waitall(requests)
+        for r, buf in inbox.items():
+            idx = self.plan.recv[r]
+            force[idx] = buf[:, :3]
+            torque[idx] = buf[:, 3:]
+
+    def _from_owners(self, arrays: list[np.ndarray]) -> None:
+        """Fill every particle's row of each (N, ...) array with its owner's (allgather)."""
+        mine = self.owned_ids
+        for ids, rows in self.comm.allgather((mine, [arr[mine] for arr in arrays])):
+            for arr, r in zip(arrays, rows):
+                arr[ids] = r
+
+    def sync_for_build(self, kin: Any) -> Any:
+        """Before a neighbour-list rebuild (inside a force evaluation, after the drift): every
+        particle's state and odometer from its owner; returns the kinematics recomputed."""
+        s = self.system
+        b = s.bodies
+        self._from_owners([getattr(b, f) for f in BODY_FIELDS]
+                          + [getattr(s, f) for f in SYSTEM_BODY_FIELDS]
+                          + [self.scene.odo[:self.n]])
+        return s._kinematics(kin.t)
+
+    def after_build(self, a: np.ndarray, b: np.ndarray) -> None:
+        """After a rebuild: the ghosts of the new list, and the others frozen."""
+        self.plan_ghosts(a, b)
+        bodies = self.system.bodies
+        idle = ~self.plan.tracked
+        bodies.v[idle] = 0.0
+        bodies.L[idle] = 0.0
+
+    # ------------------------------------------------------------------ the energy ledger
+    def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
+        """Keep the work terms of a half kick's counted contacts for the deck end's replay."""
+        sel = self.counted(a)
+        self.events.append(("kick", dict(key=key[sel], a=a[sel], b=b[sel], terms=terms[sel])))
+
+    def log_dropped(self, a: np.ndarray, key: np.ndarray, elastic: np.ndarray) -> None:
+        """Keep the normal elastic energy (J) of counted contacts left out after failed LCPs
+        (every evaluation logs one, possibly empty, so the ranks' logs stay aligned)."""
+        sel = self.counted(a)
+        self.events.append(("dropped", dict(key=key[sel], e=elastic[sel])))
+
+    def _replay(self, logs: list[list[tuple]]) -> None:
+        """The serial ledger updates from all ranks' logs: each event's rows merged in key
+        order and added as :meth:`DemSystem._kick` and ``_book_dropped`` add them."""
+        s = self.system
+        lg = s.ledger
+        for k, (kind, _) in enumerate(logs[0]):
+            rows = merge_by_key([log[k][1] for log in logs], "key")
+            if kind == "kick":
+                acc = np.zeros(4)
+                add_kick_work(np.ascontiguousarray(rows["terms"]).reshape(-1, 5), rows["a"],
+                              rows["b"], self.n, acc, s.wall_work)
+                if rows["key"].shape[0]:
+                    lg.dissipated_normal += acc[0]
+                    lg.dissipated_tangential += acc[1]
+                    lg.external_work += acc[2]
+                    lg.tangential_spring_work += acc[3]
+            elif rows["key"].shape[0]:
+                lg.dissipated_normal += float(rows["e"].sum())
+
+    # ------------------------------------------------------------------ deck ends
+    def end_of_deck_step(self) -> None:
+        """Give every rank the serial system's state (module docstring; collective)."""
+        s = self.system
+        sc = self.scene
+        N = self.n
+        self._from_owners([getattr(s.bodies, f) for f in BODY_FIELDS]
+                          + [getattr(s, f) for f in SYSTEM_BODY_FIELDS]
+                          + [s.force[:N], s.torque[:N]])
+        sel = self.counted(s.c_a)
+        rows = {f: getattr(s, f)[sel] for f in ROW_FIELDS}
+        hsel = self.counted(s.hist_keys // self.nb)
+        hist = dict(key=s.hist_keys[hsel], spring=s.hist_springs[hsel])
+        cs = s.last_contacts
+        mine = (rows, hist, self._counted_contacts(cs), self.events, (self.lcps, self.failed))
+        gathered = self.comm.allgather(mine)
+        rows = merge_by_key([g[0] for g in gathered], "c_key")
+        for f in ROW_FIELDS:
+            setattr(s, f, rows[f])
+        hist = merge_by_key([g[1] for g in gathered], "key")
+        s.hist_keys, s.hist_springs = hist["key"], hist["spring"].reshape(-1, 3)
+        s.force[N:] = 0.0
+        s.torque[N:] = 0.0
+        wall_loads(s.c_b, s.c_point, s.c_ftot, s.wall_d, N, s.force, s.torque)
+        merged = self._merged_contacts([g[2] for g in gathered])
+        s.last_contacts = merged
+        sc.last = merged
+        self._replay([g[3] for g in gathered])
+        self.events = []
+        counts = np.sum([g[4] for g in gathered], axis=0)
+        sc.timers.lcps += int(counts[0])
+        s.failed_in_step = int(counts[1])
+        self.lcps = self.failed = 0
+
+    def _counted_contacts(self, cs: ContactSet | None) -> dict:
+        if cs is None:
+            cs = ContactSet.empty()
+        sel = self.counted(cs.body_a)
+        near = self.counted(cs.near_a)
+        drop = self.counted(np.asarray(cs.dropped_keys, np.int64) // self.nb)
+        return dict(active={f: np.asarray(getattr(cs, f))[sel] for f in CS_ACTIVE},
+                    near={f: np.asarray(getattr(cs, f))[near] for f in CS_NEAR},
+                    dropped=np.asarray(cs.dropped_keys, np.int64)[drop],
+                    counters=[int(getattr(cs, f)) for f in CS_COUNTERS])
+
+    def _merged_contacts(self, pieces: list[dict]) -> ContactSet:
+        """The serial ContactSet of the last evaluation, from every rank's counted pairs."""
+        act = [dict(p["active"]) for p in pieces]
+        active = merge_by_key(act, "key")
+        near = [dict(p["near"], near_key=p["near"]["near_a"] * self.nb + p["near"]["near_b"])
+                for p in pieces]
+        near = merge_by_key(near, "near_key")
+        near.pop("near_key")
+        counters = np.sum([p["counters"] for p in pieces], axis=0)
+        dropped = np.sort(np.concatenate([p["dropped"] for p in pieces]))
+        deg = active["degenerated"]
+        return ContactSet(**active, **near, dropped_keys=dropped,
+                          **{f: int(c) for f, c in zip(CS_COUNTERS, counters)},
+                          active=int(active["key"].shape[0]),
+                          degenerated_count=int(np.count_nonzero(deg)))
+
+    # ------------------------------------------------------------------ the scene's list
+    def global_scene_state(self, local: dict) -> dict:
+        """The serial scene state (:meth:`SceneContacts.state`) from every rank's counted pairs
+        and its owned particles' odometers and poses (collective)."""
+        sel = self.counted(local["list_a"]) if "list_a" in local else None
+        mine = self.owned_ids
+        pairs = {f: local[f][sel] for f in PAIR_FIELDS} if sel is not None else None
+        per_body = {f: local[f][mine] for f in ("prev_pos", "prev_R", "prev_x") if f in local}
+        gathered = self.comm.allgather((pairs, mine, per_body, local["odo"][mine]))
+        out = dict(local)
+        if sel is not None:
+            out.update(merge_by_key([g[0] for g in gathered], "keys"))
+        out["odo"] = local["odo"].copy()
+        for f in per_body:
+            out[f] = local[f].copy()
+        for _, ids, body, odo in gathered:
+            out["odo"][ids] = odo
+            for f, rows in body.items():
+                out[f][ids] = rows
+        return out
+
+    def local_scene_state(self, full: dict) -> dict:
+        """This rank's part of a serial scene state: the pairs with an owned body."""
+        if "list_a" not in full:
+            return full
+        keep = self.involves_owned(np.asarray(full["list_a"], np.int64),
+                                   np.asarray(full["list_b"], np.int64))
+        out = dict(full)
+        out.update({f: np.asarray(full[f])[keep] for f in PAIR_FIELDS})
+        return out
+
+    def after_deck_step(self) -> None:
+        """After an accepted deck step: re-cut when the ghosts have grown or after
+        REBALANCE_EVERY deck steps (particles migrate with their pairs' histories)."""
+        self._steps_since_cut += 1
+        ghosts = self.total(self.plan.ghosts)
+        if self._ghosts_at_cut < 0:
+            self._ghosts_at_cut = ghosts
+        if (self._steps_since_cut < REBALANCE_EVERY
+                and ghosts <= GHOST_GROWTH * self._ghosts_at_cut + self.size):
+            return
+        self.recut()
+
+    def recut(self) -> None:
+        """Cut the domain anew at the current positions (collective)."""
+        sc = self.scene
+        full = self.global_scene_state(sc.local_state())
+        self._set_owner(decompose(self.system.bodies.x, self.size))
+        sc.set_local_state(self.local_scene_state(full))
+        self.plan_ghosts(sc.pairs.a, sc.pairs.b)
+        self._ghosts_at_cut = self.total(self.plan.ghosts)
+        self._steps_since_cut = 0
+        self.cuts += 1
