@@ -425,6 +425,8 @@ def export_cmd(shape_file: str, output: str, resolution: int,
 def _setup_logging(quiet: bool, verbose: bool) -> None:
     import logging
     level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    if _launched_rank() > 0:
+        level = logging.ERROR        # several MPI ranks: rank 0 tells what happens
     logger = logging.getLogger("nurbsdem")
     logger.setLevel(level)
     if not logger.handlers:
@@ -457,15 +459,47 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     from .simulation import Simulation
     _setup_logging(quiet, verbose)
     sim = Simulation.from_deck(deck, output=output, restart=restart, quiet=quiet)
-    if restart is not None and Path(restart).parent.is_dir():
+    rank = _launched_rank()
+    if restart is not None and Path(restart).parent.is_dir() and rank == 0:
         from .io.writers import clean_output_directory
         clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries
     if restart is not None and not Path(restart).is_file():
         fail(f"{restart}: no such checkpoint file")
-    summary = sim.run()      # the Python API's code path: Simulation -> Solver
-    if not quiet:
+    summary = _stopping_all_ranks(sim.run)   # the Python API's code path: Simulation -> Solver
+    if not quiet and rank == 0:
         click.echo(summary.text())
         click.echo(f"results in {sim.solver.outdir}")
+
+
+def _launched_rank() -> int:
+    """This process's rank when an MPI launcher started it (0 otherwise), from the
+    launcher's environment (without initialising MPI)."""
+    import os
+    for name in ("PMI_RANK", "OMPI_COMM_WORLD_RANK", "PMIX_RANK"):
+        value = os.environ.get(name, "")
+        if value.isdigit():
+            return int(value)
+    return 0
+
+
+def _stopping_all_ranks(call: Callable[[], Any]) -> Any:
+    """``call()``; on several MPI ranks an error on one of them stops all (MPI_Abort, after
+    the one-line message), instead of leaving the others waiting for it."""
+    try:
+        return call()
+    except BaseException as exc:
+        mpi = sys.modules.get("mpi4py.MPI")
+        if mpi is None or mpi.COMM_WORLD.size == 1:
+            raise
+        if isinstance(exc, (NurbsdemError, OSError)):
+            message, code = f"nurbsdem: error: {error_message(exc)}", EXIT_USER_ERROR
+        else:
+            message = f"nurbsdem: internal error on rank {mpi.COMM_WORLD.rank}: {exc!r}"
+            code = EXIT_INTERNAL_ERROR
+        click.echo(message, err=True)
+        sys.stderr.flush()
+        mpi.COMM_WORLD.Abort(code)
+        raise
 
 
 @main.command()

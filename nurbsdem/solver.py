@@ -168,6 +168,9 @@ class Solver:
             comm = world()
         self.comm = comm or None
         self.rank = int(self.comm.rank) if self.comm is not None else 0
+        if self.comm is not None:
+            _share_cores(self.comm)
+            quiet = quiet or self.rank > 0      # one progress line: rank 0's
         self.compiled_steps = bool(compiled_steps)
         self.background_output = bool(background_output)
         if output is not None:
@@ -477,6 +480,8 @@ class Solver:
         sysm = self.system
         log.info("step %d: %s, %d time steps of %g s (%d sub-step(s) of %.3g s each)",
                  step.id, step.kind, n_total, dt, sysm.substeps, sysm.dt_internal)
+        if sysm.domain is not None:
+            log.info("step %d: %s", step.id, sysm.domain.describe())
         self.progress.start(f"step {step.id} {step.kind}", duration)
         ck_every = self.model.output.checkpoint_every
         while self.step_progress < n_total:
@@ -734,6 +739,18 @@ class _NoWriters:
 
     def close(self) -> None:
         pass
+
+
+def _share_cores(comm) -> None:
+    """The compiled kernels' threads of a rank: its node's cores shared among the node's
+    ranks (unless NUMBA_NUM_THREADS says otherwise), so that ranks do not oversubscribe."""
+    import os
+
+    import numba
+
+    from .parallel import threads_per_rank
+    if "NUMBA_NUM_THREADS" not in os.environ:
+        numba.set_num_threads(min(numba.config.NUMBA_NUM_THREADS, threads_per_rank(comm)))
 
 
 def _constant_motion(d: np.ndarray) -> PrescribedMotion:

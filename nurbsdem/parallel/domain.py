@@ -392,6 +392,12 @@ class Domain:
         out.update({f: np.asarray(full[f])[keep] for f in PAIR_FIELDS})
         return out
 
+    def describe(self) -> str:
+        """One line on the cut: particles and ghosts per rank (collective)."""
+        counts = self.comm.allgather((int(self.owned_ids.size), self.plan.ghosts))
+        return (f"{self.n} particles on {self.size} MPI ranks (cut {self.cuts}): owned "
+                f"{[c[0] for c in counts]}, ghosts {[c[1] for c in counts]}")
+
     def after_deck_step(self) -> None:
         """After an accepted deck step: re-cut when the ghosts have grown or after
         REBALANCE_EVERY deck steps (particles migrate with their pairs' histories)."""

@@ -1,0 +1,173 @@
+"""Runs on several MPI ranks (nurbsdem.parallel) give the serial run's results bit for bit.
+
+The deck (tests/data/mpi/pack.inp) has every kind of step: deposition of paper particles and
+exact spheres in a box, replication, deposition again, a lid brought to contact, pressing and
+lifting.  Each test compares a run on P ranks with the serial run: every sample of results.h5,
+every monitor file and the checkpoint, exactly.  They need the ``mpi`` extra (mpi4py and the
+mpich wheel, which brings ``mpiexec``); without it they skip and say so.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.parallel import decompose
+from nurbsdem.parallel.domain import merge_by_key
+
+HERE = Path(__file__).resolve().parent
+DECK = HERE / "data" / "mpi" / "pack.inp"
+RUN = HERE / "mpi_run.py"
+BIN = Path(sys.executable).parent
+MPIEXEC = BIN / "mpiexec"
+
+
+def _mpi_missing() -> str | None:
+    try:
+        import mpi4py  # noqa: F401
+    except ImportError:
+        return "mpi4py is not installed (pip install 'nurbsdem[mpi]')"
+    if not MPIEXEC.exists() and shutil.which("mpiexec") is None:
+        return "no mpiexec (pip install 'nurbsdem[mpi]' brings MPICH's)"
+    return None
+
+
+needs_mpi = pytest.mark.skipif(_mpi_missing() is not None, reason=str(_mpi_missing()))
+
+
+def _env() -> dict:
+    env = dict(os.environ)
+    for name in ("PMI_SIZE", "PMI_RANK", "OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "MPI_LOCALNRANKS"):
+        env.pop(name, None)          # a serial run must not believe it runs under mpiexec
+    return env
+
+
+def _run(args: list, ranks: int = 1, check_output: bool = False) -> str:
+    """Run ``args`` (a nurbsdem or Python command) serially or on ``ranks`` ranks; returns
+    its output (stdout and stderr)."""
+    mpiexec = str(MPIEXEC) if MPIEXEC.exists() else "mpiexec"
+    cmd = ([mpiexec, "-n", str(ranks)] if ranks > 1 else []) + [str(a) for a in args]
+    res = subprocess.run(cmd, cwd=DECK.parent, env=_env(), capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return res.stdout + res.stderr
+
+
+def _solve(out: Path, ranks: int = 1, *extra) -> str:
+    return _run([BIN / "nurbsdem", "solve", DECK, "--output", out, *extra], ranks)
+
+
+def _script(out: Path, ranks: int = 1, *extra) -> str:
+    return _run([sys.executable, RUN, DECK, out, *extra], ranks)
+
+
+def assert_same_run(out: Path, ref: Path) -> None:
+    """Every sample of results.h5, every monitor file and the checkpoint equal bit for bit."""
+    times = read_results_times(out / "results.h5")
+    np.testing.assert_array_equal(times, read_results_times(ref / "results.h5"))
+    for i in range(len(times)):
+        a = read_results_sample(out / "results.h5", i)
+        b = read_results_sample(ref / "results.h5", i)
+        for key, value in a.items():
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(value, b[key], err_msg=f"sample {i} {key}")
+    names = sorted(p.name for p in (ref / "monitors").glob("*.csv"))
+    assert names == sorted(p.name for p in (out / "monitors").glob("*.csv"))
+    for name in names:
+        assert (out / "monitors" / name).read_text() == (ref / "monitors" / name).read_text(), name
+    with h5py.File(out / "checkpoint.h5") as fa, h5py.File(ref / "checkpoint.h5") as fb:
+        _same_tree(fa, fb)
+
+
+def _same_tree(a, b, path: str = "") -> None:
+    assert sorted(a.keys()) == sorted(b.keys()), path
+    for k in a:
+        if isinstance(a[k], h5py.Group):
+            _same_tree(a[k], b[k], f"{path}/{k}")
+        else:
+            x, y = a[k][()], b[k][()]
+            if isinstance(x, np.ndarray) and x.dtype.kind == "f":
+                np.testing.assert_array_equal(x, y, err_msg=f"{path}/{k}")
+            elif isinstance(x, np.ndarray):
+                np.testing.assert_array_equal(x, y, err_msg=f"{path}/{k}")
+            else:
+                assert x == y or (x != x and y != y), f"{path}/{k}"
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("serial") / "out"
+    _solve(out, 1)
+    return out
+
+
+# ---------------------------------------------------------------------- the cut
+def test_the_cut_gives_equal_counts_and_does_not_depend_on_the_rank():
+    rng = np.random.default_rng(1)
+    x = rng.uniform(0, 1, (1001, 3)) * [4.0, 1.0, 1.0]
+    for parts in (1, 2, 3, 4, 7):
+        owner = decompose(x, parts)
+        counts = np.bincount(owner, minlength=parts)
+        assert counts.max() - counts.min() <= 1 + parts // 2, (parts, counts)
+        assert set(owner) == set(range(parts))
+    owner = decompose(x, 2)                   # first cut across the longest extent (x)
+    assert x[owner == 0, 0].max() <= x[owner == 1, 0].min()
+    same = np.zeros((6, 3))                   # ties are broken by the particle index
+    np.testing.assert_array_equal(decompose(same, 2), [0, 0, 0, 1, 1, 1])
+
+
+def test_rows_merged_by_key_come_in_the_serial_order():
+    a = dict(key=np.array([4, 9, 1]), v=np.array([[4.0], [9.0], [1.0]]))
+    b = dict(key=np.array([7, 2]), v=np.array([[7.0], [2.0]]))
+    m = merge_by_key([a, b], "key")
+    np.testing.assert_array_equal(m["key"], [1, 2, 4, 7, 9])
+    np.testing.assert_array_equal(m["v"][:, 0], [1, 2, 4, 7, 9])
+
+
+# ---------------------------------------------------------------------- runs
+@needs_mpi
+def test_two_ranks_give_the_serial_run_bit_for_bit(serial, tmp_path):
+    """``mpiexec -n 2 nurbsdem solve``: the particles are cut between the ranks, contacts
+    cross the cut (ghosts), and results.h5, the monitors and the checkpoint are the serial
+    run's, exactly."""
+    log = _solve(tmp_path / "out", 2, "--verbose")
+    ghosts = [line for line in log.splitlines() if "MPI ranks" in line]
+    assert ghosts and "owned [12, 12]" in ghosts[-1]
+    assert "ghosts [0, 0]" not in ghosts[-1]            # pairs across the cut were solved
+    assert_same_run(tmp_path / "out", serial)
+
+
+@needs_mpi
+def test_three_ranks_through_the_python_api(serial, tmp_path):
+    """The Python API under mpiexec (Simulation -> Solver picks up the MPI world), on a
+    number of ranks that is not a power of two."""
+    _script(tmp_path / "out", 3, "--api")
+    assert_same_run(tmp_path / "out", serial)
+
+
+@needs_mpi
+@pytest.mark.parametrize("before, after", [(2, 1), (1, 2)])
+def test_a_checkpoint_written_on_p_ranks_restarts_on_q(serial, tmp_path, before, after):
+    """Killed after the replication (a checkpoint at 0.3 s) on ``before`` ranks, restarted
+    from its checkpoint on ``after`` ranks: the serial run's results."""
+    out = tmp_path / "out"
+    assert "killed" in _script(out, before, "--kill-after", "0.32")
+    _solve(out, after, "--restart", out / "checkpoint.h5")
+    assert_same_run(out, serial)
+
+
+@needs_mpi
+def test_deck_steps_rolled_back_by_the_guard_on_two_ranks(tmp_path):
+    """With the time-step control misjudging the limit, the guard rolls deck steps back and
+    repeats them on all ranks together: the same results as the serial run doing so."""
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    assert "repeated with" in _script(ref, 1, "--misjudge", "20")
+    assert "repeated with" in _script(out, 2, "--misjudge", "20")
+    assert_same_run(out, ref)
