@@ -21,13 +21,18 @@ from pathlib import Path
 from decks import paper_mix_deck
 
 
-def deck_text(n: int, settle: float, measure: int, out: Path) -> str:
-    """Region: square base of side L, height L/2 per the packing, bounding-sphere fraction 0.3
-    (bounding radii of A, B, C: ~37, 29, 22 mm); the box twice as high."""
+def pack_region(n: int) -> tuple[float, float]:
+    """Side L and height L/2 (m) of the region where the n particles are released: square
+    base, bounding-sphere fraction 0.3 (bounding radii of A, B, C: ~37, 29, 22 mm)."""
     r_mean3 = (0.0365 ** 3 + 0.0291 ** 3 + 0.0219 ** 3) / 3
     volume = n * 4 / 3 * math.pi * r_mean3 / 0.3
     side = (2 * volume) ** (1 / 3)
-    height = volume / side ** 2
+    return side, volume / side ** 2
+
+
+def deck_text(n: int, settle: float, measure: int, out: Path) -> str:
+    """The particles in :func:`pack_region`; the box twice as high."""
+    side, height = pack_region(n)
     return paper_mix_deck(n, (side, side, height), 2 * height, [settle, measure * 1e-3], out,
                           monitors_every=0.05, vtk_resolution=2)
 

@@ -167,6 +167,8 @@ class Solver:
             from .parallel import world
             comm = world()
         self.comm = comm or None
+        #: the domain decomposition of the current (or last) dynamic step on several ranks
+        self.domain = None
         self.rank = int(self.comm.rank) if self.comm is not None else 0
         if self.comm is not None:
             _share_cores(self.comm)
@@ -296,7 +298,8 @@ class Solver:
         sysm.compiled_steps = False
         dom = Domain(self.comm, sysm, self.scene, owner=None if old is None else old.owner,
                      plan=None if old is None else old.plan)
-        sysm.domain = self.scene.domain = dom
+        dom.cuts = old.cuts if old is not None else 1
+        sysm.domain = self.scene.domain = self.domain = dom
 
     def _fixed_motions(self) -> list[PrescribedMotion]:
         return [_constant_motion(self.wall_offset[k]) for k in range(len(self.model.walls))]

@@ -145,6 +145,25 @@ def test_two_ranks_give_the_serial_run_bit_for_bit(serial, tmp_path):
 
 
 @needs_mpi
+def test_hertz_mindlin_on_two_ranks(tmp_path):
+    """Hertz–Mindlin laws (the exact curvature per contact, its fallback count in
+    monitors/hertz.csv) on 2 ranks: the serial results."""
+    text = DECK.read_text().replace("../../../inputs", str(HERE.parent / "inputs"))
+    text = text.replace("Material 1 Density 2700",
+                        "Material 1 Density 2700 YoungModulus 7e7 PoissonRatio 0.3")
+    text = text.replace("Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 "
+                        "TangentialDamping 0 Friction 0.5",
+                        "Interface 1 Model HertzMindlin Restitution 0.5 Friction 0.3")
+    text = text.replace("Step 3 Dynamic Duration 0.15", "Step 3 Dynamic Duration 0.05")
+    assert "HertzMindlin" in text
+    deck = tmp_path / "hertz.inp"
+    deck.write_text(text)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "ref"])
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "out"], 2)
+    assert_same_run(tmp_path / "out", tmp_path / "ref")
+
+
+@needs_mpi
 def test_three_ranks_through_the_python_api(serial, tmp_path):
     """The Python API under mpiexec (Simulation -> Solver picks up the MPI world), on a
     number of ranks that is not a power of two."""

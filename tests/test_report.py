@@ -19,7 +19,8 @@ SECTIONS = ("## Headline numbers", "## 1. Contact accuracy against cost",
             "## 4. Time step against error", "## 5. Cost of a run", "### 112 spheres against Yade",
             "### An exact sphere against a NURBS particle",
             "### The paper's example",
-            "## 6. Fit to meshes", "## 7. Hertz–Mindlin with the exact curvature")
+            "## 6. Fit to meshes", "## 7. Hertz–Mindlin with the exact curvature",
+            "## 8. Runs on several MPI ranks")
 FIGURES = ("lcp_accuracy.png", "facets.png", "timestep.png", "scaling.png")
 
 

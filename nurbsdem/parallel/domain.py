@@ -50,8 +50,10 @@ of the report (section 6) gives the volume per step and the efficiency it predic
 """
 from __future__ import annotations
 
+import functools
+import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -80,6 +82,32 @@ PAIR_FIELDS = ("list_a", "list_b", "keys", "mask_a", "mask_b", "rows_f", "rows_i
                "reused")
 
 _TAG_LOADS = 11
+
+
+def _timed(kind: str) -> Callable:
+    """Add the wall time of a method (its communication, and the wait for the slowest rank
+    in it) to ``self.seconds[kind]``."""
+    def wrap(method: Callable) -> Callable:
+        @functools.wraps(method)
+        def timed(self, *args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return method(self, *args, **kwargs)
+            finally:
+                self.seconds[kind] += time.perf_counter() - t0
+        return timed
+    return wrap
+
+
+def _nbytes(obj: Any) -> int:
+    """Bytes of the NumPy arrays in a nest of tuples, lists and dicts."""
+    if isinstance(obj, np.ndarray):
+        return int(obj.nbytes)
+    if isinstance(obj, dict):
+        return sum(_nbytes(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(_nbytes(v) for v in obj)
+    return 8
 
 
 def decompose(x: np.ndarray, parts: int) -> np.ndarray:
@@ -152,6 +180,11 @@ class Domain:
         self.events: list[tuple] = []
         self.lcps = 0                  # counted LCPs since the last deck end
         self.failed = 0                # counted failed LCPs since the last deck end
+        #: bytes this rank sent: ghosts' loads (point-to-point) and its part of the gathers
+        self.sent = dict(loads=0, gathers=0, evaluations=0)
+        #: seconds in the ghosts' loads exchange, the reductions, and the gathers with their
+        #: merges (each including the wait for the slowest rank)
+        self.seconds = dict(loads=0.0, reductions=0.0, gathers=0.0)
 
     def _set_owner(self, owner: np.ndarray) -> None:
         self.owner = owner
@@ -159,17 +192,21 @@ class Domain:
         self.owned_ids = np.nonzero(self.owned)[0]
 
     # ------------------------------------------------------------------ reductions
+    @_timed("reductions")
     def any(self, flag: bool) -> bool:
         """Whether ``flag`` holds on some rank."""
         return bool(self.comm.allreduce(bool(flag), op=self._MPI.LOR))
 
+    @_timed("reductions")
     def all(self, flag: bool) -> bool:
         """Whether ``flag`` holds on every rank."""
         return bool(self.comm.allreduce(bool(flag), op=self._MPI.LAND))
 
+    @_timed("reductions")
     def total(self, count: int) -> int:
         return int(self.comm.allreduce(int(count), op=self._MPI.SUM))
 
+    @_timed("reductions")
     def worst_alternation(self, worst: int, count: int, amplitude: float) -> tuple[int, int, float]:
         """The serial period-2 verdict: the particle with the longest run of reversals (lowest
         index on ties) over all ranks, its count and its displacement per step (m)."""
@@ -222,6 +259,7 @@ class Domain:
         s.force[:self.n][idle] = 0.0
         s.torque[:self.n][idle] = 0.0
 
+    @_timed("loads")
     def exchange_loads(self, force: np.ndarray, torque: np.ndarray) -> None:
         """After a force evaluation: the owners' force and torque (B,3) of this rank's ghosts
         (non-blocking point-to-point), and none on the idle particles."""
@@ -234,9 +272,11 @@ class Domain:
             buf = np.empty((idx.size, 6))
             requests.append(self.comm.Irecv(buf, source=r, tag=_TAG_LOADS))
             inbox[r] = buf
+        self.sent["evaluations"] += 1
         for r, idx in self.plan.send.items():
             buf = np.ascontiguousarray(np.concatenate([force[idx], torque[idx]], axis=1))
             outbox.append(buf)
+            self.sent["loads"] += buf.nbytes
             requests.append(self.comm.Isend(buf, dest=r, tag=_TAG_LOADS))
         MPI.Request.Waitall(requests)
         for r, buf in inbox.items():
@@ -247,10 +287,13 @@ class Domain:
     def _from_owners(self, arrays: list[np.ndarray]) -> None:
         """Fill every particle's row of each (N, ...) array with its owner's (allgather)."""
         mine = self.owned_ids
-        for ids, rows in self.comm.allgather((mine, [arr[mine] for arr in arrays])):
+        payload = (mine, [arr[mine] for arr in arrays])
+        self.sent["gathers"] += _nbytes(payload)
+        for ids, rows in self.comm.allgather(payload):
             for arr, r in zip(arrays, rows):
                 arr[ids] = r
 
+    @_timed("gathers")
     def sync_for_build(self, kin: Any) -> Any:
         """Before a neighbour-list rebuild (inside a force evaluation, after the drift): every
         particle's state and odometer from its owner; returns the kinematics recomputed."""
@@ -301,6 +344,7 @@ class Domain:
                 lg.dissipated_normal += float(rows["e"].sum())
 
     # ------------------------------------------------------------------ deck ends
+    @_timed("gathers")
     def end_of_deck_step(self) -> None:
         """Give every rank the serial system's state (module docstring; collective)."""
         s = self.system
@@ -315,6 +359,7 @@ class Domain:
         hist = dict(key=s.hist_keys[hsel], spring=s.hist_springs[hsel])
         cs = s.last_contacts
         mine = (rows, hist, self._counted_contacts(cs), self.events, (self.lcps, self.failed))
+        self.sent["gathers"] += _nbytes(mine)
         gathered = self.comm.allgather(mine)
         rows = merge_by_key([g[0] for g in gathered], "c_key")
         for f in ROW_FIELDS:
@@ -327,6 +372,12 @@ class Domain:
         merged = self._merged_contacts([g[2] for g in gathered])
         s.last_contacts = merged
         sc.last = merged
+        if s.__dict__.get("_hertz_table"):
+            # the serial count of contacts whose curvature fell back (the radii are the
+            # merged rows' again: per contact, the same bits)
+            from ..geometry.curvature import contact_radii_for
+            s.c_radius, s.hertz_fallback = contact_radii_for(sc, merged, s.bodies,
+                                                             s.c_a.shape[0])
         self._replay([g[3] for g in gathered])
         self.events = []
         counts = np.sum([g[4] for g in gathered], axis=0)
@@ -392,6 +443,16 @@ class Domain:
         out.update({f: np.asarray(full[f])[keep] for f in PAIR_FIELDS})
         return out
 
+    def figures(self) -> dict:
+        """This rank's figures: owned particles, ghosts, cuts, bytes sent per internal step
+        (loads point-to-point, gathers at rebuilds and deck ends)."""
+        ev = max(self.sent["evaluations"], 1)
+        return dict(owned=int(self.owned_ids.size), ghosts=self.plan.ghosts, cuts=self.cuts,
+                    load_bytes_per_internal_step=self.sent["loads"] / ev,
+                    gather_bytes_per_internal_step=self.sent["gathers"] / ev,
+                    bytes_per_internal_step=(self.sent["loads"] + self.sent["gathers"]) / ev,
+                    internal_steps=self.sent["evaluations"], seconds=dict(self.seconds))
+
     def describe(self) -> str:
         """One line on the cut: particles and ghosts per rank (collective)."""
         counts = self.comm.allgather((int(self.owned_ids.size), self.plan.ghosts))
@@ -410,6 +471,7 @@ class Domain:
             return
         self.recut()
 
+    @_timed("gathers")
     def recut(self) -> None:
         """Cut the domain anew at the current positions (collective)."""
         sc = self.scene
