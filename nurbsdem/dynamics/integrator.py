@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 
 from ..geometry.rotation import quat_mul_into
-from .forces import add_kick_work, kick_work_terms
+from .forces import kick_work_terms
 from .rigid import omega_world
 
 
@@ -181,17 +181,3 @@ def kick_with_terms(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
                                    omega_world(q, L, inv_I), wall_u, w1)
     return kick_work_terms(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n,
                            f_damp_t, f_el_t, hk)
-
-
-@njit(cache=True)
-def kick_with_work(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
-                   inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray,
-                   torque: np.ndarray, hk: float, body_a: np.ndarray, body_b: np.ndarray,
-                   point: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
-                   f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
-                   f_el_t: np.ndarray, acc: np.ndarray, wall_work: np.ndarray) -> None:
-    """:func:`kick_with_terms`, its work added to acc (4,) and wall_work (W,)
-    (:func:`nurbsdem.dynamics.forces.add_kick_work`)."""
-    terms = kick_with_terms(v, L, x, q, inv_I, inv_mass, force, torque, hk, body_a, body_b,
-                            point, wall_d, wall_u, f_total, f_damp_n, f_damp_t, f_el_t)
-    add_kick_work(terms, body_a, body_b, x.shape[0], acc, wall_work)

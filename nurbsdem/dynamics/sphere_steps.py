@@ -7,7 +7,7 @@ Here the whole internal step of :class:`~nurbsdem.dynamics.system.DemSystem` wit
 :class:`~nurbsdem.contact.scene.SceneContacts` provider runs in one compiled loop over many
 deck steps:
 
-1. half kick with its exact discrete work (:func:`~nurbsdem.dynamics.integrator.kick_with_work`),
+1. half kick with its exact discrete work (:func:`~nurbsdem.dynamics.integrator.kick_with_terms`),
 2. the period-2 watch (:func:`~nurbsdem.dynamics.stepcontrol.alternation_update`),
 3. drift (:func:`~nurbsdem.dynamics.integrator.drift`),
 4. the contact search of the scene: odometers, the neighbour list with its skin, certificates
@@ -50,9 +50,9 @@ from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, li
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
-from .forces import contact_loads, match_history
+from .forces import add_kick_work, contact_loads, match_history
 from .hertz import has_hertz
-from .integrator import drift, kick_with_work, kinetic_energies
+from .integrator import drift, kick_with_terms, kinetic_energies
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, count_stands,
                           critical_step_from_rates, needed_substeps, network_bound,
@@ -220,8 +220,9 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
 def _kick(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work) -> None:
     """DemSystem._kick: half kick and its exact work booked in the ledger (J)."""
     acc = np.zeros(4)
-    kick_with_work(v, L, x, q, bc.inv_I, bc.inv_mass, ev.force, ev.torque, hk, ev.a, ev.b,
-                   ev.point, wall_d, u_mean, ev.ftot, ev.fdn, ev.fdt, ev.fet, acc, wall_work)
+    terms = kick_with_terms(v, L, x, q, bc.inv_I, bc.inv_mass, ev.force, ev.torque, hk, ev.a,
+                            ev.b, ev.point, wall_d, u_mean, ev.ftot, ev.fdn, ev.fdt, ev.fet)
+    add_kick_work(terms, ev.a, ev.b, x.shape[0], acc, wall_work)
     if ev.a.shape[0]:
         ledger[0] += acc[0]       # dissipated, normal
         ledger[1] += acc[1]       # dissipated, tangential
