@@ -190,3 +190,19 @@ def test_deck_steps_rolled_back_by_the_guard_on_two_ranks(tmp_path):
     assert "repeated with" in _script(ref, 1, "--misjudge", "20")
     assert "repeated with" in _script(out, 2, "--misjudge", "20")
     assert_same_run(out, ref)
+
+
+@needs_mpi
+def test_bad_input_on_two_ranks_is_one_line_and_a_nonzero_exit(tmp_path):
+    """A deck error under mpiexec: the one-line message naming file and line, exit status 2,
+    no traceback, no rank left waiting."""
+    deck = tmp_path / "bad.inp"
+    deck.write_text(DECK.read_text().replace("../../../inputs", str(HERE.parent / "inputs"))
+                    .replace("Material 1 Density 2700", "Material 1 Density abc"))
+    res = subprocess.run([str(MPIEXEC) if MPIEXEC.exists() else "mpiexec", "-n", "2",
+                          str(BIN / "nurbsdem"), "solve", str(deck), "--output",
+                          str(tmp_path / "out")], env=_env(), capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode != 0
+    assert "bad.inp:7" in res.stderr and "abc" in res.stderr
+    assert "Traceback" not in res.stderr
