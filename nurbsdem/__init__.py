@@ -21,6 +21,23 @@ from .errors import GeometryError, InputError, NurbsdemError
 # to hang at interpreter exit, spinning in TBB's finaliser after all its output was written.
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
+
+def _ranks_on_this_node() -> int:
+    """Processes an MPI launcher started on this node (1 without a launcher)."""
+    for name in ("MPI_LOCALNRANKS", "OMPI_COMM_WORLD_LOCAL_SIZE", "PMI_SIZE"):
+        value = os.environ.get(name, "")
+        if value.isdigit():
+            return int(value)
+    return 1
+
+
+# Several MPI ranks on a node: OpenBLAS's threads (it spins while waiting) would compete with
+# the ranks for the cores; each rank gets its share unless the user chose (effective when
+# nurbsdem is imported before NumPy, as by the command line).
+if _ranks_on_this_node() > 1:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS",
+                          str(max(1, (os.cpu_count() or 1) // _ranks_on_this_node())))
+
 __version__ = "0.1.0"
 
 #: Public names loaded on first use: name -> (module, attribute; None = the module itself).

@@ -391,6 +391,26 @@ def _largest_ritz(alpha: np.ndarray, beta: np.ndarray, m: int) -> tuple[float, n
 
 
 @njit(cache=True)
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """a · b summed in index order (the same bits whatever BLAS and its threads)."""
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i] * b[i]
+    return s
+
+
+@njit(cache=True)
+def _orthogonalise(w: np.ndarray, basis: np.ndarray) -> None:
+    """w −= basisᵀ (basis w), in place, by loops in index order."""
+    c = np.empty(basis.shape[0])
+    for j in range(basis.shape[0]):
+        c[j] = _dot(basis[j], w)
+    for j in range(basis.shape[0]):
+        for i in range(w.shape[0]):
+            w[i] -= c[j] * basis[j, i]
+
+
+@njit(cache=True)
 def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                     normal: np.ndarray, k_n: np.ndarray, k_t: np.ndarray, x: np.ndarray,
                     Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray, steps: int = LANCZOS_STEPS,
@@ -401,12 +421,13 @@ def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     Lanczos with full re-orthogonalisation from a fixed start vector (deterministic), at most
     ``steps`` products, stopping early when the largest Ritz value changes by less than
     ``rtol`` over 5 steps.  The Ritz value is a lower bound of λmax that converges from below
-    (to round-off within a few tens of steps here)."""
+    (to round-off within a few tens of steps here).  Vector products are loops in index order,
+    not BLAS, whose threaded reductions would make the bits depend on the thread count."""
     dim = 6 * x.shape[0]
     if dim == 0:
         return 0.0, np.zeros(0)
     v = 1.0 + 0.5 * np.sin(np.arange(dim) * 1.2345 + 0.1)
-    v /= np.linalg.norm(v)
+    v /= math.sqrt(_dot(v, v))
     m = min(steps, dim)
     V = np.zeros((m, dim))
     alpha = np.zeros(m)
@@ -417,11 +438,10 @@ def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
         size = k + 1
         V[k] = v
         w = network_apply(v, body_a, body_b, point, normal, k_n, k_t, x, Q, sq_m, sq_I)
-        alpha[k] = np.dot(v, w)
-        basis = V[:size]
+        alpha[k] = _dot(v, w)
         for _ in range(2):                                  # full re-orthogonalisation
-            w = w - np.dot(basis.T, np.dot(basis, w))
-        nb = np.linalg.norm(w)
+            _orthogonalise(w, V[:size])
+        nb = math.sqrt(_dot(w, w))
         beta[k] = nb
         if nb <= 1e-12 * max(np.abs(alpha[:size]).max(), 1e-300):
             break
@@ -432,7 +452,11 @@ def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
             last = ritz
         v = w / nb
     lam, y = _largest_ritz(alpha, beta, size)
-    return max(lam, 0.0), np.dot(V[:size].T, y)
+    vec = np.zeros(dim)
+    for j in range(size):
+        for i in range(dim):
+            vec[i] += V[j, i] * y[j]
+    return max(lam, 0.0), vec
 
 
 def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,

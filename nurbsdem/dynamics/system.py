@@ -400,8 +400,9 @@ class DemSystem:
             return math.inf, "no contacts"
         b = self.bodies
         a, bb, p, n, coeffs = net
-        omega2, gamma, body = network_rates(a, bb, p, n, coeffs, b.x, b.principal_rotations(),
-                                            b.mass, b.I)
+        args = (a, bb, p, n, coeffs, b.x, b.principal_rotations(), b.mass, b.I)
+        omega2, gamma, body = (network_rates(*args) if self.domain is None
+                               else self.domain.on_root(network_rates, *args))
         dt = critical_step_from_rates(omega2, gamma)
         self._network_zeta = gamma / (2.0 * math.sqrt(omega2)) if omega2 > 0 else 0.0
         n_contacts = int(np.count_nonzero(a == body) + np.count_nonzero(bb == body))

@@ -216,6 +216,13 @@ class Domain:
             return -1, 0, 0.0
         return self.n - best[0] % (self.n + 1), best[0] // (self.n + 1), best[1]
 
+    @_timed("reductions")
+    def on_root(self, fn: Callable, *args: Any) -> Any:
+        """``fn(*args)`` computed by rank 0 alone and sent to all (the same bits everywhere):
+        for a replicated computation that ranks sharing a node's memory would slow each other
+        down in (the Lanczos estimate of the whole network)."""
+        return self.comm.bcast(fn(*args) if self.rank == 0 else None, root=0)
+
     # ------------------------------------------------------------------ rows
     def counted(self, a: np.ndarray) -> np.ndarray:
         """Rows this rank counts: those whose body A (always a particle) it owns."""
