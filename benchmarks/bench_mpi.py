@@ -8,8 +8,10 @@ one thread each.  Printed per configuration: wall time per deck step, speed-up a
 against 1 rank x 1 thread, the ranks' ghost counts, the bytes each rank sent per internal step,
 and whether results.h5 equals the 1-rank run bit for bit (it must).
 
-Weak scaling: a falling pack of ``--weak-n`` particles per rank, 1 and 2 ranks (as far as a
-2-core machine goes), 1 thread each: efficiency = t(1 rank) / t(P ranks).
+Weak scaling: settled packs of N/P particles per rank (the same deck and settling), and
+falling packs of ``--weak-n`` particles per rank (where the work each rank repeats for all
+particles shows), on 1.. P ranks (as far as a 2-core machine goes), 1 thread each:
+efficiency = t(1 rank) / t(P ranks).
 
 Usage: .venv/bin/python benchmarks/bench_mpi.py [--n 10000] [--settle 0.9] [--measure 20]
        [--ranks 2] [--weak-n 1500] [--cache DIR]
@@ -124,6 +126,17 @@ def _same_results(a: Path, b: Path) -> bool:
     return True
 
 
+def _measure(deck: Path, ckpt: Path, p: int, t: int, out: Path) -> dict:
+    """The measured deck steps from the settled checkpoint on p ranks x t threads."""
+    import shutil
+    out.mkdir()
+    shutil.copy(ckpt, out / "checkpoint.h5")
+    res = _launch(p, t, ["measure", str(deck), str(out / "checkpoint.h5"), str(out)])
+    return dict(ranks=p, threads=t, per_step=res["wall"] / max(res["steps"], 1),
+                **{k: res[k] for k in ("steps", "substeps", "lcps", "active", "failed")},
+                domain=res.get("ranks", []))
+
+
 def strong(n: int, settle: float, measure: int, ranks: int, cache: Path) -> list[dict]:
     deck, ckpt = settled_checkpoint(n, settle, measure, cache, ranks)
     cores = os.cpu_count() or 1
@@ -133,16 +146,10 @@ def strong(n: int, settle: float, measure: int, ranks: int, cache: Path) -> list
         ref = None
         for p, t in configs:
             out = Path(tmp) / f"r{p}t{t}"
-            out.mkdir()
-            import shutil
-            shutil.copy(ckpt, out / "checkpoint.h5")
-            res = _launch(p, t, ["measure", str(deck), str(out / "checkpoint.h5"), str(out)])
-            same = True if ref is None else _same_results(out / "results.h5", ref)
+            row = _measure(deck, ckpt, p, t, out)
+            row["same"] = True if ref is None else _same_results(out / "results.h5", ref)
             ref = ref or out / "results.h5"
-            rows.append(dict(ranks=p, threads=t, per_step=res["wall"] / max(res["steps"], 1),
-                             same=same, **{k: res[k] for k in ("steps", "substeps", "lcps",
-                                                                 "active", "failed")},
-                             domain=res.get("ranks", [])))
+            rows.append(row)
     base = rows[0]["per_step"]
     print(f"strong scaling, {n} settled paper particles, {measure} deck steps of 1e-3 s from the "
           f"checkpoint ({rows[0]['substeps'] / max(rows[0]['steps'], 1):.1f} sub-steps, "
@@ -157,6 +164,30 @@ def strong(n: int, settle: float, measure: int, ranks: int, cache: Path) -> list
               + (f", ghosts {ghosts}, sent {[f'{b / 1e3:.1f} kB' for b in sent]} per internal step"
                  if ghosts else "")
               + f", results {'equal to 1 rank bit for bit' if r['same'] else 'DIFFER'}", flush=True)
+    return rows
+
+
+def weak_settled(n_per_rank: int, ranks: int, settle: float, measure: int, cache: Path,
+                 strong_rows: list[dict], n_strong: int) -> list[dict]:
+    """Settled packs of n_per_rank particles per rank on 1.. ranks, 1 thread each (a pack
+    measured by the strong scaling is not measured again)."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for p in range(1, ranks + 1):
+            n = n_per_rank * p
+            done = [r for r in strong_rows if n == n_strong and r["ranks"] == p and r["threads"] == 1]
+            if done:
+                row = done[0]
+            else:
+                deck, ckpt = settled_checkpoint(n, settle, measure, cache, ranks)
+                row = _measure(deck, ckpt, p, 1, Path(tmp) / f"w{p}")
+            rows.append(dict(ranks=p, n=n, per_step=row["per_step"]))
+    for r in rows:
+        r["efficiency"] = rows[0]["per_step"] / r["per_step"]
+    print(f"weak scaling, settled packs of {n_per_rank} paper particles per rank, 1 thread per "
+          "rank: " + ", ".join(f"{r['ranks']} rank(s) {r['n']} particles {r['per_step']:.3f} s per "
+                               f"deck step (efficiency {r['efficiency']:.2f})" for r in rows),
+          flush=True)
     return rows
 
 
@@ -201,7 +232,10 @@ def main(argv: list[str] | None = None) -> dict:
     except ImportError:
         print("bench_mpi: mpi4py is not installed (pip install 'nurbsdem[mpi]'): nothing measured")
         return {}
-    res = dict(n=a.n, cores=os.cpu_count(), strong=strong(a.n, a.settle, a.measure, a.ranks, a.cache),
+    rows = strong(a.n, a.settle, a.measure, a.ranks, a.cache)
+    res = dict(n=a.n, cores=os.cpu_count(), strong=rows,
+               weak_settled=weak_settled(a.n // a.ranks, a.ranks, a.settle, a.measure, a.cache,
+                                         rows, a.n),
                weak=weak(a.weak_n, a.ranks))
     print("RESULT " + json.dumps(res))
     return res

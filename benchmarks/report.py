@@ -1132,9 +1132,13 @@ def section_mpi(rep: Report) -> None:
     two = next((r for r in res["strong"] if r["ranks"] == 2), None)
     if two:
         rep.headline["mpi"] = dict(n=n, speedup=two["speedup"], same=two["same"])
-    w = res["weak"]
-    rep.add("Weak scaling (measured as far as this machine goes): falling packs of "
-            f"{w[0]['n']} paper particles per rank, 1 thread per rank: " +
+    ws, w = res["weak_settled"], res["weak"]
+    rep.add("Weak scaling (measured as far as this machine goes, 1 thread per rank): settled "
+            f"packs of {ws[0]['n']} paper particles per rank: " +
+            ", ".join(f"{r['ranks']} rank(s): {r['per_step']:.3f} s per deck step "
+                      f"(efficiency {r['efficiency']:.2f})" for r in ws) +
+            f"; falling packs of {w[0]['n']} per rank (little contact work: the per-step "
+            "communication and the work every rank repeats for all particles show): " +
             ", ".join(f"{r['ranks']} rank(s): {r['per_step'] * 1e3:.0f} ms per deck step "
                       f"(efficiency {r['efficiency']:.2f})" for r in w) + ".\n")
     if not two:

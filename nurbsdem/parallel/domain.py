@@ -58,7 +58,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..dynamics.contactset import ContactSet
-from ..dynamics.forces import add_kick_work, wall_loads
+from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, add_kick_work, wall_loads
 
 #: deck steps between re-cuts at the latest; a re-cut also happens when the ghosts have grown
 #: by GHOST_GROWTH since the last cut
@@ -321,9 +321,14 @@ class Domain:
 
     # ------------------------------------------------------------------ the energy ledger
     def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
-        """Keep the work terms of a half kick's counted contacts for the deck end's replay."""
+        """Keep the work terms of a half kick's counted contacts for the deck end's replay:
+        the keys (the bodies follow from them), the three terms of every contact and the wall
+        term of the contacts with a wall (body B; body A is always a particle)."""
         sel = self.counted(a)
-        self.events.append(("kick", dict(key=key[sel], a=a[sel], b=b[sel], terms=terms[sel])))
+        k, t = key[sel], terms[sel]
+        wall = b[sel] >= self.n
+        self.events.append(("kick", dict(key=k, t=np.ascontiguousarray(t[:, :T_WALL_A])),
+                            dict(key=k[wall], w=t[wall, T_WALL_B])))
 
     def log_dropped(self, a: np.ndarray, key: np.ndarray, elastic: np.ndarray) -> None:
         """Keep the normal elastic energy (J) of counted contacts left out after failed LCPs
@@ -336,12 +341,16 @@ class Domain:
         order and added as :meth:`DemSystem._kick` and ``_book_dropped`` add them."""
         s = self.system
         lg = s.ledger
-        for k, (kind, _) in enumerate(logs[0]):
+        for k, (kind, *_) in enumerate(logs[0]):
             rows = merge_by_key([log[k][1] for log in logs], "key")
             if kind == "kick":
+                key = rows["key"]
+                terms = np.zeros((key.shape[0], N_TERMS))
+                terms[:, :T_WALL_A] = rows["t"].reshape(-1, T_WALL_A)
+                walls = merge_by_key([log[k][2] for log in logs], "key")
+                terms[np.searchsorted(key, walls["key"]), T_WALL_B] = walls["w"]
                 acc = np.zeros(4)
-                add_kick_work(np.ascontiguousarray(rows["terms"]).reshape(-1, 5), rows["a"],
-                              rows["b"], self.n, acc, s.wall_work)
+                add_kick_work(terms, key // self.nb, key % self.nb, self.n, acc, s.wall_work)
                 if rows["key"].shape[0]:
                     lg.dissipated_normal += acc[0]
                     lg.dissipated_tangential += acc[1]
