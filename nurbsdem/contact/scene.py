@@ -51,6 +51,10 @@ Besides the active contacts, each ContactSet reports the separated listed pairs 
 their closest points, normal and gap — for a certified pair a lower bound of it) so that the
 time-step control can see the contacts about to close.
 
+On several MPI ranks (``domain``, :mod:`nurbsdem.parallel.domain`) the list holds the pairs
+with a particle the rank owns, a rebuild is decided by all ranks together and starts from every
+particle's state sent by its owner, and the counters count the pairs whose body A it owns.
+
 Units: metres, seconds. Global body indices: particles 0..N-1, walls N..N+W-1 (DEVNOTES).
 """
 from __future__ import annotations
@@ -280,15 +284,15 @@ class SceneContacts:
         pose = (pos, R, np.array(kin.wall_displacement, float), np.array(kin.x, float))
         self._advance_odometers(pose)
         dom = self.domain
-        stale = self._list_is_stale()
-        if dom is not None and dom.any(stale):
-            kin = dom.sync_for_build(kin)        # every particle's state from its owner
-            pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
-            pose = (pos, R, pose[2], np.array(kin.x, float))
+        stale = self._list_is_stale() if dom is None else dom.any(self._list_is_stale())
+        if stale:
+            if dom is not None:
+                kin = dom.sync_for_build(kin)        # every particle's state from its owner
+                pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
+                pose = (pos, R, pose[2], np.array(kin.x, float))
             self._build_list(kin, pos, R)
-            dom.after_build(self.pairs.a, self.pairs.b)
-        elif dom is None and stale:
-            self._build_list(kin, pos, R)
+            if dom is not None:
+                dom.after_build(self.pairs.a, self.pairs.b)
         ps = self.pairs
         reach = self.odo[ps.a] + self.odo[ps.b]
         certified = (ps.budget > reach) if self.certificates else np.zeros(ps.a.shape[0], bool)
@@ -303,8 +307,8 @@ class SceneContacts:
         if dom is None:
             self.timers.lcps += int(due.shape[0])
         else:           # each pair counted by one rank (the owner of body A), summed per deck step
-            dom.lcps += int(np.count_nonzero(dom.counted(ps.a[due])))
-            dom.failed += int(np.count_nonzero(dom.counted(ps.a[due]) & (ri[:, I_FAIL] == 1)))
+            dom.lcps += cs.monitored
+            dom.failed += cs.failed
         self.last = cs
         return cs
 

@@ -45,8 +45,9 @@ number of ranks.
 
 Memory and communication: state arrays keep global indices (O(N) memory per rank, sized for
 10^6 particles per node); per internal step the messages are the ghosts' loads (6 doubles per
-ghost) and two small reductions; per deck step and per rebuild an O(N + K) gather.  The model
-of the report (section 6) gives the volume per step and the efficiency it predicts.
+ghost) and three small reductions; per deck step and per rebuild an O(N + K) gather.  The model
+of the report (section 8, benchmarks/mpi_model.py) gives the volume per step and the
+efficiency it predicts.
 """
 from __future__ import annotations
 
