@@ -238,10 +238,15 @@ def _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, bas
                           wf[base + _PA], wf[base + _MA:base + _MA + 3], wf[base + _GA:base + _GA + 2])
     okB, nB = support_map(tabB, eB, wi[sB], wfs[sB], scB, ws, ev, ev2, tmp,
                           wf[base + _PB], wf[base + _MB:base + _MB + 3], wf[base + _GB:base + _GB + 2])
-    # phi = d . (posA + RA pA) - d . (posB + RB pB)
+    # phi = d . (posA + RA pA) - d . (posB + RB pB), with the positions' difference taken
+    # first: d . posA alone carries a rounding error of eps |posA| (4e-16 m at 2 m from the
+    # origin), more than the decrease a last Newton step predicts (~|grad|^2 / curvature,
+    # 1e-16 m for |grad| = 1e-9 m); the ratio test would then reject it for ever (the
+    # stalls of tests/test_lcp_stalls.py). The difference is exact for nearby bodies.
     pA = wf[base + _PA]
     pB = wf[base + _PB]
-    phi = dot3(d, posA) - dot3(d, posB) + dot3(eA, pA) + dot3(eB, pB)
+    phi = (d[0] * (posA[0] - posB[0]) + d[1] * (posA[1] - posB[1]) + d[2] * (posA[2] - posB[2])
+           + dot3(eA, pA) + dot3(eB, pB))
     return phi, nA + nB, okA and okB
 
 
@@ -523,10 +528,12 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         g1 = 0.0
         g2 = 0.0
         for c in range(3):
-            pa = posA[c] + RA[c, 0] * wf[_PA, 0] + RA[c, 1] * wf[_PA, 1] + RA[c, 2] * wf[_PA, 2]
-            pb = posB[c] + RB[c, 0] * wf[_PB, 0] + RB[c, 1] * wf[_PB, 1] + RB[c, 2] * wf[_PB, 2]
-            g1 += t1[c] * (pa - pb)
-            g2 += t2[c] * (pa - pb)
+            # translation invariant, like phi (_eval_supports)
+            pa = RA[c, 0] * wf[_PA, 0] + RA[c, 1] * wf[_PA, 1] + RA[c, 2] * wf[_PA, 2]
+            pb = RB[c, 0] * wf[_PB, 0] + RB[c, 1] * wf[_PB, 1] + RB[c, 2] * wf[_PB, 2]
+            gc = (posA[c] - posB[c]) + (pa - pb)
+            g1 += t1[c] * gc
+            g2 += t2[c] * gc
         gnorm = math.sqrt(g1 * g1 + g2 * g2)
         if gnorm <= 1e-15 * scale:
             converged = True
