@@ -13,9 +13,9 @@ last Newton step of the direction search (|grad| ≈ 1e-9 m, step just above the
 angle of 1e-7 rad) predicts a decrease of ~|grad|²/curvature ≈ 1e-16 m. The ratio test saw
 only rounding noise, rejected the step, shrank the trust radius below the Newton step (no
 Taylor finish any more) and crept on by 1e-10..1e-12 rad steps until MAX_OUTER_IT. Whether
-a pose stalled depended on how close its last Newton step came to 1e-7 rad — hence C and the
-particle-generator clue (a few % different geometry moves those steps), not on C's geometry
-(C is convex, no saddle). Fix (nurbsdem/contact/lcp.py): phi and its gradient are formed
+a pose stalled depended on how close its last Newton step came to 1e-7 rad, not on a
+defect of C's surface (C is convex: no saddle, non-convexity height 0); that the other
+particle generator made 5 of 8 converge presumably only shifts those steps (not checked). Fix (nurbsdem/contact/lcp.py): phi and its gradient are formed
 from pos_A − pos_B (exact for nearby bodies), translation invariant; all 8 poses converge
 cold and warm, depth and normal equal to the independent reference
 (:func:`nurbsdem.contact.reference.nurbs_pair`) to round-off."""
