@@ -4,7 +4,8 @@ Prints, for a bicubic 6x6 patch (the paper's particles) and the rational biquart
 face, the time per evaluation of (S, S_u, S_v, S_uu, S_uv, S_vv) in the compiled scalar path
 (one core) and in the vectorised path, with the error of each against an independent value:
 the compiled path against the vectorised one, and the sphere's points against the exact
-radius.
+radius.  Then the cost of the shape check of a deck's shape (``check_shape``: connectivity
+of the patches, convexity) on the exact NURBS sphere, with the connectivity it finds.
 
 Run: ``.venv/bin/python benchmarks/bench_kernel.py``
 """
@@ -64,6 +65,23 @@ def main() -> None:
     print(f"{'patch':36s} {'compiled ns/pt':>15s} {'vectorised ns/pt':>17s} {'rel diff':>9s}")
     for label, tc, tv, diff, extra in rows:
         print(f"{label:36s} {tc:15.0f} {tv:17.0f} {diff:9.1e}{extra}")
+    time_shape_check()
+
+
+def time_shape_check(repeats: int = 5) -> None:
+    """Time of check_shape + find_connectivity of the exact sphere (6 rational patches): what a
+    deck pays per shape before anything runs."""
+    from nurbsdem.geometry.connectivity import check_shape, find_connectivity
+    from nurbsdem.geometry.generators import sphere
+    sh = sphere(0.5)
+    check_shape(sh)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        check_shape(sh)
+        conn = find_connectivity(sh.patches)
+    per = (time.perf_counter() - t0) / repeats
+    print(f"shape check of the exact sphere (6 patches): {per * 1e3:.1f} ms "
+          f"(closed: {conn.closed}, {len(conn.corners)} corners)")
 
 
 if __name__ == "__main__":

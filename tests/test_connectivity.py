@@ -1,7 +1,6 @@
 """Connectivity found from the geometry, and the closed / oriented / convex shape checks."""
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -109,15 +108,6 @@ def test_tolerance_is_relative_to_size():
         sh = gen.sphere(r)
         assert sh.connectivity.closed
         assert np.isclose(sh.connectivity.tol, 1e-6 * sh.size)
-
-
-def test_check_is_fast(sphere):
-    check_shape(sphere)
-    t = time.perf_counter()
-    for _ in range(5):
-        check_shape(sphere)
-        find_connectivity(sphere.patches)
-    assert (time.perf_counter() - t) / 5 < 0.2
 
 
 # ---------------------------------------------------------------------- rejections

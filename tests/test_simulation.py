@@ -320,12 +320,12 @@ def test_a_refused_step_leaves_the_simulation_usable():
 
 
 def test_simulation_is_exposed_lazily():
-    code = ("import sys, time; t = time.perf_counter(); import nurbsdem; "
-            "dt = time.perf_counter() - t; assert 'nurbsdem.simulation' not in sys.modules; "
-            "assert 'Simulation' in dir(nurbsdem); nurbsdem.Simulation; print(dt)")
+    code = ("import sys; import nurbsdem; "
+            "assert 'nurbsdem.simulation' not in sys.modules; "
+            "assert 'Simulation' in dir(nurbsdem); nurbsdem.Simulation; "
+            "assert 'nurbsdem.simulation' in sys.modules")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert float(r.stdout) < 1.0
 
 
 def test_closed_then_continued_and_results_h5_keeps_the_whole_deck(tmp_path):
