@@ -68,7 +68,7 @@ import numpy as np
 
 from ..dynamics.contactset import ContactSet
 from ..geometry.analytic import exact_sphere
-from .analytic import closed_form_rows, sphere_centres
+from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
 from .detect import ContactTable, detect_batch
@@ -327,10 +327,9 @@ class SceneContacts:
         wall = np.nonzero(wall_pair & ~closed)[0]
         idx = np.nonzero(closed)[0]
         if idx.size:
-            rf[idx], ri[idx] = closed_form_rows(a[idx], b[idx], N, pos, R, wall_d,
-                                                self.body_shape, self.sphere_center,
-                                                self.sphere_radius, self.wall_origin,
-                                                self.wall_a, self.wall_b, self.wall_dom)
+            closed_form_into(rf, ri, idx, a, b, N, pos, R, wall_d, self.body_shape,
+                             self.sphere_center, self.sphere_radius, self.wall_origin,
+                             self.wall_a, self.wall_b, self.wall_dom)
         prev_f, prev_i = ps.rows_f[due], ps.rows_i[due]
         part = np.nonzero(~wall_pair & ~closed & ~mixed)[0]
         if mixed.any():
@@ -403,7 +402,7 @@ class SceneContacts:
                            "the pair is left out of the force evaluation")
         rows_f, rows_i, budget = ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy()
         rows_f[due], rows_i[due] = rf, ri
-        renew_certificates(budget, due, rf, ri, reach)
+        renew_certificates(budget, due, rows_f, rows_i, reach)
         self.pairs = ps.replaced(rows_f, rows_i, budget, reused)
         self.prev_pose = pose
         if self.domain is not None:     # the counters count the pairs this rank counts

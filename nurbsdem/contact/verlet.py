@@ -79,14 +79,16 @@ def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
 
 
 @njit(cache=True)
-def renew_certificates(budget: np.ndarray, due: np.ndarray, rf: np.ndarray, ri: np.ndarray,
-                       reach: np.ndarray) -> None:
-    """Certificates (in place) of the pairs ``due`` just solved (rows rf, ri): a pair found
-    apart by d cannot touch until its bodies' odometers have grown by d together."""
+def renew_certificates(budget: np.ndarray, due: np.ndarray, rows_f: np.ndarray,
+                       rows_i: np.ndarray, reach: np.ndarray) -> None:
+    """Certificates (in place) of the listed pairs ``due`` just solved (their rows
+    rows_f[j], rows_i[j] of the whole list): a pair found apart by d cannot touch until its
+    bodies' odometers have grown by d together."""
     for r in range(due.shape[0]):
         j = due[r]
-        sd = rf[r, F_SD]
-        apart = ri[r, I_VALID] == 1 and ri[r, I_ACTIVE] == 0 and ri[r, I_FAIL] == 0 and sd > 0.0
+        sd = rows_f[j, F_SD]
+        apart = (rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 0 and rows_i[j, I_FAIL] == 0
+                 and sd > 0.0)
         budget[j] = sd * CERTIFICATE_SHRINK + reach[j] if apart else -np.inf
 
 

@@ -43,7 +43,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from ..contact.analytic import closed_form_rows, scatter_rows
+from ..contact.analytic import closed_form_into
 from ..contact.broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
 from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_PA, I_PB
 from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, list_is_stale,
@@ -52,7 +52,7 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from .forces import add_kick_work, contact_loads, match_history
 from .hertz import has_hertz
-from .integrator import drift, kick_with_terms, kinetic_energies
+from .integrator import drift, kick_from, kinetic_energies
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, count_stands,
                           critical_step_from_rates, needed_substeps, network_bound,
@@ -134,11 +134,10 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
             due[n_due] = j
             n_due += 1
     due = due[:n_due]
-    rf, ri = closed_form_rows(a[due], b[due], sc.n, pos, R, wall_d, sc.body_shape,
-                              sc.sphere_center, sc.sphere_radius, sc.wall_origin, sc.wall_a,
-                              sc.wall_b, sc.wall_dom)
-    scatter_rows(rows_f, rows_i, due, rf, ri)
-    renew_certificates(budget, due, rf, ri, reach)
+    closed_form_into(rows_f, rows_i, due, a, b, sc.n, pos, R, wall_d, sc.body_shape,
+                     sc.sphere_center, sc.sphere_radius, sc.wall_origin, sc.wall_a, sc.wall_b,
+                     sc.wall_dom)
+    renew_certificates(budget, due, rows_f, rows_i, reach)
     return PairList(a, b, keys, rows_f, rows_i, budget, odo, built, pos, R, wall_d, x), reach, n_due
 
 
@@ -187,11 +186,12 @@ def _hertz_radii(sc, pl, sel, a, b, nrm, R):
 
 @njit(cache=True)
 def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: np.ndarray,
-              q: np.ndarray, L: np.ndarray, R: np.ndarray, wall_d: np.ndarray,
-              wall_u: np.ndarray, h: float):
+              omega: np.ndarray, R: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
+              h: float):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
-    gravity.  Returns (True, the new Evaluation), or (False, ev) when a contact has no
+    gravity (omega (N,3): the particles' angular velocities, rad/s).  Returns (True, the new
+    Evaluation), or (False, ev) when a contact has no
     interface (the Python path raises the error)."""
     sel, near, gap = active_and_near(pl.rows_f, pl.rows_i, pl.budget, reach)
     a, b = pl.a[sel], pl.b[sel]
@@ -204,7 +204,7 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
     W = wall_d.shape[0]
     pos_all = np.concatenate((x, wall_d))
     vel_all = np.concatenate((v, wall_u))
-    omg_all = np.concatenate((omega_world(q, L, bc.inv_I), np.zeros((W, 3))))
+    omg_all = np.concatenate((omega, np.zeros((W, 3))))
     force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
         a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
         bc.inv_mass_all, radius, bc.mass, bc.gravity)
@@ -217,17 +217,20 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
 
 # --------------------------------------------------------------------------- integration
 @njit(cache=True)
-def _kick(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work) -> None:
-    """DemSystem._kick: half kick and its exact work booked in the ledger (J)."""
+def _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, hk, ledger, wall_work) -> np.ndarray:
+    """DemSystem._kick: half kick from angular velocities omega (N,3) rad/s and its exact
+    work booked in the ledger (J); returns the angular velocities after it."""
     acc = np.zeros(4)
-    terms = kick_with_terms(v, L, x, q, bc.inv_I, bc.inv_mass, ev.force, ev.torque, hk, ev.a,
-                            ev.b, ev.point, wall_d, u_mean, ev.ftot, ev.fdn, ev.fdt, ev.fet)
+    terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, ev.force,
+                                   ev.torque, hk, ev.a, ev.b, ev.point, wall_d, u_mean,
+                                   ev.ftot, ev.fdn, ev.fdt, ev.fet)
     add_kick_work(terms, ev.a, ev.b, x.shape[0], acc, wall_work)
     if ev.a.shape[0]:
         ledger[0] += acc[0]       # dissipated, normal
         ledger[1] += acc[1]       # dissipated, tangential
         ledger[3] += acc[2]       # external work
         ledger[2] += acc[3]       # work on the tangential springs
+    return omega_after
 
 
 @njit(cache=True)
@@ -264,7 +267,7 @@ def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def _gate_passes(bc, cc, ev, x, v, q, L, wall_u, substeps: int, counters) -> bool:
+def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) -> bool:
     """The first part of DemSystem._control_step: True when the present sub-step count stands
     without the exact estimate (Gershgorin bound of the network no stiffer than at the last
     exact estimate, or allowing the present count anyway)."""
@@ -272,7 +275,7 @@ def _gate_passes(bc, cc, ev, x, v, q, L, wall_u, substeps: int, counters) -> boo
         return True
     if periodic_recheck(counters[STEP_COUNT], cc.recheck, counters[REFINE], cc.fall, substeps):
         return False
-    speed = body_speeds(v, omega_world(q, L, bc.inv_I), bc.ell, wall_u)
+    speed = body_speeds(v, omega, bc.ell, wall_u)
     omega2, gamma, size = network_bound(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
                                         ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
                                         speed, cc.dt, bc.g_norm, bc.table, bc.material, x,
@@ -295,27 +298,30 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     """
     h = cc.dt / substeps
     inv_h = 1.0 / h
+    omega = omega_world(q, L, bc.inv_I)      # of the present state, kept up to date below
     for j in range(n_deck):
         for k in range(substeps):
             t = j * substeps + k
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
-            _kick(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger, wall_work)
+            omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
             if cc.watch_period2 and x.shape[0]:
                 worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count,
                                            bc.alt_floor_x, bc.alt_floor_L, inv_h)
                 if worst >= 0 and alt_count[worst] >= ALTERNATION_STEPS:
                     return GUARD, j, pl, ev, wall_d, wall_u
             drift(x, v, q, L, bc.inv_I, h)
+            omega = omega_world(q, L, bc.inv_I)
             wall_d, wall_u = d_new.copy(), u_new.copy()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
             pl, reach, monitored = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
             counters[EVALS] += 1
             counters[MONITORED] += monitored
-            ok, ev = _evaluate(sc, bc, pl, reach, monitored, ev, x, v, q, L, R, wall_d, wall_u, h)
+            ok, ev = _evaluate(sc, bc, pl, reach, monitored, ev, x, v, omega, R, wall_d, wall_u,
+                               h)
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u
-            _kick(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger, wall_work)
+            omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
             if not _finite(x, v, q, L, ev.force):
                 return GUARD, j, pl, ev, wall_d, wall_u
         counters[STEP_COUNT] += 1
@@ -328,7 +334,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         active = ev.a.shape[0]
         counters[ACTIVE_SUM] += active
         counters[ACTIVE_MAX] = max(counters[ACTIVE_MAX], active)
-        if not _gate_passes(bc, cc, ev, x, v, q, L, wall_u, substeps, counters):
+        if not _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters):
             return CONTROL, j + 1, pl, ev, wall_d, wall_u
     return DONE, n_deck, pl, ev, wall_d, wall_u
 
