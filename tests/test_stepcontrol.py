@@ -11,8 +11,9 @@ import pytest
 
 from nurbsdem.contact.scene import SceneContacts
 from nurbsdem.dynamics import ContactLaw, DemSystem, InstabilityError, InterfaceTable, sphere_inertia
-from nurbsdem.dynamics.stepcontrol import (alternation_update, critical_step,
-                                           critical_step_from_rates, network_apply, network_lanczos,
+from nurbsdem.dynamics.stepcontrol import (alternation_update, count_stands, critical_step,
+                                           critical_step_from_rates, needed_substeps,
+                                           network_apply, network_count_stands, network_lanczos,
                                            network_gershgorin, network_rates, period2_amplitude, shape_compliance,
                                            surface_compliance)
 from nurbsdem.geometry.rotation import quats_to_matrices, random_quaternions
@@ -76,6 +77,35 @@ def test_network_operator_equals_an_independent_dense_assembly():
         coeffs = np.stack([coef[:, 0], coef[:, 0], coef[:, 1], coef[:, 1]], axis=1)
         g_k, g_c = network_gershgorin(a, b, p, n, coeffs, x, Q, 1 / m, 1 / I)
         assert exact <= g_k * (1 + 1e-12) and g_c == pytest.approx(g_k, rel=1e-12)
+
+
+def test_coarse_gershgorin_bounds_the_exact_one_and_the_gate_decides_as_the_exact_bound():
+    """The coarse bound (largest inverse moment, no body frames) is never below the exact
+    Gershgorin bound; for bodies with equal moments (spheres) it equals it (to its 1e-9
+    inflation); the gate that tries it first decides as the exact bound does, case by case."""
+    rng = np.random.default_rng(11)
+    decided_by = {True: 0, False: 0}
+    for trial in range(300):
+        a, b, p, n, coef, x, Q, m, I = random_network(rng, N=6, K=12)
+        if trial % 2:
+            I = np.repeat(I[:, :1], 3, axis=1)           # spheres
+        coeffs = np.stack([coef[:, 0], rng.uniform(0, 1e2, len(a)), coef[:, 1],
+                           rng.uniform(0, 10, len(a))], axis=1)
+        exact = network_gershgorin(a, b, p, n, coeffs, x, Q, 1 / m, 1 / I)
+        coarse = network_gershgorin(a, b, p, n, coeffs, x, Q, 1 / m, 1 / I, True)
+        assert coarse[0] >= exact[0] and coarse[1] >= exact[1]
+        if trial % 2:
+            assert coarse == pytest.approx(exact, rel=2e-9)
+        bound = critical_step_from_rates(*exact)
+        dt, safety, refine, substeps = 1e-3, 0.5, 1, int(rng.integers(1, 6))
+        dt_bound = bound * rng.uniform(0.9, 1.1)
+        need = needed_substeps(dt, safety * bound)
+        want = count_stands(bound, dt_bound, 0.05, need, refine, substeps)
+        got = network_count_stands(a, b, p, n, coeffs, x, Q, 1 / m, 1 / I, dt, safety,
+                                   math.inf, dt_bound, 0.05, refine, substeps)
+        assert got == want
+        decided_by[bool(want)] += 1
+    assert min(decided_by.values()) > 30        # both decisions are exercised
 
 
 def test_one_pair_gives_the_pair_formula_and_off_centre_contacts_their_effective_mass():

@@ -54,9 +54,8 @@ from .forces import add_kick_work, contact_loads, match_history
 from .hertz import has_hertz
 from .integrator import drift, kick_from, kinetic_energies
 from .rigid import body_poses, omega_world
-from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, count_stands,
-                          critical_step_from_rates, needed_substeps, network_bound,
-                          periodic_recheck)
+from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
+                          network_count_stands, periodic_recheck)
 
 #: the loop did all its deck steps / stopped for the time-step control / a guard fired
 DONE, CONTROL, GUARD = 0, 1, 2
@@ -276,13 +275,14 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
     if periodic_recheck(counters[STEP_COUNT], cc.recheck, counters[REFINE], cc.fall, substeps):
         return False
     speed = body_speeds(v, omega, bc.ell, wall_u)
-    omega2, gamma, size = network_bound(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
-                                        ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
-                                        speed, cc.dt, bc.g_norm, bc.table, bc.material, x,
-                                        quats_to_matrices(q), bc.inv_mass, bc.inv_I)
-    bound = critical_step_from_rates(omega2, gamma) if size else math.inf
-    need = needed_substeps(cc.dt, cc.safety * min(cc.dt_apriori, bound))
-    return count_stands(bound, cc.dt_bound, cc.bound_slack, need, counters[REFINE], substeps)
+    a, b, p, n, coeffs = contact_network(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
+                                         ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
+                                         speed, cc.dt, bc.g_norm, bc.table, bc.material)
+    if a.shape[0] == 0:
+        return True
+    return network_count_stands(a, b, p, n, coeffs, x, quats_to_matrices(q), bc.inv_mass,
+                                bc.inv_I, cc.dt, cc.safety, cc.dt_apriori, cc.dt_bound,
+                                cc.bound_slack, counters[REFINE], substeps)
 
 
 @njit(cache=True)

@@ -76,8 +76,9 @@ from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finit
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
-                          count_stands, critical_step, critical_step_from_rates,
-                          needed_substeps, network_gershgorin, network_rates, periodic_recheck)
+                          critical_step, critical_step_from_rates, needed_substeps,
+                          network_count_stands, network_gershgorin, network_rates,
+                          periodic_recheck)
 
 log = logging.getLogger("nurbsdem")
 
@@ -394,6 +395,17 @@ class DemSystem:
                                            self._inv_I)
         return critical_step_from_rates(omega2, gamma)
 
+    def _count_stands(self, net) -> bool:
+        """The gate: whether the present sub-step count stands without the exact estimate
+        (:func:`~nurbsdem.dynamics.stepcontrol.network_count_stands`; no network: it does)."""
+        if net is None:
+            return True
+        b = self.bodies
+        return bool(network_count_stands(*net, b.x, b.principal_rotations(), self._inv_mass,
+                                         self._inv_I, self.dt, self.safety, self.dt_apriori,
+                                         self.dt_bound, NETWORK_BOUND_SLACK, self.refine,
+                                         self.substeps))
+
     def _network_limit(self, net) -> tuple[float, str]:
         """Critical step (s) of the network ``net`` (:meth:`_network`) by Lanczos, and why."""
         if net is None:
@@ -420,14 +432,11 @@ class DemSystem:
         if not initial and self.forced_substeps is not None:
             return
         net = self._network()
-        bound = self._network_bound(net)
         if not initial and not periodic_recheck(self.step_count, NETWORK_RECHECK_STEPS,
                                                 self.refine, FALL_HYSTERESIS, self.substeps):
-            need = self._needed_substeps(self.safety * min(self.dt_apriori, bound))
-            if count_stands(bound, self.dt_bound, NETWORK_BOUND_SLACK, need, self.refine,
-                            self.substeps):
+            if self._count_stands(net):
                 return      # no stiffer than at the last exact estimate, or allowed anyway
-        self.dt_bound = bound
+        self.dt_bound = self._network_bound(net)
         self.dt_network, net_why = self._network_limit(net)
         self.dt_critical = min(self.dt_apriori, self.dt_network)
         dt_safe = self.safety * self.dt_critical
