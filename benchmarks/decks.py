@@ -9,12 +9,12 @@ REPO = Path(__file__).resolve().parents[1]
 
 def paper_mix_deck(n: int, region: tuple[float, float, float], box_height: float,
                    durations: list[float], out: Path, monitors_every: float = 0.001,
-                   vtk_resolution: int = 4) -> str:
+                   vtk_resolution: int = 4, counts: list[int] | None = None) -> str:
     """Deck text: ``n`` particles in the region [0, region] (m), a box of the region's base
     and ``box_height`` (m), dynamic steps of the given durations (s), results in ``out``
-    (no VTK or checkpoint during the run)."""
+    (no VTK or checkpoint during the run).  ``counts``: of A, B, C (default n/3 each)."""
     shapes = (REPO / "inputs" / "shapes").resolve()
-    c = [n // 3, n // 3, n - 2 * (n // 3)]
+    c = list(counts) if counts is not None else [n // 3, n // 3, n - 2 * (n // 3)]
     lx, ly, lz = region
     steps = "\n".join(f"  Step {k + 1} Dynamic Duration {d:.6g} TimeStep 1e-3"
                       for k, d in enumerate(durations))

@@ -854,6 +854,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
                    "particles (falling particles, see the LCP counts in the table)")
     if not quick:
         _section_large(rep, workdir)
+        _section_settled(rep)
     section_spheres(rep)
     section_point_surface(rep)
     # the paper's example
@@ -903,10 +904,34 @@ def _section_large(rep: Report, workdir: Path) -> None:
                      fmt(t["setup"], ".1f")])
     rep.add("Up to 10^5 particles, 10 deck steps of the same decks (the particles still fall; "
             "the lowest layer reaches the floor): the cost per step grows about linearly once "
-            "the fixed cost of a step is amortised. A settled pack of 10^4–10^5 particles "
-            "(hours of deposition at these counts) is not measured.\n\n" +
+            "the fixed cost of a step is amortised (a settled pack: below).\n\n" +
             md_table(["particles", "sub-steps", "ms per step", "µs per particle-step",
                       "LCPs per step", "placement s", "set-up s"], rows) + "\n")
+
+
+def _section_settled(rep: Report) -> None:
+    """Settled dense packs of 10^4 … 10^5 paper particles: copies of one settled pack side by
+    side (benchmarks/bench_settled_pack.py --tiles)."""
+    import bench_settled_pack as bsp
+    n, settle, relax, steps = 10000, 0.9, 3, 5
+    tilings = [(1, 1), (2, 1), (5, 1), (5, 2)]
+    res = bsp.tiles(n, settle, tilings, relax, steps, bsp.HERE / ".cache")
+    rows = [[r["n"], r["tiles"], f"{r['substeps']:.0f}", fmt(r["ms_per_step"], ".0f"),
+             fmt(r["us_per_particle_step"], ".1f"), f"{r['active_per_step']:.0f}",
+             f"{r['lcps_per_step']:.0f}", r["failed"], fmt(r["kinetic_end"], ".2g")]
+            for r in res["rows"]]
+    rep.add(f"Settled dense packs, `benchmarks/bench_settled_pack.py --tiles`: {n} paper "
+            f"particles settled under gravity for {settle} s (the checkpoint of section 8, kept "
+            f"in `benchmarks/.cache/`), laid side by side nx × ny times in a box as much wider "
+            f"(10^5 settled particles without the hours their deposition would take); {relax} "
+            f"deck steps to absorb the seams where copies meet (overlaps of at most two wall "
+            f"penetrations), then {steps} deck steps timed (numba threads: all cores). "
+            f"Cost per deck step ∝ N^{res['exponent']:.2f} over N = {res['rows'][0]['n']} … "
+            f"{res['rows'][-1]['n']}.\n\n" +
+            md_table(["particles", "copies", "sub-steps", "ms per step",
+                      "µs per particle-step", "contacts", "LCPs per step", "failed LCPs",
+                      "kinetic energy at the end J"], rows) + "\n")
+    rep.headline["settled"] = res
 
 
 def section_point_surface(rep: Report) -> None:
@@ -1207,6 +1232,12 @@ def _headline_md(rep: Report) -> str:
     if sp and sp.get("ratio") is not None:
         out.append(f"* 112 spheres against Yade (one thread each): {sp['ratio']:.2f} x Yade's "
                    f"time (before: {BEFORE['spheres_ratio']:.0f} x), section 5.")
+    st = h.get("settled")
+    if st:
+        lo, hi = st["rows"][0], st["rows"][-1]
+        out.append(f"* Settled dense packs: {lo['us_per_particle_step']:.0f} µs per "
+                   f"particle-step at {lo['n']} particles, {hi['us_per_particle_step']:.0f} at "
+                   f"{hi['n']} (cost ∝ N^{st['exponent']:.2f}), section 5.")
     p = h.get("paper")
     if p:
         out.append(f"* Paper example: {p['wall']:.0f} s wall time (before the step engine "
