@@ -52,6 +52,21 @@ def _sphere_sphere_row(xa0: float, xa1: float, xa2: float, ra: float, xb0: float
 
 
 @njit(cache=True)
+def parallelogram_coordinates(r0: float, r1: float, r2: float, a: np.ndarray,
+                              b: np.ndarray) -> tuple[float, float]:
+    """Coordinates (α, β) of the in-plane offset r (m) from a wall's corner on its edge
+    vectors a, b (3,): r = α a + β b (the 2×2 normal equations); inside when both are in
+    [0, 1]."""
+    aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
+    ar = a[0] * r0 + a[1] * r1 + a[2] * r2
+    br = b[0] * r0 + b[1] * r1 + b[2] * r2
+    det = aa * bb - ab * ab
+    return (bb * ar - ab * br) / det, (aa * br - ab * ar) / det
+
+
+@njit(cache=True)
 def _sphere_wall_row(x0: float, x1: float, x2: float, r: float, origin: np.ndarray,
                      a: np.ndarray, b: np.ndarray, wdom: np.ndarray, row_f: np.ndarray,
                      row_i: np.ndarray) -> None:
@@ -72,15 +87,7 @@ def _sphere_wall_row(x0: float, x1: float, x2: float, r: float, origin: np.ndarr
     row_f[F_SD] = sd
     q0, q1, q2 = p0 - sd * m0, p1 - sd * m1, p2 - sd * m2
     row_f[F_PB], row_f[F_PB + 1], row_f[F_PB + 2] = q0, q1, q2
-    r0, r1, r2 = q0 - origin[0], q1 - origin[1], q2 - origin[2]
-    aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
-    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
-    ar = a[0] * r0 + a[1] * r1 + a[2] * r2
-    br = b[0] * r0 + b[1] * r1 + b[2] * r2
-    det = aa * bb - ab * ab
-    al = (bb * ar - ab * br) / det
-    be = (aa * br - ab * ar) / det
+    al, be = parallelogram_coordinates(q0 - origin[0], q1 - origin[1], q2 - origin[2], a, b)
     row_f[F_PAR + 2] = wdom[0] + al * (wdom[1] - wdom[0])
     row_f[F_PAR + 3] = wdom[2] + be * (wdom[3] - wdom[2])
     row_i[I_PA] = -1

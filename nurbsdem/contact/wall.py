@@ -28,6 +28,7 @@ from numba import njit, prange
 
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
 from . import lcp
+from .analytic import parallelogram_coordinates
 from .detect import PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, table_of
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
                   I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP, _rot_t,
@@ -94,17 +95,8 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     resF[F_PB + 1] = pa[1] - sd * n1
     resF[F_PB + 2] = pa[2] - sd * n2
     # position in the wall parallelogram
-    r0 = resF[F_PB] - origin[0]
-    r1 = resF[F_PB + 1] - origin[1]
-    r2 = resF[F_PB + 2] - origin[2]
-    aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
-    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
-    ar = a[0] * r0 + a[1] * r1 + a[2] * r2
-    br = b[0] * r0 + b[1] * r1 + b[2] * r2
-    det = aa * bb - ab * ab
-    al = (bb * ar - ab * br) / det
-    be = (aa * br - ab * ar) / det
+    al, be = parallelogram_coordinates(resF[F_PB] - origin[0], resF[F_PB + 1] - origin[1],
+                                       resF[F_PB + 2] - origin[2], a, b)
     resF[F_PAR] = wfs[0, 0]
     resF[F_PAR + 1] = wfs[0, 1]
     resF[F_PAR + 2] = wdom[0] + al * (wdom[1] - wdom[0])
