@@ -190,8 +190,8 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
     gravity (omega (N,3): the particles' angular velocities, rad/s).  Returns (True, the new
-    Evaluation), or (False, ev) when a contact has no
-    interface (the Python path raises the error)."""
+    Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
+    error)."""
     sel, near, gap = active_and_near(pl.rows_f, pl.rows_i, pl.budget, reach)
     a, b = pl.a[sel], pl.b[sel]
     if not _interfaces_defined(bc, a, b):
