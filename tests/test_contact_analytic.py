@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nurbsdem.contact.analytic import sphere_sphere_rows, sphere_wall_rows
+from nurbsdem.contact.analytic import closed_form_into
 from nurbsdem.contact.detect import ContactTable, detect_batch
 from nurbsdem.contact.lcp import (ANGLE_TOL, F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_BROAD, I_VALID,
                                   NF, NI)
@@ -47,8 +47,13 @@ def test_sphere_pairs_agree_with_the_nurbs_lcp_to_round_off():
     xa, Ra, xb, Rb = poses(rng, K, ra, rb, sd)
     table = ContactTable([sphere(ra), sphere(rb)])
     lf, li = detect_batch(table, np.zeros(K, np.int64), xa, Ra, np.ones(K, np.int64), xb, Rb)
-    cf, ci = np.zeros((K, NF)), np.zeros((K, NI), np.int64)
-    sphere_sphere_rows(xa, np.full(K, ra), xb, np.full(K, rb), cf, ci)
+    # the scene's closed form: bodies 0..K-1 (shape 0) against K..2K-1 (shape 1), no walls
+    cf, ci = np.full((K, NF), np.nan), np.full((K, NI), -9, np.int64)
+    no_walls = np.zeros((0, 3))
+    closed_form_into(cf, ci, np.arange(K), np.arange(K), K + np.arange(K), 2 * K,
+                     np.concatenate([xa, xb]), np.concatenate([Ra, Rb]), no_walls,
+                     np.repeat([0, 1], K), np.zeros((2, 3)), np.array([ra, rb]), no_walls,
+                     no_walls, no_walls, np.zeros((0, 4)))
     assert (li[:, I_VALID] == 1).all() and (ci[:, I_ACTIVE] == li[:, I_ACTIVE]).all()
     np.testing.assert_allclose(cf[:, F_SD], sd, atol=1e-14 * ra)
     # the LCP stops when its direction moves less than ANGLE_TOL (1e-11 rad): normals and
@@ -76,8 +81,11 @@ def test_sphere_on_a_flat_wall_agrees_with_the_nurbs_wall_path():
     tile = lambda v: np.tile(v, (K, 1))  # noqa: E731
     lf, li = detect_wall_batch(table, np.zeros(K, np.int64), x, R, tile(o), tile(a), tile(b),
                                tile(dom))
-    cf, ci = np.zeros((K, NF)), np.zeros((K, NI), np.int64)
-    sphere_wall_rows(x, np.full(K, r), tile(o), tile(a), tile(b), tile(dom), cf, ci)
+    # the scene's closed form: particles 0..K-1 against the wall (body K)
+    cf, ci = np.full((K, NF), np.nan), np.full((K, NI), -9, np.int64)
+    closed_form_into(cf, ci, np.arange(K), np.arange(K), np.full(K, K), K, x, R,
+                     np.zeros((1, 3)), np.zeros(K, np.int64), np.zeros((1, 3)), np.array([r]),
+                     o[None], a[None], b[None], np.asarray(dom, float)[None])
     assert (ci[:, I_ACTIVE] == li[:, I_ACTIVE]).all() and ci[:, I_ACTIVE].any()
     np.testing.assert_allclose(cf[:, F_SD], sd, atol=1e-14)
     # where the bounding sphere (radius: farthest control point) does not reach the plane the

@@ -23,8 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_PA, I_PB, I_VALID, NF,
-                  NI)
+from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_PA, I_PB, I_VALID
 
 
 @njit(cache=True)
@@ -100,27 +99,6 @@ def _sphere_wall_row(x0: float, x1: float, x2: float, r: float, origin: np.ndarr
 
 
 @njit(cache=True)
-def sphere_sphere_rows(xa: np.ndarray, ra: np.ndarray, xb: np.ndarray, rb: np.ndarray,
-                       res_f: np.ndarray, res_i: np.ndarray) -> None:
-    """K sphere pairs: centres xa, xb (K,3), radii ra, rb (K,); rows written to res_f (K,NF),
-    res_i (K,NI) (zeroed first).  Coincident centres take the normal +x."""
-    for k in range(xa.shape[0]):
-        _sphere_sphere_row(xa[k, 0], xa[k, 1], xa[k, 2], ra[k], xb[k, 0], xb[k, 1], xb[k, 2],
-                           rb[k], res_f[k], res_i[k])
-
-
-@njit(cache=True)
-def sphere_wall_rows(x: np.ndarray, r: np.ndarray, origin: np.ndarray, a: np.ndarray,
-                     b: np.ndarray, wdom: np.ndarray, res_f: np.ndarray, res_i: np.ndarray) -> None:
-    """K sphere/flat-wall pairs: centres x (K,3), radii r (K,); walls' corners ``origin``,
-    edge vectors ``a``, ``b`` (K,3) and parameter rectangles ``wdom`` (K,4); rows written to
-    res_f, res_i (zeroed first), in the convention of :func:`nurbsdem.contact.wall.solve_wall`."""
-    for k in range(x.shape[0]):
-        _sphere_wall_row(x[k, 0], x[k, 1], x[k, 2], r[k], origin[k], a[k], b[k], wdom[k],
-                         res_f[k], res_i[k])
-
-
-@njit(cache=True)
 def _centre(i: int, pos: np.ndarray, R: np.ndarray, body_shape: np.ndarray,
             centre: np.ndarray) -> tuple[float, float, float]:
     """World centre pos + R c (m) of the exact-sphere body i (c: its sphere's centre in its
@@ -169,28 +147,3 @@ def closed_form_into(rows_f: np.ndarray, rows_i: np.ndarray, idx: np.ndarray, a:
                 o[k] = wall_origin[w, k] + wall_d[w, k]
             _sphere_wall_row(xa0, xa1, xa2, ra, o, wall_a[w], wall_b[w], wall_dom[w],
                              rows_f[j], rows_i[j])
-
-
-@njit(cache=True)
-def scatter_rows(rows_f: np.ndarray, rows_i: np.ndarray, idx: np.ndarray, f: np.ndarray,
-             i: np.ndarray) -> None:
-    """rows_f[idx] = f, rows_i[idx] = i."""
-    for r in range(idx.shape[0]):
-        rows_f[idx[r]] = f[r]
-        rows_i[idx[r]] = i[r]
-
-
-@njit(cache=True)
-def closed_form_rows(a: np.ndarray, b: np.ndarray, n_particles: int, pos: np.ndarray,
-                     R: np.ndarray, wall_d: np.ndarray, body_shape: np.ndarray,
-                     sphere_center: np.ndarray, sphere_radius: np.ndarray,
-                     wall_origin: np.ndarray, wall_a: np.ndarray, wall_b: np.ndarray,
-                     wall_dom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (K,NF), (K,NI) of K pairs of exact spheres (a, b) in new arrays:
-    :func:`closed_form_into` of all K."""
-    K = a.shape[0]
-    rf = np.empty((K, NF))
-    ri = np.empty((K, NI), np.int64)
-    closed_form_into(rf, ri, np.arange(K), a, b, n_particles, pos, R, wall_d, body_shape,
-                     sphere_center, sphere_radius, wall_origin, wall_a, wall_b, wall_dom)
-    return rf, ri

@@ -278,8 +278,6 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
     a, b, p, n, coeffs = contact_network(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
                                          ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
                                          speed, cc.dt, bc.g_norm, bc.table, bc.material)
-    if a.shape[0] == 0:
-        return True
     return network_count_stands(a, b, p, n, coeffs, x, quats_to_matrices(q), bc.inv_mass,
                                 bc.inv_I, cc.dt, cc.safety, cc.dt_apriori, cc.dt_bound,
                                 cc.bound_slack, counters[REFINE], substeps)
