@@ -257,12 +257,20 @@ class Step:
         return float(getattr(self, "duration", 0.0) or 0.0)
 
 
+#: ``Damping`` of a timed step: how the normal dashpots are integrated
+DAMPING_SCHEMES = ("explicit", "implicit")
+
+
 @dataclass
 class DynamicStep(Step):
-    """``Step ID Dynamic Duration T TimeStep DT``: integrate T seconds with initial step DT (s)."""
+    """``Step ID Dynamic Duration T TimeStep DT [Damping Explicit|Implicit]``: integrate T
+    seconds with deck step DT (s); ``damping`` "implicit" evaluates the normal dashpots at the
+    end of each internal step (:mod:`nurbsdem.dynamics.implicit`), so that they do not limit
+    the stable step."""
 
     duration: float = 0.0
     time_step: float = 0.0
+    damping: str = "explicit"
     kind = "dynamic"
 
 
@@ -286,7 +294,7 @@ class MoveWallStep(Step):
       the nearest particle is ``gap`` (m, default 0). No time passes.
     * ``Displacement dx dy dz Duration T TimeStep DT``: the wall translates by the given
       vector (m) at constant velocity over T seconds while the particles move (a dynamic
-      step with a prescribed wall motion).
+      step with a prescribed wall motion; ``[Damping Explicit|Implicit]`` as for Dynamic).
     """
 
     wall: str = ""
@@ -296,6 +304,7 @@ class MoveWallStep(Step):
     displacement: np.ndarray | None = None
     duration: float = 0.0
     time_step: float = 0.0
+    damping: str = "explicit"
     kind = "movewall"
 
 

@@ -47,7 +47,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import InputError
-from .model import (PAIR_KINDS, Bodies, DynamicStep, Interface, Material, Model,
+from .model import (DAMPING_SCHEMES, PAIR_KINDS, Bodies, DynamicStep, Interface, Material, Model,
                     MoveWallStep, Output, ParticleSpec, ReplicateStep, ShapeEntry, Step,
                     WallSpec)
 
@@ -435,12 +435,13 @@ class Simulation:
         return name
 
     # ------------------------------------------------------------------ steps
-    def run_dynamic(self, duration: float, time_step: float) -> None:
+    def run_dynamic(self, duration: float, time_step: float, damping: str = "explicit") -> None:
         """``Dynamic``: integrate ``duration`` s with deck time step ``time_step`` s
-        (sub-stepped below the stability limit, as ``solve`` does)."""
+        (sub-stepped below the stability limit, as ``solve`` does); ``damping`` "explicit" or
+        "implicit" (the deck's ``Damping``)."""
         sid = self._next_step_id()
         dur, dt = self._timing(sid, duration, time_step)
-        self._run(DynamicStep(sid, 0, dur, dt))
+        self._run(DynamicStep(sid, 0, dur, dt, damping=self._damping(sid, damping)))
 
     def replicate(self, layers: int, height: float) -> None:
         """``Replicate``: the particles become layer 0 of ``layers`` layers spread over
@@ -454,11 +455,11 @@ class Simulation:
     def move_wall(self, name: str, displacement: Sequence[float] | None = None,
                   duration: float | None = None, time_step: float | None = None, *,
                   to_contact: bool = False, gap: float = 0.0,
-                  direction: Sequence[float] | None = None) -> None:
+                  direction: Sequence[float] | None = None, damping: str = "explicit") -> None:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
-        particle is ``gap`` m away (no time passes)."""
+        particle is ``gap`` m away (no time passes).  ``damping``: as for :meth:`run_dynamic`."""
         sid = self._next_step_id()
         what = f"Step {sid}"
         if not isinstance(name, str) or name not in self.model.wall_names:
@@ -482,7 +483,15 @@ class Simulation:
                              f"(or to_contact=True)")
         disp = self._vector("Displacement", displacement, what)
         dur, dt = self._timing(sid, duration, time_step)
-        self._run(MoveWallStep(sid, 0, wall=name, displacement=disp, duration=dur, time_step=dt))
+        self._run(MoveWallStep(sid, 0, wall=name, displacement=disp, duration=dur, time_step=dt,
+                               damping=self._damping(sid, damping)))
+
+    @staticmethod
+    def _damping(sid: int, damping: Any) -> str:
+        if not isinstance(damping, str) or damping.lower() not in DAMPING_SCHEMES:
+            raise InputError(f"Step {sid}: damping must be 'explicit' or 'implicit', got "
+                             f"{damping!r}")
+        return damping.lower()
 
     def _next_step_id(self) -> int:
         return max((s.id for s in self.model.steps), default=0) + 1

@@ -256,12 +256,13 @@ class Solver:
     def _wall_patches(self) -> list:
         return [w.patch for w in self.model.walls]
 
-    def _build_system(self, dt: float, motions: list[PrescribedMotion]) -> DemSystem:
+    def _build_system(self, dt: float, motions: list[PrescribedMotion],
+                      implicit_damping: bool = False) -> DemSystem:
         """A DemSystem for the current bodies (order = self.bodies), walls with ``motions``."""
         t0 = time.perf_counter()
         model = self.model
         sysm = DemSystem(dt=dt, gravity=model.gravity, interfaces=self.interfaces,
-                         safety=self.safety, t0=self.time)
+                         safety=self.safety, t0=self.time, implicit_damping=implicit_damping)
         sysm.compiled_steps = self.compiled_steps
         b = self.bodies
         Rs = b.rotation_matrices()
@@ -469,7 +470,7 @@ class Solver:
             raise self.model.error(f"Step {step.id}: Duration {duration} is not a whole number "
                                    f"of TimeStep {dt}", step.line)
         step_t0 = self.time - self.step_progress * dt
-        self.system = self._build_system(dt, motions)
+        self.system = self._build_system(dt, motions, step.damping == "implicit")
         scene_state = restored.get("scene") if restored else None
         if scene_state:
             self.scene.set_state(scene_state)

@@ -162,7 +162,8 @@ def _cross(a0, a1, a2, b0, b1, b2):
 @njit(cache=True)
 def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
                       table, spring, h, inv_mass, radius, force, torque, point, f_total, f_damp_n,
-                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs) -> float:
+                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs, dashpot_given,
+                      dashpot) -> float:
     """Evaluate the contact law of each of K contacts and accumulate loads on the bodies:
     Eq. 16–17 (module docstring) for linear rows of the table (MODEL 0), Hertz–Mindlin
     (:mod:`nurbsdem.dynamics.hertz`) for MODEL 1 rows.
@@ -180,6 +181,9 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
     1 stick / 0 slip, coeffs (K,4) (k_n, c_n, k_t, c_t): the tangent stiffnesses (N/m) and
     damping (N s/m) for the time-step control.  Returns the return mapping's slip-work estimate
     (J) (a diagnostic; the energy ledger uses the exact spring work instead).
+
+    dashpot_given: the normal dashpot force of contact c is dashpot[c] (N, along n on B; the
+    implicit dashpots of :mod:`nurbsdem.dynamics.implicit`) instead of cn ġn from vel/omg.
     """
     slip_work = 0.0
     K = body_a.shape[0]
@@ -223,7 +227,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
             eel_n = 0.5 * en * d * d
             coeffs[c, 0] = en
         coeffs[c, 1], coeffs[c, 2], coeffs[c, 3] = cn, et, ct
-        fn = fel + cn * ddot
+        fn = fel + (dashpot[c] if dashpot_given else cn * ddot)
         if fn < 0.0:
             fn = 0.0
         fdn = fn - fel
@@ -286,11 +290,13 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
 
 @njit(cache=True)
 def contact_loads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
-                  table, spring, h, inv_mass, radius, mass, gravity):
+                  table, spring, h, inv_mass, radius, mass, gravity, dashpot_given,
+                  dashpot):
     """:func:`contact_forces` of K contacts into fresh arrays, plus gravity on the N particles
     (mass (N,) kg, gravity (3,) m/s²; bodies ≥ N are walls): the loads of one force
-    evaluation.  Returns (force, torque (B,3), point, f_total, f_damp_n, f_damp_t, f_el_t
-    (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip work)."""
+    evaluation (dashpot_given, dashpot: as for contact_forces).  Returns (force, torque (B,3),
+    point, f_total, f_damp_n, f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,),
+    coeffs (K,4), slip work)."""
     K = body_a.shape[0]
     B = pos.shape[0]
     force = np.zeros((B, 3))
@@ -301,7 +307,8 @@ def contact_loads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg
     coeffs = np.empty((K, 4))
     slip = contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
                           material, table, spring, h, inv_mass, radius, force, torque, point,
-                          f_total, f_damp_n, f_damp_t, f_el_t, fn, e_el, stick, coeffs)
+                          f_total, f_damp_n, f_damp_t, f_el_t, fn, e_el, stick, coeffs,
+                          dashpot_given, dashpot)
     for i in range(mass.shape[0]):
         for k in range(3):
             force[i, k] += mass[i] * gravity[k]

@@ -206,7 +206,7 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
     omg_all = np.concatenate((omega, np.zeros((W, 3))))
     force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
         a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
-        bc.inv_mass_all, radius, bc.mass, bc.gravity)
+        bc.inv_mass_all, radius, bc.mass, bc.gravity, False, np.zeros(0))
     near_pa, near_pb, near_normal, _ = _gather_contacts(pl.rows_f, near)
     near_point = 0.5 * (near_pa + near_pb)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,

@@ -70,6 +70,7 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger, EnergySample, potential_energy
+from .implicit import implicit_dashpots
 from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
 from .hertz import has_hertz
 from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finite
@@ -199,7 +200,8 @@ class DemSystem:
     def __init__(self, dt: float, gravity=(0.0, 0.0, -9.81), interfaces: InterfaceTable | None = None,
                  safety: float = 0.5, substeps: int | None = None, max_substeps: int = 100000,
                  energy_tolerance: float = 0.25, check_energy: bool = True, t0: float = 0.0,
-                 max_refinements: int = 3, watch_period2: bool = True) -> None:
+                 max_refinements: int = 3, watch_period2: bool = True,
+                 implicit_damping: bool = False) -> None:
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError(f"time step must be positive, got {dt}")
         if not (0 < safety <= 1):
@@ -215,6 +217,11 @@ class DemSystem:
         self.max_substeps = int(max_substeps)
         self.max_refinements = int(max_refinements)
         self.watch_period2 = bool(watch_period2)
+        #: normal dashpots at the end of each internal step (:mod:`.implicit`); the time-step
+        #: control then leaves them out of the damping rate of Eq. (1)
+        self.implicit_damping = bool(implicit_damping)
+        #: active-set rounds and CG iterations of the implicit dashpots so far
+        self.dashpot_solves = np.zeros(3, np.int64)
         self.energy_tolerance = float(energy_tolerance)
         self.check_energy = bool(check_energy)
         self.bodies = RigidBodies()
@@ -332,7 +339,8 @@ class DemSystem:
                 law = self.interfaces.get(ma, mb)
             except InputError:
                 continue          # undefined interface: an error if such a contact ever occurs
-            for mode, k, c, m in (("normal", law.en, law.cn, mn), ("tangential", law.et, law.ct, mtn)):
+            cn = 0.0 if self.implicit_damping else law.cn
+            for mode, k, c, m in (("normal", law.en, cn, mn), ("tangential", law.et, law.ct, mtn)):
                 if not math.isfinite(m):
                     continue
                 w, z, dtc = critical_step(k, c, m)
@@ -383,6 +391,8 @@ class DemSystem:
         speed = body_speeds(b.v, omega_world(b.q, b.L, self._inv_I), self._ell, self.wall_u)
         net = contact_network(a, bb, self.c_point, self.c_normal, coeffs, *near, speed, self.dt,
                               self._g_norm, self._table, self._mat_all)
+        if self.implicit_damping:
+            net[4][:, 1] = 0.0      # implicit normal dashpots do not limit the step
         return net if net[0].shape[0] else None
 
     def _network_bound(self, net) -> float:
@@ -496,6 +506,10 @@ class DemSystem:
             return
         if self.provider is None:
             self.provider = lambda kin: None
+        if self.implicit_damping and self.domain is not None:
+            raise InputError("Damping Implicit runs on one MPI rank only (its dashpot forces "
+                             "couple the whole contact network); run with one rank or "
+                             "Damping Explicit")
         b = self.bodies
         self._inv_mass = 1.0 / b.mass
         self._inv_I = 1.0 / b.I
@@ -573,11 +587,13 @@ class DemSystem:
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:
             self.c_radius = np.zeros(K)
+        law = (a, bb, pa, pb, nrm, dep, pos, vel, omg, self._mat_all, self._table)
+        dashpot = (self._implicit_dashpots(law, spring, h)
+                   if self.implicit_damping and h > 0.0 and K else None)
         (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
-         self.last_slip_work) = contact_loads(a, bb, pa, pb, nrm, dep, pos, vel, omg,
-                                              self._mat_all, self._table, spring, h,
-                                              self._inv_mass_all, self.c_radius, b.mass,
-                                              self.gravity)
+         self.last_slip_work) = contact_loads(*law, spring, h, self._inv_mass_all, self.c_radius,
+                                              b.mass, self.gravity, dashpot is not None,
+                                              np.zeros(0) if dashpot is None else dashpot)
         self.hist_keys, self.hist_springs = store_history(key, spring)
         if self.domain is not None:          # the owners' loads of this rank's ghosts
             self.domain.exchange_loads(force, torque)
@@ -585,6 +601,21 @@ class DemSystem:
         self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
         self.c_fet = fet
         self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
+
+    def _implicit_dashpots(self, law: tuple, spring: np.ndarray, h: float) -> np.ndarray:
+        """The normal dashpot forces (K,) N at the end of the internal step h (s)
+        (:func:`~nurbsdem.dynamics.implicit.implicit_dashpots`), from an explicit evaluation
+        of the same contacts (on a copy of the tangential springs)."""
+        b = self.bodies
+        force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
+            *law, spring.copy(), h, self._inv_mass_all, self.c_radius, b.mass, self.gravity,
+            False, np.zeros(0))
+        f, rounds, iterations = implicit_dashpots(
+            law[0], law[1], point, law[4], fn, fdn, np.ascontiguousarray(coeffs[:, 1]), force,
+            torque, b.x, b.v, b.q, b.L, self._inv_I, self._inv_mass, self.wall_d, self.wall_u,
+            b.principal_rotations(), np.sqrt(b.mass), np.sqrt(b.I), h)
+        self.dashpot_solves += (1, rounds, iterations)
+        return f
 
     def _book_dropped(self, cs: Any) -> None:
         """A pair the provider left out after a failed contact problem takes its normal elastic
@@ -699,7 +730,8 @@ class DemSystem:
         if (self.compiled_steps and self.domain is None and n_max >= 1
                 and self._sphere_steps is None):
             self._sphere_steps = SphereSteps.for_system(self) or False
-        fast = self._sphere_steps if self.compiled_steps and self.domain is None else None
+        fast = (self._sphere_steps if self.compiled_steps and self.domain is None
+                and not self.implicit_damping else None)
         self.last_steps = StepTally()
         if not fast:
             self._tallied_step()

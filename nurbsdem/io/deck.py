@@ -44,10 +44,12 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
                 # Hertz-Mindlin with the exact curvature; E, nu from the Materials (walls:
                 # the Material on the Box/Wall line, default rigid). Model LinearPenalty: above
     Steps
-      Step ID Dynamic Duration T TimeStep dt
+      Step ID Dynamic Duration T TimeStep dt [Damping Explicit|Implicit]
       Step ID Replicate Layers L Height H
       Step ID MoveWall name ToContact [Gap g] [Direction dx dy dz]
-      Step ID MoveWall name Displacement dx dy dz Duration T TimeStep dt
+      Step ID MoveWall name Displacement dx dy dz Duration T TimeStep dt [Damping ..]
+                # Damping Implicit: normal dashpots at the end of each internal step, so
+                # that strong damping does not shorten the stable step (default Explicit)
     Output
       Directory path                                     # default: results
       VTK [Every t] [Resolution n]                       # default 0.01 s, 8
@@ -68,9 +70,9 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
-from ..model import (PAIR_KINDS, DynamicStep, Interface, Material, Model, MoveWallStep,
-                     Output, ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step,
-                     WallSpec)
+from ..model import (DAMPING_SCHEMES, PAIR_KINDS, DynamicStep, Interface, Material, Model,
+                     MoveWallStep, Output, ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry,
+                     Step, WallSpec)
 
 # ---------------------------------------------------------------------------- schema
 
@@ -125,7 +127,7 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Steps": {"Step": EntrySpec(True, {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
-        "Displacement": F3})},
+        "Displacement": F3, "Damping": S1})},
     "Output": {
         "Directory": EntrySpec(False, head=S1),
         "VTK": EntrySpec(False, {"Every": F1, "Resolution": I1}),
@@ -748,9 +750,9 @@ class _Builder:
                       + (f" (got {' and '.join(types)})" if types else ""), e.line)
         kind = types[0]
         if kind == "Dynamic":
-            self.only(e, {"Dynamic", "Duration", "TimeStep"}, "a Dynamic step")
+            self.only(e, {"Dynamic", "Duration", "TimeStep", "Damping"}, "a Dynamic step")
             self.require(e, "Duration", "TimeStep")
-            step: Step = DynamicStep(e.id, e.line, *self.timing(e))
+            step: Step = DynamicStep(e.id, e.line, *self.timing(e), damping=self.damping(e))
         elif kind == "Replicate":
             self.only(e, {"Replicate", "Layers", "Height"}, "a Replicate step")
             self.require(e, "Layers", "Height")
@@ -784,12 +786,20 @@ class _Builder:
                     self.fail(f"Step {e.id}: Direction must not be zero", e.line)
                 d = d / np.linalg.norm(d)
             return MoveWallStep(e.id, e.line, wall=name, to_contact=True, gap=gap, direction=d)
-        self.only(e, {"MoveWall", "Displacement", "Duration", "TimeStep"},
+        self.only(e, {"MoveWall", "Displacement", "Duration", "TimeStep", "Damping"},
                   "MoveWall Displacement")
         self.require(e, "Duration", "TimeStep")
         dur, dt = self.timing(e)
         return MoveWallStep(e.id, e.line, wall=name, displacement=e.get("Displacement"),
-                            duration=dur, time_step=dt)
+                            duration=dur, time_step=dt, damping=self.damping(e))
+
+    def damping(self, e: Entry) -> str:
+        """The step's ``Damping`` scheme (lower case; default explicit)."""
+        value = e.get("Damping", "explicit")
+        if value.lower() not in DAMPING_SCHEMES:
+            self.fail(f"Step {e.id}: Damping must be Explicit or Implicit, got {value!r}",
+                      e.line)
+        return value.lower()
 
     def output(self, entries: list[Entry]) -> None:
         out = Output(directory=self.base / "results")
