@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from nurbsdem.dynamics import (ContactLaw, DemSystem, InstabilityError, InterfaceTable,
                                SpherePlaneProvider, critical_step, sphere_inertia)
-from nurbsdem.dynamics.implicit import lever_arms, solve_dashpots
+from nurbsdem.dynamics.implicit import lever_arms, normal_rows, solve_dashpots
 from nurbsdem.dynamics.integrator import _relative_point_velocities
 from nurbsdem.dynamics.rigid import omega_world
 from nurbsdem.errors import InputError
@@ -73,9 +73,10 @@ def test_dashpot_problem_matches_a_dense_solution(seed):
     K = a.shape[0]
     r_a, r_b = np.empty((K, 3)), np.empty((K, 3))
     lever_arms(a, b, point, x, r_a, r_b)
+    rows = np.empty((K, 2, 6))
+    normal_rows(a, b, r_a, r_b, normal, Q, np.sqrt(mass), np.sqrt(I), rows)
     f = np.zeros(K)
-    rounds, iterations = solve_dashpots(a, b, r_a, r_b, normal, cn, f_el, w0, h, Q,
-                                        np.sqrt(mass), np.sqrt(I), f)
+    rounds, iterations = solve_dashpots(a, b, rows, mass.shape[0], cn, f_el, w0, h, f)
     assert rounds < 50 and iterations > 0
     assert np.all(f[cn == 0] == 0.0)
     on = cn > 0

@@ -44,8 +44,9 @@ is unchanged.  Accuracy: first order in the damping (test_implicit: the restitut
 contact starting and ending between two samples).  The dashpots are solved with the tangential
 loads of the explicit evaluation; the Coulomb limit then takes the implicit f_n.
 
-All kernels work in the mass-scaled coordinates of :mod:`nurbsdem.dynamics.stepcontrol`
-(y = M^{1/2}(v, ω in the principal frame)) and reuse its scatter/gather of a contact force.
+The operator G works in the mass-scaled coordinates of :mod:`nurbsdem.dynamics.stepcontrol`
+(y = M^{1/2}(v, ω in the principal frame)) with the rows of N M^{-1/2} formed once per solve
+(:func:`normal_rows`), so that a CG iteration is 24 multiply–adds per contact.
 """
 from __future__ import annotations
 
@@ -54,7 +55,6 @@ from numba import njit
 
 from .integrator import _relative_point_velocities
 from .rigid import omega_world
-from .stepcontrol import _relative_displacement, _scatter_force
 
 #: relative residual of the conjugate gradients: |A f + w₀|∞ on the free set ≤ this × scale
 CG_TOLERANCE = 1e-12
@@ -76,58 +76,61 @@ def lever_arms(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.
 
 
 @njit(cache=True)
-def scaled_velocities(v: np.ndarray, omega: np.ndarray, Q: np.ndarray, sq_m: np.ndarray,
-                      sq_I: np.ndarray) -> np.ndarray:
-    """y (6N,) = M^{1/2} (v, Qᵀ ω): velocities (m/s) and world angular velocities (rad/s) in
-    the mass-scaled coordinates of the network operators."""
-    n = v.shape[0]
-    y = np.empty(6 * n)
-    for i in range(n):
-        for k in range(3):
-            y[6 * i + k] = sq_m[i] * v[i, k]
-            y[6 * i + 3 + k] = sq_I[i, k] * (Q[i, 0, k] * omega[i, 0] + Q[i, 1, k] * omega[i, 1]
-                                             + Q[i, 2, k] * omega[i, 2])
-    return y
-
-
-@njit(cache=True)
-def normal_velocities(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray,
-                      r_b: np.ndarray, normal: np.ndarray, Q: np.ndarray, sq_m: np.ndarray,
-                      sq_I: np.ndarray, out: np.ndarray) -> None:
-    """out (K,) = N y: the normal relative velocity n·(v_B − v_A) (m/s) at each contact of the
-    scaled velocities y (walls at rest; add their velocity apart)."""
+def normal_rows(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b: np.ndarray,
+                normal: np.ndarray, Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray,
+                rows: np.ndarray) -> None:
+    """rows (K,2,6): the rows of N M^{-1/2}, a unit normal force at each contact as mass-scaled
+    generalised forces of B (side 0, +n) and A (side 1, −n): (±n/√m, ±Qᵀ(r × n)/√I) in the
+    coordinates of :mod:`nurbsdem.dynamics.stepcontrol` (walls, index ≥ N: zero rows)."""
     n_part = sq_m.shape[0]
-    rel = np.empty(3)
     for c in range(body_a.shape[0]):
-        _relative_displacement(y, body_a[c], body_b[c], n_part, r_a[c], r_b[c], Q, sq_m, sq_I,
-                               rel)
-        out[c] = rel[0] * normal[c, 0] + rel[1] * normal[c, 1] + rel[2] * normal[c, 2]
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i >= n_part:
+                rows[c, side, :] = 0.0
+                continue
+            sign = 1.0 if side == 0 else -1.0
+            r0, r1, r2 = ((r_b[c, 0], r_b[c, 1], r_b[c, 2]) if side == 0
+                          else (r_a[c, 0], r_a[c, 1], r_a[c, 2]))
+            n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
+            x0, x1, x2 = r1 * n2 - r2 * n1, r2 * n0 - r0 * n2, r0 * n1 - r1 * n0
+            for k in range(3):
+                rows[c, side, k] = sign * normal[c, k] / sq_m[i]
+                rows[c, side, 3 + k] = sign * (Q[i, 0, k] * x0 + Q[i, 1, k] * x1
+                                               + Q[i, 2, k] * x2) / sq_I[i, k]
 
 
 @njit(cache=True)
 def delassus_apply(f: np.ndarray, use: np.ndarray, body_a: np.ndarray, body_b: np.ndarray,
-                   r_a: np.ndarray, r_b: np.ndarray, normal: np.ndarray, Q: np.ndarray,
-                   sq_m: np.ndarray, sq_I: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
-    """out (K,) = G f: the normal velocity change (m/s per unit impulse, s/kg × N s) at every
-    contact from the normal forces f (N) of the contacts with ``use`` (workspace y (6N,))."""
-    n_part = sq_m.shape[0]
+                   rows: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """out (K,) = G f: the normal relative velocity (m/s) at every contact from the impulse
+    of the normal forces f (N, × 1 s) of the contacts with ``use``; workspace y (6N,)."""
+    n_part = y.shape[0] // 6
     y[:] = 0.0
-    fc = np.empty(3)
     for c in range(body_a.shape[0]):
         if not use[c] or f[c] == 0.0:
             continue
-        for k in range(3):
-            fc[k] = f[c] * normal[c, k]
-        _scatter_force(fc, body_a[c], body_b[c], n_part, r_a[c], r_b[c], Q, sq_m, sq_I, y)
-    normal_velocities(y, body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, out)
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i < n_part:
+                for k in range(6):
+                    y[6 * i + k] += f[c] * rows[c, side, k]
+    for c in range(body_a.shape[0]):
+        g = 0.0
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i < n_part:
+                for k in range(6):
+                    g += rows[c, side, k] * y[6 * i + k]
+        out[c] = g
 
 
 @njit(cache=True)
 def _residual(f: np.ndarray, inv_cn: np.ndarray, w0: np.ndarray, h: float,
-              all_on: np.ndarray, body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, y,
-              gf: np.ndarray, res: np.ndarray) -> None:
+              all_on: np.ndarray, body_a, body_b, rows, y, gf: np.ndarray,
+              res: np.ndarray) -> None:
     """res = A f + w₀ of Eq. (D1) over all contacts (gf: workspace for G f)."""
-    delassus_apply(f, all_on, body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, y, gf)
+    delassus_apply(f, all_on, body_a, body_b, rows, y, gf)
     for c in range(f.shape[0]):
         res[c] = inv_cn[c] * f[c] + h * gf[c] + w0[c]
 
@@ -143,36 +146,41 @@ def _masked_dot(a: np.ndarray, b: np.ndarray, free: np.ndarray) -> float:
 
 @njit(cache=True)
 def _cg_free(f: np.ndarray, free: np.ndarray, inv_cn: np.ndarray, w0: np.ndarray,
-             h: float, tol: float, body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I,
+             h: float, precond: np.ndarray, tol: float, body_a, body_b, rows,
              y: np.ndarray) -> int:
-    """Conjugate gradients for A_FF f_F = −(w₀ + A_FC f_C) on the free contacts (the others
-    fixed at their bound), from the present f; returns the iterations."""
+    """Conjugate gradients, Jacobi-preconditioned (``precond`` = 1 / diag A), for
+    A_FF f_F = −(w₀ + A_FC f_C) on the free contacts (the others fixed at their bound), from
+    the present f; stops when |residual|₂ <= tol.  Returns the iterations."""
     K = f.shape[0]
     all_on = np.ones(K, np.bool_)
     r = np.empty(K)
     gf = np.empty(K)
-    _residual(f, inv_cn, w0, h, all_on, body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I,
-              y, gf, r)
+    _residual(f, inv_cn, w0, h, all_on, body_a, body_b, rows, y, gf, r)
+    z = np.zeros(K)
     for c in range(K):
         r[c] = -r[c] if free[c] else 0.0
-    p = r.copy()
+        z[c] = precond[c] * r[c]
+    p = z.copy()
     ap = np.empty(K)
+    rz = _masked_dot(r, z, free)
     rr = _masked_dot(r, r, free)
     it = 0
     while it < CG_MAX_ITERATIONS and np.sqrt(rr) > tol:
-        delassus_apply(p, free, body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, y, gf)
+        delassus_apply(p, free, body_a, body_b, rows, y, gf)
         for c in range(K):
             ap[c] = inv_cn[c] * p[c] + h * gf[c] if free[c] else 0.0
-        alpha = rr / _masked_dot(p, ap, free)
+        alpha = rz / _masked_dot(p, ap, free)
         for c in range(K):
             if free[c]:
                 f[c] += alpha * p[c]
                 r[c] -= alpha * ap[c]
-        rr_new = _masked_dot(r, r, free)
-        beta = rr_new / rr
-        rr = rr_new
+                z[c] = precond[c] * r[c]
+        rz_new = _masked_dot(r, z, free)
+        rr = _masked_dot(r, r, free)
+        beta = rz_new / rz
+        rz = rz_new
         for c in range(K):
-            p[c] = r[c] + beta * p[c] if free[c] else 0.0
+            p[c] = z[c] + beta * p[c] if free[c] else 0.0
         it += 1
     return it
 
@@ -197,18 +205,19 @@ def _update_active_set(f: np.ndarray, free: np.ndarray, damped: np.ndarray, lowe
 
 
 @njit(cache=True)
-def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b: np.ndarray,
-                   normal: np.ndarray, cn: np.ndarray, f_el: np.ndarray, w0: np.ndarray,
-                   h: float, Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray,
+def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray, n_particles: int,
+                   cn: np.ndarray, f_el: np.ndarray, w0: np.ndarray, h: float,
                    f: np.ndarray) -> tuple[int, int]:
     """Solve Eq. (D1): the normal dashpot forces f (K,) N (in place, started from its values)
     of contacts with damping cn (K,) N s/m, elastic normal forces f_el (K,) N and dashpot-free
-    normal velocities w₀ (K,) m/s, for the closing half kick h/2 of an internal step h (s).
-    Contacts with cn = 0 get f = 0.  Returns (active-set rounds, CG iterations)."""
+    normal velocities w₀ (K,) m/s, for the two half kicks (h s in all) of an internal step h;
+    ``rows`` from :func:`normal_rows`.  Contacts with cn = 0 get f = 0.  Returns (active-set
+    rounds, CG iterations)."""
     K = f.shape[0]
     inv_cn = np.zeros(K)
     lower = np.empty(K)
     free = np.zeros(K, np.bool_)
+    precond = np.zeros(K)
     scale = 0.0
     for c in range(K):
         lower[c] = -f_el[c]
@@ -217,12 +226,17 @@ def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b:
             if f[c] < lower[c]:
                 f[c] = lower[c]
             free[c] = f[c] > lower[c]
+            g = 0.0                               # G_cc, the contact's own compliance
+            for side in range(2):
+                for k in range(6):
+                    g += rows[c, side, k] * rows[c, side, k]
+            precond[c] = 1.0 / (inv_cn[c] + h * g)
         else:
             f[c] = 0.0
             lower[c] = 0.0
         scale = max(scale, abs(w0[c]), abs(f_el[c]) * inv_cn[c])
     tol = CG_TOLERANCE * max(scale, 1e-300) * np.sqrt(K)
-    y = np.empty(6 * sq_m.shape[0])
+    y = np.empty(6 * n_particles)
     res = np.empty(K)
     gf = np.empty(K)
     all_on = np.ones(K, np.bool_)
@@ -230,10 +244,8 @@ def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b:
     rounds, iterations = 0, 0
     while rounds < MAX_ROUNDS:
         rounds += 1
-        iterations += _cg_free(f, free, inv_cn, w0, h, tol, body_a, body_b, r_a, r_b,
-                               normal, Q, sq_m, sq_I, y)
-        _residual(f, inv_cn, w0, h, all_on, body_a, body_b, r_a, r_b, normal, Q, sq_m,
-                  sq_I, y, gf, res)
+        iterations += _cg_free(f, free, inv_cn, w0, h, precond, tol, body_a, body_b, rows, y)
+        _residual(f, inv_cn, w0, h, all_on, body_a, body_b, rows, y, gf, res)
         if not _update_active_set(f, free, damped, lower, res):
             break
     for c in range(K):          # an unfinished active set still gives forces within the law
@@ -277,13 +289,13 @@ def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     r_a = np.empty((K, 3))
     r_b = np.empty((K, 3))
     lever_arms(body_a, body_b, point, x, r_a, r_b)
+    rows = np.empty((K, 2, 6))
+    normal_rows(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows)
     gf = np.empty(K)
-    delassus_apply(f, np.ones(K, np.bool_), body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I,
-                   np.empty(6 * N), gf)
+    delassus_apply(f, np.ones(K, np.bool_), body_a, body_b, rows, np.empty(6 * N), gf)
     w0 = np.empty(K)
     for c in range(K):
         w0[c] = (w3[c, 0] * normal[c, 0] + w3[c, 1] * normal[c, 1] + w3[c, 2] * normal[c, 2]
                  - h * gf[c])
-    rounds, iterations = solve_dashpots(body_a, body_b, r_a, r_b, normal, cn, f_el, w0, h, Q,
-                                        sq_m, sq_I, f)
+    rounds, iterations = solve_dashpots(body_a, body_b, rows, N, cn, f_el, w0, h, f)
     return f, rounds, iterations
