@@ -554,6 +554,8 @@ def summary_text(model: Model) -> str:
     for s in model.steps:
         if isinstance(s, DynamicStep):
             desc = f"Dynamic {s.duration:g} s, time step {s.time_step:g} s"
+            if s.damping == "implicit":
+                desc += ", implicit dashpots"
         elif isinstance(s, ReplicateStep):
             desc = f"Replicate into {s.layers} layers over {s.height:g} m"
         else:
@@ -563,6 +565,8 @@ def summary_text(model: Model) -> str:
             else:
                 desc = (f"MoveWall {s.wall} by {_vec(s.displacement)} m in {s.duration:g} s, "
                         f"time step {s.time_step:g} s")
+                if s.damping == "implicit":
+                    desc += ", implicit dashpots"
         out.append(f"  {s.id}: t = {t:g} s: {desc}")
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")

@@ -864,8 +864,10 @@ class Simulation:
 
 
 def _step_line(s: Step) -> str:
+    damping = " Damping Implicit" if getattr(s, "damping", "explicit") == "implicit" else ""
     if isinstance(s, DynamicStep):
-        return f"  Step {s.id} Dynamic Duration {_f(s.duration)} TimeStep {_f(s.time_step)}"
+        return (f"  Step {s.id} Dynamic Duration {_f(s.duration)} TimeStep {_f(s.time_step)}"
+                f"{damping}")
     if isinstance(s, ReplicateStep):
         return f"  Step {s.id} Replicate Layers {s.layers} Height {_f(s.height)}"
     assert isinstance(s, MoveWallStep)
@@ -873,7 +875,7 @@ def _step_line(s: Step) -> str:
         d = f" Direction {_v(s.direction)}" if s.direction is not None else ""
         return f"  Step {s.id} MoveWall {s.wall} ToContact Gap {_f(s.gap)}{d}"
     return (f"  Step {s.id} MoveWall {s.wall} Displacement {_v(s.displacement)} Duration "
-            f"{_f(s.duration)} TimeStep {_f(s.time_step)}")
+            f"{_f(s.duration)} TimeStep {_f(s.time_step)}{damping}")
 
 
 def _split_deck(text: str) -> tuple[list[str], list[str]]:

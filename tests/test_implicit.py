@@ -253,3 +253,43 @@ def test_implicit_damping_refuses_a_domain_decomposition():
     s.domain = object()
     with pytest.raises(InputError, match="one MPI rank"):
         s.initialize()
+
+
+# --------------------------------------------------------------------------- deck and API
+def test_deck_and_python_api_run_implicit_damping_alike(tmp_path):
+    """``Damping Implicit`` in a deck and ``damping="implicit"`` in Python: the same model
+    (also through Simulation.deck_text) and the same trajectory; not the explicit one."""
+    from test_simulation import DECK, build_scene
+    from nurbsdem.io.deck import parse_deck
+    from nurbsdem.simulation import Simulation
+
+    text = DECK.replace("Step 1 Dynamic Duration 0.04 TimeStep 1e-3",
+                        "Step 1 Dynamic Duration 0.04 TimeStep 1e-3 Damping Implicit")
+    text = text[:text.index("  Step 2")] + "Output\n  Directory results\n"
+    deck = tmp_path / "case.inp"
+    deck.write_text(text)
+    assert parse_deck(deck).steps[0].damping == "implicit"
+    from_deck = Simulation.from_deck(deck, output=tmp_path / "out")
+    from_deck.run()
+    py = build_scene()
+    py.run_dynamic(duration=0.04, time_step=1e-3, damping="Implicit")
+    assert "Damping Implicit" in py.deck_text
+    np.testing.assert_array_equal(from_deck.positions, py.positions)
+    ex = build_scene()
+    ex.run_dynamic(duration=0.04, time_step=1e-3)
+    assert not np.array_equal(ex.positions, py.positions)
+
+
+def test_bench_damping_deck_puts_implicit_on_every_timed_step():
+    import bench_damping
+    from nurbsdem.io.deck import parse_deck
+
+    path = bench_damping.DECK.parent / "_bench_damping_check.inp"
+    try:
+        path.write_text(bench_damping.deck_text("Implicit", quick=True))
+        steps = parse_deck(path).steps
+    finally:
+        path.unlink(missing_ok=True)
+    timed = [s for s in steps if s.duration_s > 0]
+    assert len(timed) == 4 and all(s.damping == "implicit" for s in timed)
+    assert sum(s.duration_s for s in timed) == pytest.approx(0.65)

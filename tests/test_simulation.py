@@ -279,6 +279,8 @@ def small_scene() -> Simulation:
     (lambda s: s.run_dynamic(0.01, 0.1), "Step 1: time_step 0.1 s exceeds duration 0.01 s"),
     (lambda s: s.run_dynamic(0.01, 3e-3), "Step 1: Duration 0.01 s is not a whole number of TimeStep"),
     (lambda s: s.run_dynamic(-1, 1e-3), "Step 1: Duration must be > 0"),
+    (lambda s: s.run_dynamic(0.01, 1e-3, damping="semi"),
+     "Step 1: damping must be 'explicit' or 'implicit', got 'semi'"),
     (lambda s: s.replicate(0, 0.1), "layers must be an integer >= 1"),
     (lambda s: s.move_wall("roof", to_contact=True), "no wall named 'roof'"),
     (lambda s: s.move_wall("bottom", displacement=(0, 0, 1)), "needs displacement, duration and time_step"),
