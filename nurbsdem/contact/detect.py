@@ -263,9 +263,6 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
 #: Below this many pairs the batch runs on the calling thread: launching the parallel
 #: region costs more than it saves for a handful of LCPs.
 PARALLEL_MIN_PAIRS = 32
-#: Chunks of pairs per thread: LCPs differ in cost (warm/cold, one stage or two), so equal
-#: counts per thread leave one waiting; several chunks each let the scheduler even them out.
-CHUNKS_PER_THREAD = 8
 
 
 @njit(cache=True)
@@ -346,7 +343,7 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
             np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
             mask_a, mask_b, out[0], out[1])
     if K >= PARALLEL_MIN_PAIRS:
-        _batch_kernel(*args, CHUNKS_PER_THREAD * numba.get_num_threads())
+        _batch_kernel(*args, numba.get_num_threads())
     elif K:
         _solve_chunk(*args, 0, K)
     _accept_within_nonconvexity(table.nonconvexity[sa] + table.nonconvexity[sb], *out)

@@ -29,8 +29,7 @@ from numba import njit, prange
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
 from . import lcp
 from .analytic import parallelogram_coordinates
-from .detect import (CHUNKS_PER_THREAD, PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows,
-                     _work, table_of)
+from .detect import PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, table_of
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
                   I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP, _rot_t,
                   _to_world)
@@ -216,7 +215,7 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
             f(dom, (K, 4)), np.ascontiguousarray(prev_f, dtype=float),
             np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i)
     if K >= PARALLEL_MIN_PAIRS:
-        _wall_batch_kernel(*args, CHUNKS_PER_THREAD * numba.get_num_threads())
+        _wall_batch_kernel(*args, numba.get_num_threads())
     elif K:
         _wall_chunk(*args, 0, K)
     return res_f, res_i
