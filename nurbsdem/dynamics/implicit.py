@@ -56,7 +56,8 @@ from numba import njit
 from .integrator import _relative_point_velocities
 from .rigid import omega_world
 
-#: relative residual of the conjugate gradients: |A f + w₀|∞ on the free set ≤ this × scale
+#: relative residual of the conjugate gradients: |A f + w₀|₂ on the free set ≤ this × scale √K
+#: (scale: the largest |w₀| or f_el/cn, m/s)
 CG_TOLERANCE = 1e-12
 #: conjugate-gradient iterations per active-set round (a safeguard; a few tens suffice)
 CG_MAX_ITERATIONS = 500

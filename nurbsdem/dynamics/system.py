@@ -39,6 +39,10 @@ particles: C–C Δt_cr = 4.7e-4 s).  A deck step is split into ``substeps`` int
   estimate is repeated when the bound shows a stiffer network that the present count might
   not cover, and every ``NETWORK_RECHECK_STEPS`` deck steps.
 
+With ``implicit_damping`` (the deck's ``Damping Implicit``) the normal dashpots act at the
+velocity after each evaluation's two half kicks (:mod:`nurbsdem.dynamics.implicit`, stable
+whatever the damping) and both estimates leave them out of the damping rate γ.
+
 The count rises at once when the network needs it and falls again (with 20 % hysteresis) when
 the pack loosens; every change is logged on logger ``'nurbsdem'`` with the reason (the particle
 that dominates the stiffest mode and its number of contacts).
@@ -195,6 +199,8 @@ class DemSystem:
     max_refinements: how often a deck step found unstable is repeated with twice the sub-steps
         before :class:`InstabilityError` is raised (0: stop at once).
     watch_period2: enable the period-2 part of the guard (disable only to demonstrate it).
+    implicit_damping: implicit normal dashpots (:mod:`nurbsdem.dynamics.implicit`); one MPI
+        rank only, and not in the compiled loop of exact spheres (:meth:`steps`).
     """
 
     def __init__(self, dt: float, gravity=(0.0, 0.0, -9.81), interfaces: InterfaceTable | None = None,
