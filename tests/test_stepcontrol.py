@@ -256,6 +256,7 @@ Output
     assert summary.simulated_time == pytest.approx(0.1) and summary.failed == 0
     # a warning the user can act on: heavily sub-stepped, because of the damping
     assert any("sub-stepped" in r.getMessage() and "damping limits it" in r.getMessage()
+               and "Damping Implicit" in r.getMessage()
                for r in caplog.records)
     assert summary.active_max >= 1                     # they reached the floor
     assert abs(summary.balance_error) < 1e-3 * summary.balance_scale

@@ -15,6 +15,8 @@ deck steps:
 5. contact forces (paper Eq. 16–17, or Hertz–Mindlin with the contacts' exact equivalent
    radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii`;
    :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential histories, gravity,
+   and with ``Damping Implicit`` the implicit normal dashpots
+   (:func:`~nurbsdem.dynamics.implicit.implicit_dashpots`),
 6. the second half kick;
 
 and after each deck step the guards (finite state, energy) and the Gershgorin gate of the
@@ -52,6 +54,7 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from .forces import add_kick_work, contact_loads, match_history
 from .hertz import has_hertz
+from .implicit import implicit_dashpots
 from .integrator import drift, kick_from, kinetic_energies
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
@@ -69,17 +72,21 @@ PairList = namedtuple("PairList", "a b keys rows_f rows_i budget odo built_odo "
                       "prev_pos prev_R prev_wall prev_x")
 #: constants of the bodies and the contact laws
 BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
-                       "table gravity g_norm alt_floor_x alt_floor_L")
+                       "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
 #: the last force evaluation: per-contact arrays, histories and loads
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
                         "radius fallback hist_keys hist_springs force torque slip near_a near_b "
                         "near_point near_normal near_gap reach monitored")
 #: step-control and guard settings (floats and flags)
 Control = namedtuple("Control", "dt refine_decay safety dt_apriori dt_bound forced recheck fall "
-                     "bound_slack energy_tolerance scale_floor check_energy watch_period2")
+                     "bound_slack energy_tolerance scale_floor check_energy watch_period2 "
+                     "implicit")
 
 #: counters (int64 array) of the loop's state, in this order
 STEP_COUNT, REFINE, CALM, BUILDS, EVALS, MONITORED, ACTIVE_SUM, ACTIVE_MAX = range(8)
+#: ... then the implicit dashpots' solves, active-set rounds and CG iterations
+DASHPOT_SOLVES = 8
+N_COUNTERS = 11
 
 
 # --------------------------------------------------------------------------- contact search
@@ -184,14 +191,28 @@ def _hertz_radii(sc, pl, sel, a, b, nrm, R):
 
 
 @njit(cache=True)
-def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, v: np.ndarray,
-              omega: np.ndarray, R: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
-              h: float):
+def _dashpots(bc, a, b, point, nrm, fn, fdn, coeffs, force, torque, x, v, q, L, wall_d,
+              wall_u, h, counters) -> np.ndarray:
+    """DemSystem._implicit_dashpots after its explicit evaluation: the implicit normal
+    dashpot forces (K,) N, their solve counted in ``counters``."""
+    f, rounds, iterations = implicit_dashpots(
+        a, b, point, nrm, fn, fdn, np.ascontiguousarray(coeffs[:, 1]), force, torque, x, v, q,
+        L, bc.inv_I, bc.inv_mass, wall_d, wall_u, quats_to_matrices(q), bc.sq_m, bc.sq_I, h)
+    counters[DASHPOT_SOLVES] += 1
+    counters[DASHPOT_SOLVES + 1] += rounds
+    counters[DASHPOT_SOLVES + 2] += iterations
+    return f
+
+
+@njit(cache=True)
+def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray,
+              v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray, R: np.ndarray,
+              wall_d: np.ndarray, wall_u: np.ndarray, h: float, counters: np.ndarray):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
-    gravity (omega (N,3): the particles' angular velocities, rad/s).  Returns (True, the new
-    Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
-    error)."""
+    gravity (omega (N,3): the particles' angular velocities, rad/s; implicit dashpots when
+    ``cc.implicit``).  Returns (True, the new Evaluation), or (False, ev) when a contact has
+    no interface (the Python path raises the error)."""
     sel, near, gap = active_and_near(pl.rows_f, pl.rows_i, pl.budget, reach)
     a, b = pl.a[sel], pl.b[sel]
     if not _interfaces_defined(bc, a, b):
@@ -204,9 +225,17 @@ def _evaluate(sc, bc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray, 
     pos_all = np.concatenate((x, wall_d))
     vel_all = np.concatenate((v, wall_u))
     omg_all = np.concatenate((omega, np.zeros((W, 3))))
+    given = cc.implicit and h > 0.0 and a.shape[0] > 0
+    dashpot = np.zeros(0)
+    if given:
+        force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
+            a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table,
+            spring.copy(), h, bc.inv_mass_all, radius, bc.mass, bc.gravity, False, dashpot)
+        dashpot = _dashpots(bc, a, b, point, nrm, fn, fdn, coeffs, force, torque, x, v, q, L,
+                            wall_d, wall_u, h, counters)
     force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
         a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
-        bc.inv_mass_all, radius, bc.mass, bc.gravity, False, np.zeros(0))
+        bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)
     near_pa, near_pb, near_normal, _ = _gather_contacts(pl.rows_f, near)
     near_point = 0.5 * (near_pa + near_pb)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
@@ -278,6 +307,8 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
     a, b, p, n, coeffs = contact_network(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
                                          ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
                                          speed, cc.dt, bc.g_norm, bc.table, bc.material)
+    if cc.implicit:
+        coeffs[:, 1] = 0.0      # implicit normal dashpots do not limit the step
     return network_count_stands(a, b, p, n, coeffs, x, quats_to_matrices(q), bc.inv_mass,
                                 bc.inv_I, cc.dt, cc.safety, cc.dt_apriori, cc.dt_bound,
                                 cc.bound_slack, counters[REFINE], substeps)
@@ -315,8 +346,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             pl, reach, monitored = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
             counters[EVALS] += 1
             counters[MONITORED] += monitored
-            ok, ev = _evaluate(sc, bc, pl, reach, monitored, ev, x, v, omega, R, wall_d, wall_u,
-                               h)
+            ok, ev = _evaluate(sc, bc, cc, pl, reach, monitored, ev, x, v, q, L, omega, R,
+                               wall_d, wall_u, h, counters)
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u
             omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
@@ -357,7 +388,7 @@ class SphereSteps:
                               np.ascontiguousarray(scene.table.info[:, 0], np.int64))
         self.bc = BodyConst(b.mass, s._inv_mass, s._inv_I, b.P, b.centroid_file, s._ell,
                             s._inv_mass_all, s._mat_all, s._table, s.gravity, s._g_norm,
-                            s._alt_floor_x, s._alt_floor_L)
+                            s._alt_floor_x, s._alt_floor_L, s._sq_m, s._sq_I)
 
     @staticmethod
     def for_system(system) -> "SphereSteps | None":
@@ -411,7 +442,8 @@ class SphereSteps:
         return Control(s.dt, REFINE_DECAY_STEPS, s.safety, s.dt_apriori, s.dt_bound,
                        s.forced_substeps is not None, NETWORK_RECHECK_STEPS, FALL_HYSTERESIS,
                        NETWORK_BOUND_SLACK,
-                       s.energy_tolerance, s._scale_floor, s.check_energy, s.watch_period2)
+                       s.energy_tolerance, s._scale_floor, s.check_energy, s.watch_period2,
+                       s.implicit_damping)
 
     def run(self, n_deck: int) -> tuple[int, int, np.ndarray]:
         """Up to n_deck deck steps; returns (status, deck steps done, counters).  On GUARD the
@@ -419,7 +451,7 @@ class SphereSteps:
         s, b = self.system, self.system.bodies
         n_sub = s.substeps
         walls_d, walls_u = self._wall_tables(n_deck, n_sub)
-        counters = np.zeros(8, np.int64)
+        counters = np.zeros(N_COUNTERS, np.int64)
         counters[STEP_COUNT], counters[REFINE], counters[CALM] = s.step_count, s.refine, s.calm_steps
         peak = np.array([s._peak])
         ledger = s.ledger.to_array()
@@ -462,3 +494,4 @@ class SphereSteps:
         s.step_count, s.refine, s.calm_steps = (int(counters[i]) for i in (STEP_COUNT, REFINE, CALM))
         s._peak = float(peak[0])
         s.failed_in_step = 0
+        s.dashpot_solves += counters[DASHPOT_SOLVES:DASHPOT_SOLVES + 3]

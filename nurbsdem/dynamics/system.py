@@ -200,7 +200,7 @@ class DemSystem:
         before :class:`InstabilityError` is raised (0: stop at once).
     watch_period2: enable the period-2 part of the guard (disable only to demonstrate it).
     implicit_damping: implicit normal dashpots (:mod:`nurbsdem.dynamics.implicit`); one MPI
-        rank only, and not in the compiled loop of exact spheres (:meth:`steps`).
+        rank only.
     """
 
     def __init__(self, dt: float, gravity=(0.0, 0.0, -9.81), interfaces: InterfaceTable | None = None,
@@ -495,7 +495,9 @@ class DemSystem:
         if zeta > 1.0:
             lever = (f"the damping limits it (zeta {zeta:.3g} > 1: the dashpots' rate, not the "
                      f"springs, sets the step): less damping (NormalDamping / TangentialDamping; "
-                     f"Hertz-Mindlin: a higher Restitution) would allow a larger one")
+                     f"Hertz-Mindlin: a higher Restitution) would allow a larger one"
+                     + ("" if self.implicit_damping else
+                        ", and so would implicit normal dashpots (Damping Implicit on the step)"))
         else:
             lever = ("the stiffness limits it: softer contacts (NormalPenalty / "
                      "TangentialPenalty; Hertz-Mindlin: YoungModulus) or heavier particles would "
@@ -519,6 +521,7 @@ class DemSystem:
         b = self.bodies
         self._inv_mass = 1.0 / b.mass
         self._inv_I = 1.0 / b.I
+        self._sq_m, self._sq_I = np.sqrt(b.mass), np.sqrt(b.I)
         nm = 1 + int(max(np.max(b.material, initial=0), np.max(self.walls.material, initial=0)))
         self._table = self.interfaces.as_array(nm)
         self._mat_all = np.concatenate([b.material, self.walls.material]).astype(np.int64)
@@ -619,7 +622,7 @@ class DemSystem:
         f, rounds, iterations = implicit_dashpots(
             law[0], law[1], point, law[4], fn, fdn, np.ascontiguousarray(coeffs[:, 1]), force,
             torque, b.x, b.v, b.q, b.L, self._inv_I, self._inv_mass, self.wall_d, self.wall_u,
-            b.principal_rotations(), np.sqrt(b.mass), np.sqrt(b.I), h)
+            b.principal_rotations(), self._sq_m, self._sq_I, h)
         self.dashpot_solves += (1, rounds, iterations)
         return f
 
@@ -736,8 +739,7 @@ class DemSystem:
         if (self.compiled_steps and self.domain is None and n_max >= 1
                 and self._sphere_steps is None):
             self._sphere_steps = SphereSteps.for_system(self) or False
-        fast = (self._sphere_steps if self.compiled_steps and self.domain is None
-                and not self.implicit_damping else None)
+        fast = self._sphere_steps if self.compiled_steps and self.domain is None else None
         self.last_steps = StepTally()
         if not fast:
             self._tallied_step()
