@@ -74,9 +74,9 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger, EnergySample, potential_energy
-from .implicit import implicit_dashpots
 from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
 from .hertz import has_hertz
+from .implicit import implicit_dashpots
 from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
