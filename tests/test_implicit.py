@@ -19,7 +19,7 @@ from nurbsdem.dynamics.integrator import _relative_point_velocities
 from nurbsdem.dynamics.rigid import omega_world
 from nurbsdem.errors import InputError
 
-from test_dynamics_system import MASS, PLANES, RADIUS
+from test_dynamics_system import MASS, assert_restart_bit_for_bit, paper_box
 
 
 # --------------------------------------------------------------------------- the QP (D1)
@@ -99,23 +99,9 @@ def test_dashpot_problem_matches_a_dense_solution(seed):
 
 
 # --------------------------------------------------------------------------- in a system
-def _box(implicit, substeps=None, law=ContactLaw(en=1e5, cn=1e2, et=1e4, ct=0.0, mu=0.5),
-         n=9, seed=3, kinds="CA"):
-    """Spheres with the paper's masses dropped into the paper's box (no lid)."""
-    s = DemSystem(dt=1e-3, interfaces=InterfaceTable(default=law), substeps=substeps,
-                  implicit_damping=implicit)
-    rng = np.random.default_rng(seed)
-    radii = []
-    for i in range(n):
-        k = kinds[i % len(kinds)]
-        xi = [0.04 + 0.085 * (i % 3), 0.06 + 0.12 * ((i // 3) % 2), 0.03 + 0.05 * i]
-        s.add_particle(MASS[k], sphere_inertia(MASS[k], RADIUS[k]), xi,
-                       v=rng.uniform(-0.3, 0.3, 3), radius=RADIUS[k])
-        radii.append(RADIUS[k])
-    for _ in PLANES:
-        s.add_wall()
-    s.set_contact_provider(SpherePlaneProvider(radii, PLANES))
-    return s
+def _box(implicit, substeps=None, law=ContactLaw(en=1e5, cn=1e2, et=1e4, ct=0.0, mu=0.5)):
+    """Nine spheres with the paper's masses of C and A dropped into the paper's box."""
+    return paper_box(substeps=substeps, n=9, law=law, kinds="CA", implicit=implicit)
 
 
 def test_dashpots_follow_the_clipped_law_at_the_end_velocity():
@@ -236,16 +222,7 @@ def test_energy_balance_and_restart_with_implicit_dashpots(tmp_path):
     assert np.isfinite(ref.bodies.x).all() and e.kinetic < 0.05 * e.initial_mechanical
     assert abs(e.balance_error) < 0.05 * e.dissipated
     assert ref.dashpot_solves[0] > 0
-    a = _box(True, law=law)
-    a.advance(250)
-    np.savez(tmp_path / "ck.npz", **a.get_state())
-    b = _box(True, law=law)
-    with np.load(tmp_path / "ck.npz") as f:
-        b.set_state({k: f[k] for k in f.files})
-    b.advance(250)
-    sr, sb = ref.get_state(), b.get_state()
-    for k in sr:
-        assert np.array_equal(sr[k], sb[k]), k
+    assert_restart_bit_for_bit(lambda: _box(True, law=law), 250, tmp_path)
 
 
 def test_implicit_damping_refuses_a_domain_decomposition():

@@ -72,6 +72,19 @@ def _same_results(a: Path, b: Path) -> None:
             np.testing.assert_array_equal(ra[key], rb[key])          # bit for bit
 
 
+def _both_paths(tmp_path: Path, name: str, text: str):
+    """The deck ``text`` solved by the Python path and by the compiled deck steps:
+    [(output folder, summary)] in that order."""
+    deck = tmp_path / name
+    deck.write_text(text)
+    outs = []
+    for compiled in (False, True):
+        o = tmp_path / ("compiled" if compiled else "python")
+        summary = Solver(parse_deck(deck), output=o, quiet=True, compiled_steps=compiled).run()
+        outs.append((o, summary))
+    return outs
+
+
 def test_compiled_steps_equal_the_python_path_bit_for_bit(runs):
     """Deposition, a lid moved to contact, pressed and lifted: every sample of results.h5 and
     every monitor line equal; the same counts of internal steps, LCPs and contacts."""
@@ -93,14 +106,7 @@ def test_compiled_hertz_mindlin_equals_the_python_path(tmp_path):
               "TangentialDamping 0 Friction 0.5",
               "Interface 1 Model HertzMindlin Restitution 0.5 Friction 0.5").replace(
         "Step 1 Dynamic Duration 0.2", "Step 1 Dynamic Duration 0.12")
-    deck = tmp_path / "hertz.inp"
-    deck.write_text(text)
-    outs = []
-    for compiled in (False, True):
-        o = tmp_path / ("compiled" if compiled else "python")
-        summary = Solver(parse_deck(deck), output=o, quiet=True, compiled_steps=compiled).run()
-        outs.append((o, summary))
-    (py, s_py), (cc, s_cc) = outs
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "hertz.inp", text)
     assert_same_final_state(cc, py, ("energy.csv", "contacts.csv", "hertz.csv", "wall_lid.csv"))
     assert s_py.substeps == s_cc.substeps and s_cc.active_max > 10
 
@@ -110,14 +116,7 @@ def test_compiled_implicit_dashpots_equal_the_python_path(tmp_path):
     Python path's results bit for bit, with fewer sub-steps than the explicit dashpots."""
     text = _sphere_deck().replace("TimeStep 1e-3", "TimeStep 1e-3 Damping Implicit").replace(
         "Step 1 Dynamic Duration 0.2", "Step 1 Dynamic Duration 0.12")
-    deck = tmp_path / "implicit.inp"
-    deck.write_text(text)
-    outs = []
-    for compiled in (False, True):
-        o = tmp_path / ("compiled" if compiled else "python")
-        s = Solver(parse_deck(deck), output=o, quiet=True, compiled_steps=compiled)
-        outs.append((o, s.run()))
-    (py, s_py), (cc, s_cc) = outs
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "implicit.inp", text)
     _same_results(py, cc)
     assert s_py.substeps == s_cc.substeps and s_cc.active_max > 10
     explicit_deck = tmp_path / "explicit.inp"
