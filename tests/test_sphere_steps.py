@@ -111,19 +111,18 @@ def test_compiled_hertz_mindlin_equals_the_python_path(tmp_path):
     assert s_py.substeps == s_cc.substeps and s_cc.active_max > 10
 
 
-def test_compiled_implicit_dashpots_equal_the_python_path(tmp_path):
+def test_compiled_implicit_dashpots_equal_the_python_path(runs, tmp_path):
     """``Damping Implicit`` (nurbsdem.dynamics.implicit) in the compiled deck steps: the
-    Python path's results bit for bit, with fewer sub-steps than the explicit dashpots."""
+    Python path's results bit for bit, with fewer sub-steps per deck step than the explicit
+    dashpots of the same deck (``runs``)."""
     text = _sphere_deck().replace("TimeStep 1e-3", "TimeStep 1e-3 Damping Implicit").replace(
         "Step 1 Dynamic Duration 0.2", "Step 1 Dynamic Duration 0.12")
     (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "implicit.inp", text)
     _same_results(py, cc)
     assert s_py.substeps == s_cc.substeps and s_cc.active_max > 10
-    explicit_deck = tmp_path / "explicit.inp"
-    explicit_deck.write_text(_sphere_deck().replace("Step 1 Dynamic Duration 0.2",
-                                                    "Step 1 Dynamic Duration 0.12"))
-    explicit = Solver(parse_deck(explicit_deck), write_output=False, quiet=True).run()
-    assert s_cc.substeps < explicit.substeps
+    _, out = runs
+    explicit = out[True][1]
+    assert s_cc.substeps / s_cc.steps < 0.7 * explicit.substeps / explicit.steps
 
 
 def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
