@@ -901,8 +901,9 @@ def _section_damping(rep: Report, workdir: Path, explicit) -> None:
             "(`benchmarks/bench_damping.py`; normal dashpots at the velocity after the step's "
             "two half kicks, `dynamics/implicit.py`): the springs alone set the step. The "
             "energy-balance error is the integration error, which grows with the step; the pack "
-            "is one realisation of a chaotic process (top and lid reaction are outcomes, not "
-            "invariants).\n\n" + md_table(head, body) + "\n\n"
+            "is one realisation of a chaotic process (the lid's height after ToContact, the "
+            "pack's top + 5 mm, and its reaction are outcomes, not invariants).\n\n"
+            + md_table(head, body) + "\n\n"
             f"Implicit / explicit wall time: **{figures['wall'] / explicit.wall_time:.2f}**.\n")
     rep.headline["damping"] = dict(explicit=explicit.wall_time, implicit=figures["wall"],
                                    balance=figures["balance"])
