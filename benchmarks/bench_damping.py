@@ -45,7 +45,7 @@ def _lid(out: Path) -> tuple[float, float]:
     |reaction z| (N)) from its monitor."""
     with open(out / "monitors" / "wall_lid.csv") as fh:
         rows = list(csv.DictReader(fh))
-    z0 = 0.60
+    z0 = 0.60                    # the lid's Point z in inputs/paper/compaction.inp
     moved = [float(r["displacement_z"]) for r in rows]
     # the first sample of the compaction: the lid sits where ToContact put it
     top = z0 + next((d for d in moved if d != 0.0), 0.0)
@@ -60,9 +60,13 @@ def run(damping: str, workdir: Path, quick: bool = False) -> dict:
     case = workdir / f"paper_{damping.lower()}.inp"
     case.write_text(deck_text(damping, quick))
     out = workdir / f"out_{damping.lower()}"
-    s = Solver(parse_deck(case), output=out, quiet=True).run()
+    return figures(damping, Solver(parse_deck(case), output=out, quiet=True).run(), out)
+
+
+def figures(label: str, s, out: Path) -> dict:
+    """The row of :func:`table` for a run's summary ``s`` and its output folder ``out``."""
     top, peak = _lid(out)
-    return dict(damping=damping, wall=s.wall_time, steps=s.steps, substeps=s.substeps,
+    return dict(damping=label, wall=s.wall_time, steps=s.steps, substeps=s.substeps,
                 lcps=s.lcps, failed=s.failed, balance=abs(s.balance_error),
                 share=abs(s.balance_error) / max(abs(s.balance_scale), 1e-300),
                 lcp=s.timers["LCP"], top=top, peak=peak)

@@ -890,12 +890,7 @@ def _section_damping(rep: Report, workdir: Path, explicit) -> None:
     """The paper's example again with ``Damping Implicit`` (benchmarks/bench_damping.py)."""
     import bench_damping as bd
     figures = bd.run("Implicit", workdir)
-    top, peak = bd._lid(workdir / "paper")
-    ex = dict(damping="Explicit (as shipped)", wall=explicit.wall_time, steps=explicit.steps,
-              substeps=explicit.substeps, lcps=explicit.lcps, failed=explicit.failed,
-              balance=abs(explicit.balance_error),
-              share=abs(explicit.balance_error) / max(abs(explicit.balance_scale), 1e-300),
-              lcp=explicit.timers["LCP"], top=top, peak=peak)
+    ex = bd.figures("Explicit (as shipped)", explicit, workdir / "paper")
     head, body = bd.table([ex, figures])
     rep.add("The same deck with `Damping Implicit` on its four timed steps "
             "(`benchmarks/bench_damping.py`; normal dashpots at the velocity after the step's "

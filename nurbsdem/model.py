@@ -264,9 +264,9 @@ DAMPING_SCHEMES = ("explicit", "implicit")
 @dataclass
 class DynamicStep(Step):
     """``Step ID Dynamic Duration T TimeStep DT [Damping Explicit|Implicit]``: integrate T
-    seconds with deck step DT (s); ``damping`` "implicit" evaluates the normal dashpots at the
-    end of each internal step (:mod:`nurbsdem.dynamics.implicit`), so that they do not limit
-    the stable step."""
+    seconds with deck step DT (s); ``damping`` "implicit" takes the normal dashpots at the
+    velocity after each force evaluation's two half kicks (:mod:`nurbsdem.dynamics.implicit`),
+    so that they do not limit the stable step."""
 
     duration: float = 0.0
     time_step: float = 0.0
@@ -554,8 +554,6 @@ def summary_text(model: Model) -> str:
     for s in model.steps:
         if isinstance(s, DynamicStep):
             desc = f"Dynamic {s.duration:g} s, time step {s.time_step:g} s"
-            if s.damping == "implicit":
-                desc += ", implicit dashpots"
         elif isinstance(s, ReplicateStep):
             desc = f"Replicate into {s.layers} layers over {s.height:g} m"
         else:
@@ -565,8 +563,8 @@ def summary_text(model: Model) -> str:
             else:
                 desc = (f"MoveWall {s.wall} by {_vec(s.displacement)} m in {s.duration:g} s, "
                         f"time step {s.time_step:g} s")
-                if s.damping == "implicit":
-                    desc += ", implicit dashpots"
+        if getattr(s, "damping", "explicit") == "implicit":
+            desc += ", implicit dashpots"
         out.append(f"  {s.id}: t = {t:g} s: {desc}")
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")

@@ -53,6 +53,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .forces import contact_loads
 from .integrator import _relative_point_velocities
 from .rigid import omega_world
 
@@ -300,3 +301,24 @@ def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                  - h * gf[c])
     rounds, iterations = solve_dashpots(body_a, body_b, rows, N, cn, f_el, w0, h, f)
     return f, rounds, iterations
+
+
+@njit(cache=True)
+def dashpots_of_evaluation(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                           material, table, spring, h, inv_mass_all, radius, mass, gravity,
+                           q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, Q: np.ndarray,
+                           sq_m: np.ndarray, sq_I: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The implicit normal dashpot forces (K,) N of a force evaluation given by the arguments
+    of :func:`~nurbsdem.dynamics.forces.contact_loads` (pos, vel (B,3): the N particles then
+    the walls): its explicit evaluation on a copy of the tangential springs, then
+    :func:`implicit_dashpots` with the particles' q, L (N,4), (N,3), 1/I, Q (principal frames)
+    and √m, √I.  Returns (f, active-set rounds, CG iterations).  The one entry of the Python
+    path and the compiled sphere loop, so that both give the same bits."""
+    N = mass.shape[0]
+    force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
+        body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material, table,
+        spring.copy(), h, inv_mass_all, radius, mass, gravity, False, np.zeros(0))
+    return implicit_dashpots(body_a, body_b, point, normal, fn, fdn,
+                             np.ascontiguousarray(coeffs[:, 1]), force, torque, pos[:N],
+                             vel[:N], q, L, inv_I, inv_mass_all[:N], pos[N:], vel[N:], Q, sq_m,
+                             sq_I, h)

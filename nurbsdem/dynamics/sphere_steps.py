@@ -16,7 +16,7 @@ deck steps:
    radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii`;
    :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential histories, gravity,
    and with ``Damping Implicit`` the implicit normal dashpots
-   (:func:`~nurbsdem.dynamics.implicit.implicit_dashpots`),
+   (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`),
 6. the second half kick;
 
 and after each deck step the guards (finite state, energy) and the Gershgorin gate of the
@@ -54,7 +54,7 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from .forces import add_kick_work, contact_loads, match_history
 from .hertz import has_hertz
-from .implicit import implicit_dashpots
+from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from, kinetic_energies
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
@@ -191,20 +191,6 @@ def _hertz_radii(sc, pl, sel, a, b, nrm, R):
 
 
 @njit(cache=True)
-def _dashpots(bc, a, b, point, nrm, fn, fdn, coeffs, force, torque, x, v, q, L, wall_d,
-              wall_u, h, counters) -> np.ndarray:
-    """DemSystem._implicit_dashpots after its explicit evaluation: the implicit normal
-    dashpot forces (K,) N, their solve counted in ``counters``."""
-    f, rounds, iterations = implicit_dashpots(
-        a, b, point, nrm, fn, fdn, np.ascontiguousarray(coeffs[:, 1]), force, torque, x, v, q,
-        L, bc.inv_I, bc.inv_mass, wall_d, wall_u, quats_to_matrices(q), bc.sq_m, bc.sq_I, h)
-    counters[DASHPOT_SOLVES] += 1
-    counters[DASHPOT_SOLVES + 1] += rounds
-    counters[DASHPOT_SOLVES + 2] += iterations
-    return f
-
-
-@njit(cache=True)
 def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray,
               v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray, R: np.ndarray,
               wall_d: np.ndarray, wall_u: np.ndarray, h: float, counters: np.ndarray):
@@ -228,11 +214,13 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
     given = cc.implicit and h > 0.0 and a.shape[0] > 0
     dashpot = np.zeros(0)
     if given:
-        force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
-            a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table,
-            spring.copy(), h, bc.inv_mass_all, radius, bc.mass, bc.gravity, False, dashpot)
-        dashpot = _dashpots(bc, a, b, point, nrm, fn, fdn, coeffs, force, torque, x, v, q, L,
-                            wall_d, wall_u, h, counters)
+        dashpot, rounds, iterations = dashpots_of_evaluation(
+            a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
+            bc.inv_mass_all, radius, bc.mass, bc.gravity, q, L, bc.inv_I, quats_to_matrices(q),
+            bc.sq_m, bc.sq_I)
+        counters[DASHPOT_SOLVES] += 1
+        counters[DASHPOT_SOLVES + 1] += rounds
+        counters[DASHPOT_SOLVES + 2] += iterations
     force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
         a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
         bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)

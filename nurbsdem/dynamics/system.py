@@ -76,7 +76,7 @@ from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger, EnergySample, potential_energy
 from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
 from .hertz import has_hertz
-from .implicit import implicit_dashpots
+from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
@@ -613,16 +613,11 @@ class DemSystem:
 
     def _implicit_dashpots(self, law: tuple, spring: np.ndarray, h: float) -> np.ndarray:
         """The normal dashpot forces (K,) N at the end of the internal step h (s)
-        (:func:`~nurbsdem.dynamics.implicit.implicit_dashpots`), from an explicit evaluation
-        of the same contacts (on a copy of the tangential springs)."""
+        (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`)."""
         b = self.bodies
-        force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
-            *law, spring.copy(), h, self._inv_mass_all, self.c_radius, b.mass, self.gravity,
-            False, np.zeros(0))
-        f, rounds, iterations = implicit_dashpots(
-            law[0], law[1], point, law[4], fn, fdn, np.ascontiguousarray(coeffs[:, 1]), force,
-            torque, b.x, b.v, b.q, b.L, self._inv_I, self._inv_mass, self.wall_d, self.wall_u,
-            b.principal_rotations(), self._sq_m, self._sq_I, h)
+        f, rounds, iterations = dashpots_of_evaluation(
+            *law, spring, h, self._inv_mass_all, self.c_radius, b.mass, self.gravity, b.q, b.L,
+            self._inv_I, b.principal_rotations(), self._sq_m, self._sq_I)
         self.dashpot_solves += (1, rounds, iterations)
         return f
 

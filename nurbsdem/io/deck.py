@@ -48,8 +48,9 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
       Step ID Replicate Layers L Height H
       Step ID MoveWall name ToContact [Gap g] [Direction dx dy dz]
       Step ID MoveWall name Displacement dx dy dz Duration T TimeStep dt [Damping ..]
-                # Damping Implicit: normal dashpots at the end of each internal step, so
-                # that strong damping does not shorten the stable step (default Explicit)
+                # Damping Implicit: normal dashpots at the velocity after each evaluation's
+                # two half kicks, so that strong damping does not shorten the stable step
+                # (default Explicit)
     Output
       Directory path                                     # default: results
       VTK [Every t] [Resolution n]                       # default 0.01 s, 8
