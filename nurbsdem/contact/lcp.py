@@ -75,8 +75,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ..jit import kernel
 from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
                      S1_C, S1_G, S1_INTERSECTING, S1_NONE, S1_PAW, S1_PBW, S1_ROW, S1_ROWS,
                      S1_SEPARATED, W4_COLS, W4_ROWS, nearest_seed, outward_normal, stage1)
@@ -145,7 +145,7 @@ def make_work() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             np.zeros((W4_ROWS, W4_COLS)))
 
 
-@njit(cache=True)
+@kernel
 def _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB, wf, wi, wfs):
     """Cold start of stage 1: the nearest pair of surface samples, approximately — A's sample
     farthest along the centroid direction d, then alternately the nearest sample of B and of
@@ -172,7 +172,7 @@ def _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB
     wfs[1, 1] = seedsB[2][kb, 1]
 
 
-@njit(cache=True)
+@kernel
 def _tangent_basis(d, t1, t2):
     """Orthonormal t1, t2 with t1 × t2 = d (d unit)."""
     ax = abs(d[0])
@@ -197,21 +197,21 @@ def _tangent_basis(d, t1, t2):
     t2[2] = d[0] * t1[1] - d[1] * t1[0]
 
 
-@njit(cache=True)
+@kernel
 def _rot_t(R, d, sign, out):
     """out = sign * Rᵀ d (world direction to file frame)."""
     for a in range(3):
         out[a] = sign * (R[0, a] * d[0] + R[1, a] * d[1] + R[2, a] * d[2])
 
 
-@njit(cache=True)
+@kernel
 def _to_world(pos, R, p, out):
     """out = pos + R p."""
     for a in range(3):
         out[a] = pos[a] + R[a, 0] * p[0] + R[a, 1] * p[1] + R[a, 2] * p[2]
 
 
-@njit(cache=True)
+@kernel
 def _quad_world(R, M, x, y):
     """xᵀ (R M Rᵀ) y."""
     s = 0.0
@@ -223,7 +223,7 @@ def _quad_world(R, M, x, y):
     return s
 
 
-@njit(cache=True)
+@kernel
 def _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, base, ws, sA, sB):
     """Both support mappings for the world direction d into rows ``base`` (0: current,
     _TRIAL: trial) of the work arrays; states in wi/wfs rows sA, sB. Returns (phi, nev, ok)."""
@@ -250,7 +250,7 @@ def _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, bas
     return phi, nA + nB, okA and okB
 
 
-@njit(cache=True)
+@kernel
 def _predict(wf, wfs, base, sA, sB, tA, tB, RA, RB, dnew):
     """First-order prediction of the trial parameters: u' = u + G (e' − e)."""
     eA = wf[_EA]
@@ -271,7 +271,7 @@ def _predict(wf, wfs, base, sA, sB, tA, tB, RA, RB, dnew):
     wfs[tB, 2] = wfs[sB, 2]
 
 
-@njit(cache=True)
+@kernel
 def _taylor_finish(wf, wfs, RA, RB, d, x1, x2):
     """Take a final Newton step of angle <= TAYLOR_ANGLE without new support mappings:
     d' = normalize(d + x1 t1 + x2 t2), p' = p + M (e' − e), u' = u + G (e' − e).
@@ -303,7 +303,7 @@ def _taylor_finish(wf, wfs, RA, RB, d, x1, x2):
         d[c] += dt[c]
 
 
-@njit(cache=True)
+@kernel
 def _copy_trial(wf, wi, wfs):
     """Make the trial rows/states current."""
     for r in range(12):
@@ -317,7 +317,7 @@ def _copy_trial(wf, wi, wfs):
         wfs[1, c] = wfs[3, c]
 
 
-@njit(cache=True)
+@kernel
 def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
                posA, RA, posB, RB, prevF, prevI, maskA, maskB, seedsA, seedsB,
                ws, wf, wi, wfs, w4, resF, resI, tol_nc):

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
+from ..jit import kernel
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_IT, I_NEV, I_PA, I_PB, I_STAGE,
                   I_VALID, NF, NI)
 from .support import evaluate
@@ -42,7 +43,7 @@ TOL = 1e-12
 STAGE_POINT = 3
 
 
-@njit(cache=True)
+@kernel
 def _local(pos, R, x, out):
     """out = Rᵀ (x − pos): a world point in the body's file frame."""
     for a in range(3):
@@ -50,7 +51,7 @@ def _local(pos, R, x, out):
                   + R[2, a] * (x[2] - pos[2]))
 
 
-@njit(cache=True)
+@kernel
 def _nearest_seed(seed_x, seed_p, seed_uv, s0, ns, c):
     """Index of the tabulated surface sample nearest to c (file frame)."""
     best, ib = 1e300, s0
@@ -62,7 +63,7 @@ def _nearest_seed(seed_x, seed_p, seed_uv, s0, ns, c):
     return ib
 
 
-@njit(cache=True)
+@kernel
 def closest_point(tab, ip, u, v, c, scale, ws, ev):
     """Newton for the point of patch ``ip`` nearest to c (file frame), from (u, v).
 

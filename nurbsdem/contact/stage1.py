@@ -63,8 +63,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ..jit import kernel
 from .support import (CREASE, FREE, OPEN_FIX, POLE_FIX, dot3, evaluate, pole_escape,
                       try_migrate)
 from .trust_region import jacobi_eig, tr_step_eig
@@ -116,7 +116,7 @@ def make_w4() -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- geometry
-@njit(cache=True)
+@kernel
 def _world(pos, R, ev, sign, p, c0, c1):
     """p = pos + R ev[0]; c0 = sign R ev[1]; c1 = sign R ev[2] (world)."""
     for a in range(3):
@@ -125,7 +125,7 @@ def _world(pos, R, ev, sign, p, c0, c1):
         c1[a] = sign * (R[a, 0] * ev[2, 0] + R[a, 1] * ev[2, 1] + R[a, 2] * ev[2, 2])
 
 
-@njit(cache=True)
+@kernel
 def outward_normal(c0, c1, p, centre, out):
     """Unit outward normal from two world tangents c0, c1 at p (sign chosen so that it points
     away from the body's centroid ``centre``; p − centre where the tangents are degenerate,
@@ -151,7 +151,7 @@ def outward_normal(c0, c1, p, centre, out):
     return True
 
 
-@njit(cache=True)
+@kernel
 def _clamp_state(tab, ist, fst):
     dom = tab[6]
     ip = ist[0]
@@ -159,7 +159,7 @@ def _clamp_state(tab, ist, fst):
     fst[1] = min(max(fst[1], dom[ip, 2]), dom[ip, 3])
 
 
-@njit(cache=True)
+@kernel
 def _bounds(tab, ist, fst, gu, gv, gl, g, pos, R, sign, ws, ev, e, ev2, tmp):
     """Bound handling of one body's point (paper 3.2.2; module docstring). ``gu, gv``: the
     gradient of f1 w.r.t. this body's (ζ, θ); the point's descent direction is −sign·g.
@@ -220,7 +220,7 @@ def _bounds(tab, ist, fst, gu, gv, gl, g, pos, R, sign, ws, ev, e, ev2, tmp):
     return False, nev
 
 
-@njit(cache=True)
+@kernel
 def _retest_creases(tab, ist, fst, g, gl, R, sign, ws, e, ev2, tmp):
     """Re-test parameters fixed at a crease at the final point (the crease decision was taken
     where the point first reached the edge). Returns (moved, evaluations)."""
@@ -253,7 +253,7 @@ def _retest_creases(tab, ist, fst, g, gl, R, sign, ws, e, ev2, tmp):
     return False, nev
 
 
-@njit(cache=True)
+@kernel
 def _taylor(ev, du, dv):
     """Second-order Taylor update of the point ev[0] (file frame) by (du, dv)."""
     for c in range(3):
@@ -262,7 +262,7 @@ def _taylor(ev, du, dv):
 
 
 # --------------------------------------------------------------------------- the solver
-@njit(cache=True)
+@kernel
 def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, wf, w4, out):
     """Minimise f1 (paper Eq. 5) from the state in ``ist``/``fst`` rows 0 (A) and 1 (B)
     (module docstring). ``scale`` (m): length scale of the pair (sum of bounding radii).
@@ -565,7 +565,7 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
 
 
 # --------------------------------------------------------------------------- cold seeds
-@njit(cache=True)
+@kernel
 def nearest_seed(seed_x, seed_p, s0, ns, mask, p0, pos, R, q):
     """Index of the seed (file-frame surface sample of a body in pose (pos, R)) nearest to
     the world point q, among seeds s0..s0+ns-1 allowed by ``mask`` (empty: all)."""

@@ -33,7 +33,7 @@ with ``J_F`` the tangent columns of the free parameters. ``G`` predicts the para
 the next direction (warm start of the next support mapping).
 
 Units: lengths in metres, parameters dimensionless. All functions are numba
-``@njit(cache=True)``; the table ``tab`` is the tuple
+compiled by :func:`nurbsdem.jit.kernel`; the table ``tab`` is the tuple
 ``(deg, ncp, koff, coff, knots, cpw, dom, nbr)`` of a packed pool (global patch indices).
 """
 from __future__ import annotations
@@ -41,10 +41,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from ..geometry.connectivity import edge_uv_nb, map_to_neighbour_nb
 from ..geometry.kernel import patch_derivs
+from ..jit import kernel
 from .trust_region import sym2_eig, tr_step1, tr_step2
 
 #: Parameter status codes.
@@ -67,26 +67,26 @@ POLE_SAMPLES = 16
 TAYLOR_STEP = 1e-6
 
 
-@njit(cache=True)
+@kernel
 def evaluate(tab, ip, u, v, order, ws, out):
     """Point and derivatives of patch ``ip`` of the table at (u, v) into ``out`` (6, 3)."""
     patch_derivs(tab[0], tab[1], tab[2], tab[3], tab[4], tab[5], ip, u, v, order, ws, out)
 
 
-@njit(cache=True)
+@kernel
 def dot3(a, b):
     """a · b for 3-vectors."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True)
+@kernel
 def norm3(a):
     """|a| for a 3-vector."""
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
 # --------------------------------------------------------------------------- edges
-@njit(cache=True)
+@kernel
 def edge_param(dom, ip, edge, u, v):
     """Edge parameter s in [0, 1] of (u, v) on edge ``edge`` of patch ip (DEVNOTES)."""
     if edge < 2:
@@ -96,7 +96,7 @@ def edge_param(dom, ip, edge, u, v):
     return (u - dom[ip, 0]) / w if w > 0.0 else 0.0
 
 
-@njit(cache=True)
+@kernel
 def inward_derivative(ev, edge, out):
     """Derivative pointing into the patch across edge ``edge`` (from an order >= 1 ``ev``)."""
     k = 1 if edge < 2 else 2
@@ -105,7 +105,7 @@ def inward_derivative(ev, edge, out):
         out[c] = sg * ev[k, c]
 
 
-@njit(cache=True)
+@kernel
 def try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp):
     """Patch change across edge ``edge`` of patch ip at (u, v) (paper 3.2.2).
 
@@ -131,7 +131,7 @@ def try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp):
     return 1, ip, u, v
 
 
-@njit(cache=True)
+@kernel
 def pole_escape(tab, ip, u, v, edge, e, ws, ev2, tmp):
     """At a pole (edge ``edge`` of patch ip collapsed to a point): the meridian along which
     ``e · s`` increases fastest. Returns (moved, u, v): moved = False means the pole is the
@@ -171,7 +171,7 @@ def pole_escape(tab, ip, u, v, edge, e, ws, ev2, tmp):
 
 
 # --------------------------------------------------------------------------- support map
-@njit(cache=True)
+@kernel
 def support_derivatives(tab, ip, u, v, e, fixu, fixv, scale, ws, ev, ev2, out_M, out_G):
     """dp/de (``out_M``, 3×3) and du/de (``out_G``, 2×3) at a support point (module doc).
 
@@ -248,7 +248,7 @@ def support_derivatives(tab, ip, u, v, e, fixu, fixv, scale, ws, ev, ev2, out_M,
                 out_M[a, c2] = src[k, a] * out_G[row, c2]
 
 
-@njit(cache=True)
+@kernel
 def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
     """Support point of a closed multi-patch body along the unit direction ``e`` (file frame).
 
@@ -494,7 +494,7 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
     return converged, nev
 
 
-@njit(cache=True)
+@kernel
 def seed_start(seed_x, seed_p, seed_uv, s0, ns, mask, p0, e):
     """Index of the seed (tabulated surface sample, file frame) with the largest e · x among
     seeds s0..s0+ns-1 whose patch is allowed by ``mask`` (mask empty: all allowed)."""

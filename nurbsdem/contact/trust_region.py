@@ -19,20 +19,20 @@ The eigen-decompositions: closed form for 2×2 (:func:`sym2_eig`), cyclic Jacobi
 value too) and :func:`tr_step_eig` (n-D, H already decomposed). One free parameter in the
 support mapping is the closed-form :func:`tr_step1`.
 
-All functions are numba ``@njit(cache=True)``; the callers pass the scratch arrays.
+All functions are compiled by :func:`nurbsdem.jit.kernel`; the callers pass the scratch arrays.
 """
 from __future__ import annotations
 
 import math
 
-from numba import njit
+from ..jit import kernel
 
 #: Iterations of the secular equation (it converges in a few; bisection bounds the rest).
 SECULAR_IT = 80
 
 
 # --------------------------------------------------------------------------- eigen-decompositions
-@njit(cache=True)
+@kernel
 def sym2_eig(b11, b12, b22):
     """Eigen-decomposition of a symmetric 2×2 matrix: (l1, l2, c, s) with l1 <= l2,
     q1 = (−s, c) the eigenvector of l1 and q2 = (c, s) the eigenvector of l2."""
@@ -43,7 +43,7 @@ def sym2_eig(b11, b12, b22):
     return m - r, m + r, math.cos(th), math.sin(th)
 
 
-@njit(cache=True)
+@kernel
 def jacobi_eig(A, n, Q, lam):
     """Eigen-decomposition of the leading n×n block (n <= 4) of the symmetric ``A`` by cyclic
     Jacobi rotations: A = Q diag(lam) Qᵀ (eigenvectors in the columns of Q). ``A`` is
@@ -91,7 +91,7 @@ def jacobi_eig(A, n, Q, lam):
 
 
 # --------------------------------------------------------------------------- the step
-@njit(cache=True, inline="always")   # hot: the 2-D callers run it with n = 2
+@kernel(inline="always")   # hot: the 2-D callers run it with n = 2
 def tr_solve(lam, a, n, delta, y):
     """The trust-region step in the eigenbasis (module docstring): minimise
     Σ a_i y_i + ½ λ_i y_i² subject to |y| <= delta, for n <= 4 components. Writes ``y``;
@@ -168,7 +168,7 @@ def tr_solve(lam, a, n, delta, y):
     return False
 
 
-@njit(cache=True)
+@kernel
 def tr_step_eig(lam, Q, gv, n, delta, y, s, a):
     """Trust-region step for H = Q diag(lam) Qᵀ (n×n, n <= 4) and gradient ``gv``: writes
     s (and y = Qᵀ s); returns whether it is the Newton step. ``a`` (n,): scratch."""
@@ -186,7 +186,7 @@ def tr_step_eig(lam, Q, gv, n, delta, y, s, a):
     return newton
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def tr_step2(b11, b12, b22, c1, c2, delta, w):
     """Trust-region step in 2-D: minimise m(x) = c·x + ½ xᵀBx subject to |x| <= delta,
     B = [[b11, b12], [b12, b22]]. ``w``: scratch, 3 rows of >= 2. Returns (x1, x2, m(x))."""
@@ -207,7 +207,7 @@ def tr_step2(b11, b12, b22, c1, c2, delta, w):
     return x1, x2, mval
 
 
-@njit(cache=True)
+@kernel
 def tr_step1(b, cg, delta):
     """Trust-region step in 1-D: minimise cg x + ½ b x² with |x| <= delta; returns (x, m(x))."""
     if b > 0.0 and abs(cg) <= b * delta:

@@ -27,6 +27,7 @@ import numba
 from numba import njit, prange
 
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
+from ..jit import kernel
 from . import lcp
 from .analytic import parallelogram_coordinates
 from .detect import PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, table_of
@@ -36,14 +37,15 @@ from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL
 from .support import CREASE, seed_start, support_map
 
 
-@njit(cache=True)
+@kernel
 def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, prevI,
-               ws, wf, wi, wfs, resF, resI):
+               ws, wf, wi, wfs, no_mask, resF, resI):
     """One body against one flat wall (module docstring); writes ``resF``/``resI`` rows.
 
     ``origin`` (3,) wall corner (u_min, v_min), ``a``/``b`` (3,) edge vectors along u and v
     (a × b along the wall normal, towards the particles), ``wdom`` the wall's parameter
-    rectangle (u_min, u_max, v_min, v_max)."""
+    rectangle (u_min, u_max, v_min, v_max); ``no_mask`` an empty bool array (every patch may
+    seed a cold start)."""
     for k in range(resF.shape[0]):
         resF[k] = 0.0
     for k in range(resI.shape[0]):
@@ -79,8 +81,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
         wfs[0, 0] = prevF[F_PAR]
         wfs[0, 1] = prevF[F_PAR + 1]
     else:
-        empty = np.zeros(0, np.bool_)
-        k = seed_start(seeds[0], seeds[1], seeds[2], info[2], info[3], empty, p0, e)
+        k = seed_start(seeds[0], seeds[1], seeds[2], info[2], info[3], no_mask, p0, e)
         wi[0, 0] = seeds[1][k]
         wfs[0, 0] = seeds[2][k, 0]
         wfs[0, 1] = seeds[2][k, 1]
@@ -160,7 +161,7 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
     try:
         solve_wall(t.tab, t.info[0], t.centroid[0], float(t.radius[0]), t.seeds, pos, R,
                    np.ascontiguousarray(o), np.ascontiguousarray(a), np.ascontiguousarray(b),
-                   wdom, pf, pi, ws, wf, wi, wfs, rf, ri)
+                   wdom, pf, pi, ws, wf, wi, wfs, np.zeros(0, np.bool_), rf, ri)
     except Exception:  # pragma: no cover - never abort the simulation
         ri[I_FAIL] = 1
         ri[I_VALID] = 0
@@ -175,10 +176,12 @@ def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
     wf = np.zeros((lcp.WORK_ROWS, 3))
     wi = np.zeros((4, 4), np.int64)
     wfs = np.zeros((4, 3))
+    no_mask = np.zeros(0, np.bool_)
     for k in range(k0, k1):
         s = sid[k]
         solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
-                   wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, res_f[k], res_i[k])
+                   wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, no_mask, res_f[k],
+                   res_i[k])
 
 
 @njit(cache=True, parallel=True)

@@ -37,9 +37,10 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-from numba import njit
+
 
 from ..errors import GeometryError
+from ..jit import kernel
 from .nurbs import Patch
 
 #: Edge names by edge index.
@@ -72,7 +73,7 @@ def edge_uv(dom, e: int, s):
     raise ValueError(f"edge index must be 0..3, got {e}")
 
 
-@njit(cache=True)
+@kernel
 def edge_uv_nb(dom, ip, e, s):
     """Compiled :func:`edge_uv` for patch ``ip`` of a pool's ``dom`` array: returns (u, v)."""
     u0 = dom[ip, 0]
@@ -88,7 +89,7 @@ def edge_uv_nb(dom, ip, e, s):
     return u0 + s * (u1 - u0), v1
 
 
-@njit(cache=True)
+@kernel
 def map_to_neighbour_nb(nbr, dom, i, e, s):
     """Compiled :meth:`Connectivity.map_to_neighbour` over the packed arrays
     ``nbr`` (P, 4, 3) int64 and ``dom`` (P, 4): returns (j, u, v).

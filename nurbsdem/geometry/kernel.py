@@ -26,6 +26,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from ..jit import kernel
 from .nurbs import Patch
 
 #: Highest degree the compiled kernel supports (workspace size).
@@ -38,7 +39,7 @@ def make_workspace() -> np.ndarray:
     return np.zeros((_WS_ROWS, MAX_DEGREE + 1))
 
 
-@njit(cache=True)
+@kernel
 def find_span(knots, k0, n, p, t):
     """Span index (relative to the patch's knot vector at offset k0) with n control points.
 
@@ -60,7 +61,7 @@ def find_span(knots, k0, n, p, t):
     return mid
 
 
-@njit(cache=True)
+@kernel
 def basis_ders(knots, k0, span, p, t, nd, ndu, a, left, right, ders):
     """Non-zero basis functions and derivatives up to ``nd`` (The NURBS Book A2.3).
 
@@ -112,7 +113,7 @@ def basis_ders(knots, k0, span, p, t, nd, ndu, a, left, right, ders):
         fac *= p - k
 
 
-@njit(cache=True)
+@kernel
 def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
     """Point and partial derivatives of patch ``ip`` of a pool at (u, v).
 
@@ -150,58 +151,83 @@ def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
     sv = find_span(knots, kv, nv, q, v)
     basis_ders(knots, ku, su, p, u, order, ndu, a, left, right, Nu)
     basis_ders(knots, kv, sv, q, v, order, ndu, a, left, right, Nv)
-    # homogeneous sums A[k] for (k,l) in (0,0),(1,0),(0,1),(2,0),(1,1),(0,2)
-    A00 = ws[m + 10]
-    A10 = ws[m + 11]
-    A01 = ws[m + 12]
-    A20 = ws[m + 13]
-    A11 = ws[m + 14]
-    A02 = ws[m + 15]
-    for c in range(4):
-        A00[c] = 0.0
-        A10[c] = 0.0
-        A01[c] = 0.0
-        A20[c] = 0.0
-        A11[c] = 0.0
-        A02[c] = 0.0
+    # homogeneous sums A_kl (x, y, z, w) for (k,l) in (0,0),(1,0),(0,1),(2,0),(1,1),(0,2):
+    # scalar accumulators, summed in the same order as rows of a workspace would be (same
+    # bits) but kept in registers (a row of ``ws`` may alias ``cpw`` for the compiler)
+    x00 = y00 = z00 = w00 = 0.0
+    x10 = y10 = z10 = w10 = 0.0
+    x01 = y01 = z01 = w01 = 0.0
+    x20 = y20 = z20 = w20 = 0.0
+    x11 = y11 = z11 = w11 = 0.0
+    x02 = y02 = z02 = w02 = 0.0
     for i in range(p + 1):
         row = c0 + (su - p + i) * nv + (sv - q)
         for j in range(q + 1):
             idx = row + j
+            cx = cpw[idx, 0]
+            cy = cpw[idx, 1]
+            cz = cpw[idx, 2]
+            cw = cpw[idx, 3]
             n00 = Nu[0, i] * Nv[0, j]
-            for c in range(4):
-                A00[c] += n00 * cpw[idx, c]
+            x00 += n00 * cx
+            y00 += n00 * cy
+            z00 += n00 * cz
+            w00 += n00 * cw
             if order >= 1:
                 n10 = Nu[1, i] * Nv[0, j]
                 n01 = Nu[0, i] * Nv[1, j]
-                for c in range(4):
-                    A10[c] += n10 * cpw[idx, c]
-                    A01[c] += n01 * cpw[idx, c]
+                x10 += n10 * cx
+                y10 += n10 * cy
+                z10 += n10 * cz
+                w10 += n10 * cw
+                x01 += n01 * cx
+                y01 += n01 * cy
+                z01 += n01 * cz
+                w01 += n01 * cw
             if order >= 2:
                 n20 = Nu[2, i] * Nv[0, j]
                 n11 = Nu[1, i] * Nv[1, j]
                 n02 = Nu[0, i] * Nv[2, j]
-                for c in range(4):
-                    A20[c] += n20 * cpw[idx, c]
-                    A11[c] += n11 * cpw[idx, c]
-                    A02[c] += n02 * cpw[idx, c]
-    w = A00[3]
+                x20 += n20 * cx
+                y20 += n20 * cy
+                z20 += n20 * cz
+                w20 += n20 * cw
+                x11 += n11 * cx
+                y11 += n11 * cy
+                z11 += n11 * cz
+                w11 += n11 * cw
+                x02 += n02 * cx
+                y02 += n02 * cy
+                z02 += n02 * cz
+                w02 += n02 * cw
+    _rational_derivs(order, x00, y00, z00, w00, x10, y10, z10, w10, x01, y01, z01, w01,
+                     x20, y20, z20, w20, x11, y11, z11, w11, x02, y02, z02, w02, out)
+
+
+@kernel
+def _rational_derivs(order, x00, y00, z00, w00, x10, y10, z10, w10, x01, y01, z01, w01,
+                     x20, y20, z20, w20, x11, y11, z11, w11, x02, y02, z02, w02, out):
+    """S, S_u, S_v, S_uu, S_uv, S_vv (rows of ``out``) from the homogeneous sums A_kl =
+    (x, y, z, w)_kl (quotient rule, The NURBS Book Eq. 4.8)."""
+    out[0, 0] = x00 / w00
+    out[0, 1] = y00 / w00
+    out[0, 2] = z00 / w00
+    if order < 1:
+        return
     for c in range(3):
-        out[0, c] = A00[c] / w
-    if order >= 1:
-        wu = A10[3]
-        wv = A01[3]
-        for c in range(3):
-            out[1, c] = (A10[c] - wu * out[0, c]) / w
-            out[2, c] = (A01[c] - wv * out[0, c]) / w
-        if order >= 2:
-            wuu = A20[3]
-            wuv = A11[3]
-            wvv = A02[3]
-            for c in range(3):
-                out[3, c] = (A20[c] - 2.0 * wu * out[1, c] - wuu * out[0, c]) / w
-                out[4, c] = (A11[c] - wu * out[2, c] - wv * out[1, c] - wuv * out[0, c]) / w
-                out[5, c] = (A02[c] - 2.0 * wv * out[2, c] - wvv * out[0, c]) / w
+        a10 = x10 if c == 0 else (y10 if c == 1 else z10)
+        a01 = x01 if c == 0 else (y01 if c == 1 else z01)
+        out[1, c] = (a10 - w10 * out[0, c]) / w00
+        out[2, c] = (a01 - w01 * out[0, c]) / w00
+    if order < 2:
+        return
+    for c in range(3):
+        a20 = x20 if c == 0 else (y20 if c == 1 else z20)
+        a11 = x11 if c == 0 else (y11 if c == 1 else z11)
+        a02 = x02 if c == 0 else (y02 if c == 1 else z02)
+        out[3, c] = (a20 - 2.0 * w10 * out[1, c] - w20 * out[0, c]) / w00
+        out[4, c] = (a11 - w10 * out[2, c] - w01 * out[1, c] - w11 * out[0, c]) / w00
+        out[5, c] = (a02 - 2.0 * w01 * out[2, c] - w02 * out[0, c]) / w00
 
 
 @njit(cache=True)
