@@ -3,9 +3,9 @@
 numba counts references to every array it handles (its runtime, NRT): each view a kernel
 takes of a workspace row (``wf[_PA]``) or a shape table (``tab[6]``) is an atomic increment
 and decrement, also inside a kernel called from a loop.  In the contact problem those atomic
-operations took about a third of a warm LCP's time on one thread, and more on two, where the
-threads share the shape tables' counters (measured with ``perf``; see
-``benchmarks/bench_lcp.py``).  A kernel that creates no array needs no counts:
+operations took about a third of a warm LCP's time on one thread (``perf`` on a batch of the
+paper example's compaction; the batch 1.5 x faster without them, same bits), and two threads
+share the shape tables' counters.  A kernel that creates no array needs no counts:
 :func:`kernel` compiles it without the runtime.  A kernel that allocates (``np.zeros`` …)
 keeps plain ``njit`` (numba refuses to compile an allocation here: the error names it).
 """
