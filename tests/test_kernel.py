@@ -103,3 +103,43 @@ def test_exact_ellipsoid_points_and_outward_normals():
         grad = x / a**2  # outward normal of the implicit surface
         cosang = np.einsum("ij,ij->i", n, grad) / np.linalg.norm(n, axis=1) / np.linalg.norm(grad, axis=1)
         assert cosang.min() > 1 - 1e-12
+
+
+# --------------------------------------------------------------------------- compilation
+def test_hot_kernels_compile_without_reference_counting():
+    """The LCP's kernels are compiled by nurbsdem.jit.kernel (no NRT: no atomic reference
+    counts on every view of a workspace or shape table); the evaluation still matches the
+    vectorised path above, so only the counting is gone."""
+    from nurbsdem.contact import lcp, support
+    from nurbsdem.jit import kernel
+    for f in (patch_derivs, support.support_map, lcp.solve_pair):
+        assert f.targetoptions.get("_nrt") is False, f.__name__
+    with pytest.raises(Exception, match="zeros"):      # a kernel may not allocate
+        kernel(lambda n: np.zeros(n))(3)
+
+
+def test_threading_layer_is_openmp_where_there_else_work_queue():
+    """Importing nurbsdem before numba picks OpenMP for the parallel LCP batches where the
+    GNU OpenMP runtime is installed, else numba's work queue; never TBB (see nurbsdem/__init__)."""
+    import ctypes
+    import os
+    import subprocess
+    import sys
+    code = ("import nurbsdem, numba, numpy as np\n"
+            "@numba.njit(parallel=True)\n"
+            "def total(x):\n"
+            "    s = 0.0\n"
+            "    for i in numba.prange(x.size):\n"
+            "        s += x[i]\n"
+            "    return s\n"
+            "assert total(np.ones(64)) == 64.0\n"
+            "print(numba.threading_layer())\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True).stdout.split()[-1]
+    try:
+        ctypes.CDLL("libgomp.so.1")
+        expected = "omp"
+    except OSError:
+        expected = "workqueue"
+    assert out == expected
