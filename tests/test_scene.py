@@ -51,28 +51,26 @@ def test_separated_bodies_give_no_contacts_and_moving_walls_follow():
 
 
 def test_failed_warm_starts_are_retried_cold():
+    """The compiled dispatch (nurbsdem.contact.listed) solves again, cold, exactly the rows
+    whose warm start failed, and takes the retries that converged."""
     from nurbsdem.contact.lcp import F_SD, I_FAIL, I_VALID, NF, NI
-    from nurbsdem.contact.scene import _retry_failed_cold
-
-    calls = []
-
-    def solve(idx, prev_f, prev_i):
-        """Pairs 1 and 2 fail when warm-started; pair 2 fails cold as well."""
-        calls.append((idx.copy(), prev_i[:, I_VALID].copy()))
-        rf = np.zeros((idx.size, NF))
-        ri = np.zeros((idx.size, NI), np.int64)
-        rf[:, F_SD] = -1e-6 * (idx + 1)
-        warm = prev_i[:, I_VALID] == 1
-        ri[:, I_FAIL] = ((idx == 1) & warm) | (idx == 2)
-        return rf, ri
+    from nurbsdem.contact.listed import _retry_cold, _take_converged
 
     prev_i = np.zeros((4, NI), np.int64)
     prev_i[:3, I_VALID] = 1            # pairs 0-2 have a previous solution, pair 3 is new
-    rf, ri = _retry_failed_cold(solve, np.zeros((4, NF)), prev_i)
-    assert ri[:, I_FAIL].tolist() == [0, 0, 1, 0]     # 1 recovered by the cold retry
-    assert len(calls) == 2 and calls[1][0].tolist() == [1, 2]
-    assert not calls[1][1].any()                       # the retry is cold
-    assert rf[1, F_SD] == pytest.approx(-2e-6)
+    rf = np.zeros((4, NF))
+    rf[:, F_SD] = -1e-6 * np.arange(1, 5)
+    ri = np.zeros((4, NI), np.int64)
+    ri[[1, 2, 3], I_FAIL] = 1          # warm: 1 and 2 fail; 3 fails from its (cold) start
+    again = _retry_cold(rf, ri, prev_i, np.empty(4, np.int64))
+    assert again.tolist() == [1, 2]    # pair 3 was cold already: not solved again
+    cf = np.zeros((2, NF))
+    cf[:, F_SD] = [-2.5e-6, -3.5e-6]
+    ci = np.zeros((2, NI), np.int64)
+    ci[1, I_FAIL] = 1                  # pair 2 fails cold as well
+    _take_converged(rf, ri, again, cf, ci)
+    assert ri[:, I_FAIL].tolist() == [0, 0, 1, 1]     # 1 recovered by the cold retry
+    assert rf[1, F_SD] == -2.5e-6 and rf[2, F_SD] == -3e-6
 
 
 def test_neighbour_lists_and_certificates_do_not_change_the_results(tmp_path):

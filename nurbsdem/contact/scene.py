@@ -17,8 +17,8 @@ that can touch) until some body's odometer has grown by s/2 since the build; the
 again.  With s = 0 it is built at every evaluation.
 
 Per force evaluation (:meth:`SceneContacts.__call__`) the LCP of each listed pair is solved in
-compiled code, in parallel (:func:`~nurbsdem.contact.detect_batch`,
-:func:`~nurbsdem.contact.detect_wall_batch`), warm-started from the pair's previous solution —
+compiled code, in parallel, dispatched by kind without per-pair Python
+(:func:`~nurbsdem.contact.listed.solve_due`), warm-started from the pair's previous solution —
 **unless the pair holds a separation certificate**: a pair solved as separated by a distance d
 cannot touch until the odometers of its two bodies have grown by d together (the distance
 between two sets shrinks by at most the largest displacements of their points), so its LCP is
@@ -64,19 +64,19 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
+import numba
 import numpy as np
 
 from ..dynamics.contactset import ContactSet
 from ..geometry.analytic import exact_sphere
-from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
 from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
-from .detect import ContactTable, detect_batch
-from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_STAGE,
-                  I_VALID, NF, NI)
-from .point_surface import STAGE_POINT, sphere_nurbs_rows
-from .verlet import active_and_near, advance_odometers, carry_rows, list_is_stale, renew_certificates
-from .wall import detect_wall_batch, wall_frame
+from .detect import ContactTable
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI
+from .listed import SceneTables, scene_tables, solve_due
+from .verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
+                     renew_certificates)
+from .wall import wall_frame
 
 log = logging.getLogger("nurbsdem")
 
@@ -163,6 +163,8 @@ class SceneContacts:
         #: the domain decomposition of a run on several MPI ranks (:mod:`nurbsdem.parallel`):
         #: the list holds the pairs with an owned particle; None: a serial run
         self.domain = None
+        #: the constant tables of the compiled dispatch (:mod:`nurbsdem.contact.listed`)
+        self._tables: SceneTables | None = None
 
     # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
@@ -313,69 +315,16 @@ class SceneContacts:
         return cs
 
     def _solve(self, due: np.ndarray, pos: np.ndarray, R: np.ndarray, wall_d: np.ndarray):
-        """LCP rows of the listed pairs ``due`` (warm-started, failed warm starts retried cold)."""
+        """LCP rows of the listed pairs ``due``, each by what its shapes are, warm-started,
+        failed warm starts retried cold (:func:`~nurbsdem.contact.listed.solve_due`)."""
         ps = self.pairs
-        N = self.n
-        rf = np.zeros((due.shape[0], NF))
-        ri = np.zeros((due.shape[0], NI), np.int64)
-        a, b = ps.a[due], ps.b[due]
-        sph = self.is_sphere
-        wall_pair = b >= N
-        sph_b = ~wall_pair & sph[np.minimum(b, N - 1)]
-        closed = sph[a] & (wall_pair | sph_b)
-        mixed = ~wall_pair & (sph[a] != sph_b) if self.point_surface else np.zeros(len(a), bool)
-        wall = np.nonzero(wall_pair & ~closed)[0]
-        idx = np.nonzero(closed)[0]
-        if idx.size:
-            closed_form_into(rf, ri, idx, a, b, N, pos, R, wall_d, self.body_shape,
-                             self.sphere_center, self.sphere_radius, self.wall_origin,
-                             self.wall_a, self.wall_b, self.wall_dom)
-        prev_f, prev_i = ps.rows_f[due], ps.rows_i[due]
-        part = np.nonzero(~wall_pair & ~closed & ~mixed)[0]
-        if mixed.any():
-            left = self._sphere_nurbs(np.nonzero(mixed)[0], a, b, pos, R, prev_f, prev_i, rf, ri)
-            part = np.union1d(part, left)
-            # a row of the point-to-surface solver cannot warm-start the LCP (no sphere patch)
-            prev_i = prev_i.copy()
-            prev_i[left[prev_i[left, I_STAGE] == STAGE_POINT], I_VALID] = 0
-        if part.size:
-            pa, pb, idx = a[part], b[part], due[part]
-
-            def solve_pairs(k, prev_f, prev_i):
-                return detect_batch(self.table, self.body_shape[pa[k]], pos[pa[k]], R[pa[k]],
-                                    self.body_shape[pb[k]], pos[pb[k]], R[pb[k]], prev_f, prev_i,
-                                    mask_a=ps.mask_a[idx[k]], mask_b=ps.mask_b[idx[k]])
-            rf[part], ri[part] = _retry_failed_cold(solve_pairs, prev_f[part], prev_i[part])
-        if wall.size:
-            wa, w, idx = a[wall], b[wall] - N, due[wall]
-            org = self.wall_origin[w] + wall_d[w]
-
-            def solve_walls(k, prev_f, prev_i):
-                return detect_wall_batch(self.table, self.body_shape[wa[k]], pos[wa[k]], R[wa[k]],
-                                         org[k], self.wall_a[w[k]], self.wall_b[w[k]],
-                                         self.wall_dom[w[k]], prev_f, prev_i)
-            rf[wall], ri[wall] = _retry_failed_cold(solve_walls, ps.rows_f[idx], ps.rows_i[idx])
+        if self._tables is None:
+            self._tables = scene_tables(self)
+        rf, ri, points = solve_due(self._tables, ps.a, ps.b, ps.mask_a, ps.mask_b, ps.rows_f,
+                                   ps.rows_i, np.ascontiguousarray(due, np.int64), pos, R,
+                                   np.ascontiguousarray(wall_d, float), numba.get_num_threads())
+        self.point_solves += points
         return rf, ri
-
-    def _sphere_nurbs(self, mixed, a, b, pos, R, prev_f, prev_i, rf, ri) -> np.ndarray:
-        """Rows of the pairs ``mixed`` (indices of a, b: an exact sphere and a NURBS particle)
-        by the point-to-surface problem (:mod:`nurbsdem.contact.point_surface`); returns the
-        indices it left to the LCP."""
-        ia, ib = a[mixed], b[mixed]
-        sphere_is_a = self.is_sphere[ia]
-        ball = np.where(sphere_is_a, ia, ib)
-        body = np.where(sphere_is_a, ib, ia)
-        c = sphere_centres(ball, pos, R, self.body_shape, self.sphere_center)
-        r = self.sphere_radius[self.body_shape[ball]]
-        f, i = np.empty((mixed.size, NF)), np.empty((mixed.size, NI), np.int64)
-        t = self.table
-        ok = sphere_nurbs_rows(t.tab, t.info, t.centroid, t.radius, t.seeds, self.body_shape[body],
-                               c, r, np.ascontiguousarray(pos[body]), np.ascontiguousarray(R[body]),
-                               sphere_is_a, np.ascontiguousarray(prev_f[mixed]),
-                               np.ascontiguousarray(prev_i[mixed]), f, i)
-        rf[mixed[ok]], ri[mixed[ok]] = f[ok], i[ok]
-        self.point_solves += int(ok.sum())
-        return mixed[~ok]
 
     def _assemble(self, due, rf, ri, reach, pose) -> ContactSet:
         """Store the new rows (failed ones answered by the previous solution moved rigidly,
@@ -418,27 +367,20 @@ class SceneContacts:
         """The ContactSet of the listed pairs' current rows (reach (L,): the sums of the pairs'
         odometers, for the gaps certified pairs leave)."""
         ps = self.pairs
-        rows_f, rows_i, keys = ps.rows_f, ps.rows_i, ps.keys
         dropped = np.zeros(0, np.int64) if dropped is None else dropped
-        sel, near, gap = active_and_near(rows_f, rows_i, ps.budget, reach)
-        deg = rows_i[sel, I_DEG]
-        return ContactSet(body_a=ps.a[sel].copy(), body_b=ps.b[sel].copy(),
-                          point_a=rows_f[sel, F_PA:F_PA + 3].copy(),
-                          point_b=rows_f[sel, F_PB:F_PB + 3].copy(),
-                          normal=rows_f[sel, F_N:F_N + 3].copy(), depth=-rows_f[sel, F_SD],
-                          key=keys[sel].copy(), degenerated=deg.astype(np.int64),
-                          monitored=monitored, active=int(sel.shape[0]),
+        (a, b, pa, pb, nrm, depth, key, deg, params, patch_a, patch_b, near_a, near_b,
+         near_point, near_normal, gap) = contact_arrays(ps.rows_f, ps.rows_i, ps.a, ps.b,
+                                                        ps.keys, ps.budget, reach)
+        return ContactSet(body_a=a, body_b=b, point_a=pa, point_b=pb, normal=nrm, depth=depth,
+                          key=key, degenerated=deg, monitored=monitored, active=int(a.shape[0]),
                           degenerated_count=int(np.count_nonzero(deg)), failed=failed,
                           reused=int(ps.reused.sum() if self.domain is None
                                      else (ps.reused & self.domain.counted(ps.a)).sum()),
                           dropped=int(len(dropped) if self.domain is None
                                       else self.domain.counted(dropped // self.nb).sum()),
-                          dropped_keys=dropped,
-                          near_a=ps.a[near].copy(), near_b=ps.b[near].copy(),
-                          near_point=0.5 * (rows_f[near, F_PA:F_PA + 3] + rows_f[near, F_PB:F_PB + 3]),
-                          near_normal=rows_f[near, F_N:F_N + 3].copy(), near_gap=gap,
-                          params=rows_f[sel, F_PAR:F_PAR + 4].copy(),
-                          patch_a=rows_i[sel, I_PA].copy(), patch_b=rows_i[sel, I_PB].copy())
+                          dropped_keys=dropped, near_a=near_a, near_b=near_b,
+                          near_point=near_point, near_normal=near_normal, near_gap=gap,
+                          params=params, patch_a=patch_a, patch_b=patch_b)
 
     def _moved(self, row_f: np.ndarray, row_i: np.ndarray, a: int, b: int, pose):
         """A previous LCP row moved rigidly from the previous call's poses to ``pose``: the
@@ -523,22 +465,3 @@ class _PairState:
             return cls.empty(P)
         return cls(*(np.array(st[k]) for k in ("list_a", "list_b", "keys", "mask_a", "mask_b",
                                                 "rows_f", "rows_i", "budget", "reused")))
-
-
-def _retry_failed_cold(solve, prev_f: np.ndarray, prev_i: np.ndarray):
-    """Solve all pairs (warm where a previous solution exists); pairs whose warm-started LCP
-    did not converge are solved once more from a cold start before they count as failed.
-
-    ``solve(index, prev_f, prev_i)`` solves the pairs ``index`` (an index array) and returns
-    their result rows. A warm start can stall where a cold one does not (e.g. in the flat
-    valley of a near-touching pair), so the cold retry removes most spurious failures at the
-    cost of one more LCP for the rare failed pair.
-    """
-    K = prev_f.shape[0]
-    rf, ri = solve(np.arange(K), prev_f, prev_i)
-    again = np.nonzero((ri[:, I_FAIL] == 1) & (prev_i[:, I_VALID] == 1))[0]
-    if again.size:
-        cf, ci = solve(again, np.zeros((again.size, NF)), np.zeros((again.size, NI), np.int64))
-        ok = ci[:, I_FAIL] == 0
-        rf[again[ok]], ri[again[ok]] = cf[ok], ci[ok]
-    return rf, ri

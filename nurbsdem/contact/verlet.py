@@ -14,7 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .lcp import F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI
+from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_VALID, NF,
+                  NI)
 
 #: a certificate is kept this fraction short of the distance it was solved for (round-off)
 CERTIFICATE_SHRINK = 1.0 - 1e-9
@@ -116,3 +117,38 @@ def active_and_near(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
         j = near[r]
         gap[r] = min(rows_f[j, F_SD], max(budget[j] - reach[j], 0.0))
     return sel[:ns].copy(), near[:nn].copy(), gap
+
+
+@njit(cache=True)
+def contact_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
+                   keys: np.ndarray, budget: np.ndarray, reach: np.ndarray):
+    """The arrays of a :class:`~nurbsdem.dynamics.contactset.ContactSet` from the listed
+    pairs' rows (:func:`active_and_near`): per active contact body_a, body_b, point_a,
+    point_b (m), normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a,
+    patch_b; per separated pair near_a, near_b, near_point (midpoint of the closest points,
+    m), near_normal, near_gap (m)."""
+    sel, near, gap = active_and_near(rows_f, rows_i, budget, reach)
+    K, M = sel.shape[0], near.shape[0]
+    pa, pb, nrm, params = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 4))
+    depth = np.empty(K)
+    deg, patch_a, patch_b = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
+    for r in range(K):
+        j = sel[r]
+        for c in range(3):
+            pa[r, c] = rows_f[j, F_PA + c]
+            pb[r, c] = rows_f[j, F_PB + c]
+            nrm[r, c] = rows_f[j, F_N + c]
+        for c in range(4):
+            params[r, c] = rows_f[j, F_PAR + c]
+        depth[r] = -rows_f[j, F_SD]
+        deg[r] = rows_i[j, I_DEG]
+        patch_a[r] = rows_i[j, I_PA]
+        patch_b[r] = rows_i[j, I_PB]
+    near_point, near_normal = np.empty((M, 3)), np.empty((M, 3))
+    for r in range(M):
+        j = near[r]
+        for c in range(3):
+            near_point[r, c] = 0.5 * (rows_f[j, F_PA + c] + rows_f[j, F_PB + c])
+            near_normal[r, c] = rows_f[j, F_N + c]
+    return (a[sel], b[sel], pa, pb, nrm, depth, keys[sel], deg, params, patch_a, patch_b,
+            a[near], b[near], near_point, near_normal, gap)

@@ -1,0 +1,237 @@
+"""The contact rows of the listed pairs due at one evaluation of a scene, in compiled code.
+
+:meth:`nurbsdem.contact.scene.SceneContacts._solve` hands over the pairs of its neighbour list
+that are not certified apart (``due``); :func:`solve_due` gives each its row by what its
+shapes are (the scene's module docstring):
+
+* exact sphere against exact sphere or a flat wall: the closed forms of
+  :mod:`nurbsdem.contact.analytic`;
+* exact sphere against a NURBS particle: the point-to-surface problem of
+  :mod:`nurbsdem.contact.point_surface` (when the scene allows it); the pairs it leaves go to
+  the LCP, a row of the point solver not counting as its warm start;
+* NURBS against NURBS: the LCP batch of :mod:`nurbsdem.contact.detect` (paper Sec. 3.2), warm
+  started from the previous row, directed by the pair's candidate patches (paper 3.1);
+* NURBS against a flat wall: the support-mapping kernel of :mod:`nurbsdem.contact.wall`.
+
+A warm-started LCP that did not converge is solved once more from a cold start before it
+counts as failed (a warm start can stall in the flat valley of a near-touching pair).  The
+failed rows that remain are left to the scene (moved solution or left out, once).
+
+The kernels and their inputs are those of the per-pair functions (``detect_batch``,
+``detect_wall_batch``, ``sphere_nurbs_rows``): the rows are the same to the bit; only the
+Python around them, about 0.8 ms per evaluation of the paper example's 300 listed pairs, is
+gone.  Units: metres; rows in the column layout of :mod:`nurbsdem.contact.lcp`; global body
+indices (particles 0..N-1, walls N..N+W-1).
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .analytic import closed_form_into, sphere_centres
+from .detect import PARALLEL_MIN_PAIRS, _batch_kernel, _solve_chunk
+from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI
+from .point_surface import STAGE_POINT, sphere_nurbs_rows
+from .wall import _wall_batch_kernel, _wall_chunk
+
+#: the scene's constant tables: the packed shapes (:class:`~nurbsdem.contact.detect.ContactTable`:
+#: tab, info, centroid, radius, seeds, nonconvexity), the bodies' shapes, the exact spheres
+#: and the flat walls' frames; n particles; point_surface: spheres against NURBS by the point
+#: solver
+SceneTables = namedtuple("SceneTables", "tab info centroid radius seeds nonconvexity body_shape "
+                         "is_sphere sphere_center sphere_radius wall_origin wall_a wall_b "
+                         "wall_dom n point_surface")
+
+
+def scene_tables(scene) -> SceneTables:
+    """The :class:`SceneTables` of a :class:`~nurbsdem.contact.scene.SceneContacts`."""
+    t = scene.table
+    return SceneTables(t.tab, t.info, t.centroid, t.radius, t.seeds, t.nonconvexity,
+                       scene.body_shape, np.ascontiguousarray(scene.is_sphere, np.bool_),
+                       np.ascontiguousarray(scene.sphere_center, float),
+                       np.ascontiguousarray(scene.sphere_radius, float), scene.wall_origin,
+                       scene.wall_a, scene.wall_b, scene.wall_dom, scene.n,
+                       scene.point_surface)
+
+
+@njit(cache=True)
+def _accept_within_nonconvexity(tol, res_f, res_i) -> None:
+    """:func:`nurbsdem.contact.detect._accept_within_nonconvexity` (same rule, compiled)."""
+    if not np.any(tol != 0.0):
+        return
+    for k in range(res_f.shape[0]):
+        if res_i[k, I_FAIL] == 1 and res_i[k, I_VALID] == 1 and abs(res_f[k, F_SD]) <= tol[k]:
+            res_i[k, I_FAIL] = 0
+
+
+@njit(cache=True)
+def _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
+    """:func:`nurbsdem.contact.detect.detect_batch` of the body pairs (a[k], b[k])."""
+    K = a.shape[0]
+    sa = st.body_shape[a]
+    sb = st.body_shape[b]
+    res_f = np.zeros((K, NF))
+    res_i = np.zeros((K, NI), np.int64)
+    if K >= PARALLEL_MIN_PAIRS:
+        _batch_kernel(st.tab, st.info, st.centroid, st.radius, st.seeds, st.nonconvexity, sa,
+                      pos[a], R[a], sb, pos[b], R[b], prev_f, prev_i, mask_a, mask_b, res_f,
+                      res_i, nt)
+    elif K:
+        _solve_chunk(st.tab, st.info, st.centroid, st.radius, st.seeds, st.nonconvexity, sa,
+                     pos[a], R[a], sb, pos[b], R[b], prev_f, prev_i, mask_a, mask_b, res_f,
+                     res_i, 0, K)
+    _accept_within_nonconvexity(st.nonconvexity[sa] + st.nonconvexity[sb], res_f, res_i)
+    return res_f, res_i
+
+
+@njit(cache=True)
+def _wall_rows(st, a, w, pos, R, wall_d, prev_f, prev_i, nt):
+    """:func:`nurbsdem.contact.wall.detect_wall_batch` of particles a[k] against walls w[k]."""
+    K = a.shape[0]
+    res_f = np.zeros((K, NF))
+    res_i = np.zeros((K, NI), np.int64)
+    origin = st.wall_origin[w] + wall_d[w]
+    if K >= PARALLEL_MIN_PAIRS:
+        _wall_batch_kernel(st.tab, st.info, st.centroid, st.radius, st.seeds, st.body_shape[a],
+                           pos[a], R[a], origin, st.wall_a[w], st.wall_b[w], st.wall_dom[w],
+                           prev_f, prev_i, res_f, res_i, nt)
+    elif K:
+        _wall_chunk(st.tab, st.info, st.centroid, st.radius, st.seeds, st.body_shape[a], pos[a],
+                    R[a], origin, st.wall_a[w], st.wall_b[w], st.wall_dom[w], prev_f, prev_i,
+                    res_f, res_i, 0, K)
+    return res_f, res_i
+
+
+@njit(cache=True)
+def _retry_cold(rf, ri, prev_i, again_rows):
+    """Rows ``again`` (indices into rf) whose warm start failed: returns their indices."""
+    n = 0
+    for k in range(rf.shape[0]):
+        if ri[k, I_FAIL] == 1 and prev_i[k, I_VALID] == 1:
+            again_rows[n] = k
+            n += 1
+    return again_rows[:n]
+
+
+@njit(cache=True)
+def _take_converged(rf, ri, again, cf, ci) -> None:
+    """Rows of the cold retry that converged replace the failed warm ones."""
+    for r in range(again.shape[0]):
+        if ci[r, I_FAIL] == 0:
+            rf[again[r]] = cf[r]
+            ri[again[r]] = ci[r]
+
+
+@njit(cache=True)
+def _lcp_rows_retried(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
+    """:func:`_lcp_rows`, failed warm starts solved once more cold
+    (:func:`nurbsdem.contact.scene._retry_failed_cold`)."""
+    rf, ri = _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt)
+    again = _retry_cold(rf, ri, prev_i, np.empty(a.shape[0], np.int64))
+    if again.shape[0]:
+        n = again.shape[0]
+        cf, ci = _lcp_rows(st, a[again], b[again], mask_a[again], mask_b[again], pos, R,
+                           np.zeros((n, NF)), np.zeros((n, NI), np.int64), nt)
+        _take_converged(rf, ri, again, cf, ci)
+    return rf, ri
+
+
+@njit(cache=True)
+def _wall_rows_retried(st, a, w, pos, R, wall_d, prev_f, prev_i, nt):
+    """:func:`_wall_rows` with the cold retry of :func:`_lcp_rows_retried`."""
+    rf, ri = _wall_rows(st, a, w, pos, R, wall_d, prev_f, prev_i, nt)
+    again = _retry_cold(rf, ri, prev_i, np.empty(a.shape[0], np.int64))
+    if again.shape[0]:
+        n = again.shape[0]
+        cf, ci = _wall_rows(st, a[again], w[again], pos, R, wall_d, np.zeros((n, NF)),
+                            np.zeros((n, NI), np.int64), nt)
+        _take_converged(rf, ri, again, cf, ci)
+    return rf, ri
+
+
+@njit(cache=True)
+def _kinds(st, a, b):
+    """Per due pair: 0 closed form, 1 sphere against NURBS (point solver), 2 LCP, 3 NURBS
+    against a flat wall."""
+    N = st.n
+    kind = np.empty(a.shape[0], np.int64)
+    for r in range(a.shape[0]):
+        wall = b[r] >= N
+        sph_a = st.is_sphere[a[r]]
+        sph_b = (not wall) and st.is_sphere[b[r]]
+        if sph_a and (wall or sph_b):
+            kind[r] = 0
+        elif wall:
+            kind[r] = 3
+        elif st.point_surface and sph_a != sph_b:
+            kind[r] = 1
+        else:
+            kind[r] = 2
+    return kind
+
+
+@njit(cache=True)
+def _sphere_nurbs(st, a, b, pos, R, prev_f, prev_i, rf, ri):
+    """Rows of the sphere–NURBS pairs (a[k], b[k]) by the point solver, into rf/ri; returns
+    the converged flags."""
+    sphere_is_a = st.is_sphere[a]
+    ball = np.where(sphere_is_a, a, b)
+    body = np.where(sphere_is_a, b, a)
+    c = sphere_centres(ball, pos, R, st.body_shape, st.sphere_center)
+    r = st.sphere_radius[st.body_shape[ball]]
+    return sphere_nurbs_rows(st.tab, st.info, st.centroid, st.radius, st.seeds,
+                             st.body_shape[body], c, r, pos[body], R[body], sphere_is_a,
+                             prev_f, prev_i, rf, ri)
+
+
+@njit(cache=True)
+def solve_due(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, wall_d, nt):
+    """Rows (len(due), NF) and (len(due), NI) of the listed pairs ``due`` (indices into the
+    list: bodies list_a/list_b, candidate patch masks (L, P), previous rows (L, NF/NI));
+    poses pos (N,3) m, R (N,3,3); wall displacements wall_d (W,3) m; nt threads.  Returns
+    (rows_f, rows_i, pairs solved by the point solver)."""
+    D = due.shape[0]
+    rf = np.zeros((D, NF))
+    ri = np.zeros((D, NI), np.int64)
+    a = list_a[due]
+    b = list_b[due]
+    prev_f = rows_f[due]
+    prev_i = rows_i[due]
+    kind = _kinds(st, a, b)
+    closed_form_into(rf, ri, np.nonzero(kind == 0)[0], a, b, st.n, pos, R, wall_d,
+                     st.body_shape, st.sphere_center, st.sphere_radius, st.wall_origin,
+                     st.wall_a, st.wall_b, st.wall_dom)
+    mixed = np.nonzero(kind == 1)[0]
+    point_solved = 0
+    if mixed.shape[0]:
+        f = np.empty((mixed.shape[0], NF))
+        i = np.empty((mixed.shape[0], NI), np.int64)
+        ok = _sphere_nurbs(st, a[mixed], b[mixed], pos, R, prev_f[mixed], prev_i[mixed], f, i)
+        for k in range(mixed.shape[0]):
+            j = mixed[k]
+            if ok[k]:
+                rf[j] = f[k]
+                ri[j] = i[k]
+                point_solved += 1
+            else:
+                kind[j] = 2
+                # a row of the point solver cannot warm-start the LCP (no sphere patch)
+                if prev_i[j, I_STAGE] == STAGE_POINT:
+                    prev_i[j, I_VALID] = 0
+    part = np.nonzero(kind == 2)[0]
+    if part.shape[0]:
+        lf, li = _lcp_rows_retried(st, a[part], b[part], mask_a[due[part]], mask_b[due[part]],
+                                   pos, R, prev_f[part], prev_i[part], nt)
+        for k in range(part.shape[0]):
+            rf[part[k]] = lf[k]
+            ri[part[k]] = li[k]
+    wall = np.nonzero(kind == 3)[0]
+    if wall.shape[0]:
+        wf, wi = _wall_rows_retried(st, a[wall], b[wall] - st.n, pos, R, wall_d, prev_f[wall],
+                                    prev_i[wall], nt)
+        for k in range(wall.shape[0]):
+            rf[wall[k]] = wf[k]
+            ri[wall[k]] = wi[k]
+    return rf, ri, point_solved
