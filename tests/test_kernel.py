@@ -143,3 +143,36 @@ def test_threading_layer_is_openmp_where_there_else_work_queue():
     except OSError:
         expected = "workqueue"
     assert out == expected
+
+
+# --------------------------------------------------------------------------- unrolled basis
+def test_unrolled_basis_module_is_what_the_generator_writes():
+    from nurbsdem.geometry import basis_codegen
+    assert basis_codegen.TARGET.read_text() == basis_codegen.module_source()
+
+
+@pytest.mark.parametrize("p", [2, 3])
+def test_unrolled_basis_equals_a2_3_to_the_bit(p):
+    """The straight-line basis of degrees 2 and 3 (used by patch_derivs) performs A2.3's
+    operations in its order: the same bits as the general routine, for random non-uniform
+    knots with repeated interior knots, at random parameters, at knots and at the ends."""
+    from nurbsdem.geometry import _basis_unrolled as unrolled
+    from nurbsdem.geometry.kernel import basis_ders, find_span
+    rng = np.random.default_rng(p)
+    for trial in range(20):
+        n = p + 1 + int(rng.integers(0, 6))
+        inner = np.sort(rng.uniform(0.0, 2.0, n - p - 1))
+        if inner.size > 1 and trial % 3 == 0:
+            inner[1] = inner[0]                                    # a repeated knot
+        knots = np.r_[[0.0] * (p + 1), inner, [2.0] * (p + 1)]
+        ts = np.r_[rng.uniform(0.0, 2.0, 40), knots, 0.0, 2.0]
+        for nd in (0, 1, 2):
+            fast = getattr(unrolled, f"basis_ders_{p}_{nd}")
+            for t in ts:
+                span = find_span(knots, 0, n, p, t)
+                ref = np.zeros((3, 10))
+                ws = np.zeros((16, 10))
+                basis_ders(knots, 0, span, p, t, nd, ws[:10], ws[10:12], ws[12], ws[13], ref)
+                got = np.zeros((3, 10))
+                fast(knots, 0, span, t, got)
+                assert np.array_equal(got[:nd + 1], ref[:nd + 1]), (p, nd, t)

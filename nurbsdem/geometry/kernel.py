@@ -27,6 +27,8 @@ import numpy as np
 from numba import njit
 
 from ..jit import kernel
+from ._basis_unrolled import (basis_ders_2_0, basis_ders_2_1, basis_ders_2_2, basis_ders_3_0,
+                              basis_ders_3_1, basis_ders_3_2)
 from .nurbs import Patch
 
 #: Highest degree the compiled kernel supports (workspace size).
@@ -113,6 +115,27 @@ def basis_ders(knots, k0, span, p, t, nd, ndu, a, left, right, ders):
         fac *= p - k
 
 
+@kernel(inline="always")
+def _basis(knots, k0, span, p, t, nd, ndu, a, left, right, ders):
+    """:func:`basis_ders`, unrolled for degrees 2 and 3 (same operations, same bits)."""
+    if p == 3:
+        if nd == 2:
+            basis_ders_3_2(knots, k0, span, t, ders)
+        elif nd == 1:
+            basis_ders_3_1(knots, k0, span, t, ders)
+        else:
+            basis_ders_3_0(knots, k0, span, t, ders)
+    elif p == 2:
+        if nd == 2:
+            basis_ders_2_2(knots, k0, span, t, ders)
+        elif nd == 1:
+            basis_ders_2_1(knots, k0, span, t, ders)
+        else:
+            basis_ders_2_0(knots, k0, span, t, ders)
+    else:
+        basis_ders(knots, k0, span, p, t, nd, ndu, a, left, right, ders)
+
+
 @kernel
 def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
     """Point and partial derivatives of patch ``ip`` of a pool at (u, v).
@@ -149,8 +172,8 @@ def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
         v = vmax
     su = find_span(knots, ku, nu, p, u)
     sv = find_span(knots, kv, nv, q, v)
-    basis_ders(knots, ku, su, p, u, order, ndu, a, left, right, Nu)
-    basis_ders(knots, kv, sv, q, v, order, ndu, a, left, right, Nv)
+    _basis(knots, ku, su, p, u, order, ndu, a, left, right, Nu)
+    _basis(knots, kv, sv, q, v, order, ndu, a, left, right, Nv)
     # homogeneous sums A_kl (x, y, z, w) for (k,l) in (0,0),(1,0),(0,1),(2,0),(1,1),(0,2):
     # scalar accumulators, summed in the same order as rows of a workspace would be (same
     # bits) but kept in registers (a row of ``ws`` may alias ``cpw`` for the compiler)
