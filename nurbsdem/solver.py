@@ -142,8 +142,8 @@ class Solver:
     restart_check: ``check(path) -> state``, reads the restart checkpoint and checks that it
         belongs to this model (default :func:`~nurbsdem.io.checkpoint.restart_state`: the
         decks compared; a model whose steps are added while it runs passes its own).
-    compiled_steps: run scenes of exact spheres in compiled deck steps
-        (:mod:`~nurbsdem.dynamics.sphere_steps`; the same results, bit for bit: a test says so).
+    compiled_steps: run the internal steps of a scene in compiled deck steps
+        (:mod:`~nurbsdem.dynamics.deck_steps`; the same results, bit for bit: a test says so).
     background_output: write the ParaView files from a worker thread while the time loop
         goes on (the same files, byte for byte; a checkpoint waits for them).
     comm: an MPI communicator with several ranks: the particles are decomposed over them

@@ -1,4 +1,4 @@
-"""Compiled deck steps for scenes of exact spheres (nurbsdem.dynamics.sphere_steps): the same
+"""Compiled deck steps for scenes of exact spheres (nurbsdem.dynamics.deck_steps): the same
 bits as the Python path, for every step kind, with the guard and restart."""
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
 
     def counting(self, n_max):
         done = original(self, n_max)
-        calls.append((done, self._sphere_steps is not False))
+        calls.append((done, self._deck_steps is not False))
         return done
     monkeypatch.setattr(system_module.DemSystem, "steps", counting)
     Solver(parse_deck(deck), write_output=False, quiet=True).run()

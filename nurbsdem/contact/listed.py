@@ -1,8 +1,13 @@
-"""The contact rows of the listed pairs due at one evaluation of a scene, in compiled code.
+"""The neighbour list of a scene and the contact rows of its pairs due at an evaluation, in
+compiled code (shared by :class:`nurbsdem.contact.scene.SceneContacts` and the compiled deck
+steps of :mod:`nurbsdem.dynamics.deck_steps`).
 
-:meth:`nurbsdem.contact.scene.SceneContacts._solve` hands over the pairs of its neighbour list
-that are not certified apart (``due``); :func:`solve_due` gives each its row by what its
-shapes are (the scene's module docstring):
+:func:`scene_list` builds the list with its skin (paper 3.1, levels 1–2): bounding spheres,
+then for each pair of NURBS bodies the patch boxes, whose overlaps become the pair's candidate
+patches (masks that direct a cold start); exact spheres need no boxes.
+
+Then the pairs of the list that are not certified apart (``due``) get their rows from
+:func:`solve_due`, each by what its shapes are (the scene's module docstring):
 
 * exact sphere against exact sphere or a flat wall: the closed forms of
   :mod:`nurbsdem.contact.analytic`;
@@ -31,6 +36,8 @@ import numpy as np
 from numba import njit
 
 from .analytic import closed_form_into, sphere_centres
+from .boxes import candidate_patch_pairs_batch_jit, candidate_patches_wall_batch_jit
+from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
 from .detect import PARALLEL_MIN_PAIRS, _batch_kernel, _solve_chunk
 from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
@@ -42,7 +49,8 @@ from .wall import _wall_batch_kernel, _wall_chunk
 #: solver
 SceneTables = namedtuple("SceneTables", "tab info centroid radius seeds nonconvexity body_shape "
                          "is_sphere sphere_center sphere_radius wall_origin wall_a wall_b "
-                         "wall_dom n point_surface")
+                         "wall_dom n point_surface body_radius boxes box_offsets n_patches "
+                         "wall_center wall_axes wall_half depth_wall nb")
 
 
 def scene_tables(scene) -> SceneTables:
@@ -53,9 +61,90 @@ def scene_tables(scene) -> SceneTables:
                        np.ascontiguousarray(scene.sphere_center, float),
                        np.ascontiguousarray(scene.sphere_radius, float), scene.wall_origin,
                        scene.wall_a, scene.wall_b, scene.wall_dom, scene.n,
-                       scene.point_surface)
+                       scene.point_surface, np.ascontiguousarray(scene.radius, float),
+                       np.ascontiguousarray(scene.boxes, float),
+                       np.ascontiguousarray(scene.box_offsets, np.int64), scene.P,
+                       np.ascontiguousarray(scene.wall_center, float),
+                       np.ascontiguousarray(scene.wall_axes, float),
+                       np.ascontiguousarray(scene.wall_half[:, :2], float),
+                       float(scene.depth_wall), scene.nb)
 
 
+# --------------------------------------------------------------------------- the list
+@njit(cache=True)
+def _directed(st, pairs, pos, R, m):
+    """The NURBS body pairs whose patch boxes overlap (within m), with their candidate
+    patches as (K, P) masks (paper 3.1)."""
+    cand = candidate_patch_pairs_batch_jit(st.boxes, st.box_offsets, st.body_shape, pos, R,
+                                           pairs, m)
+    keep = np.unique(cand[:, 0])
+    mask_a = np.zeros((keep.shape[0], st.n_patches), np.bool_)
+    mask_b = np.zeros((keep.shape[0], st.n_patches), np.bool_)
+    row = np.searchsorted(keep, cand[:, 0])
+    for c in range(cand.shape[0]):
+        mask_a[row[c], cand[c, 1]] = True
+        mask_b[row[c], cand[c, 2]] = True
+    return pairs[keep], mask_a, mask_b
+
+
+@njit(cache=True)
+def _wall_candidates(st, x, pos, R, wall_d, owned, m):
+    """(body, wall) pairs within reach of each other: exact spheres by their bounding sphere,
+    NURBS bodies when a patch box reaches the wall."""
+    wc = st.wall_center + wall_d
+    wp = sphere_wall_pairs_jit(x, st.body_radius, wc, st.wall_axes, st.wall_half, m)
+    mine = np.zeros(wp.shape[0], np.bool_)
+    for r in range(wp.shape[0]):
+        mine[r] = owned[wp[r, 0]]
+    wp = wp[mine]
+    ball = np.zeros(wp.shape[0], np.bool_)
+    for r in range(wp.shape[0]):
+        ball[r] = st.is_sphere[wp[r, 0]]
+    balls, wp = wp[ball], wp[~ball]
+    if wp.shape[0]:
+        cand = candidate_patches_wall_batch_jit(st.boxes, st.box_offsets, st.body_shape, pos, R,
+                                                wc, st.wall_axes, st.wall_half, wp, m,
+                                                st.depth_wall)
+        wp = wp[np.unique(cand[:, 0])]
+    return np.concatenate((wp, balls))
+
+
+@njit(cache=True)
+def scene_list(st, x, pos, R, wall_d, owned, m):
+    """The neighbour list: (a, b, keys, mask_a, mask_b) sorted by key a·(N+W) + b, of the
+    pairs within m (the margin plus the skin, m) of each other with a body this rank owns
+    (``owned`` (N,) bool; all True on one rank).  x (N,3) centroids, pos (N,3) and R (N,3,3)
+    the poses, wall_d (W,3) the walls' displacements (m)."""
+    N, P = st.n, st.n_patches
+    pairs = sphere_pairs_jit(x, st.body_radius, m) if N > 1 else np.zeros((0, 2), np.int64)
+    mine = np.zeros(pairs.shape[0], np.bool_)
+    both = np.zeros(pairs.shape[0], np.bool_)
+    for r in range(pairs.shape[0]):
+        mine[r] = owned[pairs[r, 0]] or owned[pairs[r, 1]]
+        both[r] = st.is_sphere[pairs[r, 0]] and st.is_sphere[pairs[r, 1]]
+    spheres, pairs = pairs[mine & both], pairs[mine & ~both]
+    mask_a = np.zeros((0, P), np.bool_)
+    mask_b = np.zeros((0, P), np.bool_)
+    if pairs.shape[0]:
+        pairs, mask_a, mask_b = _directed(st, pairs, pos, R, m)
+    wpairs = np.zeros((0, 2), np.int64)
+    if st.wall_center.shape[0] and N:
+        wpairs = _wall_candidates(st, x, pos, R, wall_d, owned, m)
+    K, S, W = pairs.shape[0], spheres.shape[0], wpairs.shape[0]
+    a = np.empty(K + S + W, np.int64)
+    b = np.empty(K + S + W, np.int64)
+    a[:K], b[:K] = pairs[:, 0], pairs[:, 1]
+    a[K:K + S], b[K:K + S] = spheres[:, 0], spheres[:, 1]
+    a[K + S:], b[K + S:] = wpairs[:, 0], N + wpairs[:, 1]
+    ma = np.ones((K + S + W, P), np.bool_)
+    mb = np.ones((K + S + W, P), np.bool_)
+    ma[:K], mb[:K] = mask_a, mask_b
+    keys = a * st.nb + b
+    order = np.argsort(keys, kind="mergesort")
+    return a[order], b[order], keys[order], ma[order], mb[order]
+
+
+# --------------------------------------------------------------------------- the due rows
 @njit(cache=True)
 def _accept_within_nonconvexity(tol, res_f, res_i) -> None:
     """:func:`nurbsdem.contact.detect._accept_within_nonconvexity` (same rule, compiled)."""

@@ -69,11 +69,11 @@ import numpy as np
 
 from ..dynamics.contactset import ContactSet
 from ..geometry.analytic import exact_sphere
-from .boxes import candidate_patch_pairs_batch, candidate_patches_wall_batch, pack_boxes
-from .broadphase import sphere_pairs, sphere_wall_pairs, wall_geometry
+from .boxes import pack_boxes
+from .broadphase import wall_geometry
 from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI
-from .listed import SceneTables, scene_tables, solve_due
+from .listed import SceneTables, scene_list, scene_tables, solve_due
 from .verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
                      renew_certificates)
 from .wall import wall_frame
@@ -226,57 +226,22 @@ class SceneContacts:
         return self.built_odo is None or list_is_stale(self.odo, self.built_odo, self.skin)
 
     def _build_list(self, kin, pos: np.ndarray, R: np.ndarray) -> None:
-        """Neighbour list with the skin (levels 1–2), carrying over the per-pair arrays."""
-        N = self.n
-        m = self.margin + self.skin
-        pairs = sphere_pairs(kin.x, self.radius, m) if N > 1 else np.zeros((0, 2), np.int64)
-        if self.domain is not None:      # this rank lists the pairs with an owned particle
-            pairs = pairs[self.domain.involves_owned(pairs[:, 0], pairs[:, 1])]
-        # exact spheres: the bounding-sphere test is exact, no patch boxes needed
-        both = self.is_sphere[pairs[:, 0]] & self.is_sphere[pairs[:, 1]]
-        spheres, pairs = pairs[both], pairs[~both]
-        mask_a = np.zeros((0, self.P), np.bool_)
-        mask_b = mask_a.copy()
-        if pairs.shape[0]:
-            cand = candidate_patch_pairs_batch(self.boxes, self.box_offsets, self.body_shape,
-                                               pos, R, pairs, m)
-            pairs, mask_a, mask_b = self._directed(pairs, cand)
-        pairs = np.concatenate([pairs, spheres])
-        ones = np.ones((spheres.shape[0], self.P), np.bool_)
-        mask_a, mask_b = np.concatenate([mask_a, ones]), np.concatenate([mask_b, ones])
-        wpairs = np.zeros((0, 2), np.int64)
-        if self.walls and N:
-            wc = self.wall_center + kin.wall_displacement
-            wpairs = sphere_wall_pairs(kin.x, self.radius, wc, self.wall_axes, self.wall_half, m)
-            if self.domain is not None:
-                wpairs = wpairs[self.domain.owned[wpairs[:, 0]]]
-            ball = self.is_sphere[wpairs[:, 0]]
-            balls, wpairs = wpairs[ball], wpairs[~ball]
-            if wpairs.shape[0]:
-                cand = candidate_patches_wall_batch(self.boxes, self.box_offsets, self.body_shape,
-                                                    pos, R, wc, self.wall_axes, self.wall_half,
-                                                    wpairs, m, self.depth_wall)
-                wpairs = wpairs[np.unique(cand[:, 0])] if cand.shape[0] else wpairs[:0]
-            wpairs = np.concatenate([wpairs, balls])
-        a = np.concatenate([pairs[:, 0], wpairs[:, 0]]).astype(np.int64)
-        b = np.concatenate([pairs[:, 1], N + wpairs[:, 1]]).astype(np.int64)
-        W = wpairs.shape[0]
-        mask_a = np.concatenate([mask_a, np.ones((W, self.P), np.bool_)])
-        mask_b = np.concatenate([mask_b, np.ones((W, self.P), np.bool_)])
-        self.pairs = self.pairs.rebuilt(a, b, a * self.nb + b, mask_a, mask_b)
+        """Neighbour list with the skin (levels 1–2, :func:`~nurbsdem.contact.listed.scene_list`),
+        carrying over the per-pair arrays."""
+        owned = (np.ones(self.n, np.bool_) if self.domain is None
+                 else np.ascontiguousarray(self.domain.owned, np.bool_))
+        a, b, keys, mask_a, mask_b = scene_list(
+            self.tables(), np.ascontiguousarray(kin.x, float), pos, R,
+            np.ascontiguousarray(kin.wall_displacement, float), owned, self.margin + self.skin)
+        self.pairs = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
         self.built_odo = self.odo.copy()
         self.builds += 1
 
-    def _directed(self, pairs: np.ndarray, cand: np.ndarray):
-        """Keep the body pairs with overlapping patch boxes, and their candidate patches as
-        (K, P) masks that direct the LCP's cold starts (paper 3.1)."""
-        keep = np.unique(cand[:, 0])
-        row = np.searchsorted(keep, cand[:, 0])
-        mask_a = np.zeros((keep.shape[0], self.P), np.bool_)
-        mask_b = np.zeros((keep.shape[0], self.P), np.bool_)
-        mask_a[row, cand[:, 1]] = True
-        mask_b[row, cand[:, 2]] = True
-        return pairs[keep], mask_a, mask_b
+    def tables(self) -> SceneTables:
+        """The scene's constant tables for the compiled list and dispatch."""
+        if self._tables is None:
+            self._tables = scene_tables(self)
+        return self._tables
 
     # ------------------------------------------------------------------ the provider
     def __call__(self, kin) -> ContactSet:
@@ -318,9 +283,7 @@ class SceneContacts:
         """LCP rows of the listed pairs ``due``, each by what its shapes are, warm-started,
         failed warm starts retried cold (:func:`~nurbsdem.contact.listed.solve_due`)."""
         ps = self.pairs
-        if self._tables is None:
-            self._tables = scene_tables(self)
-        rf, ri, points = solve_due(self._tables, ps.a, ps.b, ps.mask_a, ps.mask_b, ps.rows_f,
+        rf, ri, points = solve_due(self.tables(), ps.a, ps.b, ps.mask_a, ps.mask_b, ps.rows_f,
                                    ps.rows_i, np.ascontiguousarray(due, np.int64), pos, R,
                                    np.ascontiguousarray(wall_d, float), numba.get_num_threads())
         self.point_solves += points

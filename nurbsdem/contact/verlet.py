@@ -4,7 +4,7 @@ rebuild, the renewal of certificates, and the split of the listed pairs into act
 and separated ("near") pairs.
 
 These are plain functions over arrays, shared by the scene's Python orchestration and the
-compiled deck steps of :mod:`nurbsdem.dynamics.sphere_steps`, so that both paths see the same
+compiled deck steps of :mod:`nurbsdem.dynamics.deck_steps`, so that both paths see the same
 bits.  Units: metres; rows in the column layout of :mod:`nurbsdem.contact.lcp`.
 """
 from __future__ import annotations

@@ -11,7 +11,7 @@ Usage (what the solver does)::
     sysm.set_contact_provider(provider)        # provider(kin: Kinematics) -> ContactSet | None
     sysm.initialize()                          # first force evaluation, time-step control, E(0)
     for _ in range(n): sysm.step()             # one deck step = sysm.substeps internal steps
-    done = sysm.steps(n)                       # or up to n at once (compiled for exact spheres)
+    done = sysm.steps(n)                       # or up to n at once (compiled deck steps)
     e = sysm.energy(); r = sysm.wall_reaction; st = sysm.get_state(); sysm.set_state(st)
 
 Global body indices in a ContactSet: particles 0..N-1 in the order added, walls N..N+W-1.
@@ -79,7 +79,7 @@ from .hertz import has_hertz
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finite
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
-from .sphere_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, SphereSteps
+from .deck_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, DeckSteps
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           critical_step, critical_step_from_rates, needed_substeps,
                           network_count_stands, network_gershgorin, network_rates,
@@ -250,9 +250,9 @@ class DemSystem:
         self._compliance: list[tuple[float, float] | None] = []
         self._initialized = False
         self._peak = 0.0
-        #: run scenes of exact spheres in compiled deck steps (:meth:`steps`)
+        #: run scenes in compiled deck steps (:meth:`steps`)
         self.compiled_steps = True
-        self._sphere_steps = None
+        self._deck_steps = None
         self.last_steps = StepTally()
         #: (keys, springs) of tangential springs to start from (set before initialize()).
         self.initial_history: tuple[np.ndarray, np.ndarray] | None = None
@@ -725,16 +725,17 @@ class DemSystem:
     def steps(self, n_max: int) -> int:
         """Advance up to ``n_max`` deck steps (at least one) and return how many were done.
 
-        A scene of exact spheres (:class:`~nurbsdem.dynamics.sphere_steps.SphereSteps`) runs
-        them in compiled code, with the same results as :meth:`step`; it returns early when
-        the time-step control needs its exact estimate, and a deck step on which a guard fires
-        is repeated by :meth:`step` (which refines it or raises).  Other scenes: one
+        A scene provider on one rank (:class:`~nurbsdem.dynamics.deck_steps.DeckSteps`; not
+        Hertz–Mindlin with NURBS particles) runs them in compiled code, with the same results
+        as :meth:`step`; it returns early when the time-step control needs its exact estimate,
+        and a deck step on which a guard fires or an LCP fails is repeated by :meth:`step`
+        (which refines it, answers the failed LCP, or raises).  Other scenes: one
         :meth:`step`."""
         self.initialize()
         if (self.compiled_steps and self.domain is None and n_max >= 1
-                and self._sphere_steps is None):
-            self._sphere_steps = SphereSteps.for_system(self) or False
-        fast = self._sphere_steps if self.compiled_steps and self.domain is None else None
+                and self._deck_steps is None):
+            self._deck_steps = DeckSteps.for_system(self) or False
+        fast = self._deck_steps if self.compiled_steps and self.domain is None else None
         self.last_steps = StepTally()
         if not fast:
             self._tallied_step()

@@ -1,28 +1,30 @@
-"""Compiled deck steps for scenes of exact spheres and flat walls.
+"""Compiled deck steps: the internal step of :class:`~nurbsdem.dynamics.system.DemSystem`
+with a :class:`~nurbsdem.contact.scene.SceneContacts` provider, in one compiled loop.
 
-A scene whose particles are all exact spheres needs no LCP: every pair has a closed form
-(:mod:`nurbsdem.contact.analytic`).  What is left per internal step is bookkeeping, and in
-Python that costs more than the physics (about 0.6 ms per internal step for 112 spheres).
-Here the whole internal step of :class:`~nurbsdem.dynamics.system.DemSystem` with a
-:class:`~nurbsdem.contact.scene.SceneContacts` provider runs in one compiled loop over many
-deck steps:
+In Python the bookkeeping around the contact kernels costs more than the kernels in many
+scenes (about 0.6 ms per internal step for 112 exact spheres, which need no LCP; 0.7 ms of
+1.8 ms for the paper example's 112 NURBS particles).  Here the whole internal step runs in one
+compiled loop over many deck steps:
 
 1. half kick with its exact discrete work (:func:`~nurbsdem.dynamics.integrator.kick_with_terms`),
 2. the period-2 watch (:func:`~nurbsdem.dynamics.stepcontrol.alternation_update`),
 3. drift (:func:`~nurbsdem.dynamics.integrator.drift`),
-4. the contact search of the scene: odometers, the neighbour list with its skin, certificates
-   (:mod:`nurbsdem.contact.verlet`), closed-form rows of the pairs not certified apart,
+4. the contact search of the scene: odometers, the neighbour list with its skin and the
+   candidate patches (:func:`~nurbsdem.contact.listed.scene_list`), certificates
+   (:mod:`nurbsdem.contact.verlet`), the rows of the pairs not certified apart
+   (:func:`~nurbsdem.contact.listed.solve_due`: closed forms, point-to-surface, LCP batches),
 5. contact forces (paper Eq. 16–17, or Hertz–Mindlin with the contacts' exact equivalent
-   radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii`;
-   :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential histories, gravity,
-   and with ``Damping Implicit`` the implicit normal dashpots
+   radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii` — scenes of exact
+   spheres only; :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential
+   histories, gravity, and with ``Damping Implicit`` the implicit normal dashpots
    (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`),
 6. the second half kick;
 
 and after each deck step the guards (finite state, energy) and the Gershgorin gate of the
 time-step control.  It calls the same kernels as the Python path in the same order, so the
 trajectory is the same to the bit (tested); the energies used by the guard are summed in a
-different order (round-off only).
+different order (round-off only).  The time of the search and of the contact rows is taken
+with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time split.
 
 The loop returns to Python
 
@@ -31,9 +33,11 @@ The loop returns to Python
   estimate of the network, or at a periodic re-estimate (every ``NETWORK_RECHECK_STEPS`` deck
   steps, when the sub-step count could fall): the caller then runs
   :meth:`DemSystem._control_step` exactly as after a Python deck step;
-* with :data:`GUARD` when a guard fires (or a contact between materials without an interface
-  occurs) in deck step ``done + 1``: the caller restores the state of the loop's start and runs
-  those deck steps in Python, which repeats the failed one with more sub-steps (or raises).
+* with :data:`GUARD` when a guard fires, a contact between materials without an interface
+  occurs or an LCP fails (even after its cold retry) in deck step ``done + 1``: the caller
+  restores the state of the loop's start and runs those deck steps in Python, which repeats
+  the failed one with more sub-steps, answers the failed LCP once with its moved solution
+  (:mod:`nurbsdem.contact.scene`), or raises.
 
 Units: SI (m, s, kg); global body indices particles 0..N-1, walls N..N+W-1.
 """
@@ -45,13 +49,13 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from ..contact.analytic import closed_form_into
-from ..contact.broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
-from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_PA, I_PB
+from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_FAIL, I_PA, I_PB
+from ..contact.listed import scene_list, solve_due
 from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, list_is_stale,
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
+from ..jit import cycles, seconds_per_cycle
 from .forces import add_kick_work, contact_loads, match_history
 from .hertz import has_hertz
 from .implicit import dashpots_of_evaluation
@@ -63,12 +67,13 @@ from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, co
 #: the loop did all its deck steps / stopped for the time-step control / a guard fired
 DONE, CONTROL, GUARD = 0, 1, 2
 
-#: the scene's constant geometry (exact spheres, flat walls)
-SphereScene = namedtuple("SphereScene", "n nb radius skin margin certificates body_shape "
-                         "sphere_center sphere_radius wall_center wall_axes wall_half "
-                         "wall_origin wall_a wall_b wall_dom hertz tab first_patch")
+#: the scene's constants: the tables of :mod:`nurbsdem.contact.listed`, the skin, margin and
+#: certificates, the contact law (Hertz), the first patch of each shape (curvature radii);
+#: ``owned`` (N,) all True (one rank)
+SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
+                        "first_patch body_shape sphere_radius owned threads")
 #: the neighbour list and its per-pair arrays, odometers and the previous poses
-PairList = namedtuple("PairList", "a b keys rows_f rows_i budget odo built_odo "
+PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_odo "
                       "prev_pos prev_R prev_wall prev_x")
 #: constants of the bodies and the contact laws
 BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
@@ -86,46 +91,26 @@ Control = namedtuple("Control", "dt refine_decay safety dt_apriori dt_bound forc
 STEP_COUNT, REFINE, CALM, BUILDS, EVALS, MONITORED, ACTIVE_SUM, ACTIVE_MAX = range(8)
 #: ... then the implicit dashpots' solves, active-set rounds and CG iterations
 DASHPOT_SOLVES = 8
-N_COUNTERS = 11
+#: ... then the pairs the point-to-surface solver answered, and the CPU cycles spent in the
+#: search (odometers, list, certificates) and in the contact rows
+POINT_SOLVES, SEARCH_CYCLES, ROW_CYCLES = 11, 12, 13
+N_COUNTERS = 14
 
 
 # --------------------------------------------------------------------------- contact search
 @njit(cache=True)
-def _sphere_list(sc, x: np.ndarray, wall_d: np.ndarray):
-    """The neighbour list (levels 1 of the scene) of exact spheres: sphere pairs and sphere–
-    wall pairs within the skin, sorted by key a·(N+W) + b."""
-    N = sc.n
-    m = sc.margin + sc.skin
-    pairs = sphere_pairs_jit(x, sc.radius, m) if N > 1 else np.zeros((0, 2), np.int64)
-    W = sc.wall_center.shape[0]
-    if W and N:
-        wpairs = sphere_wall_pairs_jit(x, sc.radius, sc.wall_center + wall_d, sc.wall_axes,
-                                       sc.wall_half, m)
-    else:
-        wpairs = np.zeros((0, 2), np.int64)
-    P, Q = pairs.shape[0], wpairs.shape[0]
-    a = np.empty(P + Q, np.int64)
-    b = np.empty(P + Q, np.int64)
-    for r in range(P):
-        a[r] = pairs[r, 0]
-        b[r] = pairs[r, 1]
-    for r in range(Q):
-        a[P + r] = wpairs[r, 0]
-        b[P + r] = N + wpairs[r, 1]
-    keys = a * sc.nb + b
-    order = np.argsort(keys, kind="mergesort")
-    return a[order].copy(), b[order].copy(), keys[order].copy()
-
-
-@njit(cache=True)
 def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray,
             counters: np.ndarray):
-    """One call of the scene's contact search (SceneContacts.__call__ for exact spheres):
-    returns the new PairList, the pairs' reach (sum of odometers) and the number solved."""
+    """One call of the scene's contact search (:meth:`SceneContacts.__call__`): returns the
+    new PairList, the pairs' reach (sum of odometers), the number solved and whether an LCP
+    failed (the Python path answers it: module docstring)."""
+    c0 = cycles()
     odo = advance_odometers(pl.odo, x, pl.prev_x, R, pl.prev_R, sc.radius, wall_d, pl.prev_wall)
     a, b, keys, built = pl.a, pl.b, pl.keys, pl.built_odo
+    mask_a, mask_b = pl.mask_a, pl.mask_b
     if list_is_stale(odo, built, sc.skin):
-        a, b, keys = _sphere_list(sc, x, wall_d)
+        a, b, keys, mask_a, mask_b = scene_list(sc.tables, x, pos, R, wall_d, sc.owned,
+                                                sc.margin + sc.skin)
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
         built = odo.copy()
@@ -140,11 +125,21 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
             due[n_due] = j
             n_due += 1
     due = due[:n_due]
-    closed_form_into(rows_f, rows_i, due, a, b, sc.n, pos, R, wall_d, sc.body_shape,
-                     sc.sphere_center, sc.sphere_radius, sc.wall_origin, sc.wall_a, sc.wall_b,
-                     sc.wall_dom)
+    c1 = cycles()
+    rf, ri, points = solve_due(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i, due, pos, R,
+                               wall_d, sc.threads)
+    c2 = cycles()
+    failed = False
+    for r in range(n_due):
+        rows_f[due[r]] = rf[r]
+        rows_i[due[r]] = ri[r]
+        failed = failed or ri[r, I_FAIL] != 0
     renew_certificates(budget, due, rows_f, rows_i, reach)
-    return PairList(a, b, keys, rows_f, rows_i, budget, odo, built, pos, R, wall_d, x), reach, n_due
+    counters[POINT_SOLVES] += points
+    counters[SEARCH_CYCLES] += (c1 - c0) + (cycles() - c2)
+    counters[ROW_CYCLES] += c2 - c1
+    return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built, pos, R,
+                     wall_d, x), reach, n_due, failed)
 
 
 # --------------------------------------------------------------------------- forces
@@ -331,7 +326,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             omega = omega_world(q, L, bc.inv_I)
             wall_d, wall_u = d_new.copy(), u_new.copy()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
-            pl, reach, monitored = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
+            pl, reach, monitored, failed = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
+            if failed:
+                return GUARD, j, pl, ev, wall_d, wall_u
             counters[EVALS] += 1
             counters[MONITORED] += monitored
             ok, ev = _evaluate(sc, bc, cc, pl, reach, monitored, ev, x, v, q, L, omega, R,
@@ -357,37 +354,36 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
 
 
 # --------------------------------------------------------------------------- the Python side
-class SphereSteps:
+class DeckSteps:
     """Compiled deck steps of a :class:`~nurbsdem.dynamics.system.DemSystem` whose contact
-    provider is a :class:`~nurbsdem.contact.scene.SceneContacts` of exact spheres (see the
-    module docstring); :meth:`for_system` says whether a system qualifies."""
+    provider is a :class:`~nurbsdem.contact.scene.SceneContacts` (see the module docstring);
+    :meth:`for_system` says whether a system qualifies."""
 
     def __init__(self, system, scene) -> None:
+        import numba
         self.system, self.scene = system, scene
         s, b = system, system.bodies
-        self.sc = SphereScene(scene.n, scene.nb, scene.radius, scene.skin, scene.margin,
-                              scene.certificates, scene.body_shape,
-                              np.ascontiguousarray(scene.sphere_center),
-                              np.ascontiguousarray(scene.sphere_radius),
-                              scene.wall_center, scene.wall_axes,
-                              np.ascontiguousarray(scene.wall_half[:, :2]), scene.wall_origin,
-                              scene.wall_a, scene.wall_b, scene.wall_dom, has_hertz(s._table),
-                              scene.table.tab[:7],
-                              np.ascontiguousarray(scene.table.info[:, 0], np.int64))
+        self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
+                             scene.certificates, has_hertz(s._table), scene.table.tab[:7],
+                             np.ascontiguousarray(scene.table.info[:, 0], np.int64),
+                             scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
+                             np.ones(scene.n, np.bool_), numba.get_num_threads())
         self.bc = BodyConst(b.mass, s._inv_mass, s._inv_I, b.P, b.centroid_file, s._ell,
                             s._inv_mass_all, s._mat_all, s._table, s.gravity, s._g_norm,
                             s._alt_floor_x, s._alt_floor_L, s._sq_m, s._sq_I)
 
     @staticmethod
-    def for_system(system) -> "SphereSteps | None":
-        """The compiled stepper when every particle is an exact sphere under linear contact
-        laws and the provider is a scene that has been called once; else None."""
+    def for_system(system) -> "DeckSteps | None":
+        """The compiled stepper when the provider is a scene on one rank that has been called
+        once, under linear contact laws or with exact spheres only (the Hertz radii of NURBS
+        contacts are taken in Python); else None."""
         from ..contact.scene import SceneContacts
         scene = system.provider
-        if (not isinstance(scene, SceneContacts) or scene.n == 0 or not scene.is_sphere.all()
-                or scene.prev_pose is None or scene.built_odo is None):
+        if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
+                or scene.prev_pose is None or scene.built_odo is None
+                or (has_hertz(system._table) and not scene.is_sphere.all())):
             return None
-        return SphereSteps(system, scene)
+        return DeckSteps(system, scene)
 
     def _wall_tables(self, n_deck: int, n_sub: int) -> tuple[np.ndarray, np.ndarray]:
         """(n_deck·n_sub, W, 3) wall displacements and velocities at the ends of the internal
@@ -401,8 +397,8 @@ class SphereSteps:
         sc = self.scene
         ps = sc.pairs
         pos, R, wall, x = sc.prev_pose
-        return PairList(ps.a, ps.b, ps.keys, ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy(), sc.odo,
-                        sc.built_odo, np.ascontiguousarray(pos, float),
+        return PairList(ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b, ps.rows_f.copy(),
+                        ps.rows_i.copy(), ps.budget.copy(), sc.odo, sc.built_odo, np.ascontiguousarray(pos, float),
                         np.ascontiguousarray(R, float), np.ascontiguousarray(wall, float),
                         np.ascontiguousarray(x, float))
 
@@ -457,16 +453,16 @@ class SphereSteps:
         from ..contact.scene import _PairState
         from .energy import EnergyLedger
         s, sc = self.system, self.scene
-        P = sc.P
-        L = pl.a.shape[0]
-        ones = np.ones((L, P), np.bool_)
-        sc.pairs = _PairState(pl.a, pl.b, pl.keys, ones, ones.copy(), pl.rows_f, pl.rows_i,
-                              pl.budget, np.zeros(L, bool))
+        sc.pairs = _PairState(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f, pl.rows_i,
+                              pl.budget, np.zeros(pl.a.shape[0], bool))
         sc.odo, sc.built_odo = pl.odo, pl.built_odo
         sc.prev_pose = (pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
         sc.builds += int(counters[BUILDS])
         sc.timers.calls += int(counters[EVALS])
         sc.timers.lcps += int(counters[MONITORED])
+        sc.point_solves += int(counters[POINT_SOLVES])
+        sc.timers.global_search += float(counters[SEARCH_CYCLES]) * seconds_per_cycle()
+        sc.timers.lcp += float(counters[ROW_CYCLES]) * seconds_per_cycle()
         sc.last = sc.contact_set(ev.reach, monitored=int(ev.monitored))
         s.last_contacts = sc.last
         s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot = ev.a, ev.b, ev.point, ev.normal, ev.ftot
