@@ -32,7 +32,7 @@ import numpy as np
 from . import __version__
 from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
-from .dynamics.hertz import law_from_deck as hertz_law_from_deck
+from .dynamics.hertz import has_hertz, law_from_deck as hertz_law_from_deck
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
@@ -379,7 +379,7 @@ class Solver:
             cs = self.scene.last if self.scene is not None else None
             if cs is not None:
                 writers.monitors.contacts(t, cs.monitored, cs.active, cs.degenerated_count, cs.failed)
-                if s.c_coeffs.ndim == 2 and s.c_coeffs.shape[0] == s.c_a.shape[0]:   # Hertz
+                if has_hertz(s._table):          # Hertz–Mindlin interfaces (not linear laws)
                     writers.monitors.hertz(t, s.c_a.shape[0], getattr(s, "hertz_fallback", 0),
                                            s.c_radius, s.c_coeffs[:, 0])
             reaction = s.wall_reaction
@@ -407,7 +407,7 @@ class Solver:
         out = dict(point=tab["point"], force_normal=fn, force_tangential=tab["force"] - fn,
                    penetration=cs.depth, degenerated=cs.degenerated,
                    body_a=cs.body_a, body_b=cs.body_b)
-        if s.c_coeffs.ndim == 2 and s.c_coeffs.shape[0] == cs.active:   # Hertz–Mindlin laws
+        if has_hertz(s._table) and s.c_coeffs.shape[0] == cs.active:   # Hertz–Mindlin laws
             out.update(stiffness_normal=s.c_coeffs[:, 0], contact_radius=s.c_radius)
         return out
 

@@ -71,4 +71,5 @@ def test_compiled_nurbs_steps_equal_the_python_path(tmp_path, monkeypatch, name,
         assert getattr(s_py, key) == getattr(s_cc, key), key
     assert s_cc.active_max >= 8 and s_cc.lcps > 1000          # a pack pressed by the lid
     assert s_cc.failed == 0
+    assert not (cc / "monitors" / "hertz.csv").exists()       # linear laws: no Hertz monitor
     assert any(used) and not all(used)                         # the Python run, then compiled
