@@ -297,7 +297,7 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
                                 cc.bound_slack, counters[REFINE], substeps)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
                    counters, peak):

@@ -368,27 +368,24 @@ class ParaViewWriter:
     # -- particles ---------------------------------------------------------------
     def particle_mesh(self, bodies: "Bodies") -> tuple[np.ndarray, np.ndarray, dict, dict]:
         """World points, quads, point data and cell data of all particles."""
-        R = bodies.rotation_matrices()
-        P, Q, pd, cd = [], [], {k: [] for k in ("particle_id", "shape_id", "velocity",
-                                                "angular_velocity")}, []
-        off = 0
-        for i in range(len(bodies)):
-            rel, quads, pid = self._shape_mesh[int(bodies.shape_id[i])]
-            m = len(rel)
-            P.append(bodies.position[i] + rel @ R[i].T)
-            Q.append(quads + off)
-            cd.append(pid)
-            pd["particle_id"].append(np.full(m, bodies.id[i], np.int64))
-            pd["shape_id"].append(np.full(m, bodies.shape_id[i], np.int64))
-            pd["velocity"].append(np.broadcast_to(bodies.velocity[i], (m, 3)))
-            pd["angular_velocity"].append(np.broadcast_to(bodies.angular_velocity[i], (m, 3)))
-            off += m
-        if not P:
+        n = len(bodies)
+        if not n:
             return (np.zeros((0, 3)), np.zeros((0, 4), np.int64),
                     {"particle_id": np.zeros(0), "shape_id": np.zeros(0),
                      "velocity": np.zeros((0, 3)), "angular_velocity": np.zeros((0, 3))}, {})
-        point_data = {k: np.concatenate(v) for k, v in pd.items()}
-        return np.concatenate(P), np.concatenate(Q), point_data, {"patch_id": [np.concatenate(cd)]}
+        R = bodies.rotation_matrices()
+        meshes = [self._shape_mesh[int(s)] for s in bodies.shape_id]
+        counts = np.array([len(rel) for rel, _, _ in meshes], np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        points = np.concatenate([bodies.position[i] + rel @ R[i].T
+                                 for i, (rel, _, _) in enumerate(meshes)])
+        quads = np.concatenate([quads + off for (_, quads, _), off in zip(meshes, offsets)])
+        point_data = {"particle_id": np.repeat(np.asarray(bodies.id, np.int64), counts),
+                      "shape_id": np.repeat(np.asarray(bodies.shape_id, np.int64), counts),
+                      "velocity": np.repeat(np.asarray(bodies.velocity, float), counts, axis=0),
+                      "angular_velocity": np.repeat(np.asarray(bodies.angular_velocity, float),
+                                                    counts, axis=0)}
+        return points, quads, point_data, {"patch_id": [np.concatenate([pid for _, _, pid in meshes])]}
 
     def write_particles(self, time: float, bodies: "Bodies") -> Path:
         """One sample of ``particles.pvd`` (time in s)."""
