@@ -76,3 +76,27 @@ def test_hard_case_and_tiny_gradients_leave_a_saddle():
         s, y, a = np.zeros(4), np.zeros(4), np.zeros(4)
         tr_step_eig(lam.copy(), np.eye(4), np.array([g, 0.0, 0.0, 0.0]), 3, 0.5, y, s, a)
         assert np.linalg.norm(s[:3]) == pytest.approx(0.5, rel=1e-9) and abs(s[0]) == pytest.approx(0.5)
+
+
+def test_sym2_eig_against_numpy_and_the_angle():
+    """The closed-form 2x2 eigen-decomposition (no trigonometric calls): B q = λ q to
+    round-off, q1 = (−s, c), q2 = (c, s) orthonormal, and (c, s) the rotation by
+    θ = ½ atan2(b12, (b11 − b22)/2) — including the diagonal cases (b12 = ±0, either order)."""
+    from nurbsdem.contact.trust_region import sym2_eig
+    rng = np.random.default_rng(5)
+    cases = [tuple(rng.normal(size=3) * 10.0 ** rng.integers(-6, 6)) for _ in range(2000)]
+    cases += [(1.0, 0.0, 2.0), (2.0, 0.0, 1.0), (2.0, -0.0, 1.0), (1.0, -0.0, 2.0),
+              (1.0, 1e-300, 1.0), (3.0, 0.0, 3.0), (0.0, 1.0, 0.0), (1.0, -1e-12, 1.0 + 1e-9)]
+    for b11, b12, b22 in cases:
+        l1, l2, c, s = sym2_eig(b11, b12, b22)
+        B = np.array([[b11, b12], [b12, b22]])
+        scale = np.abs(B).max()
+        np.testing.assert_allclose([l1, l2], np.linalg.eigvalsh(B), atol=1e-14 * scale)
+        q1, q2 = np.array([-s, c]), np.array([c, s])
+        assert abs(c * c + s * s - 1.0) <= 4e-16
+        np.testing.assert_allclose(B @ q1, l1 * q1, atol=1e-14 * scale)
+        np.testing.assert_allclose(B @ q2, l2 * q2, atol=1e-14 * scale)
+        half = 0.5 * (b11 - b22)
+        if np.sqrt(half * half + b12 * b12) > 0.0:     # else any basis: (1, 0), as before
+            th = 0.5 * np.arctan2(b12, half)
+            assert abs(c - np.cos(th)) <= 1e-15 and abs(s - np.sin(th)) <= 1e-15
