@@ -39,15 +39,8 @@ def sym2_eig(b11, b12, b22):
     half = 0.5 * (b11 - b22)
     r = math.sqrt(half * half + b12 * b12)
     m = 0.5 * (b11 + b22)
-    if not r > 0.0:
-        return m - r, m + r, 1.0, 0.0
-    # θ = ½ atan2(b12, half) in (−π/2, π/2] by the half-angle formulas, without trigonometric
-    # calls (they were a tenth of an LCP): the square root gives the larger of cos θ, sin θ
-    if half >= 0.0:
-        c = math.sqrt(0.5 * (1.0 + half / r))
-        return m - r, m + r, c, b12 / (2.0 * r * c)
-    s = math.copysign(math.sqrt(0.5 * (1.0 - half / r)), b12)
-    return m - r, m + r, b12 / (2.0 * r * s), s
+    th = 0.5 * math.atan2(b12, half) if r > 0.0 else 0.0
+    return m - r, m + r, math.cos(th), math.sin(th)
 
 
 @kernel
