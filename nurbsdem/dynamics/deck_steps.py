@@ -49,6 +49,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ..contact.analytic import closed_form_into
 from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_FAIL, I_PA, I_PB
 from ..contact.listed import scene_list, solve_due
 from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, list_is_stale,
@@ -71,7 +72,7 @@ DONE, CONTROL, GUARD = 0, 1, 2
 #: certificates, the contact law (Hertz), the first patch of each shape (curvature radii);
 #: ``owned`` (N,) all True (one rank)
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
-                        "first_patch body_shape sphere_radius owned threads")
+                        "first_patch body_shape sphere_radius owned threads all_spheres")
 #: the neighbour list and its per-pair arrays, odometers and the previous poses
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_odo "
                       "prev_pos prev_R prev_wall prev_x")
@@ -126,16 +127,22 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
             n_due += 1
     due = due[:n_due]
     c1 = cycles()
-    rf, ri, points = solve_due(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i, due, pos, R,
-                               wall_d, sc.threads)
-    c2 = cycles()
     failed = False
-    for r in range(n_due):
-        rows_f[due[r]] = rf[r]
-        rows_i[due[r]] = ri[r]
-        failed = failed or ri[r, I_FAIL] != 0
+    if sc.all_spheres:      # closed forms only: written in place (what solve_due does for them)
+        t = sc.tables
+        closed_form_into(rows_f, rows_i, due, a, b, t.n, pos, R, wall_d, t.body_shape,
+                         t.sphere_center, t.sphere_radius, t.wall_origin, t.wall_a, t.wall_b,
+                         t.wall_dom)
+    else:
+        rf, ri, points = solve_due(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i, due, pos,
+                                   R, wall_d, sc.threads)
+        for r in range(n_due):
+            rows_f[due[r]] = rf[r]
+            rows_i[due[r]] = ri[r]
+            failed = failed or ri[r, I_FAIL] != 0
+        counters[POINT_SOLVES] += points
+    c2 = cycles()
     renew_certificates(budget, due, rows_f, rows_i, reach)
-    counters[POINT_SOLVES] += points
     counters[SEARCH_CYCLES] += (c1 - c0) + (cycles() - c2)
     counters[ROW_CYCLES] += c2 - c1
     return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built, pos, R,
@@ -367,7 +374,8 @@ class DeckSteps:
                              scene.certificates, has_hertz(s._table), scene.table.tab[:7],
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
-                             np.ones(scene.n, np.bool_), numba.get_num_threads())
+                             np.ones(scene.n, np.bool_), numba.get_num_threads(),
+                             bool(scene.is_sphere.all()))
         self.bc = BodyConst(b.mass, s._inv_mass, s._inv_I, b.P, b.centroid_file, s._ell,
                             s._inv_mass_all, s._mat_all, s._table, s.gravity, s._g_norm,
                             s._alt_floor_x, s._alt_floor_L, s._sq_m, s._sq_I)
