@@ -11,6 +11,7 @@ keeps plain ``njit`` (numba refuses to compile an allocation here: the error nam
 """
 from __future__ import annotations
 
+import platform
 import time
 from functools import lru_cache
 from typing import Callable
@@ -28,11 +29,19 @@ def kernel(func: Callable | None = None, *, inline: str = "never"):
     return jit(func) if func is not None else jit
 
 
+#: the time-stamp counter is read only on x86-64 (on other CPUs the cycle counter may be
+#: closed to user programs: reading it would raise SIGILL)
+HAS_CYCLE_COUNTER = platform.machine().lower() in ("x86_64", "amd64")
+
+
 @intrinsic
 def cycles(typingctx):
     """The CPU's cycle counter (int64; ``llvm.readcyclecounter``: the time-stamp counter on
-    x86-64), for timing parts of a compiled loop; :func:`seconds_per_cycle` converts."""
+    x86-64; 0 elsewhere), for timing parts of a compiled loop; :func:`seconds_per_cycle`
+    converts."""
     def codegen(context, builder, signature, args):
+        if not HAS_CYCLE_COUNTER:
+            return ir.Constant(ir.IntType(64), 0)
         fn = cgutils.get_or_insert_function(builder.module,
                                             ir.FunctionType(ir.IntType(64), []),
                                             "llvm.readcyclecounter")
