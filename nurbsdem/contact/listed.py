@@ -216,7 +216,8 @@ def _take_converged(rf, ri, again, cf, ci) -> None:
 @njit(cache=True)
 def _lcp_rows_retried(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
     """:func:`_lcp_rows`, failed warm starts solved once more cold
-    (:func:`nurbsdem.contact.scene._retry_failed_cold`)."""
+    (a warm start can stall where a cold one does not, e.g. in the flat valley of a
+    near-touching pair)."""
     rf, ri = _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt)
     again = _retry_cold(rf, ri, prev_i, np.empty(a.shape[0], np.int64))
     if again.shape[0]:
