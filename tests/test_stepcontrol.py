@@ -268,15 +268,16 @@ def failing(monkeypatch, when):
     import nurbsdem.contact.scene as scene_mod
     from nurbsdem.contact.lcp import F_SD, I_FAIL
 
-    real = scene_mod.detect_batch
+    real = scene_mod.solve_due
 
-    def detect(*args, **kw):
-        rf, ri = real(*args, **kw)
+    def solve(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, *args):
+        rf, ri, points = real(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, *args)
         if when():
-            rf[:, F_SD] = -1.0                 # a 1 m "penetration": must never act
-            ri[:, I_FAIL] = 1
-        return rf, ri
-    monkeypatch.setattr(scene_mod, "detect_batch", detect)
+            pair = list_b[due] < st.n           # particle pairs (their cold retries too)
+            rf[pair, F_SD] = -1.0               # a 1 m "penetration": must never act
+            ri[pair, I_FAIL] = 1
+        return rf, ri, points
+    monkeypatch.setattr(scene_mod, "solve_due", solve)
 
 
 def two_spheres_kin(gap_x, r=0.02):
