@@ -32,7 +32,9 @@ import numpy as np
 from . import __version__
 from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
-from .dynamics.hertz import has_hertz, law_from_deck as hertz_law_from_deck
+from .dynamics.energy import EnergySample
+from .dynamics.hertz import law_from_deck as hertz_law_from_deck
+from .dynamics.monitor import MonitorSample
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
@@ -311,8 +313,7 @@ class Solver:
         b.position, b.quaternion, b.velocity, b.angular_velocity = self.system.body_state()
 
     # ------------------------------------------------------------------ energies
-    def _energy_row(self) -> dict:
-        e = self.system.energy()
+    def _energy_row(self, e: EnergySample) -> dict:
         diss = self.energy_offset["dissipated"] + e.dissipated
         ext = self.energy_offset["external_work"] + e.external_work
         mech = e.mechanical
@@ -366,25 +367,31 @@ class Solver:
         self.system = None
 
     # ------------------------------------------------------------------ output
-    def _sample(self, writers: OutputWriters, force: bool = False) -> None:
-        """Write what falls due at the current time."""
+    def _write_monitors(self, writers: OutputWriters, smp: MonitorSample) -> None:
+        """The rows of ``monitors/*.csv`` of one sample (energies with the run's offsets)."""
+        t = smp.time
+        row = self._energy_row(smp.energy)
+        writers.monitors.energy(t, row["kinetic"], row["potential"], row["elastic"],
+                                row["dissipated"], row["external_work"], row["balance_error"])
+        if self.scene is not None and self.scene.last is not None:
+            writers.monitors.contacts(t, smp.monitored, smp.active, smp.degenerated, smp.failed)
+            if smp.hertz is not None:          # Hertz–Mindlin interfaces (not linear laws)
+                writers.monitors.hertz(t, *smp.hertz)
+        for k, w in enumerate(self.model.walls):
+            writers.monitors.wall(w.name, t, smp.wall_displacement[k], smp.wall_reaction[k])
+
+    def _sample(self, writers: OutputWriters, force: bool = False,
+                samples: tuple[MonitorSample, ...] = ()) -> None:
+        """Write the monitor ``samples`` the deck steps took, then what falls due now (with
+        ``force`` the monitors too: the start of a run)."""
         t0 = time.perf_counter()
         out = self.model.output
         t = self.time
         s = self.system
-        if force or _due(t, out.monitors_every):
-            row = self._energy_row()
-            writers.monitors.energy(t, row["kinetic"], row["potential"], row["elastic"],
-                                    row["dissipated"], row["external_work"], row["balance_error"])
-            cs = self.scene.last if self.scene is not None else None
-            if cs is not None:
-                writers.monitors.contacts(t, cs.monitored, cs.active, cs.degenerated_count, cs.failed)
-                if has_hertz(s._table):          # Hertz–Mindlin interfaces (not linear laws)
-                    writers.monitors.hertz(t, s.c_a.shape[0], getattr(s, "hertz_fallback", 0),
-                                           s.c_radius, s.c_coeffs[:, 0])
-            reaction = s.wall_reaction
-            for k, w in enumerate(self.model.walls):
-                writers.monitors.wall(w.name, t, s.wall_displacement[k], reaction[k])
+        for smp in samples:
+            self._write_monitors(writers, smp)
+        if force:
+            self._write_monitors(writers, s.monitor_sample())
         vtk = force or _due(t, out.vtk_every)
         results = force or _due(t, out.results_interval)
         if vtk or results:
@@ -407,7 +414,7 @@ class Solver:
         out = dict(point=tab["point"], force_normal=fn, force_tangential=tab["force"] - fn,
                    penetration=cs.depth, degenerated=cs.degenerated,
                    body_a=cs.body_a, body_b=cs.body_b)
-        if has_hertz(s._table) and s.c_coeffs.shape[0] == cs.active:   # Hertz–Mindlin laws
+        if s.uses_hertz and s.c_coeffs.shape[0] == cs.active:   # Hertz–Mindlin laws
             out.update(stiffness_normal=s.c_coeffs[:, 0], contact_radius=s.c_radius)
         return out
 
@@ -491,10 +498,13 @@ class Solver:
         while self.step_progress < n_total:
             t_before = time.perf_counter()
             g0, l0, n0 = self.scene.timers.global_search, self.scene.timers.lcp, self.scene.timers.lcps
+            n = self._steps_to_event(n_total - self.step_progress, ck_every)
             try:
-                done = sysm.steps(self._steps_to_event(n_total - self.step_progress, ck_every))
+                done = sysm.steps(n, self._monitors_due(n))
             except InstabilityError:
                 self.time = sysm.time
+                for smp in sysm.last_steps.samples:     # the deck steps done before it
+                    self._write_monitors(writers, smp)
                 self._sync_bodies_from_system()
                 self._checkpoint(writers)
                 raise
@@ -513,9 +523,9 @@ class Solver:
             self.summary.substeps += tally.substeps
             self.summary.active_max = max(self.summary.active_max, tally.active_max)
             self.summary.active_total += tally.active_sum
-            self.summary.degenerated += cs.degenerated_count
-            self.summary.failed += cs.failed
-            self._sample(writers)
+            self.summary.degenerated += tally.degenerated_sum
+            self.summary.failed += tally.failed_sum
+            self._sample(writers, samples=tally.samples)
             if _due(self.time, ck_every) and self.step_progress < n_total:
                 self._sync_bodies_from_system()
                 self._checkpoint(writers)
@@ -529,15 +539,24 @@ class Solver:
         self._close_system()
 
     def _steps_to_event(self, left: int, ck_every: float) -> int:
-        """Deck steps from now to the next one at which output or a checkpoint falls due, or to
-        the end of the solution step (``left`` deck steps), at most MAX_COMPILED_STEPS."""
+        """Deck steps from now to the next one at which VTK or results output or a checkpoint
+        falls due (monitors too with Hertz–Mindlin laws), or to the end of the solution step
+        (``left`` deck steps), at most MAX_COMPILED_STEPS."""
         out = self.model.output
         sysm = self.system
         n = min(left, MAX_COMPILED_STEPS)
-        for every in (out.monitors_every, out.vtk_every, out.results_interval, ck_every):
+        # monitors are recorded inside the compiled loop, except the Hertz row (taken live)
+        monitors = out.monitors_every if sysm.uses_hertz else 0.0
+        for every in (monitors, out.vtk_every, out.results_interval, ck_every):
             if every > 0:
                 n = min(n, _steps_to_due(sysm.t0, sysm.step_count, sysm.dt, every, n))
         return n
+
+    def _monitors_due(self, n: int) -> np.ndarray:
+        """(n,) bool: the next n deck steps at whose end the monitors fall due."""
+        sysm, every = self.system, self.model.output.monitors_every
+        return np.array([_due(sysm.t0 + (sysm.step_count + k) * sysm.dt, every)
+                         for k in range(1, n + 1)], bool)
 
     def _run_replicate(self, step: ReplicateStep, writers: OutputWriters) -> None:
         before = self._mechanical_of(self.bodies)

@@ -31,8 +31,8 @@ def killed_and_restarted(deck: Path, out: Path, kill_after: float, monkeypatch) 
         pass
     original = Solver._sample
 
-    def dying(self, writers, force=False):
-        original(self, writers, force)
+    def dying(self, writers, force=False, samples=()):
+        original(self, writers, force, samples)
         if self.time > kill_after:
             raise Killed
     monkeypatch.setattr(Solver, "_sample", dying)

@@ -56,20 +56,24 @@ MIXED = _deck("  Shape 1 Sphere Radius 0.012\n  Shape 2 Ellipsoid SemiAxes 0.016
 def test_compiled_nurbs_steps_equal_the_python_path(tmp_path, monkeypatch, name, text):
     """Paper particles (NURBS–NURBS and NURBS–wall LCPs, candidate patches), and exact
     spheres with ellipsoids (closed forms, the point-to-surface solver, the LCP): every sample
-    and monitor equal bit for bit, the same LCP counts; the compiled loop really ran."""
-    used = []
+    and monitor equal bit for bit, the same LCP counts; the compiled loop really ran, and took
+    several monitor samples in one call (rows recorded inside the loop)."""
+    used, batched = [], []
     original = system_module.DemSystem.steps
 
-    def counting(self, n_max):
-        done = original(self, n_max)
-        used.append(self._deck_steps is not False and self.compiled_steps)
+    def counting(self, n_max, sample_at=None):
+        done = original(self, n_max, sample_at)
+        compiled = self._deck_steps is not False and self.compiled_steps
+        used.append(compiled)
+        batched.append(compiled and len(self.last_steps.samples) > 1)
         return done
     monkeypatch.setattr(system_module.DemSystem, "steps", counting)
     (py, s_py), (cc, s_cc) = _both_paths(tmp_path, name, text)
     _same_results(py, cc)
-    for key in ("steps", "substeps", "lcps", "active_total", "active_max"):
+    for key in ("steps", "substeps", "lcps", "active_total", "active_max", "degenerated"):
         assert getattr(s_py, key) == getattr(s_cc, key), key
     assert s_cc.active_max >= 8 and s_cc.lcps > 1000          # a pack pressed by the lid
     assert s_cc.failed == 0
     assert not (cc / "monitors" / "hertz.csv").exists()       # linear laws: no Hertz monitor
     assert any(used) and not all(used)                         # the Python run, then compiled
+    assert any(batched)

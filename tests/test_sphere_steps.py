@@ -91,7 +91,7 @@ def test_compiled_steps_equal_the_python_path_bit_for_bit(runs):
     _, out = runs
     (py, s_py, solver_py), (cc, s_cc, solver_cc) = out[False], out[True]
     _same_results(py, cc)
-    for key in ("steps", "substeps", "lcps", "active_total", "active_max"):
+    for key in ("steps", "substeps", "lcps", "active_total", "active_max", "degenerated"):
         assert getattr(s_py, key) == getattr(s_cc, key), key
     assert s_cc.active_max > 10                       # a real pack, pressed by the lid
     assert solver_cc.system is None and solver_cc.end_energy == solver_py.end_energy
@@ -131,8 +131,8 @@ def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
     calls = []
     original = system_module.DemSystem.steps
 
-    def counting(self, n_max):
-        done = original(self, n_max)
+    def counting(self, n_max, sample_at=None):
+        done = original(self, n_max, sample_at)
         calls.append((done, self._deck_steps is not False))
         return done
     monkeypatch.setattr(system_module.DemSystem, "steps", counting)

@@ -58,9 +58,10 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
 from .forces import add_kick_work, contact_loads, match_history
-from .hertz import has_hertz
 from .implicit import dashpots_of_evaluation
-from .integrator import drift, kick_from, kinetic_energies
+from .energy import energy_terms
+from .integrator import drift, kick_from
+from .monitor import degenerated_count, record_row, row_width
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           network_count_stands, periodic_recheck)
@@ -95,7 +96,9 @@ DASHPOT_SOLVES = 8
 #: ... then the pairs the point-to-surface solver answered, and the CPU cycles spent in the
 #: search (odometers, list, certificates) and in the contact rows
 POINT_SOLVES, SEARCH_CYCLES, ROW_CYCLES = 11, 12, 13
-N_COUNTERS = 14
+#: ... and the sum over deck steps of the degenerated contacts at their ends
+DEGENERATED_SUM = 14
+N_COUNTERS = 15
 
 
 # --------------------------------------------------------------------------- contact search
@@ -259,17 +262,9 @@ def _finite(x, v, q, L, force) -> bool:
 
 @njit(cache=True)
 def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> bool:
-    """DemSystem._check_energy (energies summed here in index order), then the peak of
-    kinetic + elastic energy is raised."""
-    et, er = kinetic_energies(bc.mass, v, q, L, bc.inv_I)
-    en, etan = 0.0, 0.0
-    for c in range(ev.eel.shape[0]):
-        en += ev.eel[c, 0]
-        etan += ev.eel[c, 1]
-    pot = 0.0
-    for i in range(x.shape[0]):
-        pot -= bc.mass[i] * (x[i, 0] * bc.gravity[0] + x[i, 1] * bc.gravity[1]
-                             + x[i, 2] * bc.gravity[2])
+    """DemSystem._check_energy (the same energy_terms), then the peak of kinetic + elastic
+    energy is raised."""
+    et, er, pot, en, etan = energy_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel)
     kinetic, elastic = et + er, en + etan
     mech = kinetic + pot + elastic
     dissipated = ledger[0] + ledger[1] + (ledger[2] - etan)
@@ -307,8 +302,11 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                   counters, peak):
+                   counters, peak, sample_at, rows):
     """Up to n_deck deck steps of ``substeps`` internal steps each (module docstring).
+
+    sample_at (n_deck,) bool: the deck steps at whose end a monitor row is written into rows
+    (n_deck, row_width(W)) (:func:`~nurbsdem.dynamics.monitor.record_row`).
 
     walls_d, walls_u (n_deck·substeps, W, 3): the walls' displacements (m) and velocities
     (m/s) at the end of each internal step.  Body state (x, v, q, L), ledger (5,) J, wall_work
@@ -355,6 +353,11 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         active = ev.a.shape[0]
         counters[ACTIVE_SUM] += active
         counters[ACTIVE_MAX] = max(counters[ACTIVE_MAX], active)
+        degenerated = degenerated_count(pl.rows_i)
+        counters[DEGENERATED_SUM] += degenerated
+        if sample_at[j]:
+            record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
+                       ev.monitored, active, degenerated, wall_d, ev.force)
         if not _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters):
             return CONTROL, j + 1, pl, ev, wall_d, wall_u
     return DONE, n_deck, pl, ev, wall_d, wall_u
@@ -371,7 +374,7 @@ class DeckSteps:
         self.system, self.scene = system, scene
         s, b = system, system.bodies
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
-                             scene.certificates, has_hertz(s._table), scene.table.tab[:7],
+                             scene.certificates, s.uses_hertz, scene.table.tab[:7],
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
                              np.ones(scene.n, np.bool_), numba.get_num_threads(),
@@ -389,7 +392,7 @@ class DeckSteps:
         scene = system.provider
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
                 or scene.prev_pose is None or scene.built_odo is None
-                or (has_hertz(system._table) and not scene.is_sphere.all())):
+                or (system.uses_hertz and not scene.is_sphere.all())):
             return None
         return DeckSteps(system, scene)
 
@@ -437,9 +440,10 @@ class DeckSteps:
                        s.energy_tolerance, s._scale_floor, s.check_energy, s.watch_period2,
                        s.implicit_damping)
 
-    def run(self, n_deck: int) -> tuple[int, int, np.ndarray]:
-        """Up to n_deck deck steps; returns (status, deck steps done, counters).  On GUARD the
-        system and scene are left in an undefined state: the caller restores them."""
+    def run(self, n_deck: int, sample_at: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
+        """Up to n_deck deck steps; returns (status, deck steps done, counters, the monitor
+        rows (n_deck, row_width(W)) of the deck steps ``sample_at`` (n_deck,) bool).  On GUARD
+        the system and scene are left in an undefined state: the caller restores them."""
         s, b = self.system, self.system.bodies
         n_sub = s.substeps
         walls_d, walls_u = self._wall_tables(n_deck, n_sub)
@@ -447,14 +451,16 @@ class DeckSteps:
         counters[STEP_COUNT], counters[REFINE], counters[CALM] = s.step_count, s.refine, s.calm_steps
         peak = np.array([s._peak])
         ledger = s.ledger.to_array()
+        sample_at = np.ascontiguousarray(np.resize(np.asarray(sample_at, np.bool_), n_deck))
+        rows = np.zeros((n_deck, row_width(s.walls.n)))
         status, done, pl, ev, wall_d, wall_u = run_deck_steps(
             n_deck, n_sub, self.sc, self.bc, self._control(), self._pair_list(), self._evaluation(),
             b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger, s.wall_work,
-            s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak)
+            s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, sample_at, rows)
         if status == GUARD:
-            return status, done, counters
+            return status, done, counters, rows
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
-        return status, done, counters
+        return status, done, counters, rows
 
     def _store(self, pl, ev, wall_d, wall_u, ledger, counters, peak) -> None:
         """Write the loop's results back into the system and the scene."""

@@ -32,6 +32,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numba import njit
+
+from .integrator import kinetic_energies
 
 
 @dataclass(frozen=True)
@@ -79,9 +82,29 @@ class EnergySample:
         return d
 
 
+@njit(cache=True)
 def potential_energy(mass: np.ndarray, x: np.ndarray, gravity: np.ndarray) -> float:
-    """Gravitational potential −Σ m g·x (J) relative to the world origin."""
-    return float(-np.sum(mass * (x @ np.asarray(gravity, dtype=float))))
+    """Gravitational potential −Σ m g·x (J) relative to the world origin, summed in body order."""
+    pot = 0.0
+    for i in range(x.shape[0]):
+        pot -= mass[i] * (x[i, 0] * gravity[0] + x[i, 1] * gravity[1] + x[i, 2] * gravity[2])
+    return pot
+
+
+@njit(cache=True)
+def energy_terms(mass: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray,
+                 L: np.ndarray, inv_I: np.ndarray, gravity: np.ndarray,
+                 eel: np.ndarray) -> tuple[float, float, float, float, float]:
+    """The state's energies (J): kinetic translational and rotational, potential, and the
+    elastic energies of the normal and tangential springs (eel (K,2), summed in contact order).
+    One function for every caller (the monitors, the energy guard of the Python and the
+    compiled deck steps), so they agree to the bit."""
+    et, er = kinetic_energies(mass, v, q, L, inv_I)
+    en, etan = 0.0, 0.0
+    for c in range(eel.shape[0]):
+        en += eel[c, 0]
+        etan += eel[c, 1]
+    return et, er, potential_energy(mass, x, gravity), en, etan
 
 
 @dataclass

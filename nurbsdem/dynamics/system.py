@@ -73,13 +73,14 @@ import numpy as np
 
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
-from .energy import EnergyLedger, EnergySample, potential_energy
+from .energy import EnergyLedger, EnergySample, energy_terms
 from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
 from .hertz import has_hertz
 from .implicit import dashpots_of_evaluation
-from .integrator import drift, kick_with_terms, kinetic_energies, state_is_finite
+from .integrator import drift, kick_with_terms, state_is_finite
+from .monitor import MonitorSample, energy_sample
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
-from .deck_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, GUARD, DeckSteps
+from .deck_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, DeckSteps
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           critical_step, critical_step_from_rates, needed_substeps,
                           network_count_stands, network_gershgorin, network_rates,
@@ -176,11 +177,17 @@ FALL_HYSTERESIS = 0.8
 class StepTally:
     """What the last :meth:`DemSystem.steps` did: internal steps (the sub-steps actually run;
     a repeated deck step counts once, with the count that passed), and the sum and maximum
-    over its deck steps of the active contacts at their ends."""
+    over its deck steps of the active contacts at their ends; and the monitor samples taken at the
+    ends of the deck steps asked for (:meth:`DemSystem.steps`)."""
 
     substeps: int = 0
     active_sum: int = 0
     active_max: int = 0
+    #: sums over its deck steps of the degenerated and the failed contacts at their ends
+    degenerated_sum: int = 0
+    failed_sum: int = 0
+    #: MonitorSample of each deck step asked for, in order
+    samples: tuple = ()
 
 
 class DemSystem:
@@ -587,11 +594,9 @@ class DemSystem:
             raise InputError("a contact occurred between materials with no contact interface")
         spring = match_history(self.hist_keys, self.hist_springs, key)
         pos, vel, omg = self._all_kinematics()
-        hertz = self.__dict__.get("_hertz_table")
-        if hertz is None:        # the table is fixed once initialised
-            hertz = self._hertz_table = has_hertz(self._table)
+        if self.__dict__.get("_inv_mass_all") is None:
             self._inv_mass_all = np.concatenate([self._inv_mass, np.zeros(self.walls.n)])
-        if hertz:   # Hertz–Mindlin interfaces (nurbsdem.dynamics.hertz): the exact curvature radii
+        if self.uses_hertz:   # Hertz–Mindlin interfaces (nurbsdem.dynamics.hertz): the exact curvature radii
             from ..geometry.curvature import contact_radii_for
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:
@@ -722,8 +727,13 @@ class DemSystem:
         self._control_step()
         return e
 
-    def steps(self, n_max: int) -> int:
+    def steps(self, n_max: int, sample_at: np.ndarray | None = None) -> int:
         """Advance up to ``n_max`` deck steps (at least one) and return how many were done.
+
+        sample_at (n_max,) bool: the deck steps (0 = the first of this call) at whose end the
+        monitors are sampled (:meth:`monitor_sample`); the samples are in
+        ``last_steps.samples``.  The compiled loop records them as rows
+        (:mod:`nurbsdem.dynamics.monitor`), so it need not return at each sample.
 
         A scene provider on one rank (:class:`~nurbsdem.dynamics.deck_steps.DeckSteps`; not
         Hertz–Mindlin with NURBS particles) runs them in compiled code, with the same results
@@ -736,34 +746,47 @@ class DemSystem:
                 and self._deck_steps is None):
             self._deck_steps = DeckSteps.for_system(self) or False
         fast = self._deck_steps if self.compiled_steps and self.domain is None else None
+        sample_at = (np.zeros(max(int(n_max), 1), bool) if sample_at is None
+                     else np.asarray(sample_at, bool))
         self.last_steps = StepTally()
         if not fast:
-            self._tallied_step()
+            self._tallied_step(bool(sample_at[0]))
             return 1
         good = self.get_state()
         snap = self.provider.snapshot()
         n_sub = self.substeps
-        status, done, counters = fast.run(int(n_max))
+        t0, count = self.t0, self.step_count
+        status, done, counters, rows = fast.run(int(n_max), sample_at)
         if status == GUARD:
             self.set_state(good)
             self.provider.restore(snap)
-            for _ in range(done + 1):
-                self._tallied_step()
+            for j in range(done + 1):
+                self._tallied_step(bool(sample_at[j]))
             return done + 1
+        W = self.walls.n
+        samples = [MonitorSample.from_row(t0 + (count + j + 1) * self.dt, rows[j], W)
+                   for j in range(done - 1) if sample_at[j]]
+        if done and sample_at[done - 1]:       # the present state: taken live (Hertz rows too)
+            samples.append(self.monitor_sample())
         self.last_steps = StepTally(done * n_sub, int(counters[ACTIVE_SUM]),
-                                    int(counters[ACTIVE_MAX]))
+                                    int(counters[ACTIVE_MAX]), int(counters[DEGENERATED_SUM]),
+                                    0, tuple(samples))
         if status == CONTROL:
             self._control_step()
         return done
 
-    def _tallied_step(self) -> None:
-        """:meth:`step`, counted in :attr:`last_steps`."""
+    def _tallied_step(self, sample: bool = False) -> None:
+        """:meth:`step`, counted in :attr:`last_steps` (with its monitor sample if asked)."""
         self.step()
         n_sub = self.last_substeps
-        active = int(getattr(self.last_contacts, "active", 0) or 0)
+        cs = self.last_contacts
+        active = int(getattr(cs, "active", 0) or 0)
         t = self.last_steps
-        self.last_steps = StepTally(t.substeps + n_sub, t.active_sum + active,
-                                    max(t.active_max, active))
+        self.last_steps = StepTally(
+            t.substeps + n_sub, t.active_sum + active, max(t.active_max, active),
+            t.degenerated_sum + int(getattr(cs, "degenerated_count", 0) or 0),
+            t.failed_sum + int(getattr(cs, "failed", 0) or 0),
+            t.samples + ((self.monitor_sample(),) if sample else ()))
 
     def _try_step(self) -> EnergySample:
         """The internal steps of one deck step and the guards; raises _Unstable."""
@@ -854,18 +877,31 @@ class DemSystem:
     def energy(self) -> EnergySample:
         """Energies at the current state (J); see :mod:`nurbsdem.dynamics.energy`."""
         b = self.bodies
-        et, er = kinetic_energies(b.mass, b.v, b.q, b.L, self._inv_I)
-        eel = self.c_eel.sum(axis=0) if self.c_eel.shape[0] else np.zeros(2)
-        eel = [float(eel[0]), float(eel[1])]
-        lg = self.ledger
-        return EnergySample(time=self.time, kinetic_translational=float(et),
-                            kinetic_rotational=float(er),
-                            potential=potential_energy(b.mass, b.x, self.gravity),
-                            elastic_normal=float(eel[0]), elastic_tangential=float(eel[1]),
-                            dissipated_normal=lg.dissipated_normal,
-                            dissipated_tangential=lg.dissipated_tangential,
-                            dissipated_friction=lg.tangential_spring_work - float(eel[1]),
-                            external_work=lg.external_work, initial_mechanical=lg.initial_mechanical)
+        terms = energy_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
+                             np.ascontiguousarray(self.c_eel, float).reshape(-1, 2))
+        return energy_sample(self.time, *terms, self.ledger)
+
+    @property
+    def uses_hertz(self) -> bool:
+        """Whether the interfaces include Hertz–Mindlin laws (:func:`~nurbsdem.dynamics.hertz.has_hertz`
+        of the interface table, fixed once the system is built; taken once)."""
+        hertz = self.__dict__.get("_hertz_table")
+        if hertz is None:
+            hertz = self._hertz_table = has_hertz(self._table)
+        return hertz
+
+    def monitor_sample(self) -> MonitorSample:
+        """The monitors' sample of the present state (:mod:`nurbsdem.dynamics.monitor`)."""
+        cs = self.last_contacts
+        hertz = None
+        if self.uses_hertz:
+            hertz = (int(self.c_a.shape[0]), int(getattr(self, "hertz_fallback", 0)),
+                     np.asarray(self.c_radius, float), np.asarray(self.c_coeffs[:, 0], float))
+        return MonitorSample(self.time, self.energy(), int(getattr(cs, "monitored", 0) or 0),
+                             int(getattr(cs, "active", 0) or 0),
+                             int(getattr(cs, "degenerated_count", 0) or 0),
+                             int(getattr(cs, "failed", 0) or 0), self.wall_displacement,
+                             self.wall_reaction, hertz)
 
     def body_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The particles' state as the model and the writers hold it (copies): centroids

@@ -389,7 +389,7 @@ class Domain:
         merged = self._merged_contacts([g[2] for g in gathered])
         s.last_contacts = merged
         sc.last = merged
-        if s.__dict__.get("_hertz_table"):
+        if s.uses_hertz:
             # the serial count of contacts whose curvature fell back (the radii are the
             # merged rows' again: per contact, the same bits)
             from ..geometry.curvature import contact_radii_for

@@ -1,0 +1,110 @@
+"""Monitor samples: what ``monitors/*.csv`` record at a deck step's end (energies in J, wall
+displacements in m, reactions in N, contact counts).
+
+A sample is taken either live from a :class:`~nurbsdem.dynamics.system.DemSystem`
+(:meth:`~nurbsdem.dynamics.system.DemSystem.monitor_sample`) or, inside the compiled deck
+steps (:mod:`nurbsdem.dynamics.deck_steps`), as a row of floats (:func:`record_row`) that
+:meth:`MonitorSample.from_row` turns into the same sample: both take the energies from
+:func:`~nurbsdem.dynamics.energy.energy_terms` and the same ledger, counters and forces, so a
+monitor row is the same to the bit whichever path took it (tested).  Recording rows in the
+compiled loop lets it run many deck steps per call instead of returning to Python at every
+monitor sample.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..contact.lcp import I_ACTIVE, I_DEG, I_VALID
+from .energy import EnergyLedger, EnergySample, energy_terms
+
+#: columns of a recorded row: the five energy terms of energy_terms, the five ledger entries
+#: (EnergyLedger.to_array order), the monitored / active / degenerated counts, then W×3 wall
+#: displacements and W×3 wall reactions
+ROW_TERMS, ROW_LEDGER, ROW_MONITORED, ROW_ACTIVE, ROW_DEGENERATED, ROW_WALLS = 0, 5, 10, 11, 12, 13
+
+
+def row_width(n_walls: int) -> int:
+    """Length of a recorded row for ``n_walls`` walls."""
+    return ROW_WALLS + 6 * n_walls
+
+
+@dataclass(frozen=True)
+class MonitorSample:
+    """One sample of the monitors at time ``time`` (s): energies, contact counts (monitored
+    pairs, active, degenerated and failed contacts of the last evaluation), wall displacements
+    (W,3) m and reactions (W,3) N; ``hertz`` (active, fallbacks, radii (K,) m, normal
+    stiffnesses (K,) N/m) with Hertz–Mindlin interfaces, else None."""
+
+    time: float
+    energy: EnergySample
+    monitored: int
+    active: int
+    degenerated: int
+    failed: int
+    wall_displacement: np.ndarray
+    wall_reaction: np.ndarray
+    hertz: tuple | None = None
+
+    @staticmethod
+    def from_row(time: float, row: np.ndarray, n_walls: int) -> "MonitorSample":
+        """The sample of a row written by :func:`record_row`."""
+        et, er, pot, en, etan = (float(v) for v in row[ROW_TERMS:ROW_TERMS + 5])
+        energy = energy_sample(time, et, er, pot, en, etan,
+                               EnergyLedger.from_array(row[ROW_LEDGER:ROW_LEDGER + 5]))
+        W = n_walls
+        walls = row[ROW_WALLS:ROW_WALLS + 6 * W]
+        return MonitorSample(time, energy, int(row[ROW_MONITORED]), int(row[ROW_ACTIVE]),
+                             int(row[ROW_DEGENERATED]), 0, walls[:3 * W].reshape(W, 3).copy(),
+                             walls[3 * W:].reshape(W, 3).copy())
+
+
+def energy_sample(time: float, et: float, er: float, pot: float, en: float, etan: float,
+                  ledger: EnergyLedger) -> EnergySample:
+    """The EnergySample of the terms of :func:`~nurbsdem.dynamics.energy.energy_terms` and a
+    ledger (the friction dissipation is the spring work minus the tangential energy stored)."""
+    return EnergySample(time=time, kinetic_translational=float(et), kinetic_rotational=float(er),
+                        potential=float(pot), elastic_normal=float(en),
+                        elastic_tangential=float(etan),
+                        dissipated_normal=ledger.dissipated_normal,
+                        dissipated_tangential=ledger.dissipated_tangential,
+                        dissipated_friction=ledger.tangential_spring_work - float(etan),
+                        external_work=ledger.external_work,
+                        initial_mechanical=ledger.initial_mechanical)
+
+
+@njit(cache=True)
+def degenerated_count(rows_i: np.ndarray) -> int:
+    """Active contacts whose LCP degenerated (the ContactSet's ``degenerated_count``)."""
+    n = 0
+    for j in range(rows_i.shape[0]):
+        if rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 1 and rows_i[j, I_DEG] != 0:
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def record_row(row: np.ndarray, mass: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray,
+               L: np.ndarray, inv_I: np.ndarray, gravity: np.ndarray, eel: np.ndarray,
+               ledger: np.ndarray, monitored: int, active: int, degenerated: int,
+               wall_d: np.ndarray, force: np.ndarray) -> None:
+    """Write the monitor row of the present state (columns ROW_*); force (N+W,3): the last
+    evaluation's loads, the walls' rows negated are their reactions."""
+    et, er, pot, en, etan = energy_terms(mass, x, v, q, L, inv_I, gravity, eel)
+    row[ROW_TERMS] = et
+    row[ROW_TERMS + 1] = er
+    row[ROW_TERMS + 2] = pot
+    row[ROW_TERMS + 3] = en
+    row[ROW_TERMS + 4] = etan
+    for k in range(5):
+        row[ROW_LEDGER + k] = ledger[k]
+    row[ROW_MONITORED] = monitored
+    row[ROW_ACTIVE] = active
+    row[ROW_DEGENERATED] = degenerated
+    W, N = wall_d.shape[0], x.shape[0]
+    for w in range(W):
+        for k in range(3):
+            row[ROW_WALLS + 3 * w + k] = wall_d[w, k]
+            row[ROW_WALLS + 3 * W + 3 * w + k] = -force[N + w, k]
