@@ -176,7 +176,7 @@ class LcpSweep:
         import bench_lcp
         self.quick = quick
         self.workdir = workdir
-        self.tols = ([1e-3, 1e-6] if quick else [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
+        self.tols = ([1e-6] if quick else [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
         self.K = 64 if quick else 300
         self.reps = 3 if quick else 5
         self.shapes, table = _lcp_table()

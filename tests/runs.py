@@ -15,12 +15,42 @@ STATE_KEYS = ("position", "quaternion", "velocity", "angular_velocity")
 
 
 def spread_points(rng: np.random.Generator, n: int, lo, hi, min_dist: float) -> list[np.ndarray]:
-    """n points uniform in the box [lo, hi] (m), at least ``min_dist`` apart (rejection)."""
+    """n points uniform in the box [lo, hi] (m), more than ``min_dist`` apart: the points, and
+    the state ``rng`` is left in, of the plain rejection loop (one ``rng.uniform(lo, hi)`` per
+    candidate, accepted when ``np.linalg.norm`` to every accepted point exceeds
+    ``min_dist``), found in batches: a copy of the generator draws the candidates, those
+    certainly too close to an accepted point are dropped at once, the others are tested in
+    order (within round-off of ``min_dist`` by ``np.linalg.norm``); ``rng`` then draws as
+    many candidates as the loop would have."""
+    probe = np.random.Generator(type(rng.bit_generator)())
+    probe.bit_generator.state = rng.bit_generator.state
+    near, far = (min_dist * (1 - 1e-9)) ** 2, (min_dist * (1 + 1e-9)) ** 2
     pts: list[np.ndarray] = []
+    used, batch = 0, 4096
+
+    def accepted(p: np.ndarray) -> bool:
+        if not pts:
+            return True
+        d2 = ((np.array(pts) - p) ** 2).sum(axis=1)
+        if (d2 <= near).any():
+            return False
+        return bool((d2 > far).all()) or all(np.linalg.norm(p - q) > min_dist for q in pts)
+
     while len(pts) < n:
-        p = rng.uniform(lo, hi)
-        if all(np.linalg.norm(p - q) > min_dist for q in pts):
-            pts.append(p)
+        cand = probe.uniform(lo, hi, size=(batch, 3))
+        alive = np.ones(batch, bool)
+        if pts:
+            d2 = ((cand[:, None, :] - np.array(pts)[None]) ** 2).sum(axis=2)
+            alive = ~(d2 <= near).any(axis=1)
+        taken = batch
+        for i in np.nonzero(alive)[0]:
+            if accepted(cand[i]):
+                pts.append(cand[i].copy())
+                if len(pts) == n:
+                    taken = int(i) + 1
+                    break
+        used += taken
+    rng.uniform(lo, hi, size=(used, 3))
     return pts
 
 

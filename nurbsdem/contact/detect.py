@@ -255,7 +255,8 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
             rf, ri = np.array(previous.row_f), np.array(previous.row_i)
         ri[I_FAIL] = 1
         ri[I_VALID] = 0
-    _accept_within_nonconvexity(ta.nonconvexity + tb.nonconvexity, rf[None], ri[None])
+    accept_within_nonconvexity(np.asarray(ta.nonconvexity + tb.nonconvexity, float).reshape(1),
+                               rf.reshape(1, -1), ri.reshape(1, -1))
     return ContactResult.from_rows(rf, ri)
 
 
@@ -346,11 +347,12 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
         _batch_kernel(*args, numba.get_num_threads())
     elif K:
         _solve_chunk(*args, 0, K)
-    _accept_within_nonconvexity(table.nonconvexity[sa] + table.nonconvexity[sb], *out)
+    accept_within_nonconvexity(table.nonconvexity[sa] + table.nonconvexity[sb], *out)
     return out
 
 
-def _accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.ndarray) -> None:
+@njit(cache=True)
+def accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.ndarray) -> None:
     """A direction search that stalls on a *nearly* convex shape (a saddle at a CAD patch
     corner makes the support function non-smooth there) is accepted, not counted as failed,
     when its valid result lies within the two shapes' non-convexity heights of touching,
@@ -358,12 +360,13 @@ def _accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.nd
     the shapes were accepted with (a force of at most εn (h_A + h_B)); stalls at deeper
     contacts are handled in the kernel (:func:`lcp.solve_pair`, "saddle stall").  Convex
     shapes have h = 0: nothing changes for them.  tol (K,) = h_A + h_B per row (m); rows
-    (K, NF), (K, NI) updated in place."""
-    if not tol.any():
+    (K, NF), (K, NI) updated in place.  Compiled: the scene's dispatch
+    (:mod:`nurbsdem.contact.listed`) calls it too."""
+    if not np.any(tol != 0.0):
         return
-    failed = (res_i[:, I_FAIL] == 1) & (res_i[:, I_VALID] == 1)
-    if failed.any():
-        res_i[failed & (np.abs(res_f[:, F_SD]) <= tol), I_FAIL] = 0
+    for k in range(res_f.shape[0]):
+        if res_i[k, I_FAIL] == 1 and res_i[k, I_VALID] == 1 and abs(res_f[k, F_SD]) <= tol[k]:
+            res_i[k, I_FAIL] = 0
 
 
 # --------------------------------------------------------------------------- stage 1 alone

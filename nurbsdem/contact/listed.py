@@ -38,7 +38,7 @@ from numba import njit
 from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_pairs_batch_jit, candidate_patches_wall_batch_jit
 from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
-from .detect import PARALLEL_MIN_PAIRS, _batch_kernel, _solve_chunk
+from .detect import PARALLEL_MIN_PAIRS, _batch_kernel, _solve_chunk, accept_within_nonconvexity
 from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
 from .wall import _wall_batch_kernel, _wall_chunk
@@ -146,16 +146,6 @@ def scene_list(st, x, pos, R, wall_d, owned, m):
 
 # --------------------------------------------------------------------------- the due rows
 @njit(cache=True)
-def _accept_within_nonconvexity(tol, res_f, res_i) -> None:
-    """:func:`nurbsdem.contact.detect._accept_within_nonconvexity` (same rule, compiled)."""
-    if not np.any(tol != 0.0):
-        return
-    for k in range(res_f.shape[0]):
-        if res_i[k, I_FAIL] == 1 and res_i[k, I_VALID] == 1 and abs(res_f[k, F_SD]) <= tol[k]:
-            res_i[k, I_FAIL] = 0
-
-
-@njit(cache=True)
 def _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
     """:func:`nurbsdem.contact.detect.detect_batch` of the body pairs (a[k], b[k])."""
     K = a.shape[0]
@@ -171,7 +161,7 @@ def _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
         _solve_chunk(st.tab, st.info, st.centroid, st.radius, st.seeds, st.nonconvexity, sa,
                      pos[a], R[a], sb, pos[b], R[b], prev_f, prev_i, mask_a, mask_b, res_f,
                      res_i, 0, K)
-    _accept_within_nonconvexity(st.nonconvexity[sa] + st.nonconvexity[sb], res_f, res_i)
+    accept_within_nonconvexity(st.nonconvexity[sa] + st.nonconvexity[sb], res_f, res_i)
     return res_f, res_i
 
 
@@ -214,29 +204,24 @@ def _take_converged(rf, ri, again, cf, ci) -> None:
 
 
 @njit(cache=True)
-def _lcp_rows_retried(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
-    """:func:`_lcp_rows`, failed warm starts solved once more cold
-    (a warm start can stall where a cold one does not, e.g. in the flat valley of a
-    near-touching pair)."""
-    rf, ri = _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt)
-    again = _retry_cold(rf, ri, prev_i, np.empty(a.shape[0], np.int64))
-    if again.shape[0]:
-        n = again.shape[0]
-        cf, ci = _lcp_rows(st, a[again], b[again], mask_a[again], mask_b[again], pos, R,
-                           np.zeros((n, NF)), np.zeros((n, NI), np.int64), nt)
-        _take_converged(rf, ri, again, cf, ci)
-    return rf, ri
+def _rows(st, a, b, mask_a, mask_b, pos, R, wall_d, prev_f, prev_i, nt, walls):
+    """:func:`_lcp_rows` of the body pairs (a[k], b[k]), or with ``walls`` :func:`_wall_rows`
+    of particles a[k] against walls b[k] (the masks unused)."""
+    if walls:
+        return _wall_rows(st, a, b, pos, R, wall_d, prev_f, prev_i, nt)
+    return _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt)
 
 
 @njit(cache=True)
-def _wall_rows_retried(st, a, w, pos, R, wall_d, prev_f, prev_i, nt):
-    """:func:`_wall_rows` with the cold retry of :func:`_lcp_rows_retried`."""
-    rf, ri = _wall_rows(st, a, w, pos, R, wall_d, prev_f, prev_i, nt)
+def _rows_retried(st, a, b, mask_a, mask_b, pos, R, wall_d, prev_f, prev_i, nt, walls):
+    """:func:`_rows`, failed warm starts solved once more cold (a warm start can stall where
+    a cold one does not, e.g. in the flat valley of a near-touching pair)."""
+    rf, ri = _rows(st, a, b, mask_a, mask_b, pos, R, wall_d, prev_f, prev_i, nt, walls)
     again = _retry_cold(rf, ri, prev_i, np.empty(a.shape[0], np.int64))
     if again.shape[0]:
         n = again.shape[0]
-        cf, ci = _wall_rows(st, a[again], w[again], pos, R, wall_d, np.zeros((n, NF)),
-                            np.zeros((n, NI), np.int64), nt)
+        cf, ci = _rows(st, a[again], b[again], mask_a[again], mask_b[again], pos, R, wall_d,
+                       np.zeros((n, NF)), np.zeros((n, NI), np.int64), nt, walls)
         _take_converged(rf, ri, again, cf, ci)
     return rf, ri
 
@@ -310,18 +295,13 @@ def solve_due(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, w
                 # a row of the point solver cannot warm-start the LCP (no sphere patch)
                 if prev_i[j, I_STAGE] == STAGE_POINT:
                     prev_i[j, I_VALID] = 0
-    part = np.nonzero(kind == 2)[0]
-    if part.shape[0]:
-        lf, li = _lcp_rows_retried(st, a[part], b[part], mask_a[due[part]], mask_b[due[part]],
-                                   pos, R, prev_f[part], prev_i[part], nt)
-        for k in range(part.shape[0]):
-            rf[part[k]] = lf[k]
-            ri[part[k]] = li[k]
-    wall = np.nonzero(kind == 3)[0]
-    if wall.shape[0]:
-        wf, wi = _wall_rows_retried(st, a[wall], b[wall] - st.n, pos, R, wall_d, prev_f[wall],
-                                    prev_i[wall], nt)
-        for k in range(wall.shape[0]):
-            rf[wall[k]] = wf[k]
-            ri[wall[k]] = wi[k]
+    for walls in (False, True):          # NURBS pairs (kind 2), then NURBS–wall pairs (3)
+        part = np.nonzero(kind == (3 if walls else 2))[0]
+        if part.shape[0]:
+            other = b[part] - st.n if walls else b[part]
+            lf, li = _rows_retried(st, a[part], other, mask_a[due[part]], mask_b[due[part]],
+                                   pos, R, wall_d, prev_f[part], prev_i[part], nt, walls)
+            for k in range(part.shape[0]):
+                rf[part[k]] = lf[k]
+                ri[part[k]] = li[k]
     return rf, ri, point_solved

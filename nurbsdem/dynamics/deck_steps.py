@@ -50,9 +50,9 @@ import numpy as np
 from numba import njit
 
 from ..contact.analytic import closed_form_into
-from ..contact.lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_DEG, I_FAIL, I_PA, I_PB
+from ..contact.lcp import I_FAIL
 from ..contact.listed import scene_list, solve_due
-from ..contact.verlet import (active_and_near, advance_odometers, carry_rows, list_is_stale,
+from ..contact.verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
@@ -162,36 +162,18 @@ def _interfaces_defined(bc, a: np.ndarray, b: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def _gather_contacts(rows_f: np.ndarray, sel: np.ndarray):
-    """Points on A and B, normals (K,3) and depths −sd (K,) of the rows ``sel``."""
-    K = sel.shape[0]
-    pa, pb, nrm = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
-    dep = np.empty(K)
-    for c in range(K):
-        row = rows_f[sel[c]]
-        for k in range(3):
-            pa[c, k] = row[F_PA + k]
-            pb[c, k] = row[F_PB + k]
-            nrm[c, k] = row[F_N + k]
-        dep[c] = -row[F_SD]
-    return pa, pb, nrm, dep
-
-
-@njit(cache=True)
-def _hertz_radii(sc, pl, sel, a, b, nrm, R):
-    """Equivalent Hertz radii (K,) of the contacts ``sel`` and the number of fallbacks
+def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
+    """Equivalent Hertz radii (K,) of the active contacts and the number of fallbacks
     (:func:`~nurbsdem.geometry.curvature.scene_contact_radii`, as the Python path calls it;
     zeros and 0 for linear laws)."""
-    K = sel.shape[0]
+    K = a.shape[0]
     r_eff = np.zeros(K)
     if not sc.hertz or K == 0:
         return r_eff, 0
     t = sc.tab
     n_fall = scene_contact_radii(t[0], t[1], t[2], t[3], t[4], t[5], t[6], sc.first_patch,
                                  sc.body_shape, sc.sphere_radius, sc.radius, R, a, b,
-                                 pl.rows_i[sel, I_PA], pl.rows_i[sel, I_PB],
-                                 np.ascontiguousarray(pl.rows_f[sel, F_PAR:F_PAR + 4]), nrm,
-                                 pl.rows_i[sel, I_DEG], r_eff)
+                                 patch_a, patch_b, params, nrm, deg, r_eff)
     return r_eff, n_fall
 
 
@@ -204,13 +186,12 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
     gravity (omega (N,3): the particles' angular velocities, rad/s; implicit dashpots when
     ``cc.implicit``).  Returns (True, the new Evaluation), or (False, ev) when a contact has
     no interface (the Python path raises the error)."""
-    sel, near, gap = active_and_near(pl.rows_f, pl.rows_i, pl.budget, reach)
-    a, b = pl.a[sel], pl.b[sel]
+    (a, b, pa, pb, nrm, dep, key, deg, params, patch_a, patch_b, near_a, near_b, near_point,
+     near_normal, gap) = contact_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys, pl.budget,
+                                        reach)
     if not _interfaces_defined(bc, a, b):
         return False, ev
-    pa, pb, nrm, dep = _gather_contacts(pl.rows_f, sel)
-    radius, n_fall = _hertz_radii(sc, pl, sel, a, b, nrm, R)
-    key = pl.keys[sel]
+    radius, n_fall = _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R)
     spring = match_history(ev.hist_keys, ev.hist_springs, key)
     W = wall_d.shape[0]
     pos_all = np.concatenate((x, wall_d))
@@ -229,11 +210,9 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
     force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
         a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
         bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)
-    near_pa, near_pb, near_normal, _ = _gather_contacts(pl.rows_f, near)
-    near_point = 0.5 * (near_pa + near_pb)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
-                            radius, n_fall, key.copy(), spring.copy(), force, torque, slip, pl.a[near],
-                            pl.b[near], near_point, near_normal, gap, reach, monitored)
+                            radius, n_fall, key.copy(), spring.copy(), force, torque, slip,
+                            near_a, near_b, near_point, near_normal, gap, reach, monitored)
 
 
 # --------------------------------------------------------------------------- integration
