@@ -77,3 +77,26 @@ def test_compiled_nurbs_steps_equal_the_python_path(tmp_path, monkeypatch, name,
     assert not (cc / "monitors" / "hertz.csv").exists()       # linear laws: no Hertz monitor
     assert any(used) and not all(used)                         # the Python run, then compiled
     assert any(batched)
+
+
+def test_a_guard_return_hands_the_deck_steps_to_the_python_path(tmp_path, monkeypatch):
+    """What the loop's caller does when an LCP fails in the compiled loop (it returns GUARD at
+    deck step ``done``): the system and the scene are rolled back to the call's start and the
+    Python path runs those deck steps, answering the failure.  A failure cannot be injected
+    into compiled code, so here every third call of the loop claims one at its last deck
+    step: paper particles, the same bits and counts as the Python path alone."""
+    from nurbsdem.dynamics import deck_steps
+    original = deck_steps.run_deck_steps
+    claimed = []
+
+    def failing(*args):
+        status, done, *rest = original(*args)
+        claim = done >= 1 and len(claimed) % 3 == 2
+        claimed.append(claim)
+        return (deck_steps.GUARD, done - 1, *rest) if claim else (status, done, *rest)
+    monkeypatch.setattr(deck_steps, "run_deck_steps", failing)
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "paper.inp", PAPER)
+    _same_results(py, cc)
+    for key in ("steps", "substeps", "lcps", "active_total", "active_max", "degenerated"):
+        assert getattr(s_py, key) == getattr(s_cc, key), key
+    assert sum(claimed) >= 5

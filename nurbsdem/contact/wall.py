@@ -168,6 +168,18 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
     return ContactResult.from_rows(rf, ri)
 
 
+@kernel
+def _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
+                prev_f, prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask):
+    """The loop of :func:`_wall_chunk`, without reference counting (see
+    :func:`nurbsdem.contact.detect._solve_range`)."""
+    for k in range(k0, k1):
+        s = sid[k]
+        solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
+                   wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, no_mask, res_f[k],
+                   res_i[k])
+
+
 @njit(cache=True)
 def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
                 prev_f, prev_i, res_f, res_i, k0, k1):
@@ -177,11 +189,8 @@ def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
     wi = np.zeros((4, 4), np.int64)
     wfs = np.zeros((4, 3))
     no_mask = np.zeros(0, np.bool_)
-    for k in range(k0, k1):
-        s = sid[k]
-        solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
-                   wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, no_mask, res_f[k],
-                   res_i[k])
+    _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom, prev_f,
+                prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
 
 
 @njit(cache=True, parallel=True)
