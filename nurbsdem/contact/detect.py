@@ -272,8 +272,8 @@ def _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, ro
                  prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4):
     """The loop of :func:`_solve_chunk` over its workspaces.  Without reference counting
     (:func:`nurbsdem.jit.kernel`): the rows it hands to ``solve_pair`` are views of arrays
-    that every thread shares, and counting their references took atomic updates of the
-    same counters from all threads (a quarter of a compaction run's time)."""
+    that every thread shares, whose reference counts were updated atomically by all threads
+    (8 % of the LCP time of a compaction)."""
     for k in range(k0, k1):
         a = sa[k]
         b = sb[k]

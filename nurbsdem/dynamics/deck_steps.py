@@ -28,7 +28,9 @@ with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time sp
 
 The loop returns to Python
 
-* after ``n_deck`` deck steps (the caller stops where output falls due),
+* after ``n_deck`` deck steps (the caller stops where VTK or results output or a checkpoint
+  falls due; the monitor samples in between are rows the loop records,
+  :mod:`nurbsdem.dynamics.monitor`),
 * with :data:`CONTROL` after a deck step whose Gershgorin gate calls for the exact (Lanczos)
   estimate of the network, or at a periodic re-estimate (every ``NETWORK_RECHECK_STEPS`` deck
   steps, when the sub-step count could fall): the caller then runs
@@ -58,8 +60,8 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
 from .forces import add_kick_work, contact_loads, match_history
-from .implicit import dashpots_of_evaluation
 from .energy import energy_terms
+from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
 from .monitor import degenerated_count, record_row, row_width
 from .rigid import body_poses, omega_world
