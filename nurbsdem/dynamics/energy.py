@@ -84,7 +84,8 @@ class EnergySample:
 
 @njit(cache=True)
 def potential_energy(mass: np.ndarray, x: np.ndarray, gravity: np.ndarray) -> float:
-    """Gravitational potential −Σ m g·x (J) relative to the world origin, summed in body order."""
+    """Gravitational potential −Σ m g·x (J) relative to the world origin (summed in body
+    order)."""
     pot = 0.0
     for i in range(x.shape[0]):
         pot -= mass[i] * (x[i, 0] * gravity[0] + x[i, 1] * gravity[1] + x[i, 2] * gravity[2])

@@ -596,7 +596,7 @@ class DemSystem:
         pos, vel, omg = self._all_kinematics()
         if self.__dict__.get("_inv_mass_all") is None:
             self._inv_mass_all = np.concatenate([self._inv_mass, np.zeros(self.walls.n)])
-        if self.uses_hertz:   # Hertz–Mindlin interfaces (nurbsdem.dynamics.hertz): the exact curvature radii
+        if self.uses_hertz:   # Hertz–Mindlin (nurbsdem.dynamics.hertz): the exact curvature radii
             from ..geometry.curvature import contact_radii_for
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:
@@ -883,8 +883,9 @@ class DemSystem:
 
     @property
     def uses_hertz(self) -> bool:
-        """Whether the interfaces include Hertz–Mindlin laws (:func:`~nurbsdem.dynamics.hertz.has_hertz`
-        of the interface table, fixed once the system is built; taken once)."""
+        """Whether the interfaces include Hertz–Mindlin laws
+        (:func:`~nurbsdem.dynamics.hertz.has_hertz` of the interface table, fixed once the
+        system is built; taken once)."""
         hertz = self.__dict__.get("_hertz_table")
         if hertz is None:
             hertz = self._hertz_table = has_hertz(self._table)
