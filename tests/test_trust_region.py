@@ -79,8 +79,9 @@ def test_hard_case_and_tiny_gradients_leave_a_saddle():
 
 
 def test_sym2_eig_against_numpy_and_the_angle():
-    """The closed-form 2x2 eigen-decomposition: B q = λ q to round-off, q1 = (−s, c), q2 = (c, s) orthonormal, and (c, s) the rotation by
-    θ = ½ atan2(b12, (b11 − b22)/2) — including the diagonal cases (b12 = ±0, either order)."""
+    """The closed-form 2x2 eigen-decomposition: B q = λ q to round-off, q1 = (−s, c),
+    q2 = (c, s) orthonormal, and (c, s) the rotation by θ = ½ atan2(b12, (b11 − b22)/2) —
+    including the diagonal cases (b12 = ±0, either order)."""
     from nurbsdem.contact.trust_region import sym2_eig
     rng = np.random.default_rng(5)
     cases = [tuple(rng.normal(size=3) * 10.0 ** rng.integers(-6, 6)) for _ in range(2000)]

@@ -63,7 +63,7 @@ from .forces import add_kick_work, contact_loads, match_history
 from .energy import energy_terms
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
-from .monitor import degenerated_count, record_row, row_width
+from .monitor import record_row, row_width
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           network_count_stands, periodic_recheck)
@@ -85,7 +85,7 @@ BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass
 #: the last force evaluation: per-contact arrays, histories and loads
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
                         "radius fallback hist_keys hist_springs force torque slip near_a near_b "
-                        "near_point near_normal near_gap reach monitored")
+                        "near_point near_normal near_gap reach monitored degenerated")
 #: step-control and guard settings (floats and flags)
 Control = namedtuple("Control", "dt refine_decay safety dt_apriori dt_bound forced recheck fall "
                      "bound_slack energy_tolerance scale_floor check_energy watch_period2 "
@@ -214,7 +214,8 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
         bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
                             radius, n_fall, key.copy(), spring.copy(), force, torque, slip,
-                            near_a, near_b, near_point, near_normal, gap, reach, monitored)
+                            near_a, near_b, near_point, near_normal, gap, reach, monitored,
+                            np.count_nonzero(deg))
 
 
 # --------------------------------------------------------------------------- integration
@@ -334,11 +335,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         active = ev.a.shape[0]
         counters[ACTIVE_SUM] += active
         counters[ACTIVE_MAX] = max(counters[ACTIVE_MAX], active)
-        degenerated = degenerated_count(pl.rows_i)
-        counters[DEGENERATED_SUM] += degenerated
+        counters[DEGENERATED_SUM] += ev.degenerated
         if sample_at[j]:
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
-                       ev.monitored, active, degenerated, wall_d, ev.force)
+                       ev.monitored, active, ev.degenerated, wall_d, ev.force)
         if not _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters):
             return CONTROL, j + 1, pl, ev, wall_d, wall_u
     return DONE, n_deck, pl, ev, wall_d, wall_u
@@ -409,7 +409,8 @@ class DeckSteps:
                           np.asarray(cs.near_a, np.int64), np.asarray(cs.near_b, np.int64),
                           np.ascontiguousarray(cs.near_point, float),
                           np.ascontiguousarray(cs.near_normal, float),
-                          np.asarray(cs.near_gap, float), reach, int(cs.monitored))
+                          np.asarray(cs.near_gap, float), reach, int(cs.monitored),
+                          int(cs.degenerated_count))
 
     def _control(self) -> Control:
         from .system import (FALL_HYSTERESIS, NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS,
@@ -432,7 +433,7 @@ class DeckSteps:
         counters[STEP_COUNT], counters[REFINE], counters[CALM] = s.step_count, s.refine, s.calm_steps
         peak = np.array([s._peak])
         ledger = s.ledger.to_array()
-        sample_at = np.ascontiguousarray(np.resize(np.asarray(sample_at, np.bool_), n_deck))
+        sample_at = np.ascontiguousarray(sample_at[:n_deck], np.bool_)
         rows = np.zeros((n_deck, row_width(s.walls.n)))
         status, done, pl, ev, wall_d, wall_u = run_deck_steps(
             n_deck, n_sub, self.sc, self.bc, self._control(), self._pair_list(), self._evaluation(),

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..contact.lcp import I_ACTIVE, I_DEG, I_VALID
 from .energy import EnergyLedger, EnergySample, energy_terms
 
 #: columns of a recorded row: the five energy terms of energy_terms, the five ledger entries
@@ -73,16 +72,6 @@ def energy_sample(time: float, et: float, er: float, pot: float, en: float, etan
                         dissipated_friction=ledger.tangential_spring_work - float(etan),
                         external_work=ledger.external_work,
                         initial_mechanical=ledger.initial_mechanical)
-
-
-@njit(cache=True)
-def degenerated_count(rows_i: np.ndarray) -> int:
-    """Active contacts whose LCP degenerated (the ContactSet's ``degenerated_count``)."""
-    n = 0
-    for j in range(rows_i.shape[0]):
-        if rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 1 and rows_i[j, I_DEG] != 0:
-            n += 1
-    return n
 
 
 @njit(cache=True)
