@@ -27,7 +27,7 @@ from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace
 from ..jit import kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
-                  I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, make_work, solve_pair)
+                  I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, full_rows, make_work, solve_pair)
 from .stage1 import (CLASS_NAMES as S1_CLASS_NAMES, DELTA0 as S1_DELTA0, MAX_IT as S1_MAX_IT,
                      N_OUT as S1_N_OUT, O_F1, O_GL, O_LMIN, O_LREF, S1_PAW, S1_PBW, S1_ROW,
                      make_w4, stage1 as stage1_kernel)
@@ -214,8 +214,7 @@ def _mask(P: int, patches: Iterable[int] | None) -> np.ndarray:
 def _prev_rows(previous: ContactResult | None) -> tuple[np.ndarray, np.ndarray]:
     if previous is None or previous.row_f is None or previous.failed or previous.broad_rejected:
         return np.zeros(NF), np.zeros(NI, np.int64)
-    return (np.ascontiguousarray(previous.row_f, dtype=float),
-            np.ascontiguousarray(previous.row_i, dtype=np.int64))
+    return full_rows(previous.row_f), np.ascontiguousarray(previous.row_i, dtype=np.int64)
 
 
 def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = None,
@@ -353,7 +352,7 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     mask_b = no_mask if mask_b is None else np.ascontiguousarray(mask_b, dtype=np.bool_)
     args = (table.tab, table.info, table.centroid, table.radius, table.seeds, table.nonconvexity,
             sa, pos_a, rot_a, sb, pos_b, rot_b,
-            np.ascontiguousarray(prev_f, dtype=float), np.ascontiguousarray(prev_i, dtype=np.int64),
+            full_rows(prev_f), np.ascontiguousarray(prev_i, dtype=np.int64),
             mask_a, mask_b, out[0], out[1])
     if K >= PARALLEL_MIN_PAIRS:
         _batch_kernel(*args, numba.get_num_threads())

@@ -60,6 +60,10 @@ sphere. The step is the exact trust-region step (eigen-decomposition of the 2×2
 shift when indefinite), trust radius in radians, ratio test with eta = 0.1. The support
 points for the trial direction start from the first-order prediction
 u + (du/de) (e' − e), so each support mapping takes 1–2 Newton iterations near convergence.
+A warm start predicts its start parameters the same way for the bodies' turn since the
+previous solve (that solve's du/de and body-frame directions are kept in its result row,
+columns ``F_EA`` .. ``F_GB``): at the small turns of a sub-step each support mapping then
+ends after one evaluation, by the Taylor step below.
 Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale; a last Newton step
 below 1e-7 rad is taken by a Taylor update (points moved by dp/de, depth by the quadratic
 model) instead of two more support mappings — its error is second order (~1e-14).
@@ -91,7 +95,11 @@ F_PB = 7          # 7:10 point on B (world, m)
 F_PAR = 10        # 10:14 params (uA, vA, uB, vB)
 F_GRAD = 14       # tangential gradient norm at exit (m)
 F_IT1 = 15        # stage-1 trust-region iterations (a count, stored as float)
-NF = 16
+F_EA = 16         # 16:19 direction of A's support mapping at exit, A's file frame (R_A^T n)
+F_EB = 19         # 19:22 direction of B's support mapping at exit, B's file frame (-R_B^T n)
+F_GA = 22         # 22:28 du/de of A's support point (2 x 3, row-major; zeros: no prediction)
+F_GB = 28         # 28:34 du/de of B's support point
+NF = 34
 # int result columns
 I_ACTIVE = 0
 I_PA = 1          # patch of A (local index in its shape)
@@ -104,6 +112,20 @@ I_NEV = 7         # patch evaluations spent
 I_BROAD = 8       # 1 = rejected by the bounding spheres (Eq. 3), no LCP solved
 I_STAGE = 9       # stage that produced the result: 1 = f1 (Eq. 5), 2 = f2/phi (Eq. 6-9), 0 none
 NI = 10
+
+
+
+def full_rows(rows_f) -> np.ndarray:
+    """Float result rows (..., NF), C-contiguous: rows of an older layout with fewer columns
+    (a checkpoint, stored data) are padded with zeros, which :func:`solve_pair` reads as
+    "no warm prediction"."""
+    rows_f = np.asarray(rows_f, dtype=float)
+    if rows_f.shape[-1] < NF:
+        padded = np.zeros(rows_f.shape[:-1] + (NF,))
+        padded[..., :rows_f.shape[-1]] = rows_f
+        return padded
+    return np.ascontiguousarray(rows_f)
+
 
 MAX_OUTER_IT = 60
 ANGLE_TOL = 1e-11
@@ -269,6 +291,34 @@ def _predict(wf, wfs, base, sA, sB, tA, tB, RA, RB, dnew):
         wfs[tB, a] = wfs[sB, a] + sb
     wfs[tA, 2] = wfs[sA, 2]
     wfs[tB, 2] = wfs[sB, 2]
+
+
+@kernel
+def _predicted_params(prevF, body, e, out):
+    """Start parameters of body 0 (A) or 1 (B) of a warm solve: the previous support point's
+    parameters moved to first order to the body-frame direction e (3,),
+    u = u_prev + G (e − e_prev) (the module docstring's prediction, as for a trial
+    direction; a row without G, zeros, gives u_prev).  Writes out[0:2]."""
+    fe = F_EA if body == 0 else F_EB
+    fg = F_GA if body == 0 else F_GB
+    pu = F_PAR + 2 * body
+    for a in range(2):
+        g = fg + 3 * a
+        out[a] = (prevF[pu + a] + prevF[g] * (e[0] - prevF[fe])
+                  + prevF[g + 1] * (e[1] - prevF[fe + 1]) + prevF[g + 2] * (e[2] - prevF[fe + 2]))
+
+
+@kernel
+def _store_prediction(resF, body, e, G):
+    """Columns F_EA.. (body 0) or F_EB.. (body 1) of a result row: the body-frame direction
+    e (3,) of the final support point and its du/de G (2, 3), for :func:`_predicted_params`
+    at the next solve."""
+    fe = F_EA if body == 0 else F_EB
+    fg = F_GA if body == 0 else F_GB
+    for c in range(3):
+        resF[fe + c] = e[c]
+        resF[fg + c] = G[0, c]
+        resF[fg + 3 + c] = G[1, c]
 
 
 @kernel
@@ -469,10 +519,10 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
             d[c] = prevF[F_N + c] / nn
         wi[0, 0] = pA0 + prevI[I_PA]
         wi[1, 0] = pB0 + prevI[I_PB]
-        wfs[0, 0] = prevF[F_PAR]
-        wfs[0, 1] = prevF[F_PAR + 1]
-        wfs[1, 0] = prevF[F_PAR + 2]
-        wfs[1, 1] = prevF[F_PAR + 3]
+        _rot_t(RA, d, 1.0, wf[_EA])
+        _rot_t(RB, d, -1.0, wf[_EB])
+        _predicted_params(prevF, 0, wf[_EA], wfs[0])
+        _predicted_params(prevF, 1, wf[_EB], wfs[1])
         delta = 0.1
     else:
         if mode == MODE_COLD:
@@ -625,6 +675,10 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     resF[F_PAR + 2] = wfs[1, 0]
     resF[F_PAR + 3] = wfs[1, 1]
     resF[F_GRAD] = gnorm
+    _rot_t(RA, d, 1.0, wf[_EA])
+    _rot_t(RB, d, -1.0, wf[_EB])
+    _store_prediction(resF, 0, wf[_EA], wf[_GA:_GA + 2])
+    _store_prediction(resF, 1, wf[_EB], wf[_GB:_GB + 2])
     if (not converged and tol_nc > 0.0 and 0.0 <= jump <= tol_nc and delta <= SADDLE_STALL_ANGLE
             and abs(phi - phi_ref) <= SADDLE_PHI_TOL * scale and it - it_ref >= SADDLE_PHI_IT):
         # saddle stall (docstring): the current support pair and the one it jumped to,

@@ -72,7 +72,7 @@ from ..geometry.analytic import exact_sphere
 from .boxes import pack_boxes
 from .broadphase import wall_geometry
 from .detect import ContactTable
-from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
 from .verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
                      renew_certificates)
@@ -426,5 +426,7 @@ class _PairState:
     def from_dict(cls, st: dict, P: int) -> "_PairState":
         if "list_a" not in st:
             return cls.empty(P)
-        return cls(*(np.array(st[k]) for k in ("list_a", "list_b", "keys", "mask_a", "mask_b",
-                                                "rows_f", "rows_i", "budget", "reused")))
+        fields = [np.array(st[k]) for k in ("list_a", "list_b", "keys", "mask_a", "mask_b",
+                                             "rows_f", "rows_i", "budget", "reused")]
+        fields[5] = full_rows(fields[5])     # a checkpoint of a version with fewer columns
+        return cls(*fields)

@@ -11,6 +11,10 @@ projection falls inside the wall's parallelogram o + α a + β b, 0 <= α, β <=
 wall's edge vectors along u and v). The contact normal (from A towards the wall, DEVNOTES)
 is −n, and gap = point_a − point_b satisfies normal · gap = −signed_distance.
 
+A warm start begins at the previous support point moved to first order by the body's turn
+since (its du/de and body-frame direction are kept in the row: ``lcp._predicted_params``),
+so that the support mapping usually ends after one evaluation.
+
 Curved walls: use the general :func:`nurbsdem.contact.detect` with the wall as a closed
 convex body; a single open curved patch is not supported as body B.
 
@@ -32,8 +36,8 @@ from . import lcp
 from .analytic import parallelogram_coordinates
 from .detect import PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, table_of
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
-                  I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP, _rot_t,
-                  _to_world)
+                  I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP,
+                  full_rows, _predicted_params, _rot_t, _store_prediction, _to_world)
 from .support import CREASE, seed_start, support_map
 
 
@@ -78,8 +82,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     _rot_t(R, d, 1.0, e)
     if prevI[I_VALID] == 1:
         wi[0, 0] = p0 + prevI[I_PA]
-        wfs[0, 0] = prevF[F_PAR]
-        wfs[0, 1] = prevF[F_PAR + 1]
+        _predicted_params(prevF, 0, e, wfs[0])
     else:
         k = seed_start(seeds[0], seeds[1], seeds[2], info[2], info[3], no_mask, p0, e)
         wi[0, 0] = seeds[1][k]
@@ -88,6 +91,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     wfs[0, 2] = 0.0
     ok, nev = support_map(tab, e, wi[0], wfs[0], rad, ws, wf[_EV:_EV + 6], wf[_EV2:_EV2 + 6],
                           wf[_TMP], wf[_PA], wf[_MA:_MA + 3], wf[_GA:_GA + 2])
+    _store_prediction(resF, 0, e, wf[_GA:_GA + 2])
     pa = resF[F_PA:F_PA + 3]
     _to_world(pos, R, wf[_PA], pa)
     sd = n0 * (pa[0] - origin[0]) + n1 * (pa[1] - origin[1]) + n2 * (pa[2] - origin[2])
@@ -224,7 +228,7 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
     args = (table.tab, table.info, table.centroid, table.radius, table.seeds,
             np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
             f(rot, (K, 3, 3)), f(origin, (K, 3)), f(a, (K, 3)), f(b, (K, 3)),
-            f(dom, (K, 4)), np.ascontiguousarray(prev_f, dtype=float),
+            f(dom, (K, 4)), full_rows(prev_f),
             np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i)
     if K >= PARALLEL_MIN_PAIRS:
         _wall_batch_kernel(*args, numba.get_num_threads())
