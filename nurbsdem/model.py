@@ -263,14 +263,18 @@ DAMPING_SCHEMES = ("explicit", "implicit")
 
 @dataclass
 class DynamicStep(Step):
-    """``Step ID Dynamic Duration T TimeStep DT [Damping Explicit|Implicit]``: integrate T
-    seconds with deck step DT (s); ``damping`` "implicit" takes the normal dashpots at the
-    velocity after each force evaluation's two half kicks (:mod:`nurbsdem.dynamics.implicit`),
-    so that they do not limit the stable step."""
+    """``Step ID Dynamic Duration T TimeStep DT [Damping Explicit|Implicit] [Accuracy η]``:
+    integrate T seconds with deck step DT (s); ``damping`` "implicit" takes the normal
+    dashpots at the velocity after each force evaluation's two half kicks
+    (:mod:`nurbsdem.dynamics.implicit`), so that they do not limit the stable step;
+    ``accuracy`` η (-, None: off) repeats a deck step whose energy-balance error grows by
+    more than η × the energy scale with twice the sub-steps
+    (:mod:`nurbsdem.dynamics.accuracy`)."""
 
     duration: float = 0.0
     time_step: float = 0.0
     damping: str = "explicit"
+    accuracy: float | None = None
     kind = "dynamic"
 
 
@@ -294,7 +298,8 @@ class MoveWallStep(Step):
       the nearest particle is ``gap`` (m, default 0). No time passes.
     * ``Displacement dx dy dz Duration T TimeStep DT``: the wall translates by the given
       vector (m) at constant velocity over T seconds while the particles move (a dynamic
-      step with a prescribed wall motion; ``[Damping Explicit|Implicit]`` as for Dynamic).
+      step with a prescribed wall motion; ``[Damping Explicit|Implicit] [Accuracy η]`` as for
+      Dynamic).
     """
 
     wall: str = ""
@@ -305,6 +310,7 @@ class MoveWallStep(Step):
     duration: float = 0.0
     time_step: float = 0.0
     damping: str = "explicit"
+    accuracy: float | None = None
     kind = "movewall"
 
 
@@ -565,6 +571,8 @@ def summary_text(model: Model) -> str:
                         f"time step {s.time_step:g} s")
         if getattr(s, "damping", "explicit") == "implicit":
             desc += ", implicit dashpots"
+        if getattr(s, "accuracy", None) is not None:
+            desc += f", accuracy {s.accuracy:g}"
         out.append(f"  {s.id}: t = {t:g} s: {desc}")
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")

@@ -435,13 +435,16 @@ class Simulation:
         return name
 
     # ------------------------------------------------------------------ steps
-    def run_dynamic(self, duration: float, time_step: float, damping: str = "explicit") -> None:
+    def run_dynamic(self, duration: float, time_step: float, damping: str = "explicit",
+                    accuracy: float | None = None) -> None:
         """``Dynamic``: integrate ``duration`` s with deck time step ``time_step`` s
         (sub-stepped below the stability limit, as ``solve`` does); ``damping`` "explicit" or
-        "implicit" (the deck's ``Damping``)."""
+        "implicit" (the deck's ``Damping``); ``accuracy`` η of the accuracy control (the
+        deck's ``Accuracy``, :mod:`nurbsdem.dynamics.accuracy`; None: off)."""
         sid = self._next_step_id()
         dur, dt = self._timing(sid, duration, time_step)
-        self._run(DynamicStep(sid, 0, dur, dt, damping=self._damping(sid, damping)))
+        self._run(DynamicStep(sid, 0, dur, dt, damping=self._damping(sid, damping),
+                              accuracy=self._accuracy(sid, accuracy)))
 
     def replicate(self, layers: int, height: float) -> None:
         """``Replicate``: the particles become layer 0 of ``layers`` layers spread over
@@ -455,11 +458,13 @@ class Simulation:
     def move_wall(self, name: str, displacement: Sequence[float] | None = None,
                   duration: float | None = None, time_step: float | None = None, *,
                   to_contact: bool = False, gap: float = 0.0,
-                  direction: Sequence[float] | None = None, damping: str = "explicit") -> None:
+                  direction: Sequence[float] | None = None, damping: str = "explicit",
+                  accuracy: float | None = None) -> None:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
-        particle is ``gap`` m away (no time passes).  ``damping``: as for :meth:`run_dynamic`."""
+        particle is ``gap`` m away (no time passes).  ``damping``, ``accuracy``: as for
+        :meth:`run_dynamic`."""
         sid = self._next_step_id()
         what = f"Step {sid}"
         if not isinstance(name, str) or name not in self.model.wall_names:
@@ -484,7 +489,8 @@ class Simulation:
         disp = self._vector("Displacement", displacement, what)
         dur, dt = self._timing(sid, duration, time_step)
         self._run(MoveWallStep(sid, 0, wall=name, displacement=disp, duration=dur, time_step=dt,
-                               damping=self._damping(sid, damping)))
+                               damping=self._damping(sid, damping),
+                               accuracy=self._accuracy(sid, accuracy)))
 
     @staticmethod
     def _damping(sid: int, damping: Any) -> str:
@@ -492,6 +498,11 @@ class Simulation:
             raise InputError(f"Step {sid}: damping must be 'explicit' or 'implicit', got "
                              f"{damping!r}")
         return damping.lower()
+
+    @classmethod
+    def _accuracy(cls, sid: int, accuracy: Any) -> float | None:
+        return (None if accuracy is None
+                else cls._number("Accuracy", accuracy, f"Step {sid}", positive=True))
 
     def _next_step_id(self) -> int:
         return max((s.id for s in self.model.steps), default=0) + 1
@@ -865,6 +876,8 @@ class Simulation:
 
 def _step_line(s: Step) -> str:
     damping = " Damping Implicit" if getattr(s, "damping", "explicit") == "implicit" else ""
+    if getattr(s, "accuracy", None) is not None:
+        damping += f" Accuracy {_f(s.accuracy)}"
     if isinstance(s, DynamicStep):
         return (f"  Step {s.id} Dynamic Duration {_f(s.duration)} TimeStep {_f(s.time_step)}"
                 f"{damping}")

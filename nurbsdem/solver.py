@@ -65,6 +65,8 @@ class RunSummary:
     active_total: int = 0
     balance_error: float = 0.0
     balance_scale: float = 0.0
+    #: deck steps the accuracy control repeated with more sub-steps (``Accuracy`` on a step)
+    accuracy_repeats: int = 0
     simulated_time: float = 0.0
     particles: int = 0
     timers: dict = field(default_factory=dict)
@@ -89,7 +91,9 @@ class RunSummary:
                 f"degenerated ({100 * self.degenerated / max(self.active_total, 1):.2f} %), "
                 f"{self.failed} failed LCPs\n"
                 f"energy balance error: {self.balance_error:.3e} J {self._balance_share()}\n"
-                f"time split: {split}")
+                + (f"accuracy control: {self.accuracy_repeats} deck steps repeated with more "
+                   f"sub-steps\n" if self.accuracy_repeats else "")
+                + f"time split: {split}")
 
 
 class Progress:
@@ -259,12 +263,13 @@ class Solver:
         return [w.patch for w in self.model.walls]
 
     def _build_system(self, dt: float, motions: list[PrescribedMotion],
-                      implicit_damping: bool = False) -> DemSystem:
+                      implicit_damping: bool = False, accuracy: float | None = None) -> DemSystem:
         """A DemSystem for the current bodies (order = self.bodies), walls with ``motions``."""
         t0 = time.perf_counter()
         model = self.model
         sysm = DemSystem(dt=dt, gravity=model.gravity, interfaces=self.interfaces,
-                         safety=self.safety, t0=self.time, implicit_damping=implicit_damping)
+                         safety=self.safety, t0=self.time, implicit_damping=implicit_damping,
+                         accuracy=accuracy)
         sysm.compiled_steps = self.compiled_steps
         b = self.bodies
         Rs = b.rotation_matrices()
@@ -477,7 +482,8 @@ class Solver:
             raise self.model.error(f"Step {step.id}: Duration {duration} is not a whole number "
                                    f"of TimeStep {dt}", step.line)
         step_t0 = self.time - self.step_progress * dt
-        self.system = self._build_system(dt, motions, step.damping == "implicit")
+        self.system = self._build_system(dt, motions, step.damping == "implicit",
+                                         getattr(step, "accuracy", None))
         scene_state = restored.get("scene") if restored else None
         if scene_state:
             self.scene.set_state(scene_state)
@@ -533,6 +539,7 @@ class Solver:
         self.progress.update(self.time - step_t0, dt, sysm.substeps, self.scene.last.active, force=True)
         self.progress.finish()
         self._sync_bodies_from_system()
+        self.summary.accuracy_repeats += sysm.accuracy_repeats
         if self.wall_offset.size:
             self.wall_offset = sysm.wall_displacement.copy()
         self._snapshot()

@@ -35,6 +35,11 @@ The loop returns to Python
   estimate of the network, or at a periodic re-estimate (every ``NETWORK_RECHECK_STEPS`` deck
   steps, when the sub-step count could fall): the caller then runs
   :meth:`DemSystem._control_step` exactly as after a Python deck step;
+* with :data:`REFINE` when the accuracy control (``Accuracy`` on the step,
+  :mod:`nurbsdem.dynamics.accuracy`) rejects deck step ``done + 1``: the loop has rolled it
+  back (a snapshot taken at the start of each deck step) and doubled its factor, and the
+  caller goes on with the new count; with :data:`RECOUNT` after a deck step at whose end the
+  factor fell (the walls' kinematics are tabulated per internal step for one count),
 * with :data:`GUARD` when a guard fires, a contact between materials without an interface
   occurs or an LCP fails (even after its cold retry) in deck step ``done + 1``: the caller
   restores the state of the loop's start and runs those deck steps in Python, which repeats
@@ -60,7 +65,8 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
 from .forces import add_kick_work, contact_loads, match_history
-from .energy import energy_terms
+from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
+from .energy import balance_terms
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
 from .monitor import record_row, row_width
@@ -68,8 +74,10 @@ from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           network_count_stands, periodic_recheck)
 
-#: the loop did all its deck steps / stopped for the time-step control / a guard fired
-DONE, CONTROL, GUARD = 0, 1, 2
+#: the loop did all its deck steps / stopped for the time-step control / a guard fired /
+#: the accuracy control rolled deck step ``done`` back to repeat it with twice the internal
+#: steps / the accuracy control halved its factor after deck step ``done - 1``
+DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 
 #: the scene's constants: the tables of :mod:`nurbsdem.contact.listed`, the skin, margin and
 #: certificates, the contact law (Hertz), the first patch of each shape (curvature radii);
@@ -89,7 +97,7 @@ Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel 
 #: step-control and guard settings (floats and flags)
 Control = namedtuple("Control", "dt refine_decay safety dt_apriori dt_bound forced recheck fall "
                      "bound_slack energy_tolerance scale_floor check_energy watch_period2 "
-                     "implicit")
+                     "implicit accuracy max_substeps")
 
 #: counters (int64 array) of the loop's state, in this order
 STEP_COUNT, REFINE, CALM, BUILDS, EVALS, MONITORED, ACTIVE_SUM, ACTIVE_MAX = range(8)
@@ -98,9 +106,12 @@ DASHPOT_SOLVES = 8
 #: ... then the pairs the point-to-surface solver answered, and the CPU cycles spent in the
 #: search (odometers, list, certificates) and in the contact rows
 POINT_SOLVES, SEARCH_CYCLES, ROW_CYCLES = 11, 12, 13
-#: ... and the sum over deck steps of the degenerated contacts at their ends
+#: ... the sum over deck steps of the degenerated contacts at their ends
 DEGENERATED_SUM = 14
-N_COUNTERS = 15
+#: ... and the accuracy control's factor, calm deck steps in a row and repeated deck steps
+#: (:mod:`nurbsdem.dynamics.accuracy`)
+ACC_REFINE, ACC_CALM, ACC_REPEATS = 15, 16, 17
+N_COUNTERS = 18
 
 
 # --------------------------------------------------------------------------- contact search
@@ -246,18 +257,15 @@ def _finite(x, v, q, L, force) -> bool:
 def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> bool:
     """DemSystem._check_energy (the same energy_terms), then the peak of kinetic + elastic
     energy is raised."""
-    et, er, pot, en, etan = energy_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel)
-    kinetic, elastic = et + er, en + etan
-    mech = kinetic + pot + elastic
-    dissipated = ledger[0] + ledger[1] + (ledger[2] - etan)
-    balance = mech - ledger[4] - ledger[3] + dissipated
+    mech, balance, moving = balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel,
+                                          ledger)
     ok = True
     if cc.check_energy:
         tol = cc.energy_tolerance * max(peak[0], cc.scale_floor)
         gain = mech - ledger[4] - ledger[3]
         ok = math.isfinite(mech) and math.isfinite(balance) and gain <= tol and abs(balance) <= tol
     if ok:
-        peak[0] = max(peak[0], kinetic + elastic)
+        peak[0] = max(peak[0], moving)
     return ok
 
 
@@ -281,26 +289,80 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
                                 cc.bound_slack, counters[REFINE], substeps)
 
 
+# --------------------------------------------------------------------------- accuracy control
+#: what a deck step rolled back by the accuracy control restores: the body state, angular
+#: velocities, ledger, wall work, the period-2 watch, the pair list (its rows copied: the
+#: loop updates them in place), the last evaluation and the walls' kinematics
+Snapshot = namedtuple("Snapshot", "x v q L omega ledger wall_work alt_prev_v alt_prev_L "
+                      "alt_count pl ev wall_d wall_u peak")
+
+
+@njit(cache=True)
+def _snapshot(x, v, q, L, omega, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, pl,
+              ev, wall_d, wall_u, peak):
+    """The state at the start of a deck step (copies of what the loop changes in place)."""
+    pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
+                       pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_odo, pl.prev_pos,
+                       pl.prev_R, pl.prev_wall, pl.prev_x)
+    return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), omega.copy(), ledger.copy(),
+                    wall_work.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
+                    pl_copy, ev, wall_d, wall_u, peak[0])
+
+
+@njit(cache=True)
+def _restore(sn, x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, peak):
+    """Write a :class:`Snapshot` back into the arrays the caller holds."""
+    x[:] = sn.x
+    v[:] = sn.v
+    q[:] = sn.q
+    L[:] = sn.L
+    ledger[:] = sn.ledger
+    wall_work[:] = sn.wall_work
+    alt_prev_v[:] = sn.alt_prev_v
+    alt_prev_L[:] = sn.alt_prev_L
+    alt_count[:] = sn.alt_count
+    peak[0] = sn.peak
+
+
+@njit(cache=True)
+def _balance(bc, ev, x, v, q, L, ledger) -> float:
+    """The energy-balance error (J) of the present state (DemSystem._balance)."""
+    return balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger)[1]
+
+
+# --------------------------------------------------------------------------- the loop
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                   counters, peak, sample_at, rows):
-    """Up to n_deck deck steps of ``substeps`` internal steps each (module docstring).
+                   counters, peak, acc_growth, sample_at, rows):
+    """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
+    (``substeps``: the stability control's count; module docstring).
 
     sample_at (n_deck,) bool: the deck steps at whose end a monitor row is written into rows
     (n_deck, row_width(W)) (:func:`~nurbsdem.dynamics.monitor.record_row`).
 
-    walls_d, walls_u (n_deck·substeps, W, 3): the walls' displacements (m) and velocities
+    walls_d, walls_u (n_deck·n_run, W, 3): the walls' displacements (m) and velocities
     (m/s) at the end of each internal step.  Body state (x, v, q, L), ledger (5,) J, wall_work
-    (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT …) and peak (1,) J are
-    updated in place.  Returns (status, deck steps done, PairList, Evaluation, wall_d, wall_u).
+    (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT …), peak (1,) J and
+    acc_growth (1,) J (DemSystem.acc_last_growth) are updated in place.  With the accuracy
+    control (``cc.accuracy`` > 0,
+    :mod:`nurbsdem.dynamics.accuracy`) a deck step whose balance error grows beyond its
+    budget is rolled back (REFINE, the state of its start) and one after which the factor
+    falls ends the call (RECOUNT).  Returns (status, deck steps done, PairList, Evaluation,
+    wall_d, wall_u).
     """
-    h = cc.dt / substeps
+    n_run = substeps * counters[ACC_REFINE]
+    h = cc.dt / n_run
     inv_h = 1.0 / h
     omega = omega_world(q, L, bc.inv_I)      # of the present state, kept up to date below
+    accuracy = cc.accuracy > 0.0
     for j in range(n_deck):
-        for k in range(substeps):
-            t = j * substeps + k
+        if accuracy:
+            sn = _snapshot(x, v, q, L, omega, ledger, wall_work, alt_prev_v, alt_prev_L,
+                           alt_count, pl, ev, wall_d, wall_u, peak)
+            balance0 = _balance(bc, ev, x, v, q, L, ledger)
+        for k in range(n_run):
+            t = j * n_run + k
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
             omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
@@ -328,6 +390,22 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         counters[STEP_COUNT] += 1
         if not _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak):
             return GUARD, j, pl, ev, wall_d, wall_u
+        acc = counters[ACC_REFINE]
+        if accuracy:
+            growth = abs(_balance(bc, ev, x, v, q, L, ledger) - balance0)
+            budget = accuracy_budget(cc.accuracy, sn.peak, cc.scale_floor)
+            if repeat_for_accuracy(growth, budget, acc, n_run, cc.max_substeps, acc_growth[0]):
+                _restore(sn, x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
+                         peak)
+                counters[STEP_COUNT] -= 1
+                counters[ACC_REFINE] = 2 * acc
+                counters[ACC_CALM] = 0
+                counters[ACC_REPEATS] += 1
+                acc_growth[0] = growth
+                return REFINE, j, sn.pl, sn.ev, sn.wall_d, sn.wall_u
+            acc_growth[0] = np.inf
+            counters[ACC_REFINE], counters[ACC_CALM] = after_accepted(growth, budget, acc,
+                                                                      counters[ACC_CALM])
         counters[CALM] += 1
         if counters[REFINE] > 1 and counters[CALM] >= cc.refine_decay:
             counters[REFINE] //= 2
@@ -341,6 +419,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                        ev.monitored, active, ev.degenerated, wall_d, ev.force)
         if not _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters):
             return CONTROL, j + 1, pl, ev, wall_d, wall_u
+        if counters[ACC_REFINE] != acc:
+            return RECOUNT, j + 1, pl, ev, wall_d, wall_u
     return DONE, n_deck, pl, ev, wall_d, wall_u
 
 
@@ -420,28 +500,30 @@ class DeckSteps:
                        s.forced_substeps is not None, NETWORK_RECHECK_STEPS, FALL_HYSTERESIS,
                        NETWORK_BOUND_SLACK,
                        s.energy_tolerance, s._scale_floor, s.check_energy, s.watch_period2,
-                       s.implicit_damping)
+                       s.implicit_damping, s.accuracy or 0.0, s.max_substeps)
 
     def run(self, n_deck: int, sample_at: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         """Up to n_deck deck steps; returns (status, deck steps done, counters, the monitor
         rows (n_deck, row_width(W)) of the deck steps ``sample_at`` (n_deck,) bool).  On GUARD
         the system and scene are left in an undefined state: the caller restores them."""
         s, b = self.system, self.system.bodies
-        n_sub = s.substeps
-        walls_d, walls_u = self._wall_tables(n_deck, n_sub)
+        walls_d, walls_u = self._wall_tables(n_deck, s.substeps * s.acc_refine)
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[STEP_COUNT], counters[REFINE], counters[CALM] = s.step_count, s.refine, s.calm_steps
+        counters[ACC_REFINE], counters[ACC_CALM] = s.acc_refine, s.acc_calm
         peak = np.array([s._peak])
+        acc_growth = np.array([s.acc_last_growth])
         ledger = s.ledger.to_array()
         sample_at = np.ascontiguousarray(sample_at[:n_deck], np.bool_)
         rows = np.zeros((n_deck, row_width(s.walls.n)))
         status, done, pl, ev, wall_d, wall_u = run_deck_steps(
-            n_deck, n_sub, self.sc, self.bc, self._control(), self._pair_list(), self._evaluation(),
+            n_deck, s.substeps, self.sc, self.bc, self._control(), self._pair_list(), self._evaluation(),
             b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger, s.wall_work,
-            s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, sample_at, rows)
+            s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth, sample_at, rows)
         if status == GUARD:
             return status, done, counters, rows
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
+        s.acc_last_growth = float(acc_growth[0])
         return status, done, counters, rows
 
     def _store(self, pl, ev, wall_d, wall_u, ledger, counters, peak) -> None:
@@ -472,6 +554,8 @@ class DeckSteps:
         s.wall_d, s.wall_u = wall_d, wall_u
         s.ledger = EnergyLedger.from_array(ledger)
         s.step_count, s.refine, s.calm_steps = (int(counters[i]) for i in (STEP_COUNT, REFINE, CALM))
+        s.acc_refine, s.acc_calm = int(counters[ACC_REFINE]), int(counters[ACC_CALM])
+        s.accuracy_repeats += int(counters[ACC_REPEATS])
         s._peak = float(peak[0])
         s.failed_in_step = 0
         s.dashpot_solves += counters[DASHPOT_SOLVES:DASHPOT_SOLVES + 3]

@@ -108,6 +108,21 @@ def energy_terms(mass: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray,
     return et, er, potential_energy(mass, x, gravity), en, etan
 
 
+@njit(cache=True)
+def balance_terms(mass: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray,
+                  L: np.ndarray, inv_I: np.ndarray, gravity: np.ndarray, eel: np.ndarray,
+                  ledger: np.ndarray) -> tuple[float, float, float]:
+    """(mechanical energy, balance error, kinetic + elastic energy) in J of a state and its
+    ledger (5,) (:meth:`EnergyLedger.to_array`): the figures of the energy guard and of the
+    accuracy control (:mod:`nurbsdem.dynamics.accuracy`), one function for the Python and
+    the compiled deck steps so that they decide alike to the bit."""
+    et, er, pot, en, etan = energy_terms(mass, x, v, q, L, inv_I, gravity, eel)
+    kinetic, elastic = et + er, en + etan
+    mech = kinetic + pot + elastic
+    dissipated = ledger[0] + ledger[1] + (ledger[2] - etan)
+    return mech, mech - ledger[4] - ledger[3] + dissipated, kinetic + elastic
+
+
 @dataclass
 class EnergyLedger:
     """Running accumulators (J) updated by the integrator; part of the checkpoint state."""

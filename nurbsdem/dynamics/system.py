@@ -73,14 +73,16 @@ import numpy as np
 
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
-from .energy import EnergyLedger, EnergySample, energy_terms
+from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
+from .energy import EnergyLedger, EnergySample, balance_terms, energy_terms
 from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
 from .hertz import has_hertz
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_with_terms, state_is_finite
 from .monitor import MonitorSample, energy_sample
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
-from .deck_steps import ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, DeckSteps
+from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, REFINE,
+                         DeckSteps)
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
                           critical_step, critical_step_from_rates, needed_substeps,
                           network_count_stands, network_gershgorin, network_rates,
@@ -208,19 +210,26 @@ class DemSystem:
     watch_period2: enable the period-2 part of the guard (disable only to demonstrate it).
     implicit_damping: implicit normal dashpots (:mod:`nurbsdem.dynamics.implicit`); one MPI
         rank only.
+    accuracy: η of the accuracy control (:mod:`nurbsdem.dynamics.accuracy`): a deck step whose
+        energy-balance error grows by more than η × the energy scale is repeated with more
+        sub-steps; None: off.
     """
 
     def __init__(self, dt: float, gravity=(0.0, 0.0, -9.81), interfaces: InterfaceTable | None = None,
                  safety: float = 0.5, substeps: int | None = None, max_substeps: int = 100000,
                  energy_tolerance: float = 0.25, check_energy: bool = True, t0: float = 0.0,
                  max_refinements: int = 3, watch_period2: bool = True,
-                 implicit_damping: bool = False) -> None:
+                 implicit_damping: bool = False, accuracy: float | None = None) -> None:
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError(f"time step must be positive, got {dt}")
         if not (0 < safety <= 1):
             raise InputError(f"time-step safety factor must be in (0, 1], got {safety}")
         if substeps is not None and int(substeps) < 1:
             raise InputError(f"substeps must be >= 1, got {substeps}")
+        if accuracy is not None and not (0 < accuracy < 1):
+            raise InputError(f"accuracy must be in (0, 1), got {accuracy}")
+        if accuracy is not None and substeps is not None:
+            raise InputError("forced substeps and the accuracy control exclude each other")
         self.dt = float(dt)
         self.t0 = float(t0)
         self.gravity = np.asarray(gravity, dtype=float).reshape(3)
@@ -250,6 +259,16 @@ class DemSystem:
         self.dt_bound = math.inf        # its Gershgorin lower bound at the last exact estimate
         self.refine = 1                 # factor on the sub-steps after a guard fired
         self.calm_steps = 0             # deck steps since the guard last fired
+        #: η of the accuracy control (:mod:`.accuracy`; None: off), its factor on the
+        #: sub-steps of the stability control, its calm deck steps in a row, and the deck
+        #: steps it repeated so far
+        self.accuracy = None if accuracy is None else float(accuracy)
+        self.acc_refine = 1
+        self.acc_calm = 0
+        #: the balance error's growth (J) in the last rejected attempt at the present deck
+        #: step (inf: none)
+        self.acc_last_growth = math.inf
+        self.accuracy_repeats = 0
         self.failed_in_step = 0         # failed contact problems reported in the last deck step
         self._warned_heavy = False
         self._apriori_zeta = self._network_zeta = 0.0
@@ -687,36 +706,46 @@ class DemSystem:
 
     # ------------------------------------------------------------------ stepping
     def step(self) -> EnergySample:
-        """Advance one deck step (``substeps`` internal steps); returns the energies at its end.
+        """Advance one deck step (``substeps`` × ``acc_refine`` internal steps); returns the
+        energies at its end.
 
         A deck step the guard finds unstable is rolled back and repeated with twice the
         sub-steps, up to ``max_refinements`` times; then InstabilityError is raised (with the
-        system rolled back to the start of the step)."""
+        system rolled back to the start of the step).  With the accuracy control
+        (:mod:`nurbsdem.dynamics.accuracy`) a stable deck step whose energy-balance error grew
+        by more than its budget is rolled back and repeated with twice the sub-steps too."""
         self.initialize()
         good = self.get_state()
         snapshot = getattr(self.provider, "snapshot", None)
         provider_state = snapshot() if snapshot is not None else None
+        balance0 = self._balance() if self.accuracy is not None else 0.0
         tried: list[str] = []
         while True:
-            n_sub, refine = self.substeps, self.refine
+            control = (self.substeps, self.refine, self.calm_steps, self.acc_refine,
+                       self.acc_calm, self.acc_last_growth)
+            n_sub, refine, _, acc, _, _ = control
             try:
                 e = self._try_step()
-                self.last_substeps = n_sub
-                break
             except _Unstable as exc:
-                self.set_state(good)
-                if provider_state is not None:
-                    self.provider.restore(provider_state)
-                tried.append(f"{n_sub} sub-step(s): {exc}")
+                self._roll_back(good, provider_state, control)
+                tried.append(f"{n_sub * acc} sub-step(s): {exc}")
                 if (self.forced_substeps is not None or len(tried) > self.max_refinements
-                        or 2 * n_sub > self.max_substeps):
+                        or 2 * n_sub * acc > self.max_substeps):
                     self._give_up(tried)
                 self.refine = 2 * refine
                 self.substeps = 2 * n_sub
                 self.dt_internal = self.dt / self.substeps
                 self.calm_steps = 0
                 log.warning("deck step at t = %.6g s repeated with %d sub-steps of %.4g s: %s",
-                            self.time, self.substeps, self.dt_internal, exc)
+                            self.time, self.substeps * acc, self.dt / (self.substeps * acc), exc)
+                continue
+            growth = self._repeat_for_accuracy(balance0, n_sub, acc)
+            if growth is not None:
+                self._roll_back(good, provider_state, control)
+                self.acc_refine, self.acc_calm, self.acc_last_growth = 2 * acc, 0, growth
+                continue
+            self.last_substeps = n_sub * acc
+            break
         self._peak = max(self._peak, e.kinetic + e.elastic)
         self.calm_steps += 1
         if self.refine > 1 and self.calm_steps >= REFINE_DECAY_STEPS:
@@ -726,6 +755,45 @@ class DemSystem:
             self.domain.after_deck_step()      # re-cut the domain when due
         self._control_step()
         return e
+
+    def _roll_back(self, good: dict, provider_state: Any, control: tuple) -> None:
+        """Undo a deck step: the state ``good`` and the provider's snapshot, with the step
+        control's figures ``control`` (substeps, refine, calm_steps, acc_refine, acc_calm,
+        acc_last_growth) of the attempt (a repeat may follow another)."""
+        self.set_state(good)
+        if provider_state is not None:
+            self.provider.restore(provider_state)
+        (self.substeps, self.refine, self.calm_steps, self.acc_refine, self.acc_calm,
+         self.acc_last_growth) = control
+        self.dt_internal = self.dt / self.substeps
+
+    def _balance(self) -> float:
+        """The energy-balance error (J) of the present state
+        (:func:`~nurbsdem.dynamics.energy.balance_terms`, as the compiled deck steps take it)."""
+        b = self.bodies
+        return float(balance_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
+                                   np.ascontiguousarray(self.c_eel, float).reshape(-1, 2),
+                                   self.ledger.to_array())[1])
+
+    def _repeat_for_accuracy(self, balance0: float, n_sub: int, acc: int) -> float | None:
+        """The accuracy control after a deck step that passed the guards
+        (:mod:`nurbsdem.dynamics.accuracy`; off: None): the growth of the balance error (J)
+        when the step is to be repeated with twice the sub-steps; else None, and the factor
+        and its calm count are updated."""
+        if self.accuracy is None:
+            return None
+        growth = abs(self._balance() - balance0)
+        budget = accuracy_budget(self.accuracy, self._peak, self._scale_floor)
+        if repeat_for_accuracy(growth, budget, acc, n_sub * acc, self.max_substeps,
+                               self.acc_last_growth):
+            self.accuracy_repeats += 1
+            log.debug("deck step at t = %.6g s repeated with %d sub-steps for accuracy: balance "
+                      "error grew by %.3g J (budget %.3g J)", self.time - self.dt,
+                      2 * n_sub * acc, growth, budget)
+            return growth
+        self.acc_refine, self.acc_calm = after_accepted(growth, budget, acc, self.acc_calm)
+        self.acc_last_growth = math.inf
+        return None
 
     def steps(self, n_max: int, sample_at: np.ndarray | None = None) -> int:
         """Advance up to ``n_max`` deck steps (at least one) and return how many were done.
@@ -752,23 +820,26 @@ class DemSystem:
         if not fast:
             self._tallied_step(bool(sample_at[0]))
             return 1
-        good = self.get_state()
-        snap = self.provider.snapshot()
-        n_sub = self.substeps
-        t0, count = self.t0, self.step_count
-        status, done, counters, rows = fast.run(int(n_max), sample_at)
-        if status == GUARD:
-            self.set_state(good)
-            self.provider.restore(snap)
-            for j in range(done + 1):
-                self._tallied_step(bool(sample_at[j]))
-            return done + 1
+        while True:
+            good = self.get_state()
+            snap = self.provider.snapshot()
+            n_run = self.substeps * self.acc_refine
+            t0, count = self.t0, self.step_count
+            status, done, counters, rows = fast.run(int(n_max), sample_at)
+            if status == GUARD:
+                self.set_state(good)
+                self.provider.restore(snap)
+                for j in range(done + 1):
+                    self._tallied_step(bool(sample_at[j]))
+                return done + 1
+            if status != REFINE or done:
+                break       # REFINE on the first deck step: again with the new count
         W = self.walls.n
         samples = [MonitorSample.from_row(t0 + (count + j + 1) * self.dt, rows[j], W)
                    for j in range(done - 1) if sample_at[j]]
         if done and sample_at[done - 1]:       # the present state: taken live (Hertz rows too)
             samples.append(self.monitor_sample())
-        self.last_steps = StepTally(done * n_sub, int(counters[ACTIVE_SUM]),
+        self.last_steps = StepTally(done * n_run, int(counters[ACTIVE_SUM]),
                                     int(counters[ACTIVE_MAX]), int(counters[DEGENERATED_SUM]),
                                     0, tuple(samples))
         if status == CONTROL:
@@ -791,14 +862,15 @@ class DemSystem:
     def _try_step(self) -> EnergySample:
         """The internal steps of one deck step and the guards; raises _Unstable."""
         t_start = self.time
-        n = self.substeps
+        n = self.substeps * self.acc_refine
+        h = self.dt / n
         self.failed_in_step = 0
         if self.domain is not None:
             self.domain.begin_deck_step()
         for k in range(1, n + 1):
             t_new = t_start + self.dt * k / n
             with np.errstate(all="ignore"):
-                self._internal_step(t_new, self.dt_internal)
+                self._internal_step(t_new, h)
             self.failed_in_step += int(getattr(self.last_contacts, "failed", 0) or 0)
             b = self.bodies
             finite = state_is_finite(b.x, b.v, b.q, b.L) and bool(np.isfinite(self.force).all())
@@ -947,9 +1019,10 @@ class DemSystem:
         st.update(x=b.x.copy(), q=b.q.copy(), v=b.v.copy(), L=b.L.copy(),
                   ledger=self.ledger.to_array(),
                   counters=np.array([self.step_count, self.substeps, self.refine,
-                                     self.calm_steps], dtype=np.int64),
+                                     self.calm_steps, self.acc_refine, self.acc_calm],
+                                    dtype=np.int64),
                   scalars=np.array([self.t0, self.dt, self._peak, self.dt_bound,
-                                    self.dt_network, self.dt_critical]))
+                                    self.dt_network, self.dt_critical, self.acc_last_growth]))
         return st
 
     def set_state(self, st: dict[str, np.ndarray]) -> None:
@@ -968,12 +1041,16 @@ class DemSystem:
         if st["counters"].shape[0] >= 4:
             self.substeps, self.refine, self.calm_steps = (int(c) for c in st["counters"][1:4])
             self.dt_internal = self.dt / self.substeps
+        acc = st["counters"][4:6] if st["counters"].shape[0] >= 6 else (1, 0)
+        self.acc_refine, self.acc_calm = int(acc[0]), int(acc[1])
         self.t0 = float(st["scalars"][0])
         if float(st["scalars"][1]) != self.dt:
             raise InputError("checkpoint was written with a different deck time step")
         self._peak = float(st["scalars"][2])
         if st["scalars"].shape[0] >= 6:
             self.dt_bound, self.dt_network, self.dt_critical = (float(v) for v in st["scalars"][3:6])
+        self.acc_last_growth = (float(st["scalars"][6]) if st["scalars"].shape[0] >= 7
+                                else math.inf)
 
 
 class _Unstable(Exception):

@@ -44,13 +44,15 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
                 # Hertz-Mindlin with the exact curvature; E, nu from the Materials (walls:
                 # the Material on the Box/Wall line, default rigid). Model LinearPenalty: above
     Steps
-      Step ID Dynamic Duration T TimeStep dt [Damping Explicit|Implicit]
+      Step ID Dynamic Duration T TimeStep dt [Damping Explicit|Implicit] [Accuracy eta]
       Step ID Replicate Layers L Height H
       Step ID MoveWall name ToContact [Gap g] [Direction dx dy dz]
       Step ID MoveWall name Displacement dx dy dz Duration T TimeStep dt [Damping ..]
                 # Damping Implicit: normal dashpots at the velocity after each evaluation's
                 # two half kicks, so that strong damping does not shorten the stable step
-                # (default Explicit)
+                # (default Explicit). Accuracy eta: a deck step whose energy-balance error
+                # grows by more than eta x the energy scale is repeated with twice the
+                # sub-steps (more sub-steps only where impacts need them; default off)
     Output
       Directory path                                     # default: results
       VTK [Every t] [Resolution n]                       # default 0.01 s, 8
@@ -128,7 +130,7 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Steps": {"Step": EntrySpec(True, {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
-        "Displacement": F3, "Damping": S1})},
+        "Displacement": F3, "Damping": S1, "Accuracy": F1})},
     "Output": {
         "Directory": EntrySpec(False, head=S1),
         "VTK": EntrySpec(False, {"Every": F1, "Resolution": I1}),
@@ -185,6 +187,8 @@ RANGES: dict[str, Range] = {
     "NormalDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
     "TangentialDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
     "Friction": Range(0.0, 100.0, "", "Coulomb coefficients of real materials are below ~2"),
+    "Accuracy": Range(1e-12, 0.1, "", "a relative energy error per deck step beyond 0.1 "
+                      "controls nothing; below 1e-12 it is round-off"),
     "Duration": Range(0.0, 1e7, "s", "a simulated time of months is beyond a DEM run"),
     "TimeStep": Range(1e-15, 1e7, "s", "below a femtosecond nothing granular happens"),
     "Every": Range(1e-12, 1e7, "s", "output intervals beyond this range are meaningless"),
@@ -751,9 +755,11 @@ class _Builder:
                       + (f" (got {' and '.join(types)})" if types else ""), e.line)
         kind = types[0]
         if kind == "Dynamic":
-            self.only(e, {"Dynamic", "Duration", "TimeStep", "Damping"}, "a Dynamic step")
+            self.only(e, {"Dynamic", "Duration", "TimeStep", "Damping", "Accuracy"},
+                      "a Dynamic step")
             self.require(e, "Duration", "TimeStep")
-            step: Step = DynamicStep(e.id, e.line, *self.timing(e), damping=self.damping(e))
+            step: Step = DynamicStep(e.id, e.line, *self.timing(e), damping=self.damping(e),
+                                     accuracy=self.accuracy(e))
         elif kind == "Replicate":
             self.only(e, {"Replicate", "Layers", "Height"}, "a Replicate step")
             self.require(e, "Layers", "Height")
@@ -787,12 +793,13 @@ class _Builder:
                     self.fail(f"Step {e.id}: Direction must not be zero", e.line)
                 d = d / np.linalg.norm(d)
             return MoveWallStep(e.id, e.line, wall=name, to_contact=True, gap=gap, direction=d)
-        self.only(e, {"MoveWall", "Displacement", "Duration", "TimeStep", "Damping"},
-                  "MoveWall Displacement")
+        self.only(e, {"MoveWall", "Displacement", "Duration", "TimeStep", "Damping",
+                      "Accuracy"}, "MoveWall Displacement")
         self.require(e, "Duration", "TimeStep")
         dur, dt = self.timing(e)
         return MoveWallStep(e.id, e.line, wall=name, displacement=e.get("Displacement"),
-                            duration=dur, time_step=dt, damping=self.damping(e))
+                            duration=dur, time_step=dt, damping=self.damping(e),
+                            accuracy=self.accuracy(e))
 
     def damping(self, e: Entry) -> str:
         """The step's ``Damping`` scheme (lower case; default explicit)."""
@@ -801,6 +808,11 @@ class _Builder:
             self.fail(f"Step {e.id}: Damping must be Explicit or Implicit, got {value!r}",
                       e.line)
         return value.lower()
+
+    def accuracy(self, e: Entry) -> float | None:
+        """The step's ``Accuracy`` η (:mod:`nurbsdem.dynamics.accuracy`; None: off)."""
+        value = e.get("Accuracy")
+        return None if value is None else self.positive(e, "Accuracy", value)
 
     def output(self, entries: list[Entry]) -> None:
         out = Output(directory=self.base / "results")
