@@ -1,9 +1,15 @@
-"""The paper's example with explicit and with implicit normal dashpots, side by side.
+"""The paper's example with explicit and implicit normal dashpots and the accuracy control.
 
-`inputs/paper/compaction.inp` as shipped (``Damping Explicit``, the default: the dashpots
-limit the step, Eq. 1 of :mod:`nurbsdem.dynamics.stepcontrol`) and the same deck with
-``Damping Implicit`` on its four timed steps (:mod:`nurbsdem.dynamics.implicit`: the step is
-limited by the springs alone).  Printed per run: wall time, internal steps, LCPs, failed
+`inputs/paper/compaction.inp` with, on its four timed steps,
+
+* ``Damping Explicit`` (the default: the dashpots limit the step, Eq. 1 of
+  :mod:`nurbsdem.dynamics.stepcontrol`),
+* ``Damping Implicit`` (:mod:`nurbsdem.dynamics.implicit`: the springs alone limit the step),
+* ``Damping Implicit Accuracy 3e-5``, as shipped (:mod:`nurbsdem.dynamics.accuracy`: deck
+  steps whose energy-balance error grows beyond the budget are repeated with more
+  sub-steps).
+
+Printed per run: wall time, internal steps, LCPs, failed
 LCPs, the energy-balance error (absolute and as a share of the energy turned over — the
 integration error, which grows with the step), and two outcomes of the physics: the lid's
 height after ``MoveWall lid ToContact Gap 0.005`` (the pack's top + 5 mm) and the lid's
@@ -28,11 +34,21 @@ sys.path.insert(0, str(REPO))
 DECK = REPO / "inputs" / "paper" / "compaction.inp"
 
 
-def deck_text(damping: str, quick: bool = False) -> str:
-    """The paper deck with ``Damping <damping>`` on its timed steps and absolute shape paths
-    (quick: durations and the lid stroke divided by 10)."""
+#: the variants: (label, Damping, Accuracy or None)
+VARIANTS = (("Explicit", "Explicit", None), ("Implicit", "Implicit", None),
+            ("Implicit, Accuracy 3e-5 (as shipped)", "Implicit", 3e-5))
+
+
+def deck_text(damping: str, quick: bool = False, accuracy: float | None = None) -> str:
+    """The paper deck with ``Damping <damping> [Accuracy <accuracy>]`` on its timed steps
+    (instead of the shipped settings) and absolute shape paths (quick: durations and the lid
+    stroke divided by 10)."""
     text = DECK.read_text().replace("../shapes/", str(REPO / "inputs" / "shapes") + "/")
-    text = re.sub(r"(TimeStep \S+)", rf"\1 Damping {damping}", text)
+    extra = f" Damping {damping}" + (f" Accuracy {accuracy:g}" if accuracy is not None else "")
+    lines = [re.sub(r"(TimeStep \S+)", rf"\1{extra}",
+                    re.sub(r" Damping \S+| Accuracy \S+", "", line))
+             if line.lstrip().startswith("Step ") else line for line in text.splitlines()]
+    text = "\n".join(lines) + "\n"
     if quick:
         text = re.sub(r"Duration (\S+)", lambda m: f"Duration {float(m.group(1)) / 10:g}", text)
         text = text.replace("-0.08 Duration", "-0.008 Duration").replace(
@@ -53,30 +69,34 @@ def _lid(out: Path) -> tuple[float, float]:
     return top, peak
 
 
-def run(damping: str, workdir: Path, quick: bool = False) -> dict:
-    """Run the paper deck with the given damping; returns its figures."""
+def run(label: str, damping: str, accuracy: float | None, workdir: Path,
+        quick: bool = False) -> dict:
+    """Run the paper deck with the given damping and accuracy; returns its figures."""
     from nurbsdem.io.deck import parse_deck
     from nurbsdem.solver import Solver
-    case = workdir / f"paper_{damping.lower()}.inp"
-    case.write_text(deck_text(damping, quick))
-    out = workdir / f"out_{damping.lower()}"
-    return figures(damping, Solver(parse_deck(case), output=out, quiet=True).run(), out)
+    name = f"{damping.lower()}_{accuracy:g}" if accuracy is not None else damping.lower()
+    case = workdir / f"paper_{name}.inp"
+    case.write_text(deck_text(damping, quick, accuracy))
+    out = workdir / f"out_{name}"
+    return figures(label, Solver(parse_deck(case), output=out, quiet=True).run(), out)
 
 
 def figures(label: str, s, out: Path) -> dict:
     """The row of :func:`table` for a run's summary ``s`` and its output folder ``out``."""
     top, peak = _lid(out)
     return dict(damping=label, wall=s.wall_time, steps=s.steps, substeps=s.substeps,
+                repeats=s.accuracy_repeats,
                 lcps=s.lcps, failed=s.failed, balance=abs(s.balance_error),
                 share=abs(s.balance_error) / max(abs(s.balance_scale), 1e-300),
                 lcp=s.timers["LCP"], top=top, peak=peak)
 
 
 def table(rows: list[dict]) -> tuple[list[str], list[list[str]]]:
-    head = ["Damping", "wall s", "internal steps", "LCPs", "failed", "LCP s",
-            "energy-balance error J", "share of energy turned over",
+    head = ["Damping", "wall s", "internal steps", "repeated deck steps", "LCPs", "failed",
+            "LCP s", "energy-balance error J", "share of energy turned over",
             "lid after ToContact m", "lid peak reaction N"]
-    body = [[r["damping"], f"{r['wall']:.1f}", f"{r['substeps']}", f"{r['lcps']}",
+    body = [[r["damping"], f"{r['wall']:.1f}", f"{r['substeps']}", f"{r['repeats']}",
+             f"{r['lcps']}",
              f"{r['failed']}", f"{r['lcp']:.1f}", f"{r['balance']:.3g}", f"{r['share']:.2e}",
              f"{r['top']:.4f}", f"{r['peak']:.4g}"] for r in rows]
     return head, body
@@ -89,12 +109,13 @@ def main() -> None:
     from common import machine_info, stamp
     print(stamp(machine_info()))
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [run(d, Path(tmp), args.quick) for d in ("Explicit", "Implicit")]
+        rows = [run(*v, Path(tmp), args.quick) for v in VARIANTS]
     head, body = table(rows)
     print(" | ".join(head))
     for r in body:
         print(" | ".join(r))
-    print(f"implicit / explicit wall time: {rows[1]['wall'] / rows[0]['wall']:.2f}")
+    for r in rows[1:]:
+        print(f"{r['damping']} / explicit wall time: {r['wall'] / rows[0]['wall']:.2f}")
 
 
 if __name__ == "__main__":
