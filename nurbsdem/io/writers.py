@@ -3,7 +3,7 @@
 In the output directory (``Output Directory``, default ``results`` next to the deck)::
 
     particles.pvd  walls.pvd  contacts.pvd     ParaView time collections of ...
-    vtk/particles_000000.vtu ...               ... one .vtu per sample (meshio, zlib binary)
+    vtk/particles_000000.vtu ...               ... one .vtu per sample (zlib binary, io/vtu.py)
     monitors/energy.csv                        time,kinetic,potential,elastic,dissipated,
                                                external_work,mechanical,balance_error
     monitors/contacts.csv                      time,monitored,active,degenerated,failed
@@ -35,20 +35,19 @@ Typical use by the solver (see :class:`OutputWriters`)::
 from __future__ import annotations
 
 import errno
-import functools
 from concurrent.futures import Future, ThreadPoolExecutor
 import math
 import os
-import zlib
 import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Hashable, Mapping, Sequence
 
 import numpy as np
 
-from .atomic import (atomic_path, atomic_write_text, ensure_space, remove_stale_temporaries,
+from .atomic import (atomic_write_text, ensure_space, remove_stale_temporaries,
                      write_hdf5_atomically)
+from .vtu import Reuse, vtu_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..geometry.nurbs import Patch
@@ -71,6 +70,10 @@ VTK_DIR = "vtk"
 
 VTK_QUAD = 9
 VTK_VERTEX = 1
+#: arrays of each series that stay the same while its bodies do (encoded once: io/vtu.py)
+REUSED = {"particles": ("connectivity", "offsets", "types", "particle_id", "shape_id",
+                        "patch_id"),
+          "walls": ("connectivity", "offsets", "types", "wall_id")}
 
 
 def _time_tol(t: float) -> float:
@@ -143,37 +146,17 @@ def _empty_vtu(point_data: Mapping[str, int]) -> str:
 
 def write_vtu(path: str | Path, points: np.ndarray, cells: list[tuple[str, np.ndarray]],
               point_data: Mapping[str, np.ndarray] | None = None,
-              cell_data: Mapping[str, list[np.ndarray]] | None = None) -> None:
-    """Write an unstructured grid atomically with meshio (an empty grid by hand)."""
-    import meshio
-
+              cell_data: Mapping[str, list[np.ndarray]] | None = None,
+              reuse: Reuse | None = None, key: Hashable = None) -> None:
+    """Write an unstructured grid atomically (:mod:`nurbsdem.io.vtu`: float32 points and
+    data, zlib; ``reuse``/``key``: arrays encoded once for as long as ``key`` holds)."""
     point_data = dict(point_data or {})
     points = np.asarray(points, float).reshape(-1, 3)
     if points.shape[0] == 0:
         comps = {k: (1 if np.ndim(v) < 2 else int(np.shape(v)[1])) for k, v in point_data.items()}
         atomic_write_text(path, _empty_vtu(comps))
         return
-    _fast_vtu_compression()
-    # float32 is what ParaView renders with; it halves the bytes to compress and store
-    points = points.astype(np.float32)
-    point_data = {k: (np.asarray(v).astype(np.float32) if np.asarray(v).dtype.kind == "f"
-                      else np.asarray(v)) for k, v in point_data.items()}
-    mesh = meshio.Mesh(points, cells, point_data=point_data, cell_data=dict(cell_data or {}))
-    with atomic_path(path) as tmp:
-        meshio.write(str(tmp), mesh, file_format="vtu")
-
-
-class _Zlib1:
-    """zlib at level 1 for meshio's VTU writer (its compression is the slowest part of a
-    sample: level 1 is ~4x faster than the default level 6 for files ~15 % larger)."""
-
-    compress = staticmethod(functools.partial(zlib.compress, level=1))
-    decompress = staticmethod(zlib.decompress)
-
-
-def _fast_vtu_compression() -> None:
-    import meshio.vtu._vtu as vtu
-    vtu.zlib = _Zlib1
+    atomic_write_text(path, vtu_text(points, cells, point_data, cell_data, reuse, key))
 
 
 def pvd_text(entries: Sequence[tuple[float, str]]) -> str:
@@ -256,10 +239,14 @@ class PvdSeries:
     """
 
     def __init__(self, outdir: str | Path, name: str, restart_time: float | None = None,
-                 background: BackgroundWriter | None = None) -> None:
+                 background: BackgroundWriter | None = None,
+                 reuse: Sequence[str] = ()) -> None:
         self.outdir = Path(outdir)
         self.name = name
         self.background = background
+        #: the arrays of this series that repeat while a sample's ``key`` does (used by the
+        #: one thread that writes the series)
+        self.reuse = Reuse(reuse) if reuse else None
         self.pvd = self.outdir / f"{name}.pvd"
         self.vtkdir = self.outdir / VTK_DIR
         self.vtkdir.mkdir(parents=True, exist_ok=True)
@@ -294,21 +281,23 @@ class PvdSeries:
         self.entries.append((float(time), rel))
         atomic_write_text(self.pvd, pvd_text(self.entries))
 
-    def write(self, time: float, points, cells, point_data=None, cell_data=None) -> Path:
+    def write(self, time: float, points, cells, point_data=None, cell_data=None,
+              key: Hashable = None) -> Path:
         """Write one sample (see :func:`write_vtu`) and add it to the collection (in the
         background when the series has a :class:`BackgroundWriter`: the .pvd lists a sample
-        only once its file is complete)."""
+        only once its file is complete).  ``key``: while it stays the same, the arrays the
+        series' :attr:`reuse` names are the same (their encoding is kept)."""
         path, rel = self.next_path()
         self._next += 1
         if self.background is None:
-            self._write(path, rel, time, points, cells, point_data, cell_data)
+            self._write(path, rel, time, points, cells, point_data, cell_data, key)
         else:
             self.background.submit(self._write, path, rel, time, points, cells,
-                                   dict(point_data or {}), dict(cell_data or {}))
+                                   dict(point_data or {}), dict(cell_data or {}), key)
         return path
 
-    def _write(self, path, rel, time, points, cells, point_data, cell_data) -> None:
-        write_vtu(path, points, cells, point_data, cell_data)
+    def _write(self, path, rel, time, points, cells, point_data, cell_data, key) -> None:
+        write_vtu(path, points, cells, point_data, cell_data, self.reuse, key)
         self.commit(time, rel)
 
 
@@ -340,7 +329,8 @@ class ParaViewWriter:
         self.resolution = int(resolution)
         #: the worker that writes the samples when ``background`` (None: written at once)
         self.background = BackgroundWriter() if background else None
-        self.series = {name: PvdSeries(self.outdir, name, restart_time, self.background)
+        self.series = {name: PvdSeries(self.outdir, name, restart_time, self.background,
+                                       REUSED.get(name, ()))
                        for name in SERIES}
         self._shape_mesh: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for sid, shape in shapes.items():
@@ -390,7 +380,9 @@ class ParaViewWriter:
     def write_particles(self, time: float, bodies: "Bodies") -> Path:
         """One sample of ``particles.pvd`` (time in s)."""
         pts, quads, pd, cd = self.particle_mesh(bodies)
-        return self.series["particles"].write(time, pts, [("quad", quads)], pd, cd)
+        key = (np.asarray(bodies.id, np.int64).tobytes(),
+               np.asarray(bodies.shape_id, np.int64).tobytes())    # fixes the REUSED arrays
+        return self.series["particles"].write(time, pts, [("quad", quads)], pd, cd, key)
 
     # -- walls -------------------------------------------------------------------
     def write_walls(self, time: float, displacement: np.ndarray | None = None) -> Path:
@@ -401,7 +393,8 @@ class ParaViewWriter:
         d = disp[pw] if len(pw) else np.zeros((0, 3))
         ids = np.array([w.id for w in self.walls], np.int64)
         pd = {"wall_id": ids[pw] if len(pw) else np.zeros(0, np.int64), "displacement": d}
-        return self.series["walls"].write(time, pts + d, [("quad", quads)], pd, {"wall_id": [wid]})
+        return self.series["walls"].write(time, pts + d, [("quad", quads)], pd, {"wall_id": [wid]},
+                                          key=0)       # the walls never change their mesh
 
     # -- contacts ----------------------------------------------------------------
     def write_contacts(self, time: float, contacts: Mapping[str, np.ndarray] | None) -> Path:
