@@ -393,10 +393,11 @@ class Solver:
         out = self.model.output
         t = self.time
         s = self.system
-        for smp in samples:
-            self._write_monitors(writers, smp)
-        if force:
-            self._write_monitors(writers, s.monitor_sample())
+        with writers.monitors.batch():          # the rows of all samples, flushed once
+            for smp in samples:
+                self._write_monitors(writers, smp)
+            if force:
+                self._write_monitors(writers, s.monitor_sample())
         vtk = force or _due(t, out.vtk_every)
         results = force or _due(t, out.results_interval)
         if vtk or results:

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import errno
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 import math
 import os
 import shutil
@@ -287,18 +288,49 @@ class PvdSeries:
         background when the series has a :class:`BackgroundWriter`: the .pvd lists a sample
         only once its file is complete).  ``key``: while it stays the same, the arrays the
         series' :attr:`reuse` names are the same (their encoding is kept)."""
+        return self.write_built(time, _as_given, (points, cells, dict(point_data or {}),
+                                                  dict(cell_data or {})), key)
+
+    def write_built(self, time: float, build, args: tuple, key: Hashable = None) -> Path:
+        """:meth:`write` of the grid ``build(*args)`` -> (points, cells, point_data,
+        cell_data), built where the sample is written (on the worker in the background;
+        ``args`` must not change afterwards)."""
         path, rel = self.next_path()
         self._next += 1
         if self.background is None:
-            self._write(path, rel, time, points, cells, point_data, cell_data, key)
+            self._write(path, rel, time, build, args, key)
         else:
-            self.background.submit(self._write, path, rel, time, points, cells,
-                                   dict(point_data or {}), dict(cell_data or {}), key)
+            self.background.submit(self._write, path, rel, time, build, args, key)
         return path
 
-    def _write(self, path, rel, time, points, cells, point_data, cell_data, key) -> None:
+    def _write(self, path, rel, time, build, args, key) -> None:
+        points, cells, point_data, cell_data = build(*args)
         write_vtu(path, points, cells, point_data, cell_data, self.reuse, key)
         self.commit(time, rel)
+
+
+def _as_given(points, cells, point_data, cell_data) -> tuple:
+    return points, cells, point_data, cell_data
+
+
+class _BodyState:
+    """A copy of what :meth:`ParaViewWriter.particle_mesh` reads of the bodies."""
+
+    def __init__(self, id, shape_id, position, R, velocity, angular_velocity) -> None:
+        self.id, self.shape_id, self.position = id, shape_id, position
+        self.velocity, self.angular_velocity, self._R = velocity, angular_velocity, R
+
+    @classmethod
+    def of(cls, bodies: "Bodies") -> "_BodyState":
+        return cls(np.array(bodies.id, np.int64), np.array(bodies.shape_id, np.int64),
+                   np.array(bodies.position, float), np.array(bodies.rotation_matrices(), float),
+                   np.array(bodies.velocity, float), np.array(bodies.angular_velocity, float))
+
+    def __len__(self) -> int:
+        return len(self.id)
+
+    def rotation_matrices(self) -> np.ndarray:
+        return self._R
 
 
 class ParaViewWriter:
@@ -378,11 +410,15 @@ class ParaViewWriter:
         return points, quads, point_data, {"patch_id": [np.concatenate([pid for _, _, pid in meshes])]}
 
     def write_particles(self, time: float, bodies: "Bodies") -> Path:
-        """One sample of ``particles.pvd`` (time in s)."""
+        """One sample of ``particles.pvd`` (time in s); its grid is built by the worker (in
+        the background) from a copy of the bodies' state."""
+        state = _BodyState.of(bodies)
+        key = (state.id.tobytes(), state.shape_id.tobytes())     # fixes the REUSED arrays
+        return self.series["particles"].write_built(time, self._particle_grid, (state,), key)
+
+    def _particle_grid(self, bodies) -> tuple:
         pts, quads, pd, cd = self.particle_mesh(bodies)
-        key = (np.asarray(bodies.id, np.int64).tobytes(),
-               np.asarray(bodies.shape_id, np.int64).tobytes())    # fixes the REUSED arrays
-        return self.series["particles"].write(time, pts, [("quad", quads)], pd, cd, key)
+        return pts, [("quad", quads)], pd, cd
 
     # -- walls -------------------------------------------------------------------
     def write_walls(self, time: float, displacement: np.ndarray | None = None) -> Path:
@@ -492,7 +528,9 @@ class CsvMonitor:
             rows = self._kept_rows(restart_time)
         atomic_write_text(self.path, "".join(line + "\n" for line in [self.header] + rows))
         self.rows_at_start = [list(map(float, r.split(","))) for r in rows]
-        self._fh = open(self.path, "a", newline="")
+        #: rows are flushed by the batch that holds them (MonitorWriter.batch)
+        self.batched = False
+        self._fh = open(self.path, "a", newline="", buffering=1 << 20)
 
     def _kept_rows(self, restart_time: float) -> list[str]:
         text = self.path.read_text(encoding="utf-8", errors="replace")
@@ -516,11 +554,13 @@ class CsvMonitor:
         return kept
 
     def append(self, values: Sequence[Any]) -> None:
-        """Write one row (len(columns) values; time first) and flush it."""
+        """Write one row (len(columns) values; time first) and flush it (in a
+        :meth:`MonitorWriter.batch`: at its end, whole rows at once)."""
         if len(values) != len(self.columns):
             raise ValueError(f"{self.path.name}: expected {len(self.columns)} values, got {len(values)}")
         self._fh.write(",".join(_fmt(v) for v in values) + "\n")
-        self._fh.flush()
+        if not self.batched:
+            self._fh.flush()
 
     def sync(self) -> None:
         """Flush and fsync (call before writing a checkpoint)."""
@@ -610,6 +650,21 @@ class MonitorWriter:
     def _all(self) -> list[CsvMonitor]:
         return [self.energy_csv, self.contacts_csv, *self.wall_csv.values(),
                 *([self.hertz_csv] if self.hertz_csv is not None else [])]
+
+    @contextmanager
+    def batch(self):
+        """Rows appended inside are flushed together at the end (whole rows: a run killed
+        meanwhile leaves at most an incomplete last row, which a restart drops)."""
+        files = self._all()
+        for m in files:
+            m.batched = True
+        try:
+            yield self
+        finally:
+            for m in self._all():
+                m.batched = False
+                if not m._fh.closed:
+                    m._fh.flush()
 
     def sync(self) -> None:
         for m in self._all():
