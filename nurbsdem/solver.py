@@ -20,6 +20,7 @@ time and at the end of each step; ``--restart`` continues bit-for-bit.
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import sys
@@ -758,6 +759,9 @@ class _NoWriters:
     class _Sink:
         def __getattr__(self, name):
             return lambda *args, **kwargs: None
+
+        def batch(self):            # MonitorWriter.batch
+            return contextlib.nullcontext()
 
     def __init__(self) -> None:
         self.paraview = self.monitors = self.results = self._Sink()
