@@ -523,7 +523,8 @@ class DemSystem:
                      f"springs, sets the step): less damping (NormalDamping / TangentialDamping; "
                      f"Hertz-Mindlin: a higher Restitution) would allow a larger one"
                      + ("" if self.implicit_damping else
-                        ", and so would implicit normal dashpots (Damping Implicit on the step)"))
+                        ", and so would implicit normal dashpots (Damping Implicit on the step, "
+                        "with Accuracy to keep impacts accurate)"))
         else:
             lever = ("the stiffness limits it: softer contacts (NormalPenalty / "
                      "TangentialPenalty; Hertz-Mindlin: YoungModulus) or heavier particles would "
