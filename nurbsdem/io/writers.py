@@ -69,8 +69,6 @@ RESULTS_NAME = "results.h5"
 MONITOR_DIR = "monitors"
 VTK_DIR = "vtk"
 
-VTK_QUAD = 9
-VTK_VERTEX = 1
 #: arrays of each series that stay the same while its bodies do (encoded once: io/vtu.py)
 REUSED = {"particles": ("connectivity", "offsets", "types", "particle_id", "shape_id",
                         "patch_id"),
