@@ -290,21 +290,22 @@ def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) ->
 
 
 # --------------------------------------------------------------------------- accuracy control
-#: what a deck step rolled back by the accuracy control restores: the body state, angular
-#: velocities, ledger, wall work, the period-2 watch, the pair list (its rows copied: the
-#: loop updates them in place), the last evaluation and the walls' kinematics
-Snapshot = namedtuple("Snapshot", "x v q L omega ledger wall_work alt_prev_v alt_prev_L "
+#: what a deck step rolled back by the accuracy control restores: the body state, ledger,
+#: wall work, the period-2 watch, the pair list (its rows copied: the loop updates them in
+#: place), the last evaluation, the walls' kinematics and the energy peak (the angular
+#: velocities follow from q, L when the next call starts)
+Snapshot = namedtuple("Snapshot", "x v q L ledger wall_work alt_prev_v alt_prev_L "
                       "alt_count pl ev wall_d wall_u peak")
 
 
 @njit(cache=True)
-def _snapshot(x, v, q, L, omega, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, pl,
+def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, pl,
               ev, wall_d, wall_u, peak):
     """The state at the start of a deck step (copies of what the loop changes in place)."""
     pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
                        pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_odo, pl.prev_pos,
                        pl.prev_R, pl.prev_wall, pl.prev_x)
-    return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), omega.copy(), ledger.copy(),
+    return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
                     wall_work.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
                     pl_copy, ev, wall_d, wall_u, peak[0])
 
@@ -358,8 +359,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     accuracy = cc.accuracy > 0.0
     for j in range(n_deck):
         if accuracy:
-            sn = _snapshot(x, v, q, L, omega, ledger, wall_work, alt_prev_v, alt_prev_L,
-                           alt_count, pl, ev, wall_d, wall_u, peak)
+            sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
+                           pl, ev, wall_d, wall_u, peak)
             balance0 = _balance(bc, ev, x, v, q, L, ledger)
         for k in range(n_run):
             t = j * n_run + k
