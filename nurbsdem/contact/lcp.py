@@ -114,7 +114,6 @@ I_STAGE = 9       # stage that produced the result: 1 = f1 (Eq. 5), 2 = f2/phi (
 NI = 10
 
 
-
 def full_rows(rows_f) -> np.ndarray:
     """Float result rows (..., NF), C-contiguous: rows of an older layout with fewer columns
     (a checkpoint, stored data) are padded with zeros, which :func:`solve_pair` reads as

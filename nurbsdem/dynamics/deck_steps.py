@@ -254,9 +254,10 @@ def _finite(x, v, q, L, force) -> bool:
 
 
 @njit(cache=True)
-def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> bool:
+def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> tuple[bool, float]:
     """DemSystem._check_energy (the same energy_terms), then the peak of kinetic + elastic
-    energy is raised."""
+    energy is raised.  Returns (passed, the balance error in J, which the accuracy control
+    takes too)."""
     mech, balance, moving = balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel,
                                           ledger)
     ok = True
@@ -266,7 +267,7 @@ def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> bool:
         ok = math.isfinite(mech) and math.isfinite(balance) and gain <= tol and abs(balance) <= tol
     if ok:
         peak[0] = max(peak[0], moving)
-    return ok
+    return ok, balance
 
 
 @njit(cache=True)
@@ -357,11 +358,12 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     inv_h = 1.0 / h
     omega = omega_world(q, L, bc.inv_I)      # of the present state, kept up to date below
     accuracy = cc.accuracy > 0.0
+    # the balance error at the start of the deck step (then carried from its end)
+    balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
     for j in range(n_deck):
         if accuracy:
             sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
                            pl, ev, wall_d, wall_u, peak)
-            balance0 = _balance(bc, ev, x, v, q, L, ledger)
         for k in range(n_run):
             t = j * n_run + k
             d_new, u_new = walls_d[t], walls_u[t]
@@ -389,11 +391,12 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             if not _finite(x, v, q, L, ev.force):
                 return GUARD, j, pl, ev, wall_d, wall_u
         counters[STEP_COUNT] += 1
-        if not _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak):
+        ok, balance = _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak)
+        if not ok:
             return GUARD, j, pl, ev, wall_d, wall_u
         acc = counters[ACC_REFINE]
         if accuracy:
-            growth = abs(_balance(bc, ev, x, v, q, L, ledger) - balance0)
+            growth = abs(balance - balance0)
             budget = accuracy_budget(cc.accuracy, sn.peak, cc.scale_floor)
             if repeat_for_accuracy(growth, budget, acc, n_run, cc.max_substeps, acc_growth[0]):
                 _restore(sn, x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
@@ -405,6 +408,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 acc_growth[0] = growth
                 return REFINE, j, sn.pl, sn.ev, sn.wall_d, sn.wall_u
             acc_growth[0] = np.inf
+            balance0 = balance
             counters[ACC_REFINE], counters[ACC_CALM] = after_accepted(growth, budget, acc,
                                                                       counters[ACC_CALM])
         counters[CALM] += 1
