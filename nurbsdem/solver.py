@@ -21,6 +21,7 @@ time and at the end of each step; ``--restart`` continues bit-for-bit.
 from __future__ import annotations
 
 import contextlib
+import copy
 import logging
 import math
 import sys
@@ -430,7 +431,6 @@ class Solver:
         if not self.write_output:
             return
         t0 = time.perf_counter()
-        writers.sync()
         state = {
             "version": __version__, "deck": self.model.text, "time": self.time,
             "step_index": self.step_index, "step_progress": self.step_progress,
@@ -443,8 +443,9 @@ class Solver:
                            if self._carry_hist is not None else {}),
             "motion": self._motion_spec,
         }
-        if self.rank == 0:
-            save_checkpoint(self.outdir / CHECKPOINT_NAME, state)
+        if self.rank == 0:          # written by the output worker: a copy of the state
+            writers.checkpoint(save_checkpoint, self.outdir / CHECKPOINT_NAME,
+                               copy.deepcopy(state))
         self.timers["output"] += time.perf_counter() - t0
 
     def _load_restart(self) -> dict:
@@ -748,8 +749,8 @@ class Solver:
         self._checkpoint(writers)
         if self.write_output and self.rank == 0 and self.model.text != self._results_deck:
             # a model extended step by step: results.h5 keeps the deck of the steps run so far
-            text = self._results_deck = self.model.text
-            writers.results._rewrite(lambda f: f.attrs.__setitem__("deck", text))
+            self._results_deck = self.model.text
+            writers.results.set_deck(self._results_deck)
 
 
 class _NoWriters:

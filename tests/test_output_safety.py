@@ -217,3 +217,34 @@ def test_restart_with_a_binary_monitor_file(model):
     (out / "monitors" / "energy.csv").write_bytes(b"\xff\xfe\x00garbage")
     OutputWriters(model, restart_time=0.0).close()
     assert (out / "monitors" / "energy.csv").read_text().startswith("time,")
+
+
+def test_checkpoints_are_saved_by_the_worker_after_what_they_refer_to(model, monkeypatch):
+    """The checkpoint is a job of the output worker (the time loop goes on meanwhile); when
+    it is saved, results.h5 and the monitors on disk already hold the samples up to its time
+    (a restart from it finds them), and the state it saves is the one of its time."""
+    import csv
+    import threading
+
+    import nurbsdem.solver as solver_module
+    from nurbsdem.io.writers import read_results_times
+    from nurbsdem.solver import Solver
+
+    seen = []
+    original = solver_module.save_checkpoint
+
+    def checked(path, state):
+        t = float(state["time"])
+        out = Path(path).parent
+        with open(out / "monitors" / "energy.csv") as fh:
+            rows = [float(r["time"]) for r in csv.DictReader(fh)]
+        seen.append((threading.current_thread().name, t, max(rows),
+                     read_results_times(out / "results.h5").max()))
+        original(path, state)
+    monkeypatch.setattr(solver_module, "save_checkpoint", checked)
+    Solver(model, quiet=True).run()
+    assert len(seen) >= 2
+    for thread, t, monitored, stored in seen[1:]:      # the first one commits the run
+        assert thread.startswith("nurbsdem-output")
+        assert monitored >= t - 1e-12 and stored >= t - 1e-12
+    assert load_checkpoint(Path(model.output.directory) / "checkpoint.h5")["time"] == seen[-1][1]

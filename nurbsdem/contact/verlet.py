@@ -46,12 +46,47 @@ def advance_odometers(odo: np.ndarray, x: np.ndarray, x0: np.ndarray, R: np.ndar
 
 
 @njit(cache=True)
-def list_is_stale(odo: np.ndarray, built_odo: np.ndarray, skin: float) -> bool:
-    """Whether some body has moved more than half the skin since the list was built."""
+def build_pose(x: np.ndarray, R: np.ndarray, wall: np.ndarray) -> np.ndarray:
+    """The poses a neighbour list is built at, (N+W, 12): each particle's centroid (m) and
+    rotation (row-major), each wall's displacement (m) and zeros."""
+    n = x.shape[0]
+    out = np.zeros((n + wall.shape[0], 12))
+    for i in range(n):
+        for j in range(3):
+            out[i, j] = x[i, j]
+            for k in range(3):
+                out[i, 3 + 3 * j + k] = R[i, j, k]
+    for w in range(wall.shape[0]):
+        for j in range(3):
+            out[n + w, j] = wall[w, j]
+    return out
+
+
+@njit(cache=True)
+def list_is_stale(built: np.ndarray, x: np.ndarray, R: np.ndarray, wall: np.ndarray,
+                  radius: np.ndarray, skin: float) -> bool:
+    """Whether some body has moved more than half the skin (m) since the list was built at
+    the poses ``built`` (:func:`build_pose`): the largest displacement of any of its points
+    between the two poses, |Δx| + 2 sin(Δθ/2)·r (x centroids (N,3), R rotations (N,3,3), r
+    bounding radii (N,)), |Δd| for walls (W,3).  The displacement, not the path: a body that
+    jiggles in a pack does not make the list stale (a pair left out was at least s apart, and
+    the distance of two sets shrinks by at most the two displacements)."""
     if skin <= 0.0:
         return True
-    for i in range(odo.shape[0]):
-        if odo[i] - built_odo[i] > 0.5 * skin:
+    n = x.shape[0]
+    for i in range(n):
+        s = 0.0
+        for j in range(3):
+            for k in range(3):
+                d = R[i, j, k] - built[i, 3 + 3 * j + k]
+                s += d * d
+        d0, d1, d2 = x[i, 0] - built[i, 0], x[i, 1] - built[i, 1], x[i, 2] - built[i, 2]
+        if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + math.sqrt(s / 2.0) * radius[i] > 0.5 * skin:
+            return True
+    for w in range(wall.shape[0]):
+        d0, d1, d2 = (wall[w, 0] - built[n + w, 0], wall[w, 1] - built[n + w, 1],
+                      wall[w, 2] - built[n + w, 2])
+        if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > 0.5 * skin:
             return True
     return False
 

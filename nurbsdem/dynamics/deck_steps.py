@@ -59,7 +59,7 @@ from numba import njit
 from ..contact.analytic import closed_form_into
 from ..contact.lcp import I_FAIL
 from ..contact.listed import scene_list, solve_due
-from ..contact.verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
+from ..contact.verlet import (advance_odometers, build_pose, carry_rows, contact_arrays, list_is_stale,
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
@@ -85,7 +85,7 @@ DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
                         "first_patch body_shape sphere_radius owned threads all_spheres")
 #: the neighbour list and its per-pair arrays, odometers and the previous poses
-PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_odo "
+PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_pose "
                       "prev_pos prev_R prev_wall prev_x")
 #: constants of the bodies and the contact laws
 BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
@@ -123,14 +123,14 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     failed (the Python path answers it: module docstring)."""
     c0 = cycles()
     odo = advance_odometers(pl.odo, x, pl.prev_x, R, pl.prev_R, sc.radius, wall_d, pl.prev_wall)
-    a, b, keys, built = pl.a, pl.b, pl.keys, pl.built_odo
+    a, b, keys, built = pl.a, pl.b, pl.keys, pl.built_pose
     mask_a, mask_b = pl.mask_a, pl.mask_b
-    if list_is_stale(odo, built, sc.skin):
+    if list_is_stale(built, x, R, wall_d, sc.radius, sc.skin):
         a, b, keys, mask_a, mask_b = scene_list(sc.tables, x, pos, R, wall_d, sc.owned,
                                                 sc.margin + sc.skin)
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
-        built = odo.copy()
+        built = build_pose(x, R, wall_d)
         counters[BUILDS] += 1
     else:       # updated in place: the loop owns these arrays (copied at its start)
         rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
@@ -304,7 +304,7 @@ def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, 
               ev, wall_d, wall_u, peak):
     """The state at the start of a deck step (copies of what the loop changes in place)."""
     pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
-                       pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_odo, pl.prev_pos,
+                       pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_pose, pl.prev_pos,
                        pl.prev_R, pl.prev_wall, pl.prev_x)
     return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
                     wall_work.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
@@ -457,7 +457,7 @@ class DeckSteps:
         from ..contact.scene import SceneContacts
         scene = system.provider
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
-                or scene.prev_pose is None or scene.built_odo is None
+                or scene.prev_pose is None or scene.built_pose is None
                 or (system.uses_hertz and not scene.is_sphere.all())):
             return None
         return DeckSteps(system, scene)
@@ -475,7 +475,7 @@ class DeckSteps:
         ps = sc.pairs
         pos, R, wall, x = sc.prev_pose
         return PairList(ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b, ps.rows_f.copy(),
-                        ps.rows_i.copy(), ps.budget.copy(), sc.odo, sc.built_odo, np.ascontiguousarray(pos, float),
+                        ps.rows_i.copy(), ps.budget.copy(), sc.odo, sc.built_pose, np.ascontiguousarray(pos, float),
                         np.ascontiguousarray(R, float), np.ascontiguousarray(wall, float),
                         np.ascontiguousarray(x, float))
 
@@ -538,7 +538,7 @@ class DeckSteps:
         s, sc = self.system, self.scene
         sc.pairs = _PairState(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f, pl.rows_i,
                               pl.budget, np.zeros(pl.a.shape[0], bool))
-        sc.odo, sc.built_odo = pl.odo, pl.built_odo
+        sc.odo, sc.built_pose = pl.odo, pl.built_pose
         sc.prev_pose = (pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
         sc.builds += int(counters[BUILDS])
         sc.timers.calls += int(counters[EVALS])

@@ -29,7 +29,7 @@ Typical use by the solver (see :class:`OutputWriters`)::
     out.monitors.contacts(t, monitored, active, degenerated, failed)
     out.monitors.wall("lid", t, displacement, reaction)
     out.results.append(t, bodies)                                       # every Results Every
-    out.sync()          # before writing a checkpoint: results.h5 flushed, CSVs fsynced
+    out.checkpoint(save, *args)   # results.h5 flushed, CSVs fsynced, then save(*args)
     out.close()
 """
 from __future__ import annotations
@@ -566,6 +566,17 @@ class CsvMonitor:
             self._fh.flush()
             os.fsync(self._fh.fileno())
 
+    def flush(self) -> None:
+        """Hand the rows written so far to the operating system (whole rows)."""
+        if not self._fh.closed:
+            self._fh.flush()
+
+    def fsync(self) -> None:
+        """Make the rows the last :meth:`flush` handed over durable (safe from the output
+        worker while the time loop appends: the file stays open until the worker is done)."""
+        if not self._fh.closed:
+            os.fsync(self._fh.fileno())
+
     def close(self) -> None:
         if not self._fh.closed:
             self.sync()
@@ -668,6 +679,16 @@ class MonitorWriter:
         for m in self._all():
             m.sync()
 
+    def flush(self) -> None:
+        """:meth:`CsvMonitor.flush` of every file."""
+        for m in self._all():
+            m.flush()
+
+    def fsync(self) -> None:
+        """:meth:`CsvMonitor.fsync` of every file."""
+        for m in self._all():
+            m.fsync()
+
     def close(self) -> None:
         for m in self._all():
             m.close()
@@ -700,14 +721,19 @@ class ResultsWriter:
     Samples are buffered and written ``flush_every`` at a time (and by :meth:`flush`,
     :meth:`close`): each flush copies the file, appends, fsyncs and renames it into place,
     so the file is always complete. Read with :func:`read_results_sample`.
+
+    background: a :class:`BackgroundWriter` (the ParaView series' worker) that writes the
+    buffered samples while the time loop goes on; every write of the file is then one of its
+    jobs, in order, and a write the caller waits for waits for the jobs queued before it.
     """
 
     def __init__(self, path: str | Path, deck_text: str = "", deck_path: str = "",
                  restart_time: float | None = None, flush_every: int = 20,
-                 after_append=None) -> None:
+                 after_append=None, background: BackgroundWriter | None = None) -> None:
         self.path = Path(path)
         self.flush_every = int(flush_every)
         self.after_append = after_append   # called after each append (OutputWriters' commit)
+        self.background = background
         self._pending: list[tuple[float, dict[str, np.ndarray]]] = []
         if restart_time is not None and self.path.exists():
             self._truncate(restart_time)
@@ -735,11 +761,17 @@ class ResultsWriter:
                                  chunks=(4096, *tail))
         write_hdf5_atomically(self.path, fill)
 
-    def _rewrite(self, edit) -> None:
-        """Copy the file, apply ``edit(h5file)``, fsync, rename into place."""
-        pending = sum(d[k].nbytes for _, d in self._pending for k in d)
-        ensure_space(self.path.parent, 2 * (self.path.stat().st_size + pending) + 1024 * 1024)
+    def _rewrite(self, edit, adding: int = 0) -> None:
+        """Copy the file, apply ``edit(h5file)`` (which adds ``adding`` bytes), fsync, rename
+        into place."""
+        ensure_space(self.path.parent, 2 * (self.path.stat().st_size + adding) + 1024 * 1024)
         write_hdf5_atomically(self.path, edit, source=self.path)
+
+    def set_deck(self, text: str) -> None:
+        """Replace the deck text the file records (after the queued writes)."""
+        if self.background is not None:
+            self.background.wait()
+        self._rewrite(lambda f: f.attrs.__setitem__("deck", text))
 
     def _truncate(self, restart_time: float) -> None:
         try:
@@ -771,16 +803,24 @@ class ResultsWriter:
         self._pending.append((float(time), {k: np.array(v, RESULTS_FIELDS[k][1])
                                             for k, v in data.items()}))
         if len(self._pending) >= self.flush_every:
-            self.flush()
+            self.flush(wait=False)
         if self.after_append is not None:
             self.after_append()
 
-    def flush(self) -> None:
-        """Write the queued samples (atomic replace of the file)."""
-        if not self._pending:
-            return
-        pending = self._pending
+    def flush(self, wait: bool = True) -> None:
+        """Write the buffered samples (atomic replace of the file): on the background worker
+        if there is one (``wait``: and wait until it is written)."""
+        pending, self._pending = self._pending, []
+        if pending:
+            if self.background is None:
+                self._write_samples(pending)
+            else:
+                self.background.submit(self._write_samples, pending)
+        if wait and self.background is not None:
+            self.background.wait()
 
+    def _write_samples(self, pending: list) -> None:
+        """Append the samples ``pending`` [(time, arrays)] to the file."""
         def edit(f) -> None:
             s0 = f["time"].shape[0]
             r0 = int(f["offset"][s0])
@@ -797,8 +837,7 @@ class ResultsWriter:
                 ds.resize((r1, *ds.shape[1:]))
                 if r1 > r0:
                     ds[r0:r1] = np.concatenate([d[name] for _, d in pending])
-        self._rewrite(edit)
-        self._pending = []
+        self._rewrite(edit, sum(d[k].nbytes for _, d in pending for k in d))
 
     def close(self) -> None:
         self.flush()
@@ -916,7 +955,8 @@ class OutputWriters:
                                            background)
             self.monitors = MonitorWriter(self.directory, model.wall_names, restart_time)
             self.results = ResultsWriter(self.directory / RESULTS_NAME, model.text, model.path,
-                                         restart_time, flush_every, after_append=self._commit)
+                                         restart_time, flush_every, after_append=self._commit,
+                                         background=self.paraview.background)
         except BaseException:
             self._restore()
             raise
@@ -946,6 +986,26 @@ class OutputWriters:
         self.monitors.sync()
         self._commit()
 
+    def checkpoint(self, save, *args) -> None:
+        """Make everything written so far durable, then call ``save(*args)`` (write the
+        checkpoint that refers to it), in this order.  With a background worker both happen
+        on it, after the writes queued before, while the caller goes on: ``args`` must not
+        change afterwards (hand over copies); the monitor rows written so far are handed to
+        the operating system here and fsynced there.  An error is raised at the next write
+        or :meth:`sync`, as a background write's."""
+        bg = self.paraview.background
+        if bg is None or not self._committed:
+            self.sync()
+            save(*args)
+            return
+        self.monitors.flush()
+        self.results.flush(wait=False)
+        bg.submit(self._durable_then_save, save, args)
+
+    def _durable_then_save(self, save, args: tuple) -> None:
+        self.monitors.fsync()
+        save(*args)
+
     def abort(self) -> None:
         """The run failed: close the files and, if this run has no complete sample yet, put
         the previous run's results back. Never raises."""
@@ -969,8 +1029,8 @@ class OutputWriters:
         """Flush and close (after :meth:`abort`: nothing more is written)."""
         if getattr(self, "_aborted", False):
             return
+        self.results.close()            # its last samples are a job of the worker too
         self.paraview.close()
-        self.results.close()
         self.monitors.close()
         self._commit()
 
