@@ -82,6 +82,8 @@ def _time_tol(t: float) -> float:
 
 def _fmt(x: Any) -> str:
     """A CSV field: integers as integers, floats by repr (shortest exact round trip)."""
+    if isinstance(x, float):            # Python and NumPy floats (float.__repr__: no "np.")
+        return float.__repr__(x)
     if isinstance(x, (int, np.integer)) and not isinstance(x, bool):
         return str(int(x))
     return repr(float(x))
@@ -368,6 +370,10 @@ class ParaViewWriter:
             self._shape_mesh[int(sid)] = (pts - np.asarray(shape.centroid, float), quads, pid)
         self.walls = list(walls)
         self._wall_mesh = self._mesh_walls()
+        #: the particles' grid arrays of the last body set (:meth:`_particle_cells`; used by
+        #: the one thread that writes the series)
+        self._cells_key: tuple | None = None
+        self._cells: dict = {}
 
     def _mesh_walls(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         P, Q, wid, pw = [], [], [], []
@@ -394,18 +400,44 @@ class ParaViewWriter:
                     {"particle_id": np.zeros(0), "shape_id": np.zeros(0),
                      "velocity": np.zeros((0, 3)), "angular_velocity": np.zeros((0, 3))}, {})
         R = bodies.rotation_matrices()
-        meshes = [self._shape_mesh[int(s)] for s in bodies.shape_id]
-        counts = np.array([len(rel) for rel, _, _ in meshes], np.int64)
-        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        points = np.concatenate([bodies.position[i] + rel @ R[i].T
-                                 for i, (rel, _, _) in enumerate(meshes)])
-        quads = np.concatenate([quads + off for (_, quads, _), off in zip(meshes, offsets)])
-        point_data = {"particle_id": np.repeat(np.asarray(bodies.id, np.int64), counts),
-                      "shape_id": np.repeat(np.asarray(bodies.shape_id, np.int64), counts),
+        shape_id = np.asarray(bodies.shape_id, np.int64)
+        ids = np.asarray(bodies.id, np.int64)
+        static = self._particle_cells(ids, shape_id)
+        counts, offsets = static["counts"], static["offsets"]
+        points = np.empty((int(counts.sum()), 3))
+        position = np.asarray(bodies.position, float)
+        for sid, idx, rows in static["groups"]:       # the bodies of one shape at once
+            rel = self._shape_mesh[sid][0]
+            moved = position[idx, None, :] + np.matmul(rel[None], R[idx].transpose(0, 2, 1))
+            points[rows] = moved.reshape(-1, 3)
+        point_data = {"particle_id": static["particle_id"], "shape_id": static["shape_id"],
                       "velocity": np.repeat(np.asarray(bodies.velocity, float), counts, axis=0),
                       "angular_velocity": np.repeat(np.asarray(bodies.angular_velocity, float),
                                                     counts, axis=0)}
-        return points, quads, point_data, {"patch_id": [np.concatenate([pid for _, _, pid in meshes])]}
+        return points, static["quads"], point_data, {"patch_id": [static["patch_id"]]}
+
+    def _particle_cells(self, ids: np.ndarray, shape_id: np.ndarray) -> dict:
+        """What the particles' grid keeps while the bodies stay the same (ids and shapes):
+        quads, patch and body ids, each body's point count and first point, the bodies of
+        each shape and their points' rows (kept for the last body set)."""
+        key = (ids.tobytes(), shape_id.tobytes())
+        if self._cells_key == key:
+            return self._cells
+        meshes = [self._shape_mesh[int(s)] for s in shape_id]
+        counts = np.array([len(rel) for rel, _, _ in meshes], np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        groups = []
+        for sid in np.unique(shape_id):
+            idx = np.nonzero(shape_id == sid)[0]
+            n_pts = len(self._shape_mesh[int(sid)][0])
+            groups.append((int(sid), idx, (offsets[idx, None] + np.arange(n_pts)).ravel()))
+        self._cells = {
+            "counts": counts, "offsets": offsets, "groups": groups,
+            "quads": np.concatenate([quads + off for (_, quads, _), off in zip(meshes, offsets)]),
+            "patch_id": np.concatenate([pid for _, _, pid in meshes]),
+            "particle_id": np.repeat(ids, counts), "shape_id": np.repeat(shape_id, counts)}
+        self._cells_key = key
+        return self._cells
 
     def write_particles(self, time: float, bodies: "Bodies") -> Path:
         """One sample of ``particles.pvd`` (time in s); its grid is built by the worker (in
