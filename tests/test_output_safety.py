@@ -221,13 +221,13 @@ def test_restart_with_a_binary_monitor_file(model):
 
 def test_checkpoints_are_saved_by_the_worker_after_what_they_refer_to(model, monkeypatch):
     """The checkpoint is a job of the output worker (the time loop goes on meanwhile); when
-    it is saved, results.h5 and the monitors on disk already hold the samples up to its time
-    (a restart from it finds them), and the state it saves is the one of its time."""
+    it is saved, results.h5, the monitors and the .pvd on disk already hold the samples up to
+    its time (a restart from it finds them), and the state it saves is the one of its time."""
     import csv
     import threading
 
     import nurbsdem.solver as solver_module
-    from nurbsdem.io.writers import read_results_times
+    from nurbsdem.io.writers import read_pvd, read_results_times
     from nurbsdem.solver import Solver
 
     seen = []
@@ -238,7 +238,8 @@ def test_checkpoints_are_saved_by_the_worker_after_what_they_refer_to(model, mon
         out = Path(path).parent
         with open(out / "monitors" / "energy.csv") as fh:
             rows = [float(r["time"]) for r in csv.DictReader(fh)]
-        seen.append((threading.current_thread().name, t, max(rows),
+        listed = max(t for t, _ in read_pvd(out / "particles.pvd"))
+        seen.append((threading.current_thread().name, t, min(max(rows), listed),
                      read_results_times(out / "results.h5").max()))
         original(path, state)
     monkeypatch.setattr(solver_module, "save_checkpoint", checked)

@@ -65,6 +65,7 @@ def test_paraview_round_trip(tmp_path, shape_map):
         disp = np.zeros((6, 3))
         disp[5, 2] = -0.01 * i
         pv.write(t, b, wall_displacement=disp, contacts=_contacts(i))
+    pv.sync()                        # the .pvd lists every sample written (PVD_INTERVAL)
     for name in ("particles", "walls", "contacts"):
         entries = read_pvd(tmp_path / f"{name}.pvd")
         assert [t for t, _ in entries] == [0.0, 0.01, 0.02]
@@ -103,10 +104,16 @@ def test_paraview_restart_drops_later_samples(tmp_path, shape_map):
     pv = ParaViewWriter(tmp_path, shape_map, _walls(), resolution=2)
     for t in (0.0, 0.01, 0.02, 0.03):
         pv.write(t, _bodies(2))
+    pv.sync()                        # a checkpoint: every sample so far is listed ...
+    pv.write(0.04, _bodies(2))       # ... and one written after it is not yet
+    assert [t for t, _ in read_pvd(tmp_path / "particles.pvd")] == [0.0, 0.01, 0.02, 0.03]
+    assert (tmp_path / "vtk" / "particles_000004.vtu").exists()
     pv2 = ParaViewWriter(tmp_path, shape_map, _walls(), resolution=2, restart_time=0.01)
     assert [t for t, _ in read_pvd(tmp_path / "particles.pvd")] == [0.0, 0.01]
     assert not (tmp_path / "vtk" / "particles_000002.vtu").exists()
+    assert not (tmp_path / "vtk" / "particles_000004.vtu").exists()   # unlisted: removed
     pv2.write(0.02, _bodies(2))
+    pv2.close()
     entries = read_pvd(tmp_path / "particles.pvd")
     assert entries[-1] == (0.02, "vtk/particles_000002.vtu")
     # a fresh start empties the series

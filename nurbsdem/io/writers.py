@@ -40,6 +40,7 @@ from contextlib import contextmanager
 import math
 import os
 import shutil
+from time import monotonic as time_now
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Hashable, Mapping, Sequence
@@ -54,6 +55,12 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..geometry.nurbs import Patch
     from ..geometry.shape import Shape
     from ..model import Bodies, Model, WallSpec
+
+#: the .pvd files are rewritten when this old (s of wall time), and at every checkpoint and
+#: the end of the run: ParaView opened on a running case sees samples at most this late, a
+#: killed run's .pvd lists every sample up to its last checkpoint (a restart removes later
+#: .vtu files)
+PVD_INTERVAL = 1.0
 
 #: Column names of the monitor files (fixed).
 ENERGY_COLUMNS = ("time", "kinetic", "potential", "elastic", "dissipated", "external_work",
@@ -189,7 +196,7 @@ class BackgroundWriter:
     in the caller's thread at the next :meth:`submit`, :meth:`wait` or :meth:`close`; at most
     ``depth`` writes are queued (a further submit waits for the oldest)."""
 
-    def __init__(self, depth: int = 4) -> None:
+    def __init__(self, depth: int = 16) -> None:
         self.depth = int(depth)
         self._pool: ThreadPoolExecutor | None = None
         self._pending: list[Future] = []
@@ -263,7 +270,12 @@ class PvdSeries:
             for old in self.vtkdir.glob(f"{name}_*.vtu"):
                 old.unlink()
         self._next = 1 + max((self._index(f) for _, f in self.entries), default=-1)
+        for late in self.vtkdir.glob(f"{name}_*.vtu"):   # written after the last .pvd
+            if self._index(f"{VTK_DIR}/{late.name}") >= self._next:
+                late.unlink()
         atomic_write_text(self.pvd, pvd_text(self.entries))
+        self._unlisted = 0          # samples written since the .pvd was, and when it was
+        self._indexed_at = time_now()
 
     def _index(self, rel: str) -> int:
         stem = Path(rel).stem
@@ -278,9 +290,19 @@ class PvdSeries:
         return self.outdir / rel, rel
 
     def commit(self, time: float, rel: str) -> None:
-        """Record a written sample and rewrite the .pvd atomically."""
+        """Record a written sample; the .pvd is rewritten (atomically) when it is
+        :data:`PVD_INTERVAL` old, and by :meth:`write_index`."""
         self.entries.append((float(time), rel))
-        atomic_write_text(self.pvd, pvd_text(self.entries))
+        self._unlisted += 1
+        if time_now() - self._indexed_at >= PVD_INTERVAL:
+            self.write_index()
+
+    def write_index(self) -> None:
+        """Rewrite the .pvd with every sample written so far (if it lacks some)."""
+        if self._unlisted:
+            atomic_write_text(self.pvd, pvd_text(self.entries))
+            self._unlisted = 0
+        self._indexed_at = time_now()
 
     def write(self, time: float, points, cells, point_data=None, cell_data=None,
               key: Hashable = None) -> Path:
@@ -500,20 +522,33 @@ class ParaViewWriter:
         self.write_walls(time, wall_displacement)
         self.write_contacts(time, contacts if self.background is None else _copied(contacts))
 
+    def write_index(self) -> None:
+        """Rewrite each series' .pvd that lacks written samples (on the thread that writes
+        the series: the worker's job in background mode)."""
+        for series in self.series.values():
+            series.write_index()
+
     def sync(self) -> None:
-        """Wait until every sample is written (background mode; raises a write's error)."""
+        """Wait until every sample is written and listed (raises a write's error)."""
         if self.background is not None:
             self.background.wait()
+        self.write_index()
 
     def close(self) -> None:
-        """Write what is queued and stop the background worker."""
+        """Write what is queued, stop the background worker and list every sample."""
         if self.background is not None:
             self.background.close()
+        self.write_index()
 
     def abandon(self) -> None:
-        """Stop the background worker after its queued writes, ignoring their errors."""
+        """Stop the background worker after its queued writes, ignoring their errors, and
+        list the samples written (if that can be done)."""
         if self.background is not None:
             self.background.abandon()
+        try:
+            self.write_index()
+        except OSError:
+            pass
 
 
 def _copied(contacts: Any) -> Any:
@@ -1035,6 +1070,7 @@ class OutputWriters:
         bg.submit(self._durable_then_save, save, args)
 
     def _durable_then_save(self, save, args: tuple) -> None:
+        self.paraview.write_index()
         self.monitors.fsync()
         save(*args)
 
