@@ -59,28 +59,39 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     """Unit quaternions (..., 4) (w, x, y, z), w >= 0, of proper rotation matrices (..., 3, 3)
-    (Shepperd's method: the branch of the largest diagonal term)."""
+    (Shepperd's method: the branch of the largest diagonal term; compiled,
+    :func:`matrices_to_quats_into`)."""
     R = np.asarray(R, float)
-    flat = R.reshape(-1, 3, 3)
+    flat = np.ascontiguousarray(R.reshape(-1, 3, 3))
     out = np.empty((flat.shape[0], 4))
-    for i, m in enumerate(flat):
+    matrices_to_quats_into(flat, out)
+    return out.reshape(R.shape[:-2] + (4,))
+
+
+@njit(cache=True)
+def matrices_to_quats_into(R: np.ndarray, out: np.ndarray) -> None:
+    """out (n, 4) = the unit quaternions, w >= 0, of the rotations R (n, 3, 3)."""
+    for i in range(R.shape[0]):
+        m = R[i]
         tr = m[0, 0] + m[1, 1] + m[2, 2]
         if tr > 0:
             s = 2.0 * np.sqrt(tr + 1.0)
-            q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+            w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
         elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
             s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-            q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+            w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
         elif m[1, 1] > m[2, 2]:
             s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-            q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+            w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
         else:
             s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-            q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-        q = np.array(q)
-        q /= np.linalg.norm(q)
-        out[i] = q if q[0] >= 0 else -q
-    return out.reshape(R.shape[:-2] + (4,))
+            w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+        n = np.sqrt(w * w + x * x + y * y + z * z)
+        sign = 1.0 if w / n >= 0 else -1.0
+        out[i, 0] = sign * (w / n)
+        out[i, 1] = sign * (x / n)
+        out[i, 2] = sign * (y / n)
+        out[i, 3] = sign * (z / n)
 
 
 def random_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
