@@ -99,7 +99,11 @@ F_EA = 16         # 16:19 direction of A's support mapping at exit, A's file fra
 F_EB = 19         # 19:22 direction of B's support mapping at exit, B's file frame (-R_B^T n)
 F_GA = 22         # 22:28 du/de of A's support point (2 x 3, row-major; zeros: no prediction)
 F_GB = 28         # 28:34 du/de of B's support point
-NF = 34
+F_QA = 34         # 34:37 A's support point at exit, A's file frame (m; the model of a warm start)
+F_QB = 37         # 37:40 B's support point at exit, B's file frame
+F_SA = 40         # 40:46 dp/de of A's support point, symmetric part (xx, xy, xz, yy, yz, zz; m)
+F_SB = 46         # 46:52 dp/de of B's support point
+NF = 52
 # int result columns
 I_ACTIVE = 0
 I_PA = 1          # patch of A (local index in its shape)
@@ -128,6 +132,9 @@ def full_rows(rows_f) -> np.ndarray:
 
 MAX_OUTER_IT = 60
 ANGLE_TOL = 1e-11
+#: a warm start of a penetrating pair moves the previous direction by the Newton step of the
+#: previous solve's model at the new poses when that step is shorter than this (rad)
+PREDICT_ANGLE = 1e-2
 #: A final Newton step on the sphere shorter than this (rad) is taken by a Taylor update.
 TAYLOR_ANGLE = 1e-7
 WORK_ROWS = 96     # rows 0..47 stage 2, rows S1_ROW.. stage 1 (see .stage1)
@@ -321,6 +328,97 @@ def _store_prediction(resF, body, e, G):
 
 
 @kernel
+def _store_model(resF, body, p, M):
+    """Columns F_QA, F_SA (body 0) or F_QB, F_SB (body 1) of a result row: the body-frame
+    support point p (3,) at exit and the symmetric part of its dp/de M (3, 3), the model of
+    :func:`_predicted_direction` at the next solve."""
+    fq = F_QA if body == 0 else F_QB
+    fs = F_SA if body == 0 else F_SB
+    k = 0
+    for a in range(3):
+        resF[fq + a] = p[a]
+        for b in range(a, 3):
+            resF[fs + k] = 0.5 * (M[a, b] + M[b, a])
+            k += 1
+
+
+@kernel
+def _model_point(prevF, body, e, out):
+    """out (3,) = the body-frame support point of the previous solve moved to the direction
+    e (3, body frame) to first order: q + S (e − e_prev) (columns of :func:`_store_model`)."""
+    fq = F_QA if body == 0 else F_QB
+    fs = F_SA if body == 0 else F_SB
+    fe = F_EA if body == 0 else F_EB
+    de0, de1, de2 = e[0] - prevF[fe], e[1] - prevF[fe + 1], e[2] - prevF[fe + 2]
+    out[0] = prevF[fq] + prevF[fs] * de0 + prevF[fs + 1] * de1 + prevF[fs + 2] * de2
+    out[1] = prevF[fq + 1] + prevF[fs + 1] * de0 + prevF[fs + 3] * de1 + prevF[fs + 4] * de2
+    out[2] = prevF[fq + 2] + prevF[fs + 2] * de0 + prevF[fs + 4] * de1 + prevF[fs + 5] * de2
+
+
+@kernel
+def _model_quad(prevF, body, R, x, y):
+    """(Rᵀx)ᵀ S (Rᵀy): the stored symmetric dp/de S of body 0/1 as a form on world vectors."""
+    fs = F_SA if body == 0 else F_SB
+    x0 = R[0, 0] * x[0] + R[1, 0] * x[1] + R[2, 0] * x[2]
+    x1 = R[0, 1] * x[0] + R[1, 1] * x[1] + R[2, 1] * x[2]
+    x2 = R[0, 2] * x[0] + R[1, 2] * x[1] + R[2, 2] * x[2]
+    y0 = R[0, 0] * y[0] + R[1, 0] * y[1] + R[2, 0] * y[2]
+    y1 = R[0, 1] * y[0] + R[1, 1] * y[1] + R[2, 1] * y[2]
+    y2 = R[0, 2] * y[0] + R[1, 2] * y[1] + R[2, 2] * y[2]
+    return (x0 * (prevF[fs] * y0 + prevF[fs + 1] * y1 + prevF[fs + 2] * y2)
+            + x1 * (prevF[fs + 1] * y0 + prevF[fs + 3] * y1 + prevF[fs + 4] * y2)
+            + x2 * (prevF[fs + 2] * y0 + prevF[fs + 4] * y1 + prevF[fs + 5] * y2))
+
+
+@kernel
+def _predicted_direction(prevF, posA, RA, posB, RB, d, wf):
+    """The start direction d (3,, in place: the previous normal) of a warm solve of a
+    penetrating pair moved by one Newton step (the outer iteration below) of the previous
+    solve's model at the new poses: support points q + S (e − e_prev), Hessian from S, so
+    that the first support mappings are taken near the new solution (the step the bodies'
+    motion since the previous solve asks for, without evaluating a patch).  Nothing is moved
+    when the model is not positive definite (a row without one: zeros) or the step exceeds
+    PREDICT_ANGLE.  Scratch rows of wf: _EA, _EB, _TMP, _DT, _T1, _T2."""
+    eA = wf[_EA]
+    eB = wf[_EB]
+    pa = wf[_TMP]
+    pb = wf[_DT]
+    t1 = wf[_T1]
+    t2 = wf[_T2]
+    _rot_t(RA, d, 1.0, eA)
+    _rot_t(RB, d, -1.0, eB)
+    _model_point(prevF, 0, eA, pa)
+    _model_point(prevF, 1, eB, pb)
+    _tangent_basis(d, t1, t2)
+    phi = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    for c in range(3):
+        gc = ((posA[c] - posB[c]) + (RA[c, 0] * pa[0] + RA[c, 1] * pa[1] + RA[c, 2] * pa[2])
+              - (RB[c, 0] * pb[0] + RB[c, 1] * pb[1] + RB[c, 2] * pb[2]))
+        phi += d[c] * gc
+        g1 += t1[c] * gc
+        g2 += t2[c] * gc
+    k11 = _model_quad(prevF, 0, RA, t1, t1) + _model_quad(prevF, 1, RB, t1, t1) - phi
+    k12 = _model_quad(prevF, 0, RA, t1, t2) + _model_quad(prevF, 1, RB, t1, t2)
+    k22 = _model_quad(prevF, 0, RA, t2, t2) + _model_quad(prevF, 1, RB, t2, t2) - phi
+    det = k11 * k22 - k12 * k12
+    if not (k11 > 0.0 and det > 0.0):
+        return
+    x1 = -(k22 * g1 - k12 * g2) / det
+    x2 = -(k11 * g2 - k12 * g1) / det
+    if not x1 * x1 + x2 * x2 <= PREDICT_ANGLE * PREDICT_ANGLE:
+        return
+    nd = 0.0
+    for c in range(3):
+        d[c] += x1 * t1[c] + x2 * t2[c]
+        nd += d[c] * d[c]
+    nd = math.sqrt(nd)
+    for c in range(3):
+        d[c] /= nd
+
+
+@kernel
 def _taylor_finish(wf, wfs, RA, RB, d, x1, x2):
     """Take a final Newton step of angle <= TAYLOR_ANGLE without new support mappings:
     d' = normalize(d + x1 t1 + x2 t2), p' = p + M (e' − e), u' = u + G (e' − e).
@@ -364,6 +462,40 @@ def _copy_trial(wf, wi, wfs):
     for c in range(3):
         wfs[0, c] = wfs[2, c]
         wfs[1, c] = wfs[3, c]
+
+
+@kernel
+def bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, resF, resI):
+    """Level 1 of the search (paper Eq. 3) for one pair: the bounding spheres' world centres
+    cA, cB (3,) and the unit direction d (3,) from A's to B's; when the spheres are apart,
+    the row of the pair (resF, resI zeroed before) is their gap, direction and the points on
+    them (``I_BROAD``) and True is returned.  Every kind of pair that the LCP could solve
+    answers this case so (the LCP, the point-to-surface problem), so that the rows agree."""
+    _to_world(posA, RA, cenA, cA)
+    _to_world(posB, RB, cenB, cB)
+    dist = 0.0
+    for c in range(3):
+        d[c] = cB[c] - cA[c]
+        dist += d[c] * d[c]
+    dist = math.sqrt(dist)
+    if dist > 0.0:
+        for c in range(3):
+            d[c] /= dist
+    else:
+        d[0] = 0.0
+        d[1] = 0.0
+        d[2] = 1.0
+    if not dist > scA + scB:
+        return False
+    resF[F_SD] = dist - scA - scB
+    for c in range(3):
+        resF[F_N + c] = d[c]
+        resF[F_PA + c] = cA[c] + scA * d[c]
+        resF[F_PB + c] = cB[c] - scB * d[c]
+    resI[I_PA] = -1
+    resI[I_PB] = -1
+    resI[I_BROAD] = 1
+    return True
 
 
 @kernel
@@ -422,29 +554,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     # ---- global level 1: bounding spheres (paper Eq. 3)
     cA = wf[_H]
     cB = wf[_H + 1]
-    _to_world(posA, RA, cenA, cA)
-    _to_world(posB, RB, cenB, cB)
-    dist = 0.0
-    for c in range(3):
-        d[c] = cB[c] - cA[c]
-        dist += d[c] * d[c]
-    dist = math.sqrt(dist)
-    if dist > 0.0:
-        for c in range(3):
-            d[c] /= dist
-    else:
-        d[0] = 0.0
-        d[1] = 0.0
-        d[2] = 1.0
-    if dist > scA + scB:
-        resF[F_SD] = dist - scA - scB
-        for c in range(3):
-            resF[F_N + c] = d[c]
-            resF[F_PA + c] = cA[c] + scA * d[c]
-            resF[F_PB + c] = cB[c] - scB * d[c]
-        resI[I_PA] = -1
-        resI[I_PB] = -1
-        resI[I_BROAD] = 1
+    if bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, resF, resI):
         return
     pA0 = infoA[0]
     pB0 = infoB[0]
@@ -516,6 +626,8 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     elif mode == MODE_WARM:
         for c in range(3):
             d[c] = prevF[F_N + c] / nn
+        if not prev_sep:
+            _predicted_direction(prevF, posA, RA, posB, RB, d, wf)
         wi[0, 0] = pA0 + prevI[I_PA]
         wi[1, 0] = pB0 + prevI[I_PB]
         _rot_t(RA, d, 1.0, wf[_EA])
@@ -678,6 +790,8 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     _rot_t(RB, d, -1.0, wf[_EB])
     _store_prediction(resF, 0, wf[_EA], wf[_GA:_GA + 2])
     _store_prediction(resF, 1, wf[_EB], wf[_GB:_GB + 2])
+    _store_model(resF, 0, wf[_PA], wf[_MA:_MA + 3])
+    _store_model(resF, 1, wf[_PB], wf[_MB:_MB + 3])
     if (not converged and tol_nc > 0.0 and 0.0 <= jump <= tol_nc and delta <= SADDLE_STALL_ANGLE
             and abs(phi - phi_ref) <= SADDLE_PHI_TOL * scale and it - it_ref >= SADDLE_PHI_IT):
         # saddle stall (docstring): the current support pair and the one it jumped to,
@@ -746,6 +860,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
             for k in range(resI.shape[0]):
                 resI[k] = prevI[k]
         else:
+            dist = math.sqrt((cB[0] - cA[0]) ** 2 + (cB[1] - cA[1]) ** 2 + (cB[2] - cA[2]) ** 2)
             resF[F_SD] = dist - scA - scB
             for k in range(1, 14):
                 resF[k] = 0.0

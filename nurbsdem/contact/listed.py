@@ -39,7 +39,7 @@ from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_pairs_batch_jit, candidate_patches_wall_batch_jit
 from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
 from .detect import PARALLEL_MIN_PAIRS, _batch_kernel, _solve_chunk, accept_within_nonconvexity
-from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI
+from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
 from .wall import _wall_batch_kernel, _wall_chunk
 
@@ -249,6 +249,38 @@ def _kinds(st, a, b):
 
 @njit(cache=True)
 def _sphere_nurbs(st, a, b, pos, R, prev_f, prev_i, rf, ri):
+    """Rows of the sphere–NURBS pairs (a[k], b[k]) into rf/ri: those whose bounding spheres
+    are apart as the LCP answers them (:func:`~nurbsdem.contact.lcp.bounding_spheres_apart`),
+    the others by the point solver; returns the flags of the rows given (False: the LCP's)."""
+    K = a.shape[0]
+    ok = np.zeros(K, np.bool_)
+    near = np.empty(K, np.int64)
+    n_near = 0
+    cA, cB, d = np.empty(3), np.empty(3), np.empty(3)
+    for k in range(K):
+        rf[k] = 0.0
+        ri[k] = 0
+        sa, sb = st.body_shape[a[k]], st.body_shape[b[k]]
+        ok[k] = bounding_spheres_apart(pos[a[k]], R[a[k]], st.centroid[sa], st.radius[sa],
+                                       pos[b[k]], R[b[k]], st.centroid[sb], st.radius[sb],
+                                       cA, cB, d, rf[k], ri[k])
+        if not ok[k]:
+            near[n_near] = k
+            n_near += 1
+    near = near[:n_near]
+    if n_near:
+        f = np.empty((n_near, NF))
+        i = np.empty((n_near, NI), np.int64)
+        solved = _point_rows(st, a[near], b[near], pos, R, prev_f[near], prev_i[near], f, i)
+        for r in range(n_near):
+            rf[near[r]] = f[r]
+            ri[near[r]] = i[r]
+            ok[near[r]] = solved[r]
+    return ok
+
+
+@njit(cache=True)
+def _point_rows(st, a, b, pos, R, prev_f, prev_i, rf, ri):
     """Rows of the sphere–NURBS pairs (a[k], b[k]) by the point solver, into rf/ri; returns
     the converged flags."""
     sphere_is_a = st.is_sphere[a]
