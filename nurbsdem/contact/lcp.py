@@ -63,7 +63,13 @@ u + (du/de) (e' − e), so each support mapping takes 1–2 Newton iterations ne
 A warm start predicts its start parameters the same way for the bodies' turn since the
 previous solve (that solve's du/de and body-frame directions are kept in its result row,
 columns ``F_EA`` .. ``F_GB``): at the small turns of a sub-step each support mapping then
-ends after one evaluation, by the Taylor step below.
+ends after one evaluation, by the Taylor step below.  The warm start of a penetrating pair
+also moves its start direction: the previous solve's support points and dp/de (columns
+``F_QA`` .. ``F_SB``) give the support points, gradient and Hessian of the outer problem at
+the new poses to first order, and the start is the previous normal moved by that model's
+Newton step (:func:`_predicted_direction`).  The first outer iteration then lands within
+the Taylor step's reach of the solution: one support mapping per body instead of two (a
+captured compaction batch at 1e-4 rad turns: 4.4 -> 2.5 patch evaluations per pair).
 Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale; a last Newton step
 below 1e-7 rad is taken by a Taylor update (points moved by dp/de, depth by the quadratic
 model) instead of two more support mappings — its error is second order (~1e-14).

@@ -10,11 +10,13 @@ The global search (levels 1–2) builds a **neighbour list with a skin** (a Verl
    (:func:`~nurbsdem.contact.boxes.candidate_patch_pairs_batch`), each box inflated by s/2; a
    body pair with no overlapping boxes is dropped.
 
-Each body carries an **odometer**: the sum over force evaluations of the largest displacement
-of any of its points, |Δx| + 2 sin(Δθ/2)·r (r its bounding radius; walls: |Δd|).  A pair left
-out of the list at its build was at least s apart, so the list stays valid (it holds every pair
-that can touch) until some body's odometer has grown by s/2 since the build; then it is built
-again.  With s = 0 it is built at every evaluation.
+A pair left out of the list at its build was at least s apart, so the list stays valid (it
+holds every pair that can touch) until some body's largest point displacement since the
+build, |Δx| + 2 sin(Δθ/2)·r (r its bounding radius; walls: |Δd|), exceeds s/2: the
+displacement between the two poses, not the path, so that a body jiggling in a pack does not
+make the list stale; then it is built again.  With s = 0 it is built at every evaluation.
+Each body also carries an **odometer**, the sum over force evaluations of that displacement
+(the certificates' measure, below).
 
 Per force evaluation (:meth:`SceneContacts.__call__`) the LCP of each listed pair is solved in
 compiled code, in parallel, dispatched by kind without per-pair Python
