@@ -471,14 +471,8 @@ def _copy_trial(wf, wi, wfs):
 
 
 @kernel
-def bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, resF, resI):
-    """Level 1 of the search (paper Eq. 3) for one pair: the bounding spheres' world centres
-    cA, cB (3,) and the unit direction d (3,) from A's to B's; when the spheres are apart,
-    the row of the pair (resF, resI zeroed before) is their gap, direction and the points on
-    them (``I_BROAD``) and True is returned.  Every kind of pair that the LCP could solve
-    answers this case so (the LCP, the point-to-surface problem), so that the rows agree."""
-    _to_world(posA, RA, cenA, cA)
-    _to_world(posB, RB, cenB, cB)
+def _unit_direction(cA, cB, d):
+    """d (3,) = the unit vector from cA to cB (+z when they coincide); returns |cB − cA|."""
     dist = 0.0
     for c in range(3):
         d[c] = cB[c] - cA[c]
@@ -491,6 +485,19 @@ def bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, 
         d[0] = 0.0
         d[1] = 0.0
         d[2] = 1.0
+    return dist
+
+
+@kernel
+def bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, resF, resI):
+    """Level 1 of the search (paper Eq. 3) for one pair: the bounding spheres' world centres
+    cA, cB (3,) and the unit direction d (3,) from A's to B's; when the spheres are apart,
+    the row of the pair (resF, resI zeroed before) is their gap, direction and the points on
+    them (``I_BROAD``) and True is returned.  Every kind of pair that the LCP could solve
+    answers this case so (the LCP, the point-to-surface problem), so that the rows agree."""
+    _to_world(posA, RA, cenA, cA)
+    _to_world(posB, RB, cenB, cB)
+    dist = _unit_direction(cA, cB, d)
     if not dist > scA + scB:
         return False
     resF[F_SD] = dist - scA - scB
@@ -643,17 +650,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
         delta = 0.1
     else:
         if mode == MODE_COLD:
-            # centroid direction (d still holds it)
-            for c in range(3):
-                d[c] = cB[c] - cA[c]
-            nd = norm3(d)
-            if nd > 0.0:
-                for c in range(3):
-                    d[c] /= nd
-            else:
-                d[0] = 0.0
-                d[1] = 0.0
-                d[2] = 1.0
+            _unit_direction(cA, cB, d)        # the centres' direction again
         eA = wf[_EA]
         eB = wf[_EB]
         _rot_t(RA, d, 1.0, eA)

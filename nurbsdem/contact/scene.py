@@ -76,8 +76,8 @@ from .broadphase import wall_geometry
 from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
-from .verlet import (advance_odometers, build_pose, carry_rows, contact_arrays, list_is_stale,
-                     renew_certificates)
+from .verlet import (advance_odometers, build_pose, carry_rows, contact_arrays,
+                     list_is_stale, renew_certificates)
 from .wall import wall_frame
 
 log = logging.getLogger("nurbsdem")
@@ -97,9 +97,10 @@ class SceneTimers:
                 "calls": float(self.calls), "lcps": float(self.lcps)}
 
 
-#: the default skin, as a fraction of the smallest bounding radius: measured on the paper
-#: example (benchmarks/report.py), 0.05 -> 0.2 built the list 3.8x less often (search 7.5 -> 2.9
-#: s) for 17 % more LCPs, all of them on separated pairs, at the same LCP time
+#: the default skin, as a fraction of the smallest bounding radius (Yade's ``verletDist`` is
+#: one too): on the paper example 0.05 -> 0.2 built the list 3.8 x less often (search
+#: 7.5 -> 2.9 s) for 17 % more LCPs, on separated pairs, at the same LCP time (0.35: more LCP
+#: time than the search saves)
 SKIN_FRACTION = 0.2
 
 

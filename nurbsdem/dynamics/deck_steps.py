@@ -59,8 +59,8 @@ from numba import njit
 from ..contact.analytic import closed_form_into
 from ..contact.lcp import I_FAIL
 from ..contact.listed import scene_list, solve_due
-from ..contact.verlet import (advance_odometers, build_pose, carry_rows, contact_arrays, list_is_stale,
-                              renew_certificates)
+from ..contact.verlet import (advance_odometers, build_pose, carry_rows, contact_arrays,
+                              list_is_stale, renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
