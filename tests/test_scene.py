@@ -108,7 +108,7 @@ def test_the_list_goes_stale_on_displacement_not_on_path():
     long, its displacement nil); a turn by θ about the centroid moves a point at the bounding
     radius r by 2 r sin(θ/2), which makes the list stale once it exceeds half the skin; a
     wall's displacement counts alike."""
-    from nurbsdem.contact.verlet import build_pose, list_is_stale
+    from nurbsdem.contact.verlet import list_is_stale
     from nurbsdem.geometry.rotation import quat_from_rotvec, quat_to_matrix
 
     x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
@@ -116,16 +116,16 @@ def test_the_list_goes_stale_on_displacement_not_on_path():
     wall = np.zeros((1, 3))
     radius = np.array([0.02, 0.05])
     skin = 1e-3
-    built = build_pose(x, R, wall)
+    built = (x.copy(), R.copy(), wall.copy())
     for _ in range(10):                                   # 10 mm of path, back at the start
-        assert not list_is_stale(built, x + [[4e-4, 0, 0], [0, 0, 0]], R, wall, radius, skin)
-    assert not list_is_stale(built, x, R, wall, radius, skin)
-    assert list_is_stale(built, x + [[0, 6e-4, 0], [0, 0, 0]], R, wall, radius, skin)
+        assert not list_is_stale(*built, x + [[4e-4, 0, 0], [0, 0, 0]], R, wall, radius, skin)
+    assert not list_is_stale(*built, x, R, wall, radius, skin)
+    assert list_is_stale(*built, x + [[0, 6e-4, 0], [0, 0, 0]], R, wall, radius, skin)
     theta = 2 * np.arcsin(0.5 * skin / (2 * radius[1]))   # 2 r sin(θ/2) = s/2 exactly
     for f, stale in ((0.99, False), (1.01, True)):
         Rt = R.copy()
         Rt[1] = quat_to_matrix(quat_from_rotvec(np.array([0.0, 0.0, f * theta])))
-        assert list_is_stale(built, x, Rt, wall, radius, skin) == stale
-    assert not list_is_stale(built, x, R, wall + [[0, 0, 4.9e-4]], radius, skin)
-    assert list_is_stale(built, x, R, wall + [[0, 0, 6e-4]], radius, skin)
-    assert list_is_stale(built, x, R, wall, radius, 0.0)  # no skin: built at every call
+        assert list_is_stale(*built, x, Rt, wall, radius, skin) == stale
+    assert not list_is_stale(*built, x, R, wall + [[0, 0, 4.9e-4]], radius, skin)
+    assert list_is_stale(*built, x, R, wall + [[0, 0, 6e-4]], radius, skin)
+    assert list_is_stale(*built, x, R, wall, radius, 0.0)  # no skin: built at every call

@@ -6,7 +6,7 @@ from __future__ import annotations
 import meshio
 import numpy as np
 
-from nurbsdem.io.vtu import BLOCK, Reuse, vtu_text
+from nurbsdem.io.vtu import BLOCK, Reuse, vtu_bytes
 
 
 def _grid(rng, n_quads: int, ids_from: int):
@@ -18,8 +18,8 @@ def _grid(rng, n_quads: int, ids_from: int):
     return pts, quads, pd, cd
 
 
-def _read(path, text):
-    path.write_text(text)
+def _read(path, content):
+    path.write_bytes(content)
     return meshio.read(path)
 
 
@@ -36,7 +36,7 @@ def test_a_grid_of_several_blocks_reads_back_equal(tmp_path):
     """20 000 quads: every array spans several zlib blocks of BLOCK bytes."""
     pts, quads, pd, cd = _grid(np.random.default_rng(1), 20000, 0)
     assert quads.nbytes > 10 * BLOCK
-    _same(_read(tmp_path / "a.vtu", vtu_text(pts, [("quad", quads)], pd, cd)), pts, quads, pd, cd)
+    _same(_read(tmp_path / "a.vtu", vtu_bytes(pts, [("quad", quads)], pd, cd)), pts, quads, pd, cd)
 
 
 def test_reused_arrays_follow_their_key(tmp_path):
@@ -45,20 +45,20 @@ def test_reused_arrays_follow_their_key(tmp_path):
     rng = np.random.default_rng(2)
     reuse = Reuse(("connectivity", "offsets", "types", "particle_id", "patch_id"))
     a = _grid(rng, 50, 0)
-    _same(_read(tmp_path / "a.vtu", vtu_text(a[0], [("quad", a[1])], a[2], a[3], reuse, "A")), *a)
-    kept = dict(reuse._text)
+    _same(_read(tmp_path / "a.vtu", vtu_bytes(a[0], [("quad", a[1])], a[2], a[3], reuse, "A")), *a)
+    kept = dict(reuse._encoded)
     a2 = (a[0] + 1.0, a[1], a[2], a[3])                  # the bodies moved: same key
-    _same(_read(tmp_path / "a2.vtu", vtu_text(a2[0], [("quad", a2[1])], a2[2], a2[3], reuse,
+    _same(_read(tmp_path / "a2.vtu", vtu_bytes(a2[0], [("quad", a2[1])], a2[2], a2[3], reuse,
                                                "A")), *a2)
-    assert all(reuse._text[k] is kept[k] for k in kept)
+    assert all(reuse._encoded[k] is kept[k] for k in kept)
     b = _grid(rng, 80, 100)                              # other bodies: a new key
-    _same(_read(tmp_path / "b.vtu", vtu_text(b[0], [("quad", b[1])], b[2], b[3], reuse, "B")), *b)
+    _same(_read(tmp_path / "b.vtu", vtu_bytes(b[0], [("quad", b[1])], b[2], b[3], reuse, "B")), *b)
 
 
 def test_one_vertex_reads_back(tmp_path):
     """A contacts sample of one contact: vertex cells, arrays shorter than one block."""
     pts = np.array([[0.1, 0.2, 0.3]])
-    mesh = _read(tmp_path / "c.vtu", vtu_text(pts, [("vertex", np.zeros((1, 1), np.int64))],
+    mesh = _read(tmp_path / "c.vtu", vtu_bytes(pts, [("vertex", np.zeros((1, 1), np.int64))],
                                               {"penetration": np.array([1e-4]),
                                                "body_a": np.array([3])}))
     assert mesh.cells[0].type == "vertex" and len(mesh.points) == 1

@@ -76,8 +76,8 @@ from .broadphase import wall_geometry
 from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
-from .verlet import (advance_odometers, build_pose, carry_rows, contact_arrays,
-                     list_is_stale, renew_certificates)
+from .verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
+                     renew_certificates)
 from .wall import wall_frame
 
 log = logging.getLogger("nurbsdem")
@@ -163,8 +163,8 @@ class SceneContacts:
         self.pairs = _PairState.empty(self.P)
         #: odometer of every body (m, the certificates' measure)
         self.odo = np.zeros(self.nb)
-        #: the poses the list was built at (:func:`~nurbsdem.contact.verlet.build_pose`)
-        self.built_pose: np.ndarray | None = None
+        #: the poses the list was built at: centroids (N,3), rotations (N,3,3), walls (W,3)
+        self.built_pose: tuple | None = None
         #: poses of the previous call: pose positions (N,3), rotations (N,3,3), walls (W,3),
         #: centroids (N,3)
         self.prev_pose: tuple | None = None
@@ -198,7 +198,8 @@ class SceneContacts:
         st = self.pairs.as_dict()
         st["odo"] = self.odo
         if self.built_pose is not None:
-            st["built_pose"] = self.built_pose
+            st.update(built_x=self.built_pose[0], built_R=self.built_pose[1],
+                      built_wall=self.built_pose[2])
         if self.prev_pose is not None:
             st.update(prev_pos=self.prev_pose[0], prev_R=self.prev_pose[1],
                       prev_wall=self.prev_pose[2], prev_x=self.prev_pose[3])
@@ -208,8 +209,10 @@ class SceneContacts:
         """Restore :meth:`local_state`."""
         self.pairs = _PairState.from_dict(st, self.P)
         self.odo = np.array(st.get("odo", np.zeros(self.nb)), float)
-        # (a checkpoint of an older version has "built_odo": the list is built again)
-        self.built_pose = np.array(st["built_pose"], float) if "built_pose" in st else None
+        # (a checkpoint of an older version has "built_odo" or "built_pose": the list is
+        # built again)
+        self.built_pose = ((np.array(st["built_x"], float), np.array(st["built_R"], float),
+                            np.array(st["built_wall"], float)) if "built_x" in st else None)
         self.prev_pose = ((np.array(st["prev_pos"]), np.array(st["prev_R"]),
                            np.array(st["prev_wall"]), np.array(st["prev_x"]))
                           if "prev_x" in st else None)
@@ -239,7 +242,7 @@ class SceneContacts:
         """Whether some body has moved more than half the skin since the list was built
         (pose: this call's (pose positions, rotations, walls, centroids))."""
         _, R, wall, x = pose
-        return self.built_pose is None or list_is_stale(self.built_pose, x, R, wall,
+        return self.built_pose is None or list_is_stale(*self.built_pose, x, R, wall,
                                                         self.radius, self.skin)
 
     def _build_list(self, kin, pos: np.ndarray, R: np.ndarray) -> None:
@@ -251,8 +254,8 @@ class SceneContacts:
             self.tables(), np.ascontiguousarray(kin.x, float), pos, R,
             np.ascontiguousarray(kin.wall_displacement, float), owned, self.margin + self.skin)
         self.pairs = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
-        self.built_pose = build_pose(np.ascontiguousarray(kin.x, float), R,
-                                     np.ascontiguousarray(kin.wall_displacement, float))
+        self.built_pose = (np.array(kin.x, float), np.array(R, float),
+                           np.array(kin.wall_displacement, float))
         self.builds += 1
 
     def tables(self) -> SceneTables:

@@ -22,14 +22,13 @@ CERTIFICATE_SHRINK = 1.0 - 1e-9
 
 
 @njit(cache=True)
-def advance_odometers(odo: np.ndarray, x: np.ndarray, x0: np.ndarray, R: np.ndarray,
-                      R0: np.ndarray, radius: np.ndarray, wall: np.ndarray,
-                      wall0: np.ndarray) -> np.ndarray:
-    """New odometers (B,) m: odo + the largest displacement of any point of each body since the
-    previous poses, |Δx| + 2 sin(Δθ/2)·r for particles (x centroids (N,3), R rotations
-    (N,3,3), r bounding radii (N,)), |Δd| for walls (wall displacements (W,3))."""
+def largest_displacements(x: np.ndarray, x0: np.ndarray, R: np.ndarray, R0: np.ndarray,
+                          radius: np.ndarray, wall: np.ndarray, wall0: np.ndarray) -> np.ndarray:
+    """(N+W,) m: the largest displacement of any point of each body between two poses,
+    |Δx| + 2 sin(Δθ/2)·r for particles (centroids x, x0 (N,3), rotations R, R0 (N,3,3),
+    bounding radii r (N,)), |Δd| for walls (displacements wall, wall0 (W,3))."""
     n = x.shape[0]
-    out = odo.copy()
+    out = np.empty(n + wall.shape[0])
     for i in range(n):
         s = 0.0
         for j in range(3):
@@ -38,55 +37,36 @@ def advance_odometers(odo: np.ndarray, x: np.ndarray, x0: np.ndarray, R: np.ndar
                 s += d * d
         chord = math.sqrt(s / 2.0)                    # 2 sin(θ/2) = ‖R − R0‖_F / √2
         dx0, dx1, dx2 = x[i, 0] - x0[i, 0], x[i, 1] - x0[i, 1], x[i, 2] - x0[i, 2]
-        out[i] += math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2) + chord * radius[i]
+        out[i] = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2) + chord * radius[i]
     for w in range(wall.shape[0]):
         d0, d1, d2 = wall[w, 0] - wall0[w, 0], wall[w, 1] - wall0[w, 1], wall[w, 2] - wall0[w, 2]
-        out[n + w] += math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        out[n + w] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     return out
 
 
 @njit(cache=True)
-def build_pose(x: np.ndarray, R: np.ndarray, wall: np.ndarray) -> np.ndarray:
-    """The poses a neighbour list is built at, (N+W, 12): each particle's centroid (m) and
-    rotation (row-major), each wall's displacement (m) and zeros."""
-    n = x.shape[0]
-    out = np.zeros((n + wall.shape[0], 12))
-    for i in range(n):
-        for j in range(3):
-            out[i, j] = x[i, j]
-            for k in range(3):
-                out[i, 3 + 3 * j + k] = R[i, j, k]
-    for w in range(wall.shape[0]):
-        for j in range(3):
-            out[n + w, j] = wall[w, j]
-    return out
+def advance_odometers(odo: np.ndarray, x: np.ndarray, x0: np.ndarray, R: np.ndarray,
+                      R0: np.ndarray, radius: np.ndarray, wall: np.ndarray,
+                      wall0: np.ndarray) -> np.ndarray:
+    """New odometers (B,) m: odo + each body's :func:`largest_displacements` since the
+    previous poses (x0, R0, wall0)."""
+    return odo + largest_displacements(x, x0, R, R0, radius, wall, wall0)
 
 
 @njit(cache=True)
-def list_is_stale(built: np.ndarray, x: np.ndarray, R: np.ndarray, wall: np.ndarray,
-                  radius: np.ndarray, skin: float) -> bool:
+def list_is_stale(built_x: np.ndarray, built_R: np.ndarray, built_wall: np.ndarray,
+                  x: np.ndarray, R: np.ndarray, wall: np.ndarray, radius: np.ndarray,
+                  skin: float) -> bool:
     """Whether some body has moved more than half the skin (m) since the list was built at
-    the poses ``built`` (:func:`build_pose`): the largest displacement of any of its points
-    between the two poses, |Δx| + 2 sin(Δθ/2)·r (x centroids (N,3), R rotations (N,3,3), r
-    bounding radii (N,)), |Δd| for walls (W,3).  The displacement, not the path: a body that
-    jiggles in a pack does not make the list stale (a pair left out was at least s apart, and
-    the distance of two sets shrinks by at most the two displacements)."""
+    the poses (built_x, built_R, built_wall): its :func:`largest_displacements` between the
+    two poses.  The displacement, not the path: a body that jiggles in a pack does not make
+    the list stale (a pair left out was at least s apart, and the distance of two sets
+    shrinks by at most the two displacements)."""
     if skin <= 0.0:
         return True
-    n = x.shape[0]
-    for i in range(n):
-        s = 0.0
-        for j in range(3):
-            for k in range(3):
-                d = R[i, j, k] - built[i, 3 + 3 * j + k]
-                s += d * d
-        d0, d1, d2 = x[i, 0] - built[i, 0], x[i, 1] - built[i, 1], x[i, 2] - built[i, 2]
-        if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + math.sqrt(s / 2.0) * radius[i] > 0.5 * skin:
-            return True
-    for w in range(wall.shape[0]):
-        d0, d1, d2 = (wall[w, 0] - built[n + w, 0], wall[w, 1] - built[n + w, 1],
-                      wall[w, 2] - built[n + w, 2])
-        if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > 0.5 * skin:
+    moved = largest_displacements(x, built_x, R, built_R, radius, wall, built_wall)
+    for i in range(moved.shape[0]):
+        if moved[i] > 0.5 * skin:
             return True
     return False
 

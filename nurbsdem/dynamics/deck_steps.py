@@ -59,8 +59,8 @@ from numba import njit
 from ..contact.analytic import closed_form_into
 from ..contact.lcp import I_FAIL
 from ..contact.listed import scene_list, solve_due
-from ..contact.verlet import (advance_odometers, build_pose, carry_rows, contact_arrays,
-                              list_is_stale, renew_certificates)
+from ..contact.verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
+                              renew_certificates)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
@@ -85,8 +85,8 @@ DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
                         "first_patch body_shape sphere_radius owned threads all_spheres")
 #: the neighbour list and its per-pair arrays, odometers and the previous poses
-PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_pose "
-                      "prev_pos prev_R prev_wall prev_x")
+PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
+                      "built_R built_wall prev_pos prev_R prev_wall prev_x")
 #: constants of the bodies and the contact laws
 BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
                        "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
@@ -123,14 +123,15 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     failed (the Python path answers it: module docstring)."""
     c0 = cycles()
     odo = advance_odometers(pl.odo, x, pl.prev_x, R, pl.prev_R, sc.radius, wall_d, pl.prev_wall)
-    a, b, keys, built = pl.a, pl.b, pl.keys, pl.built_pose
+    a, b, keys = pl.a, pl.b, pl.keys
+    built_x, built_R, built_wall = pl.built_x, pl.built_R, pl.built_wall
     mask_a, mask_b = pl.mask_a, pl.mask_b
-    if list_is_stale(built, x, R, wall_d, sc.radius, sc.skin):
+    if list_is_stale(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin):
         a, b, keys, mask_a, mask_b = scene_list(sc.tables, x, pos, R, wall_d, sc.owned,
                                                 sc.margin + sc.skin)
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
-        built = build_pose(x, R, wall_d)
+        built_x, built_R, built_wall = x.copy(), R.copy(), wall_d.copy()
         counters[BUILDS] += 1
     else:       # updated in place: the loop owns these arrays (copied at its start)
         rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
@@ -161,8 +162,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     renew_certificates(budget, due, rows_f, rows_i, reach)
     counters[SEARCH_CYCLES] += (c1 - c0) + (cycles() - c2)
     counters[ROW_CYCLES] += c2 - c1
-    return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built, pos, R,
-                     wall_d, x), reach, n_due, failed)
+    return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built_x, built_R,
+                     built_wall, pos, R, wall_d, x), reach, n_due, failed)
 
 
 # --------------------------------------------------------------------------- forces
@@ -304,8 +305,8 @@ def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, 
               ev, wall_d, wall_u, peak):
     """The state at the start of a deck step (copies of what the loop changes in place)."""
     pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
-                       pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_pose, pl.prev_pos,
-                       pl.prev_R, pl.prev_wall, pl.prev_x)
+                       pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_x, pl.built_R,
+                       pl.built_wall, pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
     return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
                     wall_work.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
                     pl_copy, ev, wall_d, wall_u, peak[0])
@@ -473,11 +474,11 @@ class DeckSteps:
     def _pair_list(self) -> PairList:
         sc = self.scene
         ps = sc.pairs
-        pos, R, wall, x = sc.prev_pose
+        pos, R, wall, x = (np.ascontiguousarray(a, float) for a in sc.prev_pose)
+        built_x, built_R, built_wall = (np.ascontiguousarray(a, float) for a in sc.built_pose)
         return PairList(ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b, ps.rows_f.copy(),
-                        ps.rows_i.copy(), ps.budget.copy(), sc.odo, sc.built_pose, np.ascontiguousarray(pos, float),
-                        np.ascontiguousarray(R, float), np.ascontiguousarray(wall, float),
-                        np.ascontiguousarray(x, float))
+                        ps.rows_i.copy(), ps.budget.copy(), sc.odo, built_x, built_R,
+                        built_wall, pos, R, wall, x)
 
     def _evaluation(self) -> Evaluation:
         s, cs = self.system, self.scene.last
@@ -538,7 +539,7 @@ class DeckSteps:
         s, sc = self.system, self.scene
         sc.pairs = _PairState(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f, pl.rows_i,
                               pl.budget, np.zeros(pl.a.shape[0], bool))
-        sc.odo, sc.built_pose = pl.odo, pl.built_pose
+        sc.odo, sc.built_pose = pl.odo, (pl.built_x, pl.built_R, pl.built_wall)
         sc.prev_pose = (pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
         sc.builds += int(counters[BUILDS])
         sc.timers.calls += int(counters[EVALS])

@@ -138,3 +138,17 @@ def quats_to_matrices(q: np.ndarray) -> np.ndarray:
     for i in range(n):
         quat_to_matrix_into(q[i], out[i])
     return out
+
+
+@njit(cache=True)
+def place_points_into(rel: np.ndarray, x: np.ndarray, R: np.ndarray, bodies: np.ndarray,
+                      first: np.ndarray, out: np.ndarray) -> None:
+    """Rigid placement of one point set: out[first[k] + p] = x[i] + R[i] rel[p] for each body
+    i = bodies[k] (rel (P,3) m in the body frame, x (n,3) m, R (n,3,3); out (·,3) m)."""
+    for k in range(bodies.shape[0]):
+        i = bodies[k]
+        f = first[k]
+        for p in range(rel.shape[0]):
+            r0, r1, r2 = rel[p, 0], rel[p, 1], rel[p, 2]
+            for j in range(3):
+                out[f + p, j] = x[i, j] + (R[i, j, 0] * r0 + R[i, j, 1] * r1 + R[i, j, 2] * r2)

@@ -7,7 +7,7 @@ import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 
 @contextmanager
@@ -56,10 +56,15 @@ def atomic_write_text(path: str | Path, text: str) -> None:
         tmp.write_text(text)
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write bytes to ``path`` atomically (plain file I/O: a full disk is an OSError)."""
+def atomic_write_bytes(path: str | Path, data: bytes | Sequence[bytes]) -> None:
+    """Write bytes (or pieces of bytes, one after the other) to ``path`` atomically (plain
+    file I/O: a full disk is an OSError)."""
     with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+        if isinstance(data, (bytes, bytearray, memoryview)):
+            tmp.write_bytes(data)
+        else:
+            with open(tmp, "wb") as fh:
+                fh.writelines(data)
 
 
 def write_hdf5_atomically(path: str | Path, fill, source: str | Path | None = None,

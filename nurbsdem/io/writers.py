@@ -3,7 +3,7 @@
 In the output directory (``Output Directory``, default ``results`` next to the deck)::
 
     particles.pvd  walls.pvd  contacts.pvd     ParaView time collections of ...
-    vtk/particles_000000.vtu ...               ... one .vtu per sample (zlib binary, io/vtu.py)
+    vtk/particles_000000.vtu ...               ... one .vtu per sample (zlib, raw appended, io/vtu.py)
     monitors/energy.csv                        time,kinetic,potential,elastic,dissipated,
                                                external_work,mechanical,balance_error
     monitors/contacts.csv                      time,monitored,active,degenerated,failed
@@ -47,9 +47,10 @@ from typing import TYPE_CHECKING, Any, Hashable, Mapping, Sequence
 
 import numpy as np
 
-from .atomic import (atomic_write_text, ensure_space, remove_stale_temporaries,
-                     write_hdf5_atomically)
-from .vtu import Reuse, vtu_text
+from ..geometry.rotation import place_points_into
+from .atomic import (atomic_write_bytes, atomic_write_text, ensure_space,
+                     remove_stale_temporaries, write_hdf5_atomically)
+from .vtu import Reuse, vtu_parts
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..geometry.nurbs import Patch
@@ -164,7 +165,7 @@ def write_vtu(path: str | Path, points: np.ndarray, cells: list[tuple[str, np.nd
         comps = {k: (1 if np.ndim(v) < 2 else int(np.shape(v)[1])) for k, v in point_data.items()}
         atomic_write_text(path, _empty_vtu(comps))
         return
-    atomic_write_text(path, vtu_text(points, cells, point_data, cell_data, reuse, key))
+    atomic_write_bytes(path, vtu_parts(points, cells, point_data, cell_data, reuse, key))
 
 
 def pvd_text(entries: Sequence[tuple[float, str]]) -> str:
@@ -428,10 +429,8 @@ class ParaViewWriter:
         counts, offsets = static["counts"], static["offsets"]
         points = np.empty((int(counts.sum()), 3))
         position = np.asarray(bodies.position, float)
-        for sid, idx, rows in static["groups"]:       # the bodies of one shape at once
-            rel = self._shape_mesh[sid][0]
-            moved = position[idx, None, :] + np.matmul(rel[None], R[idx].transpose(0, 2, 1))
-            points[rows] = moved.reshape(-1, 3)
+        for sid, idx in static["groups"]:       # the bodies of one shape at once
+            place_points_into(self._shape_mesh[sid][0], position, R, idx, offsets[idx], points)
         point_data = {"particle_id": static["particle_id"], "shape_id": static["shape_id"],
                       "velocity": np.repeat(np.asarray(bodies.velocity, float), counts, axis=0),
                       "angular_velocity": np.repeat(np.asarray(bodies.angular_velocity, float),
@@ -441,18 +440,14 @@ class ParaViewWriter:
     def _particle_cells(self, ids: np.ndarray, shape_id: np.ndarray) -> dict:
         """What the particles' grid keeps while the bodies stay the same (ids and shapes):
         quads, patch and body ids, each body's point count and first point, the bodies of
-        each shape and their points' rows (kept for the last body set)."""
+        each shape (kept for the last body set)."""
         key = (ids.tobytes(), shape_id.tobytes())
         if self._cells_key == key:
             return self._cells
         meshes = [self._shape_mesh[int(s)] for s in shape_id]
         counts = np.array([len(rel) for rel, _, _ in meshes], np.int64)
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        groups = []
-        for sid in np.unique(shape_id):
-            idx = np.nonzero(shape_id == sid)[0]
-            n_pts = len(self._shape_mesh[int(sid)][0])
-            groups.append((int(sid), idx, (offsets[idx, None] + np.arange(n_pts)).ravel()))
+        groups = [(int(sid), np.nonzero(shape_id == sid)[0]) for sid in np.unique(shape_id)]
         self._cells = {
             "counts": counts, "offsets": offsets, "groups": groups,
             "quads": np.concatenate([quads + off for (_, quads, _), off in zip(meshes, offsets)]),
