@@ -268,13 +268,12 @@ PARALLEL_MIN_PAIRS = 32
 
 @kernel
 def _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, step, ws, wf, wi, wfs,
-                 w4):
+                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4):
     """The loop of :func:`_solve_chunk` over its workspaces.  Without reference counting
     (:func:`nurbsdem.jit.kernel`): the rows it hands to ``solve_pair`` are views of arrays
     that every thread shares, whose reference counts were updated atomically by all threads
     (8 % of the LCP time of a compaction)."""
-    for k in range(k0, k1, step):
+    for k in range(k0, k1):
         a = sa[k]
         b = sb[k]
         solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
@@ -285,8 +284,8 @@ def _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, ro
 
 @njit(cache=True)
 def _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, step):
-    """LCPs of pairs k0, k0 + step, ... below k1 with one set of workspaces (one thread). ``mask_a/b`` (K, P)
+                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1):
+    """LCPs of pairs k0..k1-1 with one set of workspaces (one thread). ``mask_a/b`` (K, P)
     candidate patches per pair for cold starts (P = 0: no candidates given); ``nc`` (S,)
     non-convexity heights of the shapes (m)."""
     ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
@@ -295,21 +294,20 @@ def _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, ro
     wfs = np.zeros((4, 3))
     w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
     _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b, prev_f,
-                 prev_i, mask_a, mask_b, res_f, res_i, k0, k1, step, ws, wf, wi, wfs, w4)
+                 prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4)
 
 
 @njit(cache=True, parallel=True)
 def _batch_kernel(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
                   prev_f, prev_i, mask_a, mask_b, res_f, res_i, nt):
-    """Thread t of nt solves pairs t, t + nt, t + 2 nt, ...: interleaved, not in contiguous
-    halves, so that a stretch of costly pairs (the list is sorted by body, and the bodies
-    of one region of a pack have consecutive ids) is shared among the threads."""
     K = sa.shape[0]
     if nt > K:
         nt = max(K, 1)
+    chunk = (K + nt - 1) // nt
     for t in prange(nt):
         _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                     prev_f, prev_i, mask_a, mask_b, res_f, res_i, t, K, nt)
+                     prev_f, prev_i, mask_a, mask_b, res_f, res_i, t * chunk,
+                     min(K, (t + 1) * chunk))
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,
@@ -359,7 +357,7 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     if K >= PARALLEL_MIN_PAIRS:
         _batch_kernel(*args, numba.get_num_threads())
     elif K:
-        _solve_chunk(*args, 0, K, 1)
+        _solve_chunk(*args, 0, K)
     accept_within_nonconvexity(table.nonconvexity[sa] + table.nonconvexity[sb], *out)
     return out
 

@@ -160,7 +160,7 @@ def _lcp_rows(st, a, b, mask_a, mask_b, pos, R, prev_f, prev_i, nt):
     elif K:
         _solve_chunk(st.tab, st.info, st.centroid, st.radius, st.seeds, st.nonconvexity, sa,
                      pos[a], R[a], sb, pos[b], R[b], prev_f, prev_i, mask_a, mask_b, res_f,
-                     res_i, 0, K, 1)
+                     res_i, 0, K)
     accept_within_nonconvexity(st.nonconvexity[sa] + st.nonconvexity[sb], res_f, res_i)
     return res_f, res_i
 
@@ -179,7 +179,7 @@ def _wall_rows(st, a, w, pos, R, wall_d, prev_f, prev_i, nt):
     elif K:
         _wall_chunk(st.tab, st.info, st.centroid, st.radius, st.seeds, st.body_shape[a], pos[a],
                     R[a], origin, st.wall_a[w], st.wall_b[w], st.wall_dom[w], prev_f, prev_i,
-                    res_f, res_i, 0, K, 1)
+                    res_f, res_i, 0, K)
     return res_f, res_i
 
 

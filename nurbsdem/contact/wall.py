@@ -174,10 +174,10 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
 
 @kernel
 def _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                prev_f, prev_i, res_f, res_i, k0, k1, step, ws, wf, wi, wfs, no_mask):
+                prev_f, prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask):
     """The loop of :func:`_wall_chunk`, without reference counting (see
     :func:`nurbsdem.contact.detect._solve_range`)."""
-    for k in range(k0, k1, step):
+    for k in range(k0, k1):
         s = sid[k]
         solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
                    wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, no_mask, res_f[k],
@@ -186,29 +186,27 @@ def _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
 
 @njit(cache=True)
 def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                prev_f, prev_i, res_f, res_i, k0, k1, step):
-    """Body/wall contacts k0, k0 + step, ... below k1 with one set of workspaces (one
-    thread)."""
+                prev_f, prev_i, res_f, res_i, k0, k1):
+    """Body/wall contacts k0..k1-1 with one set of workspaces (one thread)."""
     ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
     wf = np.zeros((lcp.WORK_ROWS, 3))
     wi = np.zeros((4, 4), np.int64)
     wfs = np.zeros((4, 3))
     no_mask = np.zeros(0, np.bool_)
     _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom, prev_f,
-                prev_i, res_f, res_i, k0, k1, step, ws, wf, wi, wfs, no_mask)
+                prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
 
 
 @njit(cache=True, parallel=True)
 def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
                        prev_f, prev_i, res_f, res_i, nt):
-    """Thread t of nt solves pairs t, t + nt, ... (interleaved: see
-    :func:`nurbsdem.contact.detect._batch_kernel`)."""
     K = sid.shape[0]
     if nt > K:
         nt = max(K, 1)
+    chunk = (K + nt - 1) // nt
     for t in prange(nt):
         _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                    prev_f, prev_i, res_f, res_i, t, K, nt)
+                    prev_f, prev_i, res_f, res_i, t * chunk, min(K, (t + 1) * chunk))
 
 
 def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=None, prev_i=None):
@@ -235,5 +233,5 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
     if K >= PARALLEL_MIN_PAIRS:
         _wall_batch_kernel(*args, numba.get_num_threads())
     elif K:
-        _wall_chunk(*args, 0, K, 1)
+        _wall_chunk(*args, 0, K)
     return res_f, res_i
