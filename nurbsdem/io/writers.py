@@ -3,7 +3,7 @@
 In the output directory (``Output Directory``, default ``results`` next to the deck)::
 
     particles.pvd  walls.pvd  contacts.pvd     ParaView time collections of ...
-    vtk/particles_000000.vtu ...               ... one .vtu per sample (zlib, raw appended, io/vtu.py)
+    vtk/particles_000000.vtu ...               ... one .vtu per sample (zlib, raw: io/vtu.py)
     monitors/energy.csv                        time,kinetic,potential,elastic,dissipated,
                                                external_work,mechanical,balance_error
     monitors/contacts.csv                      time,monitored,active,degenerated,failed

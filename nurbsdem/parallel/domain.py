@@ -436,8 +436,7 @@ class Domain:
         sel = self.counted(local["list_a"]) if "list_a" in local else None
         mine = self.owned_ids
         pairs = {f: local[f][sel] for f in PAIR_FIELDS} if sel is not None else None
-        per_body = {f: local[f][mine] for f in ("prev_pos", "prev_R", "prev_x", "built_x", "built_R")
-                    if f in local}
+        per_body = {f: local[f][mine] for f in ("prev_pos", "prev_R", "prev_x") if f in local}
         gathered = self.comm.allgather((pairs, mine, per_body, local["odo"][mine]))
         out = dict(local)
         if sel is not None:
