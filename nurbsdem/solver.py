@@ -61,6 +61,8 @@ class RunSummary:
     steps: int = 0
     substeps: int = 0
     lcps: int = 0
+    #: contact evaluations (calls of the contact search, rejected attempts included)
+    evaluations: int = 0
     degenerated: int = 0
     failed: int = 0
     active_max: int = 0
@@ -507,6 +509,7 @@ class Solver:
         while self.step_progress < n_total:
             t_before = time.perf_counter()
             g0, l0, n0 = self.scene.timers.global_search, self.scene.timers.lcp, self.scene.timers.lcps
+            e0 = self.scene.timers.calls
             n = self._steps_to_event(n_total - self.step_progress, ck_every)
             try:
                 done = sysm.steps(n, self._monitors_due(n))
@@ -527,6 +530,7 @@ class Solver:
             self.time = sysm.time
             self.summary.steps += done
             self.summary.lcps += self.scene.timers.lcps - n0
+            self.summary.evaluations += self.scene.timers.calls - e0
             cs = self.scene.last
             tally = sysm.last_steps
             self.summary.substeps += tally.substeps
