@@ -64,3 +64,37 @@ def test_one_vertex_reads_back(tmp_path):
     assert mesh.cells[0].type == "vertex" and len(mesh.points) == 1
     np.testing.assert_array_equal(mesh.point_data["penetration"], np.float32([1e-4]))
     np.testing.assert_array_equal(mesh.point_data["body_a"], [3])
+
+
+def _appended_arrays(content: bytes) -> dict:
+    """The arrays of a file of :func:`vtu_bytes`, decoded by hand from its AppendedData (raw
+    UInt32 header + zlib blocks per array; meshio cannot read a grid without cells)."""
+    import xml.etree.ElementTree as ET
+    import zlib
+    start = content.index(b"<AppendedData")
+    data = content[content.index(b"_", start) + 1:]
+    root = ET.fromstring(content[:start] + b"</VTKFile>")
+    out = {}
+    for da in root.iter("DataArray"):
+        off = int(da.get("offset"))
+        n = int(np.frombuffer(data[off:off + 4], np.uint32)[0])
+        head = np.frombuffer(data[off:off + 4 * (3 + n)], np.uint32)
+        pos, raw = off + 4 * (3 + n), b""
+        for size in head[3:]:
+            raw += zlib.decompress(data[pos:pos + int(size)])
+            pos += int(size)
+        dtype = {"Float32": np.float32, "Int64": np.int64, "UInt8": np.uint8}[da.get("type")]
+        out[da.get("Name")] = (head[:3].tolist(), np.frombuffer(raw, dtype))
+    return out
+
+
+def test_arrays_without_rows_are_written_as_zero_blocks():
+    """Points without cells: the empty connectivity and an empty (0, 3) cell array are
+    written as zero blocks, and the points read back."""
+    pts = np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    arrays = _appended_arrays(vtu_bytes(pts, [("quad", np.zeros((0, 4), np.int64))],
+                                        {"velocity": np.ones((2, 3))},
+                                        {"force": [np.zeros((0, 3))]}))
+    assert arrays["force"][0] == [0, BLOCK, 0] and arrays["connectivity"][0] == [0, BLOCK, 0]
+    np.testing.assert_array_equal(arrays["Points"][1], pts.astype(np.float32).ravel())
+    np.testing.assert_array_equal(arrays["velocity"][1], np.ones(6, np.float32))

@@ -44,7 +44,7 @@ def encode(data: np.ndarray, level: int = LEVEL) -> list[bytes]:
     """The bytes of one appended DataArray, in pieces (written one after the other, never
     joined): its UInt32 header (block count, block size, last block's size, compressed
     sizes), then its zlib blocks."""
-    raw = memoryview(np.ascontiguousarray(data)).cast("B")
+    raw = memoryview(np.ascontiguousarray(data).reshape(-1).view(np.uint8))
     blocks = [zlib.compress(raw[k:k + BLOCK], level) for k in range(0, len(raw), BLOCK)]
     last = len(raw) - (len(blocks) - 1) * BLOCK if blocks else 0
     header = np.array([len(blocks), BLOCK, last] + [len(b) for b in blocks], np.uint32)
@@ -108,12 +108,20 @@ def _normalised(data) -> np.ndarray:
     return a
 
 
+def _cell_rows(c) -> np.ndarray:
+    """A block of cells as (n, k) point indices (a flat list: one point per cell)."""
+    c = np.asarray(c, np.int64)
+    if c.ndim == 2:
+        return c
+    return c.reshape(len(c), -1) if c.size else c.reshape(0, 1)
+
+
 def _cell_arrays(cells: Sequence[tuple[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """VTK's connectivity, offsets and types of the cell blocks [(type, (n, k) ints)]."""
     if not cells:
         return {"connectivity": np.zeros(0, np.int64), "offsets": np.zeros(0, np.int64),
                 "types": np.zeros(0, np.uint8)}
-    blocks = [np.asarray(c, np.int64).reshape(len(c), -1) for _, c in cells]
+    blocks = [_cell_rows(c) for _, c in cells]
     return {"connectivity": np.concatenate([c.ravel() for c in blocks]),
             "offsets": np.cumsum(np.concatenate([np.full(len(c), c.shape[1], np.int64)
                                                  for c in blocks])),
