@@ -84,7 +84,8 @@ DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 #: ``owned`` (N,) all True (one rank)
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
                         "first_patch body_shape sphere_radius owned threads all_spheres")
-#: the neighbour list and its per-pair arrays, odometers and the previous poses
+#: the neighbour list and its per-pair arrays, odometers, the poses it was built at and the
+#: previous poses
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
                       "built_R built_wall prev_pos prev_R prev_wall prev_x")
 #: constants of the bodies and the contact laws
