@@ -19,12 +19,15 @@ def fcc_positions(cells: int, spacing: float, origin=(0.0, 0.0, 0.0)) -> np.ndar
 
 
 def fcc_sphere_block(dt: float, cells: int = 2, overlap: float = 1e-5, substeps: int | None = None,
-                     watch_period2: bool = True, seed: int = 1):
+                     watch_period2: bool = True, seed: int = 1, safety: float = 0.5,
+                     implicit_damping: bool = False):
     """A dense pack: exact NURBS spheres with particle C's mass (paper Table 1: volume
     21.29 cm³, density 2700 kg/m³, volume-equivalent radius) in FCC order, each interior
     sphere with 12 contacts ``overlap`` (m) deep, held by six walls that touch the outer
     spheres as deep; zero gravity; the paper's contact law (εn 1e5, cn 1e2, εt 1e4, μ 0.5);
-    small random velocities (1 mm/s).  Returns ``(system, trace)``: a
+    small random velocities (1 mm/s); ``safety`` and ``implicit_damping`` as for the
+    :class:`~nurbsdem.dynamics.DemSystem` (a step's ``Safety`` and ``Damping``).  Returns
+    ``(system, trace)``: a
     :class:`~nurbsdem.dynamics.DemSystem` with deck step ``dt`` (s) and the list that receives
     the centroids (N,3) at every force evaluation (every internal step)."""
     from .contact.scene import SceneContacts
@@ -37,7 +40,8 @@ def fcc_sphere_block(dt: float, cells: int = 2, overlap: float = 1e-5, substeps:
     X = fcc_positions(cells, 2 * r - overlap, origin=(0.1, 0.1, 0.1))
     law = ContactLaw(en=1e5, cn=1e2, et=1e4, ct=0.0, mu=0.5)
     s = DemSystem(dt=dt, gravity=(0, 0, 0), interfaces=InterfaceTable(default=law),
-                  substeps=substeps, watch_period2=watch_period2)
+                  substeps=substeps, watch_period2=watch_period2, safety=safety,
+                  implicit_damping=implicit_damping)
     rng = np.random.default_rng(seed)
     for x in X:
         s.add_particle(m, sphere_inertia(m, r), x, v=rng.normal(0, 1e-3, 3), radius=r)

@@ -263,18 +263,22 @@ DAMPING_SCHEMES = ("explicit", "implicit")
 
 @dataclass
 class DynamicStep(Step):
-    """``Step ID Dynamic Duration T TimeStep DT [Damping Explicit|Implicit] [Accuracy η]``:
+    """``Step ID Dynamic Duration T TimeStep DT [Damping Explicit|Implicit] [Accuracy η]
+    [Safety f]``:
     integrate T seconds with deck step DT (s); ``damping`` "implicit" takes the normal
     dashpots at the velocity after each force evaluation's two half kicks
     (:mod:`nurbsdem.dynamics.implicit`), so that they do not limit the stable step;
     ``accuracy`` η (-, None: off) repeats a deck step whose energy-balance error grows by
     more than η × the energy scale with twice the sub-steps
-    (:mod:`nurbsdem.dynamics.accuracy`)."""
+    (:mod:`nurbsdem.dynamics.accuracy`); ``safety`` f (-, None: the solver's, 0.5): the
+    sub-step is f × the contact network's stability limit
+    (:mod:`nurbsdem.dynamics.stepcontrol`, Eq. 1)."""
 
     duration: float = 0.0
     time_step: float = 0.0
     damping: str = "explicit"
     accuracy: float | None = None
+    safety: float | None = None
     kind = "dynamic"
 
 
@@ -298,8 +302,8 @@ class MoveWallStep(Step):
       the nearest particle is ``gap`` (m, default 0). No time passes.
     * ``Displacement dx dy dz Duration T TimeStep DT``: the wall translates by the given
       vector (m) at constant velocity over T seconds while the particles move (a dynamic
-      step with a prescribed wall motion; ``[Damping Explicit|Implicit] [Accuracy η]`` as for
-      Dynamic).
+      step with a prescribed wall motion; ``[Damping Explicit|Implicit] [Accuracy η]
+      [Safety f]`` as for Dynamic).
     """
 
     wall: str = ""
@@ -311,6 +315,7 @@ class MoveWallStep(Step):
     time_step: float = 0.0
     damping: str = "explicit"
     accuracy: float | None = None
+    safety: float | None = None
     kind = "movewall"
 
 
@@ -573,6 +578,8 @@ def summary_text(model: Model) -> str:
             desc += ", implicit dashpots"
         if getattr(s, "accuracy", None) is not None:
             desc += f", accuracy {s.accuracy:g}"
+        if getattr(s, "safety", None) is not None:
+            desc += f", safety {s.safety:g}"
         out.append(f"  {s.id}: t = {t:g} s: {desc}")
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")

@@ -436,15 +436,18 @@ class Simulation:
 
     # ------------------------------------------------------------------ steps
     def run_dynamic(self, duration: float, time_step: float, damping: str = "explicit",
-                    accuracy: float | None = None) -> None:
+                    accuracy: float | None = None, safety: float | None = None) -> None:
         """``Dynamic``: integrate ``duration`` s with deck time step ``time_step`` s
         (sub-stepped below the stability limit, as ``solve`` does); ``damping`` "explicit" or
         "implicit" (the deck's ``Damping``); ``accuracy`` η of the accuracy control (the
-        deck's ``Accuracy``, :mod:`nurbsdem.dynamics.accuracy`; None: off)."""
+        deck's ``Accuracy``, :mod:`nurbsdem.dynamics.accuracy`; None: off); ``safety`` the
+        fraction of the stability limit the sub-step takes (the deck's ``Safety``; None: the
+        solver's, 0.5)."""
         sid = self._next_step_id()
         dur, dt = self._timing(sid, duration, time_step)
         self._run(DynamicStep(sid, 0, dur, dt, damping=self._damping(sid, damping),
-                              accuracy=self._accuracy(sid, accuracy)))
+                              accuracy=self._accuracy(sid, accuracy),
+                              safety=self._safety(sid, safety)))
 
     def replicate(self, layers: int, height: float) -> None:
         """``Replicate``: the particles become layer 0 of ``layers`` layers spread over
@@ -459,12 +462,12 @@ class Simulation:
                   duration: float | None = None, time_step: float | None = None, *,
                   to_contact: bool = False, gap: float = 0.0,
                   direction: Sequence[float] | None = None, damping: str = "explicit",
-                  accuracy: float | None = None) -> None:
+                  accuracy: float | None = None, safety: float | None = None) -> None:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
-        particle is ``gap`` m away (no time passes).  ``damping``, ``accuracy``: as for
-        :meth:`run_dynamic`."""
+        particle is ``gap`` m away (no time passes).  ``damping``, ``accuracy``, ``safety``: as
+        for :meth:`run_dynamic`."""
         sid = self._next_step_id()
         what = f"Step {sid}"
         if not isinstance(name, str) or name not in self.model.wall_names:
@@ -490,7 +493,8 @@ class Simulation:
         dur, dt = self._timing(sid, duration, time_step)
         self._run(MoveWallStep(sid, 0, wall=name, displacement=disp, duration=dur, time_step=dt,
                                damping=self._damping(sid, damping),
-                               accuracy=self._accuracy(sid, accuracy)))
+                               accuracy=self._accuracy(sid, accuracy),
+                               safety=self._safety(sid, safety)))
 
     @staticmethod
     def _damping(sid: int, damping: Any) -> str:
@@ -503,6 +507,11 @@ class Simulation:
     def _accuracy(cls, sid: int, accuracy: Any) -> float | None:
         return (None if accuracy is None
                 else cls._number("Accuracy", accuracy, f"Step {sid}", positive=True))
+
+    @classmethod
+    def _safety(cls, sid: int, safety: Any) -> float | None:
+        return (None if safety is None
+                else cls._number("Safety", safety, f"Step {sid}", positive=True))
 
     def _next_step_id(self) -> int:
         return max((s.id for s in self.model.steps), default=0) + 1
@@ -878,6 +887,8 @@ def _step_line(s: Step) -> str:
     damping = " Damping Implicit" if getattr(s, "damping", "explicit") == "implicit" else ""
     if getattr(s, "accuracy", None) is not None:
         damping += f" Accuracy {_f(s.accuracy)}"
+    if getattr(s, "safety", None) is not None:
+        damping += f" Safety {_f(s.safety)}"
     if isinstance(s, DynamicStep):
         return (f"  Step {s.id} Dynamic Duration {_f(s.duration)} TimeStep {_f(s.time_step)}"
                 f"{damping}")

@@ -267,12 +267,15 @@ class Solver:
         return [w.patch for w in self.model.walls]
 
     def _build_system(self, dt: float, motions: list[PrescribedMotion],
-                      implicit_damping: bool = False, accuracy: float | None = None) -> DemSystem:
-        """A DemSystem for the current bodies (order = self.bodies), walls with ``motions``."""
+                      implicit_damping: bool = False, accuracy: float | None = None,
+                      safety: float | None = None) -> DemSystem:
+        """A DemSystem for the current bodies (order = self.bodies), walls with ``motions``;
+        ``safety``: the step's fraction of the stability limit (None: the solver's)."""
         t0 = time.perf_counter()
         model = self.model
         sysm = DemSystem(dt=dt, gravity=model.gravity, interfaces=self.interfaces,
-                         safety=self.safety, t0=self.time, implicit_damping=implicit_damping,
+                         safety=self.safety if safety is None else safety, t0=self.time,
+                         implicit_damping=implicit_damping,
                          accuracy=accuracy)
         sysm.compiled_steps = self.compiled_steps
         b = self.bodies
@@ -488,7 +491,8 @@ class Solver:
                                    f"of TimeStep {dt}", step.line)
         step_t0 = self.time - self.step_progress * dt
         self.system = self._build_system(dt, motions, step.damping == "implicit",
-                                         getattr(step, "accuracy", None))
+                                         getattr(step, "accuracy", None),
+                                         getattr(step, "safety", None))
         scene_state = restored.get("scene") if restored else None
         if scene_state:
             self.scene.set_state(scene_state)

@@ -16,7 +16,9 @@ from nurbsdem.dynamics.stepcontrol import (alternation_update, count_stands, cri
                                            network_apply, network_count_stands, network_lanczos,
                                            network_gershgorin, network_rates, period2_amplitude, shape_compliance,
                                            surface_compliance)
+from nurbsdem.errors import InputError
 from nurbsdem.geometry.rotation import quats_to_matrices, random_quaternions
+from nurbsdem.io.deck import parse_deck
 from nurbsdem.lattice import fcc_sphere_block
 from nurbsdem.shapes import ellipsoid, sphere
 
@@ -167,20 +169,30 @@ def test_alternation_counts_only_sustained_reversals_above_round_off():
 
 
 # --------------------------------------------------------------------------- dense pack
-def fcc_block(dt, substeps=None, watch=True):
-    return fcc_sphere_block(dt, substeps=substeps, watch_period2=watch)
+def fcc_block(dt, substeps=None, watch=True, safety=0.5, implicit=False):
+    return fcc_sphere_block(dt, substeps=substeps, watch_period2=watch, safety=safety,
+                            implicit_damping=implicit)
 
 
-@pytest.mark.parametrize("dt", [5e-4, 1e-3, 2e-3])
-def test_a_dense_fcc_block_settles_without_period_two_motion(dt):
-    s, trace = fcc_block(dt)
+@pytest.mark.parametrize("dt, safety, implicit", [
+    (5e-4, 0.5, False), (1e-3, 0.5, False), (2e-3, 0.5, False),
+    # a step's Safety 0.8, as the paper example's deck takes it, with either dashpots
+    (1e-3, 0.8, False), (1e-3, 0.8, True)])
+def test_a_dense_fcc_block_settles_without_period_two_motion(dt, safety, implicit):
+    s, trace = fcc_block(dt, safety=safety, implicit=implicit)
     s.initialize()
-    assert s.dt_network < s.dt_apriori / 2.5          # the network is much stiffer than a pair
+    # the network is much stiffer than a pair (implicit dashpots: the springs alone)
+    assert s.dt_network < s.dt_apriori / (1.5 if implicit else 2.5)
     for _ in range(int(round(0.03 / dt))):
         s.step()
     assert s.c_a.shape[0] > 300                        # still packed: 12 contacts inside
-    assert s.dt_internal <= 0.5 * s.dt_network * (1 + 1e-9)
-    assert period2_amplitude(trace) < 1e-10            # the pair step rattled by ~1e-6 m
+    assert s.dt_internal <= safety * s.dt_network * (1 + 1e-9)
+    # and no more sub-steps than that fraction of the limit needs (the guard never refined)
+    assert s.substeps == needed_substeps(dt, safety * min(s.dt_network, s.dt_apriori))
+    assert s.refine == 1                               # the guard never had to step in
+    # the pair step rattled by ~1e-6 m; what is left is the start's ringing (implicit
+    # dashpots damp the highest modes less than the explicit ones: 1.5e-10 m at 0.5 too)
+    assert period2_amplitude(trace) < (1e-9 if implicit else 1e-10)
     assert s.energy().kinetic < 1e-7
 
 
@@ -335,3 +347,71 @@ def test_a_failing_pair_never_pushes_for_more_than_one_evaluation(monkeypatch):
         s.step()
     assert len(pushing) > 10 and sum(pushing) == 1 and pushing[0] == 1
     assert np.all(s.force == 0)
+
+
+# --------------------------------------------------------------------------- a step's Safety
+SPHERE_ON_FLOOR = """\
+Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 Sphere Radius 0.02
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.05 0.05 0.0201
+Walls
+  Box 1 Min 0 0 0 Max 0.1 0.1 0.1
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.02 TimeStep 1e-3{safety}
+Output
+  VTK Every 0.02
+"""
+
+
+def test_a_steps_safety_sets_the_fraction_of_the_stability_limit(tmp_path):
+    """A sphere resting on the floor: with ``Safety 0.25`` the deck steps take about twice
+    the internal steps of the default 0.5 (the count is a ceiling)."""
+    from nurbsdem.solver import Solver
+    internal = {}
+    for f in (None, 0.25):
+        deck = tmp_path / f"s{f}.inp"
+        deck.write_text(SPHERE_ON_FLOOR.format(safety="" if f is None else f" Safety {f}"))
+        model = parse_deck(deck)
+        assert model.steps[0].safety == f
+        internal[f] = Solver(model, output=tmp_path / f"out{f}", quiet=True).run().substeps
+    assert 1.5 * internal[None] < internal[0.25] <= 2 * internal[None]
+
+
+@pytest.mark.parametrize("line, message", [
+    ("Safety 0", "Step 1: Safety must be > 0, got 0"),
+    ("Safety 1", "Step 1: Safety 1 is out of range"),
+    ("Safety fast", "Step 1: Safety"),
+])
+def test_a_bad_safety_is_one_line_naming_the_file_and_line(tmp_path, line, message):
+    deck = tmp_path / "bad.inp"
+    deck.write_text(SPHERE_ON_FLOOR.format(safety=" " + line))
+    with pytest.raises(InputError) as info:
+        parse_deck(deck)
+    text = str(info.value)
+    assert message in text and "bad.inp:14:" in text and "\n" not in text
+
+
+def test_safety_belongs_to_timed_steps_and_the_python_api_writes_it(tmp_path):
+    import nurbsdem
+    deck = tmp_path / "replicate.inp"
+    deck.write_text(SPHERE_ON_FLOOR.format(
+        safety="\n  Step 2 Replicate Layers 2 Height 0.05 Safety 0.5"))
+    with pytest.raises(InputError, match="Safety does not apply to a Replicate step"):
+        parse_deck(deck)
+    sim = nurbsdem.Simulation()
+    sim.add_material(1, 2700)
+    sim.add_interface(normal_penalty=1e5, normal_damping=1e2)
+    sim.add_box((0, 0, 0), (0.1, 0.1, 0.1))
+    sim.add_particle(nurbsdem.shapes.sphere(0.01), 1, (0.05, 0.05, 0.03))
+    sim.run_dynamic(0.01, 1e-3, damping="implicit", safety=0.7)
+    assert sim.model.steps[-1].safety == 0.7
+    assert "Damping Implicit Safety 0.7" in sim.deck_text
+    with pytest.raises(InputError, match="Safety must be > 0"):
+        sim.run_dynamic(0.01, 1e-3, safety=0)

@@ -45,6 +45,7 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
                 # the Material on the Box/Wall line, default rigid). Model LinearPenalty: above
     Steps
       Step ID Dynamic Duration T TimeStep dt [Damping Explicit|Implicit] [Accuracy eta]
+                [Safety f]
       Step ID Replicate Layers L Height H
       Step ID MoveWall name ToContact [Gap g] [Direction dx dy dz]
       Step ID MoveWall name Displacement dx dy dz Duration T TimeStep dt [Damping ..]
@@ -52,7 +53,9 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
                 # two half kicks, so that strong damping does not shorten the stable step
                 # (default Explicit). Accuracy eta: a deck step whose energy-balance error
                 # grows by more than eta x the energy scale is repeated with twice the
-                # sub-steps (more sub-steps only where impacts need them; default off)
+                # sub-steps (more sub-steps only where impacts need them; default off).
+                # Safety f: the sub-step is f x the contact network's stability limit
+                # (0 < f < 1, default 0.5)
     Output
       Directory path                                     # default: results
       VTK [Every t] [Resolution n]                       # default 0.01 s, 8
@@ -130,7 +133,7 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Steps": {"Step": EntrySpec(True, {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
-        "Displacement": F3, "Damping": S1, "Accuracy": F1})},
+        "Displacement": F3, "Damping": S1, "Accuracy": F1, "Safety": F1})},
     "Output": {
         "Directory": EntrySpec(False, head=S1),
         "VTK": EntrySpec(False, {"Every": F1, "Resolution": I1}),
@@ -189,6 +192,9 @@ RANGES: dict[str, Range] = {
     "Friction": Range(0.0, 100.0, "", "Coulomb coefficients of real materials are below ~2"),
     "Accuracy": Range(1e-12, 0.1, "", "a relative energy error per deck step beyond 0.1 "
                       "controls nothing; below 1e-12 it is round-off"),
+    "Safety": Range(0.01, 0.95, "", "a fraction of the stability limit: at 1 the explicit "
+                    "step is unstable, and 0.95 leaves no margin for the linearisation; below "
+                    "0.01 a smaller TimeStep says the same"),
     "Duration": Range(0.0, 1e7, "s", "a simulated time of months is beyond a DEM run"),
     "TimeStep": Range(1e-15, 1e7, "s", "below a femtosecond nothing granular happens"),
     "Every": Range(1e-12, 1e7, "s", "output intervals beyond this range are meaningless"),
@@ -755,11 +761,11 @@ class _Builder:
                       + (f" (got {' and '.join(types)})" if types else ""), e.line)
         kind = types[0]
         if kind == "Dynamic":
-            self.only(e, {"Dynamic", "Duration", "TimeStep", "Damping", "Accuracy"},
-                      "a Dynamic step")
+            self.only(e, {"Dynamic", "Duration", "TimeStep", "Damping", "Accuracy",
+                          "Safety"}, "a Dynamic step")
             self.require(e, "Duration", "TimeStep")
             step: Step = DynamicStep(e.id, e.line, *self.timing(e), damping=self.damping(e),
-                                     accuracy=self.accuracy(e))
+                                     accuracy=self.accuracy(e), safety=self.safety(e))
         elif kind == "Replicate":
             self.only(e, {"Replicate", "Layers", "Height"}, "a Replicate step")
             self.require(e, "Layers", "Height")
@@ -794,12 +800,12 @@ class _Builder:
                 d = d / np.linalg.norm(d)
             return MoveWallStep(e.id, e.line, wall=name, to_contact=True, gap=gap, direction=d)
         self.only(e, {"MoveWall", "Displacement", "Duration", "TimeStep", "Damping",
-                      "Accuracy"}, "MoveWall Displacement")
+                      "Accuracy", "Safety"}, "MoveWall Displacement")
         self.require(e, "Duration", "TimeStep")
         dur, dt = self.timing(e)
         return MoveWallStep(e.id, e.line, wall=name, displacement=e.get("Displacement"),
                             duration=dur, time_step=dt, damping=self.damping(e),
-                            accuracy=self.accuracy(e))
+                            accuracy=self.accuracy(e), safety=self.safety(e))
 
     def damping(self, e: Entry) -> str:
         """The step's ``Damping`` scheme (lower case; default explicit)."""
@@ -813,6 +819,12 @@ class _Builder:
         """The step's ``Accuracy`` η (:mod:`nurbsdem.dynamics.accuracy`; None: off)."""
         value = e.get("Accuracy")
         return None if value is None else self.positive(e, "Accuracy", value)
+
+    def safety(self, e: Entry) -> float | None:
+        """The step's ``Safety`` f: the fraction of the contact network's stability limit the
+        sub-step takes (:mod:`nurbsdem.dynamics.stepcontrol`; None: the solver's, 0.5)."""
+        value = e.get("Safety")
+        return None if value is None else self.positive(e, "Safety", value)
 
     def output(self, entries: list[Entry]) -> None:
         out = Output(directory=self.base / "results")
