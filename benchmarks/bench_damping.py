@@ -7,7 +7,10 @@
 * ``Damping Implicit`` (:mod:`nurbsdem.dynamics.implicit`: the springs alone limit the step),
 * ``Damping Implicit Accuracy 3e-5``, as shipped (:mod:`nurbsdem.dynamics.accuracy`: deck
   steps whose energy-balance error grows beyond the budget are repeated with more
-  sub-steps).
+  sub-steps),
+
+all with the shipped ``Safety 0.7`` (the sub-step is 0.7 × the contact network's stability
+limit), and the shipped settings with the default ``Safety 0.5``.
 
 Printed per run: wall time, internal steps, LCPs, failed
 LCPs, the energy-balance error (absolute and as a share of the energy turned over — the
@@ -34,19 +37,24 @@ sys.path.insert(0, str(REPO))
 DECK = REPO / "inputs" / "paper" / "compaction.inp"
 
 
-#: the variants: (label, Damping, Accuracy or None)
-VARIANTS = (("Explicit", "Explicit", None), ("Implicit", "Implicit", None),
-            ("Implicit, Accuracy 3e-5 (as shipped)", "Implicit", 3e-5))
+#: the variants: (label, Damping, Accuracy or None, Safety or None: the deck's)
+VARIANTS = (("Explicit", "Explicit", None, None), ("Implicit", "Implicit", None, None),
+            ("Implicit, Accuracy 3e-5 (as shipped)", "Implicit", 3e-5, None),
+            ("Implicit, Accuracy 3e-5, Safety 0.5 (the default)", "Implicit", 3e-5, 0.5))
 
 
-def deck_text(damping: str, quick: bool = False, accuracy: float | None = None) -> str:
+def deck_text(damping: str, quick: bool = False, accuracy: float | None = None,
+              safety: float | None = None) -> str:
     """The paper deck with ``Damping <damping> [Accuracy <accuracy>]`` on its timed steps
-    (instead of the shipped settings) and absolute shape paths (quick: durations and the lid
-    stroke divided by 10)."""
+    (instead of the shipped settings; ``safety``: ``Safety <safety>`` instead of the deck's)
+    and absolute shape paths (quick: durations and the lid stroke divided by 10)."""
     text = DECK.read_text().replace("../shapes/", str(REPO / "inputs" / "shapes") + "/")
     extra = f" Damping {damping}" + (f" Accuracy {accuracy:g}" if accuracy is not None else "")
-    lines = [re.sub(r"(TimeStep \S+)", rf"\1{extra}",
-                    re.sub(r" Damping \S+| Accuracy \S+", "", line))
+    strip = r" Damping \S+| Accuracy \S+"
+    if safety is not None:
+        extra += f" Safety {safety:g}"
+        strip += r"| Safety \S+"
+    lines = [re.sub(r"(TimeStep \S+)", rf"\1{extra}", re.sub(strip, "", line))
              if line.lstrip().startswith("Step ") else line for line in text.splitlines()]
     text = "\n".join(lines) + "\n"
     if quick:
@@ -69,14 +77,16 @@ def _lid(out: Path) -> tuple[float, float]:
     return top, peak
 
 
-def run(label: str, damping: str, accuracy: float | None, workdir: Path,
-        quick: bool = False) -> dict:
-    """Run the paper deck with the given damping and accuracy; returns its figures."""
+def run(label: str, damping: str, accuracy: float | None, safety: float | None,
+        workdir: Path, quick: bool = False) -> dict:
+    """Run the paper deck with the given damping, accuracy and safety; returns its
+    figures."""
     from nurbsdem.io.deck import parse_deck
     from nurbsdem.solver import Solver
     name = f"{damping.lower()}_{accuracy:g}" if accuracy is not None else damping.lower()
+    name += f"_safety{safety:g}" if safety is not None else ""
     case = workdir / f"paper_{name}.inp"
-    case.write_text(deck_text(damping, quick, accuracy))
+    case.write_text(deck_text(damping, quick, accuracy, safety))
     out = workdir / f"out_{name}"
     return figures(label, Solver(parse_deck(case), output=out, quiet=True).run(), out)
 

@@ -270,6 +270,13 @@ def test_bench_damping_deck_puts_implicit_on_every_timed_step():
     timed = [s for s in steps if s.duration_s > 0]
     assert len(timed) == 4 and all(s.damping == "implicit" for s in timed)
     assert sum(s.duration_s for s in timed) == pytest.approx(0.65)
+    assert all(s.safety == 0.7 for s in timed)          # the shipped deck's
+    try:
+        path.write_text(bench_damping.deck_text("Implicit", True, 3e-5, safety=0.5))
+        timed = [s for s in parse_deck(path).steps if s.duration_s > 0]
+    finally:
+        path.unlink(missing_ok=True)
+    assert all(s.safety == 0.5 and s.accuracy == 3e-5 for s in timed) and len(timed) == 4
 
 
 def test_lid_press_with_implicit_dashpots_matches_the_explicit_reference(tmp_path):
