@@ -88,6 +88,9 @@ def _time_tol(t: float) -> float:
     return 1e-9 * max(1.0, abs(t))
 
 
+_float_repr = float.__repr__
+
+
 def _fmt(x: Any) -> str:
     """A CSV field: integers as integers, floats by repr (shortest exact round trip)."""
     if isinstance(x, float):            # Python and NumPy floats (float.__repr__: no "np.")
@@ -622,6 +625,15 @@ class CsvMonitor:
         if not self.batched:
             self._fh.flush()
 
+    def append_floats(self, values: Sequence[float]) -> None:
+        """:meth:`append` of a row of floats (Python or NumPy; the same text, without the
+        per-field type dispatch: the monitors write one row per deck step)."""
+        if len(values) != len(self.columns):
+            raise ValueError(f"{self.path.name}: expected {len(self.columns)} values, got {len(values)}")
+        self._fh.write(",".join(map(_float_repr, values)) + "\n")
+        if not self.batched:
+            self._fh.flush()
+
     def sync(self) -> None:
         """Flush and fsync (call before writing a checkpoint)."""
         if not self._fh.closed:
@@ -685,8 +697,9 @@ class MonitorWriter:
             if self._reference is None:
                 self._reference = total
             balance_error = total - self._reference
-        self.energy_csv.append([time, kinetic, potential, elastic, dissipated, external_work,
-                                mech, balance_error])
+        self.energy_csv.append_floats([float(time), float(kinetic), float(potential),
+                                       float(elastic), float(dissipated),
+                                       float(external_work), mech, float(balance_error)])
         return float(balance_error)
 
     def contacts(self, time: float, monitored: int, active: int, degenerated: int,
@@ -714,9 +727,9 @@ class MonitorWriter:
         """Append a row to ``wall_<name>.csv``: displacement from the deck position (m) and
         reaction (N): the force that holds the wall on its prescribed path, i.e. minus the
         sum of the contact forces the particles exert on it."""
-        d = np.asarray(displacement, float).reshape(3)
-        r = np.asarray(reaction, float).reshape(3)
-        self.wall_csv[name].append([time, *d, *r])
+        d = np.asarray(displacement, float).reshape(3).tolist()
+        r = np.asarray(reaction, float).reshape(3).tolist()
+        self.wall_csv[name].append_floats([float(time), *d, *r])
 
     def _all(self) -> list[CsvMonitor]:
         return [self.energy_csv, self.contacts_csv, *self.wall_csv.values(),
