@@ -871,8 +871,8 @@ def section_cost(rep: Report, workdir: Path) -> None:
     rest = s.wall_time - sum(t.values())
     rows.append(["other (steps bookkeeping)", fmt(rest, ".1f"), f"{100 * rest / s.wall_time:.1f}"])
     rows.append(["**total wall time**", fmt(s.wall_time, ".1f"), "100"])
-    rep.add(f"`inputs/paper/compaction.inp` as shipped (`Damping Implicit Accuracy 3e-5 Safety 0.7` on "
-            f"its timed steps), run in full by the report: {s.particles} particles "
+    rep.add(f"`inputs/paper/compaction.inp` as shipped (`Damping Implicit Accuracy 3e-5 "
+            f"Safety 0.7` on its timed steps), run in full by the report: {s.particles} particles "
             f"at the end, {s.simulated_time:.2f} s simulated, {s.steps} deck steps "
             f"({s.substeps} internal; {s.accuracy_repeats} deck steps repeated by the accuracy "
             f"control), {s.lcps} LCPs ({s.lcps / s.wall_time:.0f} per second of "
@@ -1298,7 +1298,8 @@ def _headline_md(rep: Report) -> str:
                    f"{p['failed']} failed.")
     dm = h.get("damping")
     if dm:
-        out.append(f"* Paper example as shipped (`Damping Implicit Accuracy 3e-5 Safety 0.7`): "
+        out.append(f"* Paper example as shipped (`Damping Implicit Accuracy 3e-5 Safety "
+                   f"0.7`): "
                    f"{dm['shipped']:.0f} s, energy-balance error {dm['shipped_balance']:.3g} J; "
                    f"with explicit dashpots {dm['explicit']:.0f} s "
                    f"({dm['explicit_balance']:.3g} J), implicit without the accuracy control "

@@ -55,7 +55,7 @@ Entries (square brackets: optional, defaults in the model's docstrings)::
                 # grows by more than eta x the energy scale is repeated with twice the
                 # sub-steps (more sub-steps only where impacts need them; default off).
                 # Safety f: the sub-step is f x the contact network's stability limit
-                # (0 < f < 1, default 0.5)
+                # (0.01 to 0.95, default 0.5)
     Output
       Directory path                                     # default: results
       VTK [Every t] [Resolution n]                       # default 0.01 s, 8
