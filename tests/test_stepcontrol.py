@@ -176,7 +176,7 @@ def fcc_block(dt, substeps=None, watch=True, safety=0.5, implicit=False):
 
 @pytest.mark.parametrize("dt, safety, implicit", [
     (5e-4, 0.5, False), (1e-3, 0.5, False), (2e-3, 0.5, False),
-    # a step's Safety 0.8, as the paper example's deck takes it, with either dashpots
+    # a step's Safety 0.8 (the paper example's decks take 0.7), with either dashpots
     (1e-3, 0.8, False), (1e-3, 0.8, True)])
 def test_a_dense_fcc_block_settles_without_period_two_motion(dt, safety, implicit):
     s, trace = fcc_block(dt, safety=safety, implicit=implicit)
@@ -187,7 +187,7 @@ def test_a_dense_fcc_block_settles_without_period_two_motion(dt, safety, implici
         s.step()
     assert s.c_a.shape[0] > 300                        # still packed: 12 contacts inside
     assert s.dt_internal <= safety * s.dt_network * (1 + 1e-9)
-    # and no more sub-steps than that fraction of the limit needs (the guard never refined)
+    # and the sub-step count that this fraction of the limit needs, no more
     assert s.substeps == needed_substeps(dt, safety * min(s.dt_network, s.dt_apriori))
     assert s.refine == 1                               # the guard never had to step in
     # the pair step rattled by ~1e-6 m; what is left is the start's ringing (implicit
