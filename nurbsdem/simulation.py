@@ -446,8 +446,8 @@ class Simulation:
         sid = self._next_step_id()
         dur, dt = self._timing(sid, duration, time_step)
         self._run(DynamicStep(sid, 0, dur, dt, damping=self._damping(sid, damping),
-                              accuracy=self._accuracy(sid, accuracy),
-                              safety=self._safety(sid, safety)))
+                              accuracy=self._optional_positive("Accuracy", sid, accuracy),
+                              safety=self._optional_positive("Safety", sid, safety)))
 
     def replicate(self, layers: int, height: float) -> None:
         """``Replicate``: the particles become layer 0 of ``layers`` layers spread over
@@ -493,8 +493,8 @@ class Simulation:
         dur, dt = self._timing(sid, duration, time_step)
         self._run(MoveWallStep(sid, 0, wall=name, displacement=disp, duration=dur, time_step=dt,
                                damping=self._damping(sid, damping),
-                               accuracy=self._accuracy(sid, accuracy),
-                               safety=self._safety(sid, safety)))
+                               accuracy=self._optional_positive("Accuracy", sid, accuracy),
+                               safety=self._optional_positive("Safety", sid, safety)))
 
     @staticmethod
     def _damping(sid: int, damping: Any) -> str:
@@ -504,14 +504,9 @@ class Simulation:
         return damping.lower()
 
     @classmethod
-    def _accuracy(cls, sid: int, accuracy: Any) -> float | None:
-        return (None if accuracy is None
-                else cls._number("Accuracy", accuracy, f"Step {sid}", positive=True))
-
-    @classmethod
-    def _safety(cls, sid: int, safety: Any) -> float | None:
-        return (None if safety is None
-                else cls._number("Safety", safety, f"Step {sid}", positive=True))
+    def _optional_positive(cls, key: str, sid: int, value: Any) -> float | None:
+        """A step's optional positive number (``Accuracy``, ``Safety``; None: not given)."""
+        return None if value is None else cls._number(key, value, f"Step {sid}", positive=True)
 
     def _next_step_id(self) -> int:
         return max((s.id for s in self.model.steps), default=0) + 1

@@ -765,7 +765,8 @@ class _Builder:
                           "Safety"}, "a Dynamic step")
             self.require(e, "Duration", "TimeStep")
             step: Step = DynamicStep(e.id, e.line, *self.timing(e), damping=self.damping(e),
-                                     accuracy=self.accuracy(e), safety=self.safety(e))
+                                     accuracy=self.optional_positive(e, "Accuracy"),
+                                     safety=self.optional_positive(e, "Safety"))
         elif kind == "Replicate":
             self.only(e, {"Replicate", "Layers", "Height"}, "a Replicate step")
             self.require(e, "Layers", "Height")
@@ -805,7 +806,8 @@ class _Builder:
         dur, dt = self.timing(e)
         return MoveWallStep(e.id, e.line, wall=name, displacement=e.get("Displacement"),
                             duration=dur, time_step=dt, damping=self.damping(e),
-                            accuracy=self.accuracy(e), safety=self.safety(e))
+                            accuracy=self.optional_positive(e, "Accuracy"),
+                            safety=self.optional_positive(e, "Safety"))
 
     def damping(self, e: Entry) -> str:
         """The step's ``Damping`` scheme (lower case; default explicit)."""
@@ -815,16 +817,12 @@ class _Builder:
                       e.line)
         return value.lower()
 
-    def accuracy(self, e: Entry) -> float | None:
-        """The step's ``Accuracy`` η (:mod:`nurbsdem.dynamics.accuracy`; None: off)."""
-        value = e.get("Accuracy")
-        return None if value is None else self.positive(e, "Accuracy", value)
-
-    def safety(self, e: Entry) -> float | None:
-        """The step's ``Safety`` f: the fraction of the contact network's stability limit the
+    def optional_positive(self, e: Entry, key: str) -> float | None:
+        """A step's optional positive number: ``Accuracy`` η (:mod:`nurbsdem.dynamics.accuracy`;
+        None: off) or ``Safety`` f, the fraction of the contact network's stability limit the
         sub-step takes (:mod:`nurbsdem.dynamics.stepcontrol`; None: the solver's, 0.5)."""
-        value = e.get("Safety")
-        return None if value is None else self.positive(e, "Safety", value)
+        value = e.get(key)
+        return None if value is None else self.positive(e, key, value)
 
     def output(self, entries: list[Entry]) -> None:
         out = Output(directory=self.base / "results")

@@ -619,18 +619,19 @@ class CsvMonitor:
     def append(self, values: Sequence[Any]) -> None:
         """Write one row (len(columns) values; time first) and flush it (in a
         :meth:`MonitorWriter.batch`: at its end, whole rows at once)."""
-        if len(values) != len(self.columns):
-            raise ValueError(f"{self.path.name}: expected {len(self.columns)} values, got {len(values)}")
-        self._fh.write(",".join(_fmt(v) for v in values) + "\n")
-        if not self.batched:
-            self._fh.flush()
+        self._write_row(len(values), ",".join(_fmt(v) for v in values))
 
     def append_floats(self, values: Sequence[float]) -> None:
         """:meth:`append` of a row of floats (Python or NumPy; the same text, without the
         per-field type dispatch: the monitors write one row per deck step)."""
-        if len(values) != len(self.columns):
-            raise ValueError(f"{self.path.name}: expected {len(self.columns)} values, got {len(values)}")
-        self._fh.write(",".join(map(_float_repr, values)) + "\n")
+        self._write_row(len(values), ",".join(map(_float_repr, values)))
+
+    def _write_row(self, n_values: int, text: str) -> None:
+        """The row ``text`` of ``n_values`` fields, checked against the header, written and
+        flushed unless a batch holds it."""
+        if n_values != len(self.columns):
+            raise ValueError(f"{self.path.name}: expected {len(self.columns)} values, got {n_values}")
+        self._fh.write(text + "\n")
         if not self.batched:
             self._fh.flush()
 
