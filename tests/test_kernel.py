@@ -54,6 +54,81 @@ def test_derivatives_against_finite_differences(pq):
         assert np.abs(fd - exact).max() <= 1e-7 * scale
 
 
+def _repeated_knot_patch(rng, p, n):
+    """A rational patch of degree p with an interior knot of multiplicity 2 in u and one of
+    multiplicity p in v (empty spans in the power table, a C0 line in v)."""
+    ku = np.r_[[0.0] * (p + 1), 0.5, 0.5, np.sort(rng.uniform(0.6, 2.0, n - p - 3)), [2.0] * (p + 1)]
+    kv = np.r_[[0.0] * (p + 1), [0.9] * p, np.sort(rng.uniform(1.0, 2.0, n - 2 * p - 1)), [2.0] * (p + 1)]
+    return Patch(p, p, ku, kv, rng.normal(size=(n, n, 3)), rng.uniform(0.3, 3.0, (n, n)))
+
+
+POWER_PATCHES = PATCHES + [(9, 9, 12, 12), (7, 6, 10, 9)]
+
+
+@pytest.mark.parametrize("pq", POWER_PATCHES)
+def test_power_form_equals_a2_3(pq):
+    """The contact kernels' power form (Taylor polynomials about each span's centre) against
+    A2.3's compiled path: S and its derivatives to second order within 1e-13 of the largest
+    value, at random parameters, at every knot, at the ends and beyond them (clamped)."""
+    rng = np.random.default_rng(sum(pq) + 100)
+    patch = random_patch(rng, *pq)
+    patch.validate()
+    knots = np.r_[patch.knots_u, patch.knots_v]
+    u = np.r_[rng.uniform(0, 2, 400), knots, -0.3, 2.4, 0.0, 2.0]
+    v = np.r_[rng.uniform(0, 2, 400), knots[::-1], 2.4, -0.3, 2.0, 0.0]
+    pool = PatchPool.from_patches([patch])
+    for order in (0, 1, 2):
+        ref = pool.evaluate(0, u, v, order)
+        power = pool.evaluate(0, u, v, order, power=True)
+        rows = (1, 3, 6)[order]
+        scale = np.abs(ref[:, :rows]).max()
+        assert np.abs(power[:, :rows] - ref[:, :rows]).max() <= 1e-13 * scale
+
+
+def test_power_form_with_repeated_knots_and_exact_shapes():
+    """Repeated interior knots (empty spans, never evaluated) and the exact sphere and
+    ellipsoid faces: the power form on the points of A2.3 within 1e-13 relative, and on the
+    exact surface (|S| = r, the ellipsoid's equation) to 1e-13."""
+    rng = np.random.default_rng(21)
+    patch = _repeated_knot_patch(rng, 3, 9)
+    patch.validate()
+    u = np.r_[rng.uniform(0, 2, 300), 0.5, 0.9]
+    v = np.r_[rng.uniform(0, 2, 300), 0.9, 0.5]
+    pool = PatchPool.from_patches([patch])
+    ref, power = pool.evaluate(0, u, v, 2), pool.evaluate(0, u, v, 2, power=True)
+    assert np.abs(power - ref).max() <= 1e-13 * np.abs(ref).max()
+    a = np.array([0.03, 0.02, 0.011])
+    for patches, check in ((sphere_patches(0.7), lambda x: np.linalg.norm(x, axis=1) / 0.7),
+                           (ellipsoid_patches(*a), lambda x: np.linalg.norm(x / a, axis=1))):
+        pool = PatchPool.from_patches(patches)
+        for ip, pt in enumerate(patches):
+            u0, u1, v0, v1 = pt.domain
+            uu, vv = rng.uniform(u0, u1, 500), rng.uniform(v0, v1, 500)
+            ref, power = pool.evaluate(ip, uu, vv, 2), pool.evaluate(ip, uu, vv, 2, power=True)
+            assert np.abs(power - ref).max() <= 1e-13 * np.abs(ref).max()
+            assert np.abs(check(power[:, 0]) - 1.0).max() < 1e-13
+
+
+def test_contact_table_evaluates_the_power_form_of_its_shapes():
+    """What the LCP evaluates (support.evaluate on a ContactTable of two shapes, global patch
+    indices) is each shape's own patch, point and derivatives within 1e-13 relative."""
+    from nurbsdem.contact import support
+    from nurbsdem.contact.detect import ContactTable
+    from nurbsdem.geometry.generators import ellipsoid, sphere
+    shapes = [sphere(0.4), ellipsoid(0.03, 0.02, 0.011)]
+    table = ContactTable(shapes)
+    rng = np.random.default_rng(5)
+    ws, out = make_workspace(), np.zeros((6, 3))
+    for k, sh in enumerate(shapes):
+        first = table.info[k, 0]
+        for ip, pt in enumerate(sh.patches):
+            u0, u1, v0, v1 = pt.domain
+            for u, v in zip(rng.uniform(u0, u1, 20), rng.uniform(v0, v1, 20)):
+                support.evaluate(table.tab, first + ip, u, v, 2, ws, out)
+                ref = pt.evaluate(np.array([u]), np.array([v]), 2)[0]
+                assert np.abs(out - ref).max() <= 1e-13 * np.abs(ref).max()
+
+
 def test_basis_partition_of_unity_and_derivative_sum():
     rng = np.random.default_rng(3)
     knots = np.r_[[0.0] * 4, np.sort(rng.uniform(0, 1, 5)), [1.0] * 4]

@@ -23,7 +23,7 @@ import numpy as np
 import numba
 from numba import njit, prange
 
-from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace
+from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace, power_form
 from ..jit import kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
@@ -116,9 +116,10 @@ class ContactTable:
 
     Attributes
     ----------
-    tab: (deg, ncp, koff, coff, knots, cpw, dom, nbr) — the pool arrays
-        (:class:`~nurbsdem.geometry.kernel.PatchPool`) and the connectivity with global
-        patch indices.
+    tab: (deg, ncp, koff, coff, knots, cpw, dom, nbr, pw, poff) — the pool arrays
+        (:class:`~nurbsdem.geometry.kernel.PatchPool`), the connectivity with global
+        patch indices and the patches' power form (:func:`~nurbsdem.geometry.kernel.power_form`,
+        what the LCP evaluates).
     info: int64 (S, 4) per shape (first patch, patch count, first seed, seed count).
     centroid: (S, 3) file-frame centroids (m).  radius: (S,) bounding radii (m, Eq. 3).
     seeds: (x (N, 3), patch (N,), uv (N, 2)) surface samples for cold starts.
@@ -127,11 +128,11 @@ class ContactTable:
     def __init__(self, shapes: Sequence) -> None:
         shapes = list(shapes)
         pools = [s.pool for s in shapes]
-        deg, ncp, koff, coff, dom, nbr = [], [], [], [], [], []
+        deg, ncp, koff, coff, dom, nbr, pw, poff = [], [], [], [], [], [], [], []
         knots, cpw = [], []
         sx, sp, suv = [], [], []
         info = np.zeros((len(shapes), 4), np.int64)
-        kofs = cofs = pofs = sofs = 0
+        kofs = cofs = pofs = sofs = rofs = 0
         for k, (s, pl) in enumerate(zip(shapes, pools)):
             P = pl.deg.shape[0]
             deg.append(pl.deg)
@@ -144,6 +145,10 @@ class ContactTable:
             nb = np.array(s.connectivity.neighbours, dtype=np.int64, copy=True)
             nb[:, :, 0] = np.where(nb[:, :, 0] >= 0, nb[:, :, 0] + pofs, nb[:, :, 0])
             nbr.append(nb)
+            rows, first = power_form(pl)
+            pw.append(rows)
+            poff.append(first + rofs)
+            rofs += rows.shape[0]
             x, p, uv = make_seeds(s)
             sx.append(x)
             sp.append(p + pofs)
@@ -156,7 +161,7 @@ class ContactTable:
         cat = lambda a, dt: np.ascontiguousarray(np.concatenate(a).astype(dt))  # noqa: E731
         self.tab = (cat(deg, np.int64), cat(ncp, np.int64), cat(koff, np.int64),
                     cat(coff, np.int64), cat(knots, float), cat(cpw, float), cat(dom, float),
-                    cat(nbr, np.int64))
+                    cat(nbr, np.int64), cat(pw, float), cat(poff, np.int64))
         self.info = info
         self.centroid = np.ascontiguousarray([np.asarray(s.centroid, float) for s in shapes]).reshape(-1, 3)
         self.radius = np.array([float(s.bounding_radius) for s in shapes])

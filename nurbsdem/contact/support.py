@@ -34,7 +34,8 @@ the next direction (warm start of the next support mapping).
 
 Units: lengths in metres, parameters dimensionless. All functions are numba
 compiled by :func:`nurbsdem.jit.kernel`; the table ``tab`` is the tuple
-``(deg, ncp, koff, coff, knots, cpw, dom, nbr)`` of a packed pool (global patch indices).
+``(deg, ncp, koff, coff, knots, cpw, dom, nbr, pw, poff)`` of a packed pool (global patch
+indices; :class:`nurbsdem.contact.detect.ContactTable`), evaluated in its power form.
 """
 from __future__ import annotations
 
@@ -43,7 +44,7 @@ import math
 import numpy as np
 
 from ..geometry.connectivity import edge_uv_nb, map_to_neighbour_nb
-from ..geometry.kernel import patch_derivs
+from ..geometry.kernel import power_derivs
 from ..jit import kernel
 from .trust_region import sym2_eig, tr_step1, tr_step2
 
@@ -69,8 +70,9 @@ TAYLOR_STEP = 1e-6
 
 @kernel
 def evaluate(tab, ip, u, v, order, ws, out):
-    """Point and derivatives of patch ``ip`` of the table at (u, v) into ``out`` (6, 3)."""
-    patch_derivs(tab[0], tab[1], tab[2], tab[3], tab[4], tab[5], ip, u, v, order, ws, out)
+    """Point and derivatives of patch ``ip`` of the table at (u, v) into ``out`` (6, 3), from
+    the patches' power form (:func:`nurbsdem.geometry.kernel.power_derivs`; ``ws`` unused)."""
+    power_derivs(tab[0], tab[1], tab[2], tab[4], tab[8], tab[9], ip, u, v, order, out)
 
 
 @kernel
