@@ -129,6 +129,19 @@ def test_contact_table_evaluates_the_power_form_of_its_shapes():
                 assert np.abs(out - ref).max() <= 1e-13 * np.abs(ref).max()
 
 
+def test_patches_with_a_pole_keep_a2_3_in_the_contact_table():
+    """A patch with a collapsed edge (the single-patch sphere's poles) is evaluated by A2.3
+    (poff -1): there the Taylor form's round-off turned the LCP's normal by 1e-10 rad
+    (test_contact_spheres' pole cases); the Cobb sphere's patches use the power form."""
+    from nurbsdem.contact.detect import ContactTable
+    from nurbsdem.geometry.generators import sphere
+    from nurbsdem.geometry.shape import Shape
+    poles = Shape(single_patch_sphere_patches(0.01), name="poles", check=False)
+    table = ContactTable([sphere(0.01), poles])
+    poff = table.tab[9]
+    assert (poff[:6] >= 0).all() and (poff[6:] == -1).all()
+
+
 def test_basis_partition_of_unity_and_derivative_sum():
     rng = np.random.default_rng(3)
     knots = np.r_[[0.0] * 4, np.sort(rng.uniform(0, 1, 5)), [1.0] * 4]

@@ -23,6 +23,7 @@ import numpy as np
 import numba
 from numba import njit, prange
 
+from ..geometry.connectivity import POLE
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace, power_form
 from ..jit import kernel
 from . import lcp
@@ -119,7 +120,7 @@ class ContactTable:
     tab: (deg, ncp, koff, coff, knots, cpw, dom, nbr, pw, poff) — the pool arrays
         (:class:`~nurbsdem.geometry.kernel.PatchPool`), the connectivity with global
         patch indices and the patches' power form (:func:`~nurbsdem.geometry.kernel.power_form`,
-        what the LCP evaluates).
+        what the LCP evaluates; ``poff`` -1 for a patch with a pole, evaluated by A2.3).
     info: int64 (S, 4) per shape (first patch, patch count, first seed, seed count).
     centroid: (S, 3) file-frame centroids (m).  radius: (S,) bounding radii (m, Eq. 3).
     seeds: (x (N, 3), patch (N,), uv (N, 2)) surface samples for cold starts.
@@ -147,7 +148,9 @@ class ContactTable:
             nbr.append(nb)
             rows, first = power_form(pl)
             pw.append(rows)
-            poff.append(first + rofs)
+            # patches with a pole keep A2.3 (poff -1): there the Taylor form's round-off
+            # turned the LCP's normal by 1e-10 rad instead of 1e-12 (test_contact_spheres)
+            poff.append(np.where((nb[:, :, 0] == POLE).any(axis=1), -1, first + rofs))
             rofs += rows.shape[0]
             x, p, uv = make_seeds(s)
             sx.append(x)

@@ -35,7 +35,8 @@ the next direction (warm start of the next support mapping).
 Units: lengths in metres, parameters dimensionless. All functions are numba
 compiled by :func:`nurbsdem.jit.kernel`; the table ``tab`` is the tuple
 ``(deg, ncp, koff, coff, knots, cpw, dom, nbr, pw, poff)`` of a packed pool (global patch
-indices; :class:`nurbsdem.contact.detect.ContactTable`), evaluated in its power form.
+indices; :class:`nurbsdem.contact.detect.ContactTable`), evaluated in its power form
+(patches with a pole by A2.3).
 """
 from __future__ import annotations
 
@@ -44,7 +45,7 @@ import math
 import numpy as np
 
 from ..geometry.connectivity import edge_uv_nb, map_to_neighbour_nb
-from ..geometry.kernel import power_derivs
+from ..geometry.kernel import patch_derivs, power_derivs
 from ..jit import kernel
 from .trust_region import sym2_eig, tr_step1, tr_step2
 
@@ -71,8 +72,13 @@ TAYLOR_STEP = 1e-6
 @kernel
 def evaluate(tab, ip, u, v, order, ws, out):
     """Point and derivatives of patch ``ip`` of the table at (u, v) into ``out`` (6, 3), from
-    the patches' power form (:func:`nurbsdem.geometry.kernel.power_derivs`; ``ws`` unused)."""
-    power_derivs(tab[0], tab[1], tab[2], tab[4], tab[8], tab[9], ip, u, v, order, out)
+    the patches' power form (:func:`nurbsdem.geometry.kernel.power_derivs`), or by A2.3
+    (:func:`~nurbsdem.geometry.kernel.patch_derivs`, workspace ``ws``) for a patch with a
+    pole (``poff`` -1)."""
+    if tab[9][ip] < 0:
+        patch_derivs(tab[0], tab[1], tab[2], tab[3], tab[4], tab[5], ip, u, v, order, ws, out)
+    else:
+        power_derivs(tab[0], tab[1], tab[2], tab[4], tab[8], tab[9], ip, u, v, order, out)
 
 
 @kernel
