@@ -2,9 +2,10 @@
 
 Prints, for a bicubic 6x6 patch (the paper's particles) and the rational biquartic sphere
 face, the time per evaluation of (S, S_u, S_v, S_uu, S_uv, S_vv) in the compiled scalar path
-(one core) and in the vectorised path, with the error of each against an independent value:
-the compiled path against the vectorised one, and the sphere's points against the exact
-radius.  Then the cost of the shape check of a deck's shape (``check_shape``: connectivity
+by A2.3 (one core), in the power form the contact kernels evaluate
+(:func:`nurbsdem.geometry.kernel.power_derivs`) and in the vectorised path, with the error of
+each against an independent value: the compiled paths against the vectorised one, and the
+sphere's points against the exact radius.  Then the cost of the shape check of a deck's shape (``check_shape``: connectivity
 of the patches, convexity) on the exact NURBS sphere, with the connectivity it finds.
 
 Run: ``.venv/bin/python benchmarks/bench_kernel.py``
@@ -16,7 +17,8 @@ import time
 import numpy as np
 
 from nurbsdem.geometry.generators import sphere_patches
-from nurbsdem.geometry.kernel import PatchPool, patch_derivs_many
+from nurbsdem.geometry.kernel import (PatchPool, patch_derivs_many, power_derivs_many,
+                                      power_form)
 from nurbsdem.geometry.nurbs import Patch
 
 
@@ -26,13 +28,20 @@ def bicubic_patch() -> Patch:
     return Patch(3, 3, knots, knots, rng.normal(size=(6, 6, 3)))
 
 
-def time_compiled(pool: PatchPool, u, v, repeats: int = 5) -> tuple[float, np.ndarray]:
+def time_compiled(pool: PatchPool, u, v, repeats: int = 5,
+                  power: bool = False) -> tuple[float, np.ndarray]:
     out = np.zeros((u.size, 6, 3))
-    patch_derivs_many(*pool.arrays, 0, u[:10], v[:10], 2, out[:10])  # compile / load cache
+    if power:
+        pw, poff = power_form(pool)
+        args = (pool.deg, pool.ncp, pool.koff, pool.knots, pw, poff)
+        run = power_derivs_many
+    else:
+        args, run = pool.arrays, patch_derivs_many
+    run(*args, 0, u[:10], v[:10], 2, out[:10])  # compile / load cache
     best = np.inf
     for _ in range(repeats):
         t0 = time.perf_counter()
-        patch_derivs_many(*pool.arrays, 0, u, v, 2, out)
+        run(*args, 0, u, v, 2, out)
         best = min(best, time.perf_counter() - t0)
     return best / u.size, out
 
@@ -56,15 +65,19 @@ def main() -> None:
         u, v = rng.uniform(u0, u1, n), rng.uniform(v0, v1, n)
         pool = PatchPool.from_patches([patch])
         tc, comp = time_compiled(pool, u, v)
+        tp, powr = time_compiled(pool, u, v, power=True)
         tv, vec = time_vectorised(patch, u, v)
-        diff = np.abs(comp - vec).max() / np.abs(vec).max()
+        scale = np.abs(vec).max()
+        diff, pdiff = np.abs(comp - vec).max() / scale, np.abs(powr - vec).max() / scale
         extra = ""
         if "sphere" in label:
-            extra = f"  max | |S| - 1 | = {np.abs(np.linalg.norm(comp[:, 0], axis=1) - 1).max():.1e}"
-        rows.append((label, tc * 1e9, tv * 1e9, diff, extra))
-    print(f"{'patch':36s} {'compiled ns/pt':>15s} {'vectorised ns/pt':>17s} {'rel diff':>9s}")
-    for label, tc, tv, diff, extra in rows:
-        print(f"{label:36s} {tc:15.0f} {tv:17.0f} {diff:9.1e}{extra}")
+            extra = "  max | |S| - 1 |: A2.3 {:.1e}, power {:.1e}".format(
+                *(np.abs(np.linalg.norm(x[:, 0], axis=1) - 1).max() for x in (comp, powr)))
+        rows.append((label, tc * 1e9, tp * 1e9, tv * 1e9, diff, pdiff, extra))
+    print(f"{'patch':34s} {'A2.3 ns/pt':>11s} {'power ns/pt':>12s} {'vectorised':>11s} "
+          f"{'A2.3 diff':>10s} {'power diff':>11s}")
+    for label, tc, tp, tv, diff, pdiff, extra in rows:
+        print(f"{label:34s} {tc:11.0f} {tp:12.0f} {tv:11.0f} {diff:10.1e} {pdiff:11.1e}{extra}")
     time_shape_check()
 
 

@@ -383,7 +383,7 @@ def equivalent_radii(table, rows_a_shape: np.ndarray, kind_a, kind_b, patch_a, p
     patch_a/patch_b are **local** patch indices of the shapes ``rows_a_shape`` (K,2) (shape of
     A, shape of B; -1 where not a patch).  Returns r_eff, axis_ratio, curv (K,2), status."""
     K = kind_a.shape[0]
-    deg, ncp, koff, coff, knots, cpw, dom, _ = table.tab
+    deg, ncp, koff, coff, knots, cpw, dom = table.tab[:7]
     first = table.info[:, 0]
     ga = np.where(kind_a == KIND_PATCH, first[np.maximum(rows_a_shape[:, 0], 0)] + patch_a, 0)
     gb = np.where(kind_b == KIND_PATCH, first[np.maximum(rows_a_shape[:, 1], 0)] + patch_b, 0)
@@ -413,7 +413,7 @@ def contact_radii_for(provider, cs, bodies, K: int) -> tuple[np.ndarray, int]:
         return np.ascontiguousarray(own, float), 0
     N = bodies.n
     if hasattr(provider, "body_shape") and hasattr(provider, "table"):
-        deg, ncp, koff, coff, knots, cpw, dom, _ = provider.table.tab
+        deg, ncp, koff, coff, knots, cpw, dom = provider.table.tab[:7]
         r = np.empty(K)
         k = min(K, np.asarray(cs.params).shape[0])
         n_fall = scene_contact_radii(
