@@ -24,7 +24,7 @@ polynomial in homogeneous coordinates, stored as its Taylor coefficients about t
 centre, ``Pw(u, v) = sum_ab C_ab (u - u_c)^a (v - v_c)^b`` (The NURBS Book Sec. 6.6, the
 B-spline to power-basis conversion, here by A2.3's derivatives at the centre). An
 evaluation is then two Horner schemes with derivatives (no basis recursion, no division
-before the rational quotient rule): 1.8 x faster for the paper's bicubic patches, 2.9 x for
+before the rational quotient rule): 1.5 x faster for the paper's bicubic patches, 2.9 x for
 the sphere's rational biquartic ones (``benchmarks/bench_kernel.py``), equal to A2.3's path
 within 1e-14 relative (``tests/test_kernel.py``; centring keeps ``|u - u_c|`` at half a span,
 so even degree 9 stays there). Table layout (R rows):
