@@ -161,12 +161,7 @@ def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
     S, S_u, S_v, S_uu, S_uv, S_vv (metres per unit parameter^k). ``ws`` from
     :func:`make_workspace`. Parameters outside the domain are clamped to it.
     """
-    p = deg[ip, 0]
-    q = deg[ip, 1]
-    nu = ncp[ip, 0]
-    nv = ncp[ip, 1]
-    ku = koff[ip, 0]
-    kv = koff[ip, 1]
+    p, q, nu, nv, ku, kv = _patch_dims(deg, ncp, koff, ip)
     c0 = coff[ip]
     m = MAX_DEGREE + 1
     ndu = ws[0:m]
@@ -175,18 +170,8 @@ def patch_derivs(deg, ncp, koff, coff, knots, cpw, ip, u, v, order, ws, out):
     right = ws[m + 3]
     Nu = ws[m + 4:m + 7]
     Nv = ws[m + 7:m + 10]
-    umin = knots[ku + p]
-    umax = knots[ku + nu]
-    vmin = knots[kv + q]
-    vmax = knots[kv + nv]
-    if u < umin:
-        u = umin
-    elif u > umax:
-        u = umax
-    if v < vmin:
-        v = vmin
-    elif v > vmax:
-        v = vmax
+    u = _clamp(u, knots[ku + p], knots[ku + nu])
+    v = _clamp(v, knots[kv + q], knots[kv + nv])
     su = find_span(knots, ku, nu, p, u)
     sv = find_span(knots, kv, nv, q, v)
     _basis(knots, ku, su, p, u, order, ndu, a, left, right, Nu)
@@ -275,12 +260,7 @@ def power_derivs(deg, ncp, koff, knots, pw, poff, ip, u, v, order, out):
     """:func:`patch_derivs` from the power form of the patch (module docstring): the same
     rows S, S_u, S_v, S_uu, S_uv, S_vv of ``out`` (metres per unit parameter^k) within
     round-off. Parameters outside the domain are clamped to it."""
-    p = deg[ip, 0]
-    q = deg[ip, 1]
-    nu = ncp[ip, 0]
-    nv = ncp[ip, 1]
-    ku = koff[ip, 0]
-    kv = koff[ip, 1]
+    p, q, nu, nv, ku, kv = _patch_dims(deg, ncp, koff, ip)
     u = _clamp(u, knots[ku + p], knots[ku + nu])
     v = _clamp(v, knots[kv + q], knots[kv + nv])
     su = find_span(knots, ku, nu, p, u)
@@ -342,6 +322,12 @@ def power_derivs(deg, ncp, koff, knots, pw, poff, ip, u, v, order, out):
     _rational_derivs(order, x00, y00, z00, w00, x10, y10, z10, w10, x01, y01, z01, w01,
                      2.0 * x20, 2.0 * y20, 2.0 * z20, 2.0 * w20, x11, y11, z11, w11,
                      2.0 * x02, 2.0 * y02, 2.0 * z02, 2.0 * w02, out)
+
+
+@kernel(inline="always")
+def _patch_dims(deg, ncp, koff, ip):
+    """(p, q, n_u, n_v, u-knot offset, v-knot offset) of patch ``ip`` of a pool."""
+    return deg[ip, 0], deg[ip, 1], ncp[ip, 0], ncp[ip, 1], koff[ip, 0], koff[ip, 1]
 
 
 @kernel(inline="always")
