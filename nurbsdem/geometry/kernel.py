@@ -352,10 +352,10 @@ def power_form(pool: "PatchPool") -> tuple[np.ndarray, np.ndarray]:
         V = pool.knots[pool.koff[ip, 1]:pool.koff[ip, 1] + nv + q + 1]
         net = pool.cpw[pool.coff[ip]:pool.coff[ip] + nu * nv].reshape(nu, nv, 4)
         poff[ip] = rows
+        taylor_v_of = [_span_taylor(V, q, sv) for sv in range(q, nv)]
         for su in range(p, nu):
             taylor_u = _span_taylor(U, p, su)
-            for sv in range(q, nv):
-                taylor_v = _span_taylor(V, q, sv)
+            for sv, taylor_v in zip(range(q, nv), taylor_v_of):
                 c = np.zeros((p + 1, q + 1, 4))
                 if taylor_u is not None and taylor_v is not None:
                     c = np.einsum("ai,bj,ijc->abc", taylor_u, taylor_v,
