@@ -26,6 +26,8 @@ from typing import Callable, Hashable, Mapping, Sequence
 
 import numpy as np
 
+from .deflate import encode_repeated
+
 #: uncompressed bytes per zlib block (meshio's and VTK's choice)
 BLOCK = 32768
 #: zlib level: 1 is ~4 x faster than the default 6 for files ~15 % larger
@@ -57,6 +59,28 @@ Encoded = tuple[str, int, list[bytes]]
 
 def _encoded(data: np.ndarray, level: int = LEVEL) -> Encoded:
     return _VTK_TYPE[data.dtype], (data.shape[1] if data.ndim == 2 else 0), encode(data, level)
+
+
+class Repeated:
+    """An array whose rows repeat: row k of ``values`` (n, ...) ``counts[k]`` times (a body's
+    velocity at each of its points).  Written by :func:`nurbsdem.io.deflate.encode_repeated`
+    without spelling the rows out; ``np.asarray`` gives the array."""
+
+    def __init__(self, values: np.ndarray, counts: np.ndarray) -> None:
+        self.values = np.asarray(values)
+        self.counts = np.asarray(counts, np.int64)
+        self.shape = (int(self.counts.sum()),) + self.values.shape[1:]
+        self.ndim = len(self.shape)
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        a = np.repeat(self.values, self.counts, axis=0)
+        return a if dtype is None else a.astype(dtype)
+
+    def encoded(self) -> Encoded:
+        """Its VTK type, components and pieces (floats as Float32, like :func:`_normalised`)."""
+        v = _normalised(self.values)
+        return (_VTK_TYPE[v.dtype], (v.shape[1] if v.ndim == 2 else 0),
+                encode_repeated(v, self.counts, BLOCK))
 
 
 class Reuse:
@@ -135,15 +159,18 @@ def vtu_parts(points: np.ndarray, cells: Sequence[tuple[str, np.ndarray]],
               reuse: Reuse | None = None, key: Hashable = None) -> list[bytes]:
     """The file content of an unstructured grid, in pieces to be written one after the other:
     points (P, 3), cells [(type, (n, k) ints)], point data (P, ...) and cell data (one array
-    per cell block, like meshio).  Floats are written as Float32.  With ``reuse``, the arrays
+    per cell block, like meshio; point data may be :class:`Repeated`).  Floats are written as
+    Float32.  With ``reuse``, the arrays
     it names ("connectivity", "offsets", "types" and data names) are taken from it for
     ``key`` (and not even built while it holds them)."""
     appended = _Appended()
     cell_arrays: dict[str, np.ndarray] = {}
 
-    def tag(name: str, make: Callable[[], np.ndarray]) -> str:
+    def tag(name: str, make: Callable[[], np.ndarray], data=None) -> str:
         if reuse is not None and name in reuse.names:
             return appended.tag(name, reuse.encoded(key, name, make))
+        if isinstance(data, Repeated):
+            return appended.tag(name, data.encoded())
         return appended.tag(name, _encoded(make()))
 
     def cell_array(name: str) -> np.ndarray:
@@ -163,7 +190,7 @@ def vtu_parts(points: np.ndarray, cells: Sequence[tuple[str, np.ndarray]],
     if point_data:
         out.append("<PointData>\n")
         for name, data in point_data.items():
-            out.append(tag(name, lambda data=data: _normalised(data)))
+            out.append(tag(name, lambda data=data: _normalised(data), data))
         out.append("</PointData>\n")
     if cell_data:
         out.append("<CellData>\n")

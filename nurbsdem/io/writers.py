@@ -50,7 +50,7 @@ import numpy as np
 from ..geometry.rotation import place_points_into
 from .atomic import (atomic_write_bytes, atomic_write_text, ensure_space,
                      remove_stale_temporaries, write_hdf5_atomically)
-from .vtu import Reuse, vtu_parts
+from .vtu import Repeated, Reuse, vtu_parts
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..geometry.nurbs import Patch
@@ -419,7 +419,8 @@ class ParaViewWriter:
 
     # -- particles ---------------------------------------------------------------
     def particle_mesh(self, bodies: "Bodies") -> tuple[np.ndarray, np.ndarray, dict, dict]:
-        """World points, quads, point data and cell data of all particles."""
+        """World points, quads, point data and cell data of all particles (the velocities
+        as :class:`~nurbsdem.io.vtu.Repeated`: one row per body, repeated at its points)."""
         n = len(bodies)
         if not n:
             return (np.zeros((0, 3)), np.zeros((0, 4), np.int64),
@@ -435,9 +436,9 @@ class ParaViewWriter:
         for sid, idx in static["groups"]:       # the bodies of one shape at once
             place_points_into(self._shape_mesh[sid][0], position, R, idx, offsets[idx], points)
         point_data = {"particle_id": static["particle_id"], "shape_id": static["shape_id"],
-                      "velocity": np.repeat(np.asarray(bodies.velocity, float), counts, axis=0),
-                      "angular_velocity": np.repeat(np.asarray(bodies.angular_velocity, float),
-                                                    counts, axis=0)}
+                      "velocity": Repeated(np.asarray(bodies.velocity, float), counts),
+                      "angular_velocity": Repeated(np.asarray(bodies.angular_velocity, float),
+                                                   counts)}
         return points, static["quads"], point_data, {"patch_id": [static["patch_id"]]}
 
     def _particle_cells(self, ids: np.ndarray, shape_id: np.ndarray) -> dict:
