@@ -389,8 +389,8 @@ class Solver:
             writers.monitors.contacts(t, smp.monitored, smp.active, smp.degenerated, smp.failed)
             if smp.hertz is not None:          # Hertz–Mindlin interfaces (not linear laws)
                 writers.monitors.hertz(t, *smp.hertz)
-        for k, w in enumerate(self.model.walls):
-            writers.monitors.wall(w.name, t, smp.wall_displacement[k], smp.wall_reaction[k])
+        if self.model.walls:
+            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction)
 
     def _sample(self, writers: OutputWriters, force: bool = False,
                 samples: tuple[MonitorSample, ...] = ()) -> None:

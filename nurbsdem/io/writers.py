@@ -733,6 +733,14 @@ class MonitorWriter:
         r = np.asarray(reaction, float).reshape(3).tolist()
         self.wall_csv[name].append_floats([float(time), *d, *r])
 
+    def walls(self, time: float, displacement: np.ndarray, reaction: np.ndarray) -> None:
+        """:meth:`wall` rows of every wall at once: displacement, reaction (W, 3) in the
+        order of the wall names given at construction."""
+        t = float(time)
+        for csv, d, r in zip(self.wall_csv.values(), np.asarray(displacement, float).tolist(),
+                             np.asarray(reaction, float).tolist()):
+            csv.append_floats([t, *d, *r])
+
     def _all(self) -> list[CsvMonitor]:
         return [self.energy_csv, self.contacts_csv, *self.wall_csv.values(),
                 *([self.hertz_csv] if self.hertz_csv is not None else [])]
