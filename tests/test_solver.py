@@ -238,6 +238,37 @@ def test_background_write_errors_reach_the_caller():
     assert done == [1, 2]
 
 
+def test_held_writes_run_as_one_job_in_order():
+    """Writes submitted inside ``held()`` reach the worker as one job when the block ends
+    (none before), run in their order; an error among them reaches the caller."""
+    import threading
+
+    from nurbsdem.io.writers import BackgroundWriter
+    done = []
+    gate = threading.Event()
+    w = BackgroundWriter()
+    with w.held():
+        w.submit(done.append, 1)
+        with w.held():                 # nested: the outer block holds them all
+            w.submit(done.append, 2)
+        w.submit(done.append, 3)
+        assert done == [] and w._pending == []
+    assert len(w._pending) == 1
+    w.wait()
+    assert done == [1, 2, 3]
+
+    def fail():
+        gate.wait()
+        raise OSError(28, "No space left on device")
+    with w.held():
+        w.submit(fail)
+        w.submit(done.append, 4)
+    gate.set()
+    with pytest.raises(OSError, match="No space"):
+        w.wait()
+    w.close()
+
+
 def test_steps_to_the_next_output_equal_a_scan():
     """The compiled loop stops exactly where a step-by-step run would write output: the
     closed-form search of the next due step equals a scan with the same test."""

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import errno
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 import math
 import os
 import shutil
@@ -204,9 +204,29 @@ class BackgroundWriter:
         self.depth = int(depth)
         self._pool: ThreadPoolExecutor | None = None
         self._pending: list[Future] = []
+        self._held: list | None = None
+
+    @contextmanager
+    def held(self):
+        """The writes submitted inside are queued as one, at the end: the worker starts once
+        the caller has prepared them all, instead of taking the interpreter from it meanwhile
+        (one sample's three series)."""
+        if self._held is not None:
+            yield
+            return
+        self._held = []
+        try:
+            yield
+        finally:
+            jobs, self._held = self._held, None
+            if jobs:
+                self.submit(_run_in_turn, jobs)
 
     def submit(self, job, *args) -> None:
         """Queue ``job(*args)`` (its arguments must not be changed afterwards)."""
+        if self._held is not None:
+            self._held.append((job, args))
+            return
         self._collect(block=len(self._pending) >= self.depth)
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="nurbsdem-output")
@@ -240,6 +260,12 @@ class BackgroundWriter:
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
+
+
+def _run_in_turn(jobs: list) -> None:
+    """Run the (job, args) one after the other (a :meth:`BackgroundWriter.held` batch)."""
+    for job, args in jobs:
+        job(*args)
 
 
 class PvdSeries:
@@ -516,10 +542,11 @@ class ParaViewWriter:
 
     def write(self, time: float, bodies: "Bodies", wall_displacement: np.ndarray | None = None,
               contacts: Mapping[str, np.ndarray] | None = None) -> None:
-        """One sample of all three series."""
-        self.write_particles(time, bodies)
-        self.write_walls(time, wall_displacement)
-        self.write_contacts(time, contacts if self.background is None else _copied(contacts))
+        """One sample of all three series (in the background: one job of the worker)."""
+        with self.background.held() if self.background is not None else nullcontext():
+            self.write_particles(time, bodies)
+            self.write_walls(time, wall_displacement)
+            self.write_contacts(time, contacts if self.background is None else _copied(contacts))
 
     def write_index(self) -> None:
         """Rewrite each series' .pvd that lacks written samples (on the thread that writes
