@@ -76,3 +76,23 @@ def test_robustness_counts_consistent(report):
     n, conv, fail = int(cells[1]), int(cells[2]), int(cells[3])
     assert 1000 <= n <= 10_000 and conv + fail == n
     assert int(cells[7]) > 0.5 * n          # most poses validated against a reference
+
+
+def test_bench_paper_decks_differ_only_in_the_vtk_interval(tmp_path):
+    """benchmarks/bench_paper.py: the few-samples variant of each paper deck is the deck with
+    ``VTK Every 0.5`` and nothing else changed (parsed models compared)."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import bench_paper
+
+    from nurbsdem.io.deck import parse_deck
+    from nurbsdem.model import model_differences
+    for quick in (False, True):
+        models = []
+        for few in (False, True):
+            path = tmp_path / f"{quick}_{few}.inp"
+            path.write_text(bench_paper.deck_text(few, quick))
+            models.append(parse_deck(path, place=False))
+        assert models[1].output.vtk_every == 0.5 != models[0].output.vtk_every
+        assert model_differences(*models) == []          # all but the Output block
+        models[1].output.vtk_every = models[0].output.vtk_every
+        assert models[1].output == models[0].output
