@@ -508,6 +508,9 @@ class Solver:
                  step.id, step.kind, n_total, dt, sysm.substeps, sysm.dt_internal)
         if sysm.domain is not None:
             log.info("step %d: %s", step.id, sysm.domain.describe())
+        t_load = time.perf_counter()
+        sysm.load_compiled()        # numba's cached kernels: set-up, not the time loop
+        self.timers["setup"] += time.perf_counter() - t_load
         self.progress.start(f"step {step.id} {step.kind}", duration)
         ck_every = self.model.output.checkpoint_every
         while self.step_progress < n_total:

@@ -509,6 +509,22 @@ class DeckSteps:
                        s.energy_tolerance, s._scale_floor, s.check_energy, s.watch_period2,
                        s.implicit_damping, s.accuracy or 0.0, s.max_substeps)
 
+    def load(self) -> None:
+        """Load the compiled loop (numba's on-disk cache: about a second for the whole loop,
+        once per process) without stepping: :func:`run_deck_steps` for 0 deck steps with the
+        argument types of :meth:`run`, which changes nothing.  The solver calls it with its
+        set-up, so that the time loop's figures hold the loop alone."""
+        s, b = self.system, self.system.bodies
+        walls_d, walls_u = self._wall_tables(0, 1)
+        counters = np.zeros(N_COUNTERS, np.int64)
+        counters[ACC_REFINE] = 1            # the loop divides the deck step by the count
+        run_deck_steps(0, max(int(s.substeps), 1), self.sc, self.bc, self._control(), self._pair_list(),
+                       self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d,
+                       walls_u, s.ledger.to_array(), s.wall_work, s.alt_prev_v, s.alt_prev_L,
+                       s.alt_count, counters, np.array([s._peak]),
+                       np.array([s.acc_last_growth]), np.zeros(0, np.bool_),
+                       np.zeros((0, row_width(s.walls.n))))
+
     def run(self, n_deck: int, sample_at: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         """Up to n_deck deck steps; returns (status, deck steps done, counters, the monitor
         rows (n_deck, row_width(W)) of the deck steps ``sample_at`` (n_deck,) bool).  On GUARD

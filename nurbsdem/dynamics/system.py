@@ -796,6 +796,23 @@ class DemSystem:
         self.acc_last_growth = math.inf
         return None
 
+    def _compiled_stepper(self) -> "DeckSteps | None":
+        """The compiled deck steps of this system (made once), or None where they do not
+        apply (:meth:`DeckSteps.for_system`, several ranks, ``compiled_steps`` off)."""
+        if not self.compiled_steps or self.domain is not None:
+            return None
+        if self._deck_steps is None:
+            self._deck_steps = DeckSteps.for_system(self) or False
+        return self._deck_steps or None
+
+    def load_compiled(self) -> None:
+        """Load the compiled deck steps now (numba's cache), so that the first call of
+        :meth:`steps` does not (the solver counts this as set-up)."""
+        self.initialize()
+        fast = self._compiled_stepper()
+        if fast is not None:
+            fast.load()
+
     def steps(self, n_max: int, sample_at: np.ndarray | None = None) -> int:
         """Advance up to ``n_max`` deck steps (at least one) and return how many were done.
 
@@ -811,10 +828,7 @@ class DemSystem:
         (which refines it, answers the failed LCP, or raises).  Other scenes: one
         :meth:`step`."""
         self.initialize()
-        if (self.compiled_steps and self.domain is None and n_max >= 1
-                and self._deck_steps is None):
-            self._deck_steps = DeckSteps.for_system(self) or False
-        fast = self._deck_steps if self.compiled_steps and self.domain is None else None
+        fast = self._compiled_stepper() if n_max >= 1 else None
         sample_at = (np.zeros(max(int(n_max), 1), bool) if sample_at is None
                      else np.asarray(sample_at, bool))
         self.last_steps = StepTally()
