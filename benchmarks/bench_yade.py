@@ -9,7 +9,8 @@ time step 1e-4 s.  Both codes get the same positions and the same linear spring�
 into the contact's 1e5, 100, 1e4 — printed from a Yade interaction to be sure).
 
 Printed: the wall time of the time loop of each code on one thread (nurbsdem:
-``NUMBA_NUM_THREADS=1``; Yade: ``-j1``), its ratio, and the mean height of the spheres at the end
+``NUMBA_NUM_THREADS=1``, the run less its set-up — the model, the contact tables, the compiled
+kernels loaded from numba's cache — and its output; Yade: ``-j1``, its ``O.run``), its ratio, and the mean height of the spheres at the end
 (the outcome both must agree on).  When Yade is not installed (``apt-get install yade``) the
 benchmark says so and measures nurbsdem alone.
 
