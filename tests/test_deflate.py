@@ -1,9 +1,12 @@
 """nurbsdem.io.deflate: the zlib streams written for repeated rows without a search inflate
 (by zlib itself, an independent inflater) to exactly ``np.repeat(values, counts, axis=0)``,
-in VTK's block layout; a .vtu holding them reads back equal in meshio (ParaView's own reader:
-test_paraview.py, whose particles carry them)."""
+in VTK's block layout; a .vtu holding them reads back equal in meshio and in ParaView's own
+VTK reader (``pvpython``, where installed)."""
 from __future__ import annotations
 
+import shutil
+import subprocess
+import textwrap
 import zlib
 
 import meshio
@@ -91,3 +94,36 @@ def test_a_vtu_with_repeated_point_data_reads_back(tmp_path):
     np.testing.assert_array_equal(mesh.point_data["velocity"],
                                   np.repeat(v, counts, axis=0).astype(np.float32))
     np.testing.assert_array_equal(np.asarray(Repeated(v, counts)), np.repeat(v, counts, axis=0))
+
+
+PV_READ = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+    r = vtkXMLUnstructuredGridReader()
+    r.SetFileName(sys.argv[1])
+    r.Update()
+    np.save(sys.argv[2], vtk_to_numpy(r.GetOutput().GetPointData().GetArray("velocity")))
+""")
+
+
+@pytest.mark.skipif(shutil.which("pvpython") is None,
+                    reason="ParaView's pvpython is not installed (Debian: python3-paraview)")
+def test_paraview_reads_the_repeated_rows(tmp_path):
+    """ParaView's own reader (vtkXMLUnstructuredGridReader in pvpython) inflates the streams to
+    the spelled-out array, bit for bit."""
+    rng = np.random.default_rng(5)
+    counts = rng.integers(1, 900, 40)
+    n = int(counts.sum())
+    v = rng.normal(size=(40, 3))
+    path = tmp_path / "r.vtu"
+    path.write_bytes(vtu_bytes(rng.normal(size=(n, 3)),
+                               [("vertex", np.arange(n, dtype=np.int64).reshape(-1, 1))],
+                               {"velocity": Repeated(v, counts)}))
+    script = tmp_path / "read.py"
+    script.write_text(PV_READ)
+    subprocess.run(["pvpython", str(script), str(path), str(tmp_path / "got.npy")], check=True,
+                   capture_output=True, timeout=300)
+    np.testing.assert_array_equal(np.load(tmp_path / "got.npy"),
+                                  np.repeat(v, counts, axis=0).astype(np.float32))
