@@ -160,9 +160,8 @@ def vtu_parts(points: np.ndarray, cells: Sequence[tuple[str, np.ndarray]],
     """The file content of an unstructured grid, in pieces to be written one after the other:
     points (P, 3), cells [(type, (n, k) ints)], point data (P, ...) and cell data (one array
     per cell block, like meshio; point data may be :class:`Repeated`).  Floats are written as
-    Float32.  With ``reuse``, the arrays
-    it names ("connectivity", "offsets", "types" and data names) are taken from it for
-    ``key`` (and not even built while it holds them)."""
+    Float32.  With ``reuse``, the arrays it names ("connectivity", "offsets", "types" and data
+    names) are taken from it for ``key`` (and not even built while it holds them)."""
     appended = _Appended()
     cell_arrays: dict[str, np.ndarray] = {}
 
