@@ -898,23 +898,23 @@ def section_cost(rep: Report, workdir: Path) -> None:
 
 
 def _paper_with_few_frames(rep: Report, workdir: Path, shipped):
-    """The shipped paper deck again with ``VTK Every 0.5`` (a few ParaView samples instead of
-    the deck's one every 0.01 s): what writing the samples costs the run beside the run
-    ``shipped``.  Returns the run's summary (with ``frames``: its particle samples)."""
+    """The shipped paper deck again with ``VTK Every 0.5`` (``bench_paper.deck_text``: a few
+    ParaView samples instead of the deck's one every 0.01 s): what writing the samples costs
+    the run beside the run ``shipped``.  Returns the run's summary (with ``frames``: its particle samples)."""
+    import bench_paper
+
     from nurbsdem.io.deck import parse_deck
     from nurbsdem.solver import Solver
-    text = (REPO / "inputs/paper/compaction.inp").read_text().replace(
-        "../shapes/", str(REPO / "inputs" / "shapes") + "/")
-    assert "VTK Every 0.01 Resolution 8" in text
     deck = workdir / "paper_few_frames.inp"
-    deck.write_text(text.replace("VTK Every 0.01 Resolution 8", "VTK Every 0.5 Resolution 8"))
+    deck.write_text(bench_paper.deck_text(few_frames=True, quick=False))
     s = Solver(parse_deck(deck), output=workdir / "paper_few_frames", quiet=True).run()
     t, t0 = s.timers, shipped.timers
     frames = [sorted((workdir / d / "vtk").glob("particles_*.vtu"))
               for d in ("paper_few_frames", "paper")]
     mb = sum(f.stat().st_size for f in frames[1]) / max(len(frames[1]), 1) / 1e6
     s.frames, s.frames_shipped = len(frames[0]), len(frames[1])
-    rep.add(f"The same deck with `VTK Every 0.5` ({len(frames[0])} ParaView samples of the "
+    rep.add(f"The same deck with `VTK Every {bench_paper.FEW_EVERY}` ({len(frames[0])} "
+            f"ParaView samples of the "
             f"particles instead of {len(frames[1])}, {mb:.2f} MB each; monitors as shipped), "
             f"run next: **{s.wall_time:.1f} s** wall "
             f"time against {shipped.wall_time:.1f} s, LCP {t['LCP']:.1f} s against "

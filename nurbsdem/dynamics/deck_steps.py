@@ -511,25 +511,33 @@ class DeckSteps:
 
     def load(self) -> None:
         """Load the compiled loop (numba's on-disk cache: 0.34 s for the 112-sphere scene,
-        once per process) without stepping: :func:`run_deck_steps` for 0 deck steps with the
-        argument types of :meth:`run`, which changes nothing.  The solver calls it with its
-        set-up, so that the time loop's figures hold the loop alone."""
-        s, b = self.system, self.system.bodies
+        once per process) without stepping: :meth:`_loop` for 0 deck steps, which changes
+        nothing.  The solver calls it with its set-up, so that the time loop's figures hold
+        the loop alone."""
+        s = self.system
         walls_d, walls_u = self._wall_tables(0, 1)
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[ACC_REFINE] = 1            # the loop divides the deck step by the count
-        run_deck_steps(0, max(int(s.substeps), 1), self.sc, self.bc, self._control(),
-                       self._pair_list(), self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d,
-                       s.wall_u, walls_d, walls_u, s.ledger.to_array(), s.wall_work,
-                       s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, np.array([s._peak]),
-                       np.array([s.acc_last_growth]), np.zeros(0, np.bool_),
-                       np.zeros((0, row_width(s.walls.n))))
+        self._loop(0, max(int(s.substeps), 1), walls_d, walls_u, s.ledger.to_array(), counters,
+                   np.array([s._peak]), np.array([s.acc_last_growth]), np.zeros(0, np.bool_),
+                   np.zeros((0, row_width(s.walls.n))))
+
+    def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, ledger, counters, peak,
+              acc_growth, sample_at, rows):
+        """:func:`run_deck_steps` on the system's state (the one call of the loop, so that
+        :meth:`load` and :meth:`run` pass the same argument types)."""
+        s, b = self.system, self.system.bodies
+        return run_deck_steps(
+            n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
+            self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
+            s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
+            sample_at, rows)
 
     def run(self, n_deck: int, sample_at: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         """Up to n_deck deck steps; returns (status, deck steps done, counters, the monitor
         rows (n_deck, row_width(W)) of the deck steps ``sample_at`` (n_deck,) bool).  On GUARD
         the system and scene are left in an undefined state: the caller restores them."""
-        s, b = self.system, self.system.bodies
+        s = self.system
         walls_d, walls_u = self._wall_tables(n_deck, s.substeps * s.acc_refine)
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[STEP_COUNT], counters[REFINE], counters[CALM] = s.step_count, s.refine, s.calm_steps
@@ -539,10 +547,9 @@ class DeckSteps:
         ledger = s.ledger.to_array()
         sample_at = np.ascontiguousarray(sample_at[:n_deck], np.bool_)
         rows = np.zeros((n_deck, row_width(s.walls.n)))
-        status, done, pl, ev, wall_d, wall_u = run_deck_steps(
-            n_deck, s.substeps, self.sc, self.bc, self._control(), self._pair_list(), self._evaluation(),
-            b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger, s.wall_work,
-            s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth, sample_at, rows)
+        status, done, pl, ev, wall_d, wall_u = self._loop(
+            n_deck, s.substeps, walls_d, walls_u, ledger, counters, peak, acc_growth, sample_at,
+            rows)
         if status == GUARD:
             return status, done, counters, rows
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
