@@ -140,3 +140,23 @@ def test_isotropic_body_turns_exactly_about_its_angular_momentum():
         for i in range(4):
             turn = Rotation.from_rotvec(n * h * L[i] * 250.0).as_matrix()
             assert np.abs(quat_to_matrix(q[i]) - turn @ quat_to_matrix(q0[i])).max() < 1e-13
+
+
+def test_piecewise_linear_table_has_the_bits_of_the_function():
+    """Walls.kinematics_at tabulates a piecewise-linear wall (the deck's MoveWall) at many
+    times at once: the same bits as the motion called at each time, before, on and between
+    the knots and after the last."""
+    from nurbsdem.dynamics.rigid import PrescribedMotion, Walls
+    motion = PrescribedMotion.piecewise_linear([0.3, 1.3, 1.7], [[0, 0, 0], [0.01, -0.08, 0.2],
+                                                                 [0.0, 0.0, 1e-3]])
+    times = np.concatenate([[0.0, 0.3, 1.3, 1.7, 2.0], 0.3 + np.arange(1, 1500) * 1e-3 / 3,
+                            np.random.default_rng(0).uniform(0.2, 1.8, 300)])
+    walls = Walls()
+    walls.add(PrescribedMotion.fixed([0, 0, 0.5]))
+    walls.add(motion)
+    d, u = walls.kinematics_at(times)
+    one_by_one = [motion(t) for t in times]
+    np.testing.assert_array_equal(d[:, 1], [e[0] for e in one_by_one])      # bit for bit
+    np.testing.assert_array_equal(u[:, 1], [e[1] for e in one_by_one])
+    np.testing.assert_array_equal(d[:, 0], np.tile([0, 0, 0.5], (len(times), 1)))
+    assert not u[:, 0].any()

@@ -31,10 +31,14 @@ The loop returns to Python
 * after ``n_deck`` deck steps (the caller stops where VTK or results output or a checkpoint
   falls due; the monitor samples in between are rows the loop records,
   :mod:`nurbsdem.dynamics.monitor`),
-* with :data:`CONTROL` after a deck step whose Gershgorin gate calls for the exact (Lanczos)
-  estimate of the network, or at a periodic re-estimate (every ``NETWORK_RECHECK_STEPS`` deck
-  steps, when the sub-step count could fall): the caller then runs
-  :meth:`DemSystem._control_step` exactly as after a Python deck step;
+* with :data:`CONTROL` after a deck step at which the time-step control changes the sub-step
+  count (or finds more than the most allowed, or reaches the count that warns): the caller
+  then runs :meth:`DemSystem._control_step` exactly as after a Python deck step, which takes
+  the same figures and logs, warns or raises.  Where the Gershgorin gate calls for the exact
+  (Lanczos) estimate of the network, or at a periodic re-estimate (every
+  ``NETWORK_RECHECK_STEPS`` deck steps, when the count could fall), and the count stands, the
+  loop takes the estimate itself (:func:`_step_control`; ~500 returns of the paper example's
+  ~520 did nothing else);
 * with :data:`REFINE` when the accuracy control (``Accuracy`` on the step,
   :mod:`nurbsdem.dynamics.accuracy`) rejects deck step ``done + 1``: the loop has rolled it
   back (a snapshot taken at the start of each deck step) and doubled its factor, and the
@@ -72,7 +76,8 @@ from .integrator import drift, kick_from
 from .monitor import record_row, row_width
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
-                          network_count_stands, periodic_recheck)
+                          critical_step_from_rates, needed_substeps, network_count_stands,
+                          network_gershgorin, network_rates_scaled, periodic_recheck)
 
 #: the loop did all its deck steps / stopped for the time-step control / a guard fired /
 #: the accuracy control rolled deck step ``done`` back to repeat it with twice the internal
@@ -95,10 +100,15 @@ BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
                         "radius fallback hist_keys hist_springs force torque slip near_a near_b "
                         "near_point near_normal near_gap reach monitored degenerated")
-#: step-control and guard settings (floats and flags)
-Control = namedtuple("Control", "dt refine_decay safety dt_apriori dt_bound forced recheck fall "
+#: step-control and guard settings (floats and flags); ``heavy``: the sub-step count from which
+#: the caller warns (once: afterwards larger than any count)
+Control = namedtuple("Control", "dt refine_decay safety dt_apriori forced recheck fall "
                      "bound_slack energy_tolerance scale_floor check_energy watch_period2 "
-                     "implicit accuracy max_substeps")
+                     "implicit accuracy max_substeps heavy")
+#: the time-step control's figures (float64 array, s) of the last exact estimate, in this
+#: order: the network's Gershgorin bound, its critical step (Lanczos), the critical step
+#: (the smaller of that and the a-priori one)
+DT_BOUND, DT_NETWORK, DT_CRITICAL = range(3)
 
 #: counters (int64 array) of the loop's state, in this order
 STEP_COUNT, REFINE, CALM, BUILDS, EVALS, MONITORED, ACTIVE_SUM, ACTIVE_MAX = range(8)
@@ -112,7 +122,9 @@ DEGENERATED_SUM = 14
 #: ... and the accuracy control's factor, calm deck steps in a row and repeated deck steps
 #: (:mod:`nurbsdem.dynamics.accuracy`)
 ACC_REFINE, ACC_CALM, ACC_REPEATS = 15, 16, 17
-N_COUNTERS = 18
+#: ... and the exact (Lanczos) estimates the loop took itself
+NETWORK_ESTIMATES = 18
+N_COUNTERS = 19
 
 
 # --------------------------------------------------------------------------- contact search
@@ -273,23 +285,46 @@ def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> tuple[bool, 
 
 
 @njit(cache=True)
-def _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters) -> bool:
-    """The first part of DemSystem._control_step: True when the present sub-step count stands
-    without the exact estimate (Gershgorin bound of the network no stiffer than at the last
-    exact estimate, or allowing the present count anyway)."""
+def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
+                  estimate) -> bool:
+    """DemSystem._control_step after a deck step: True when the present sub-step count stands
+    — by the Gershgorin gate (the network no stiffer than at the last exact estimate, or
+    allowing the count anyway), or by the exact estimate, taken here with the same kernels in
+    the same order (its figures written into ``estimate``: DT_BOUND, DT_NETWORK, DT_CRITICAL,
+    s).  False when the count is to change, exceeds ``cc.max_substeps`` or reaches
+    ``cc.heavy``: the caller runs _control_step, which takes the same estimate and logs,
+    warns or raises."""
     if cc.forced:
         return True
-    if periodic_recheck(counters[STEP_COUNT], cc.recheck, counters[REFINE], cc.fall, substeps):
-        return False
+    recheck = periodic_recheck(counters[STEP_COUNT], cc.recheck, counters[REFINE], cc.fall,
+                               substeps)
     speed = body_speeds(v, omega, bc.ell, wall_u)
     a, b, p, n, coeffs = contact_network(ev.a, ev.b, ev.point, ev.normal, ev.coeffs, ev.near_a,
                                          ev.near_b, ev.near_point, ev.near_normal, ev.near_gap,
                                          speed, cc.dt, bc.g_norm, bc.table, bc.material)
     if cc.implicit:
         coeffs[:, 1] = 0.0      # implicit normal dashpots do not limit the step
-    return network_count_stands(a, b, p, n, coeffs, x, quats_to_matrices(q), bc.inv_mass,
-                                bc.inv_I, cc.dt, cc.safety, cc.dt_apriori, cc.dt_bound,
-                                cc.bound_slack, counters[REFINE], substeps)
+    Q = quats_to_matrices(q)
+    if not recheck and network_count_stands(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I,
+                                            cc.dt, cc.safety, cc.dt_apriori,
+                                            estimate[DT_BOUND], cc.bound_slack,
+                                            counters[REFINE], substeps):
+        return True
+    dt_bound, dt_network = math.inf, math.inf
+    if a.shape[0]:
+        wk, wc = network_gershgorin(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I)
+        dt_bound = critical_step_from_rates(wk, wc)
+        omega2, gamma, _ = network_rates_scaled(a, b, p, n, coeffs, x, Q, bc.sq_m, bc.sq_I)
+        dt_network = critical_step_from_rates(omega2, gamma)
+    dt_critical = min(cc.dt_apriori, dt_network)
+    need = needed_substeps(cc.dt, cc.safety * dt_critical) * counters[REFINE]
+    if (need > cc.max_substeps or need > substeps or need < cc.fall * substeps
+            or substeps >= cc.heavy):
+        return False
+    estimate[DT_BOUND], estimate[DT_NETWORK], estimate[DT_CRITICAL] = (dt_bound, dt_network,
+                                                                       dt_critical)
+    counters[NETWORK_ESTIMATES] += 1
+    return True
 
 
 # --------------------------------------------------------------------------- accuracy control
@@ -338,7 +373,7 @@ def _balance(bc, ev, x, v, q, L, ledger) -> float:
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                   counters, peak, acc_growth, sample_at, rows):
+                   counters, peak, acc_growth, estimate, sample_at, rows):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
 
@@ -347,8 +382,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
 
     walls_d, walls_u (n_deck·n_run, W, 3): the walls' displacements (m) and velocities
     (m/s) at the end of each internal step.  Body state (x, v, q, L), ledger (5,) J, wall_work
-    (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT …), peak (1,) J and
-    acc_growth (1,) J (DemSystem.acc_last_growth) are updated in place.  With the accuracy
+    (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT …), peak (1,) J,
+    acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
+    (DT_BOUND …, s) are updated in place.  With the accuracy
     control (``cc.accuracy`` > 0,
     :mod:`nurbsdem.dynamics.accuracy`) a deck step whose balance error grows beyond its
     budget is rolled back (REFINE, the state of its start) and one after which the factor
@@ -424,7 +460,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         if sample_at[j]:
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
                        ev.monitored, active, ev.degenerated, wall_d, ev.force)
-        if not _gate_passes(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters):
+        if not _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters, estimate):
             return CONTROL, j + 1, pl, ev, wall_d, wall_u
         if counters[ACC_REFINE] != acc:
             return RECOUNT, j + 1, pl, ev, wall_d, wall_u
@@ -468,8 +504,9 @@ class DeckSteps:
         """(n_deck·n_sub, W, 3) wall displacements and velocities at the ends of the internal
         steps, at the times the Python path uses: t_start + Δt·k/n."""
         s = self.system
-        times = [s.t0 + (s.step_count + j) * s.dt + s.dt * k / n_sub
-                 for j in range(n_deck) for k in range(1, n_sub + 1)]
+        j = np.repeat(np.arange(n_deck), n_sub)             # the same operations, on arrays
+        k = np.tile(np.arange(1, n_sub + 1), n_deck)
+        times = s.t0 + (s.step_count + j) * s.dt + s.dt * k / n_sub
         return s.walls.kinematics_at(times)
 
     def _pair_list(self) -> PairList:
@@ -500,14 +537,20 @@ class DeckSteps:
                           int(cs.degenerated_count))
 
     def _control(self) -> Control:
-        from .system import (FALL_HYSTERESIS, NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS,
-                             REFINE_DECAY_STEPS)
+        from .system import (FALL_HYSTERESIS, HEAVY_SUBSTEPS, NETWORK_BOUND_SLACK,
+                             NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS)
         s = self.system
-        return Control(s.dt, REFINE_DECAY_STEPS, s.safety, s.dt_apriori, s.dt_bound,
+        heavy = np.iinfo(np.int64).max if s._warned_heavy else HEAVY_SUBSTEPS
+        return Control(s.dt, REFINE_DECAY_STEPS, s.safety, s.dt_apriori,
                        s.forced_substeps is not None, NETWORK_RECHECK_STEPS, FALL_HYSTERESIS,
                        NETWORK_BOUND_SLACK,
                        s.energy_tolerance, s._scale_floor, s.check_energy, s.watch_period2,
-                       s.implicit_damping, s.accuracy or 0.0, s.max_substeps)
+                       s.implicit_damping, s.accuracy or 0.0, s.max_substeps, heavy)
+
+    def _estimate(self) -> np.ndarray:
+        """The time-step control's figures (DT_BOUND, DT_NETWORK, DT_CRITICAL; s), a copy."""
+        s = self.system
+        return np.array([s.dt_bound, s.dt_network, s.dt_critical])
 
     def load(self) -> None:
         """Load the compiled loop (numba's on-disk cache: 0.34 s for the 112-sphere scene,
@@ -519,11 +562,11 @@ class DeckSteps:
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[ACC_REFINE] = 1            # the loop divides the deck step by the count
         self._loop(0, max(int(s.substeps), 1), walls_d, walls_u, s.ledger.to_array(), counters,
-                   np.array([s._peak]), np.array([s.acc_last_growth]), np.zeros(0, np.bool_),
-                   np.zeros((0, row_width(s.walls.n))))
+                   np.array([s._peak]), np.array([s.acc_last_growth]), self._estimate(),
+                   np.zeros(0, np.bool_), np.zeros((0, row_width(s.walls.n))))
 
     def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, ledger, counters, peak,
-              acc_growth, sample_at, rows):
+              acc_growth, estimate, sample_at, rows):
         """:func:`run_deck_steps` on the system's state (the one call of the loop, so that
         :meth:`load` and :meth:`run` pass the same argument types)."""
         s, b = self.system, self.system.bodies
@@ -531,7 +574,7 @@ class DeckSteps:
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
             s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
-            sample_at, rows)
+            estimate, sample_at, rows)
 
     def run(self, n_deck: int, sample_at: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         """Up to n_deck deck steps; returns (status, deck steps done, counters, the monitor
@@ -544,16 +587,19 @@ class DeckSteps:
         counters[ACC_REFINE], counters[ACC_CALM] = s.acc_refine, s.acc_calm
         peak = np.array([s._peak])
         acc_growth = np.array([s.acc_last_growth])
+        estimate = self._estimate()
         ledger = s.ledger.to_array()
         sample_at = np.ascontiguousarray(sample_at[:n_deck], np.bool_)
         rows = np.zeros((n_deck, row_width(s.walls.n)))
         status, done, pl, ev, wall_d, wall_u = self._loop(
-            n_deck, s.substeps, walls_d, walls_u, ledger, counters, peak, acc_growth, sample_at,
-            rows)
+            n_deck, s.substeps, walls_d, walls_u, ledger, counters, peak, acc_growth, estimate,
+            sample_at, rows)
         if status == GUARD:
             return status, done, counters, rows
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
         s.acc_last_growth = float(acc_growth[0])
+        s.dt_bound, s.dt_network, s.dt_critical = (float(e) for e in estimate)
+        s.network_estimates += int(counters[NETWORK_ESTIMATES])
         return status, done, counters, rows
 
     def _store(self, pl, ev, wall_d, wall_u, ledger, counters, peak) -> None:

@@ -227,6 +227,9 @@ class PrescribedMotion:
     function: MotionFunction | None = None
     #: the displacement (3,) m of a wall at rest (used when ``function`` is None; None: 0)
     rest: np.ndarray | None = None
+    #: optional ``table(times (T,) s) -> (d (T,3) m, u (T,3) m/s)``: ``function`` at many
+    #: times at once, with the same bits (:meth:`Walls.kinematics_at`)
+    table: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         if self.function is None:
@@ -274,7 +277,20 @@ class PrescribedMotion:
             s = (t - ts[k]) / (ts[k + 1] - ts[k])
             u = (ds[k + 1] - ds[k]) / (ts[k + 1] - ts[k])
             return ds[k] + s * (ds[k + 1] - ds[k]), u
-        return PrescribedMotion(f)
+
+        def table(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """f at each of the times, by the same operations on arrays."""
+            t = np.asarray(times, dtype=float)
+            inside = (t > ts[0]) & (t < ts[-1])
+            k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
+            span = (ts[k + 1] - ts[k])[:, None]
+            step = ds[k + 1] - ds[k]
+            s = (t[:, None] - ts[k][:, None]) / span
+            d = np.where(inside[:, None], ds[k] + s * step, np.where((t <= ts[0])[:, None],
+                                                                      ds[0], ds[-1]))
+            u = np.where(inside[:, None], step / span, 0.0)
+            return d, u
+        return PrescribedMotion(f, table=table)
 
 
 class Walls:
@@ -305,6 +321,9 @@ class Walls:
         for k, m in enumerate(self.motions):
             if m.at_rest:
                 d[:, k] = m(0.0)[0]
+                continue
+            if m.table is not None and T:
+                d[:, k], u[:, k] = m.table(np.asarray(times, dtype=float))
                 continue
             for r, t in enumerate(times):
                 d[r, k], u[r, k] = m(float(t))

@@ -501,17 +501,45 @@ def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                   mass: np.ndarray, I: np.ndarray) -> tuple[float, float, int]:
     """(ω² 1/s², γ 1/s, dominant body) of the contact network: λmax of Eq. (2)'s stiffness and
     damping operators, and the particle with the largest share of the stiffest mode (−1 when
-    there is no contact).  coeffs (K,4): εn, cn, εt, ct of each contact."""
+    there is no contact).  coeffs (K,4): εn, cn, εt, ct of each contact; mass (N,) kg, I (N,3)
+    principal inertias kg m² (:func:`network_rates_scaled` with their square roots)."""
+    omega2, gamma, body = network_rates_scaled(body_a, body_b, point, normal,
+                                               np.ascontiguousarray(coeffs, float), x, Q,
+                                               np.sqrt(mass), np.sqrt(I))
+    return float(omega2), float(gamma), int(body)
+
+
+@njit(cache=True)
+def network_rates_scaled(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                         normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
+                         sq_m: np.ndarray, sq_I: np.ndarray) -> tuple[float, float, int]:
+    """:func:`network_rates` given sq_m (N,) = √mass (√kg) and sq_I (N,3) = √I (√(kg m²)):
+    compiled, so that the deck steps' loop takes the exact estimate without returning to
+    Python (:mod:`nurbsdem.dynamics.deck_steps`)."""
     N = x.shape[0]
     if body_a.shape[0] == 0 or N == 0:
         return 0.0, 0.0, -1
-    sq_m, sq_I = np.sqrt(mass), np.sqrt(I)
-    args = (body_a, body_b, point, normal)
-    kn, cn, kt, ct = (np.ascontiguousarray(coeffs[:, j]) for j in range(4))
-    omega2, vec = network_lanczos(*args, kn, kt, x, Q, sq_m, sq_I)
-    gamma = network_lanczos(*args, cn, ct, x, Q, sq_m, sq_I)[0] if (cn.any() or ct.any()) else 0.0
-    share = (vec.reshape(N, 6) ** 2).sum(axis=1)
-    return float(omega2), float(gamma), int(np.argmax(share))
+    kn, cn = coeffs[:, 0].copy(), coeffs[:, 1].copy()
+    kt, ct = coeffs[:, 2].copy(), coeffs[:, 3].copy()
+    omega2, vec = network_lanczos(body_a, body_b, point, normal, kn, kt, x, Q, sq_m, sq_I)
+    gamma = 0.0
+    if cn.any() or ct.any():
+        gamma = network_lanczos(body_a, body_b, point, normal, cn, ct, x, Q, sq_m, sq_I)[0]
+    return omega2, gamma, _dominant_body(vec, N)
+
+
+@njit(cache=True)
+def _dominant_body(vec: np.ndarray, N: int) -> int:
+    """The body with the largest share Σ vec[6i:6i+6]² of a mode vector (6N,) (the first of
+    equal ones)."""
+    best, body = -1.0, 0
+    for i in range(N):
+        share = 0.0
+        for k in range(6):
+            share += vec[6 * i + k] ** 2
+        if share > best:
+            best, body = share, i
+    return body
 
 
 # --------------------------------------------------------------------------- period-2 guard
