@@ -49,6 +49,24 @@ def cycles(typingctx):
     return types.int64(), codegen
 
 
+@intrinsic
+def fetch_add(typingctx, counter, amount):
+    """Atomically add ``amount`` to ``counter[0]`` (a 1-d int64 array) and return its value
+    before (``atomicrmw add``, monotonic): threads of a parallel loop taking chunks of work
+    from a shared counter (:func:`nurbsdem.contact.detect.next_chunk`)."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64
+            and counter.ndim == 1 and isinstance(amount, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, signature.args[0], ary,
+                                       [context.get_constant(types.intp, 0)])
+        value = context.cast(builder, args[1], signature.args[1], types.int64)
+        return builder.atomic_rmw("add", ptr, value, "monotonic")
+    return types.int64(counter, amount), codegen
+
+
 @njit(cache=True)
 def _cycles_now() -> int:
     return cycles()

@@ -73,3 +73,53 @@ def test_ellipsoid_batch_parallel_equals_single():
     for k, (pa, pb) in enumerate(cases):
         assert f[k, F_SD] == pytest.approx(detect(EA, pa, EB, pb).signed_distance, abs=1e-15)
     assert not i[:, I_FAIL].any()
+
+
+def _ellipsoid_batch_poses(rng, K):
+    """K pairs (A, B) of the two ellipsoids, B at 0.6-1.6 x the sum of the largest axes from
+    A in a random direction (touching, overlapping and apart), both turned at random."""
+    ra, rb = Rotation.random(2 * K, random_state=rng).as_matrix().reshape(2, K, 3, 3)
+    u = rng.normal(size=(K, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    xb = u * rng.uniform(0.6, 1.6, (K, 1)) * (max(AX_A) + max(AX_B))
+    return np.zeros((K, 3)), ra, xb, rb
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_batch_results_do_not_depend_on_how_the_threads_share_it(threads):
+    """The threads of a parallel batch take chunks of pairs as they go (a slowed thread leaves
+    its share to the others): every pair's result, cold and warm-started, is the same to the
+    bit on one thread, on two, and solved alone (a batch of one pair); flat walls too."""
+    import numba
+
+    from nurbsdem.contact.wall import detect_wall_batch
+    rng = np.random.default_rng(21)
+    K = 300
+    table = ContactTable([EA, EB])
+    xa, ra, xb, rb = _ellipsoid_batch_poses(rng, K)
+    sa, sb = np.zeros(K, np.int64), np.ones(K, np.int64)
+    moved = xb + rng.normal(size=(K, 3)) * 1e-4
+    o, a, b = np.array([-0.1, -0.1, 0.0]), np.array([0.2, 0, 0]), np.array([0, 0.2, 0])
+    xw = rng.uniform(-0.08, 0.08, (K, 3)) * [1, 1, 0] + [0, 0, 1] * rng.uniform(0.0, 0.04, (K, 1))
+    tile = lambda v: np.tile(v, (K, 1))  # noqa: E731
+
+    def solve(select):
+        cold = detect_batch(table, sa[select], xa[select], ra[select], sb[select], xb[select],
+                            rb[select])
+        warm = detect_batch(table, sa[select], xa[select], ra[select], sb[select],
+                            moved[select], rb[select], prev_f=cold[0], prev_i=cold[1])
+        wall = detect_wall_batch(table, sa[select], xw[select], ra[select], tile(o)[select],
+                                 tile(a)[select], tile(b)[select])
+        return cold + warm + wall
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        together = solve(np.arange(K))
+        alone = [solve(np.array([k])) for k in range(0, K, 7)]
+    finally:
+        numba.set_num_threads(before)
+    for j, k in enumerate(range(0, K, 7)):
+        for whole, one in zip(together, alone[j]):
+            np.testing.assert_array_equal(whole[k], one[0])          # bit for bit
+    assert not together[1][:, I_FAIL].any() and not together[3][:, I_FAIL].any()
+    assert (together[0][:, F_SD] < 0).sum() > 20 and (together[0][:, F_SD] > 0).sum() > 20

@@ -25,7 +25,7 @@ from numba import njit, prange
 
 from ..geometry.connectivity import POLE
 from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace, power_form
-from ..jit import kernel
+from ..jit import fetch_add, kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
                   I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, full_rows, make_work, solve_pair)
@@ -272,6 +272,8 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
 #: Below this many pairs the batch runs on the calling thread: launching the parallel
 #: region costs more than it saves for a handful of LCPs.
 PARALLEL_MIN_PAIRS = 32
+#: pairs a thread of a parallel batch takes at a time (:func:`next_chunk`): ~50 us of LCPs
+CHUNK_PAIRS = 8
 
 
 @kernel
@@ -305,17 +307,45 @@ def _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, ro
                  prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4)
 
 
+@njit(cache=True)
+def next_chunk(taken: np.ndarray, n: int) -> tuple[int, int]:
+    """The next CHUNK_PAIRS items (k0, k1) of n that the shared counter ``taken`` (1,) hands
+    out (k0 >= n: none left).  Threads that take their work this way share it out as they
+    go: one slowed down (by the output writer or another process on the same core) leaves
+    its share to the others instead of holding the whole batch up at the end of the
+    parallel loop."""
+    k0 = fetch_add(taken, CHUNK_PAIRS)
+    return k0, min(n, k0 + CHUNK_PAIRS)
+
+
+@njit(cache=True)
+def _solve_chunks(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
+                  prev_f, prev_i, mask_a, mask_b, res_f, res_i, taken):
+    """:func:`_solve_chunk` of the chunks :func:`next_chunk` hands this thread, with one set
+    of workspaces (every pair's result is independent of the workspaces' history)."""
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    wf = np.zeros((lcp.WORK_ROWS, 3))
+    wi = np.zeros((4, 4), np.int64)
+    wfs = np.zeros((4, 3))
+    w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
+    k0, k1 = next_chunk(taken, sa.shape[0])
+    while k0 < k1:
+        _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
+                     prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4)
+        k0, k1 = next_chunk(taken, sa.shape[0])
+
+
 @njit(cache=True, parallel=True)
 def _batch_kernel(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
                   prev_f, prev_i, mask_a, mask_b, res_f, res_i, nt):
+    """The LCPs of the batch on nt threads, which take chunks of pairs as they go."""
     K = sa.shape[0]
     if nt > K:
         nt = max(K, 1)
-    chunk = (K + nt - 1) // nt
+    taken = np.zeros(1, np.int64)
     for t in prange(nt):
-        _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                     prev_f, prev_i, mask_a, mask_b, res_f, res_i, t * chunk,
-                     min(K, (t + 1) * chunk))
+        _solve_chunks(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
+                      prev_f, prev_i, mask_a, mask_b, res_f, res_i, taken)
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,

@@ -34,7 +34,8 @@ from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
 from ..jit import kernel
 from . import lcp
 from .analytic import parallelogram_coordinates
-from .detect import PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, table_of
+from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, next_chunk,
+                     table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
                   I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP,
                   full_rows, _predicted_params, _rot_t, _store_prediction, _to_world)
@@ -197,16 +198,34 @@ def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
                 prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
 
 
+@njit(cache=True)
+def _wall_chunks(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
+                 prev_f, prev_i, res_f, res_i, taken):
+    """:func:`_wall_chunk` of the chunks :func:`~nurbsdem.contact.detect.next_chunk` hands
+    this thread, with one set of workspaces."""
+    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
+    wf = np.zeros((lcp.WORK_ROWS, 3))
+    wi = np.zeros((4, 4), np.int64)
+    wfs = np.zeros((4, 3))
+    no_mask = np.zeros(0, np.bool_)
+    k0, k1 = next_chunk(taken, sid.shape[0])
+    while k0 < k1:
+        _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom, prev_f,
+                    prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
+        k0, k1 = next_chunk(taken, sid.shape[0])
+
+
 @njit(cache=True, parallel=True)
 def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
                        prev_f, prev_i, res_f, res_i, nt):
+    """The body/wall contacts of the batch on nt threads, which take chunks as they go."""
     K = sid.shape[0]
     if nt > K:
         nt = max(K, 1)
-    chunk = (K + nt - 1) // nt
+    taken = np.zeros(1, np.int64)
     for t in prange(nt):
-        _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                    prev_f, prev_i, res_f, res_i, t * chunk, min(K, (t + 1) * chunk))
+        _wall_chunks(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
+                     prev_f, prev_i, res_f, res_i, taken)
 
 
 def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=None, prev_i=None):
