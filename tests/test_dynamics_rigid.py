@@ -160,3 +160,7 @@ def test_piecewise_linear_table_has_the_bits_of_the_function():
     np.testing.assert_array_equal(u[:, 1], [e[1] for e in one_by_one])
     np.testing.assert_array_equal(d[:, 0], np.tile([0, 0, 0.5], (len(times), 1)))
     assert not u[:, 0].any()
+    one_knot = PrescribedMotion.piecewise_linear([0.5], [[0.1, 0.2, 0.3]])
+    d1, u1 = one_knot.table(times)
+    np.testing.assert_array_equal(d1, [one_knot(t)[0] for t in times])
+    assert not u1.any()

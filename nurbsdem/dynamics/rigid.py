@@ -282,13 +282,15 @@ class PrescribedMotion:
             """f at each of the times, by the same operations on arrays."""
             t = np.asarray(times, dtype=float)
             inside = (t > ts[0]) & (t < ts[-1])
-            k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
-            span = (ts[k + 1] - ts[k])[:, None]
-            step = ds[k + 1] - ds[k]
-            s = (t[:, None] - ts[k][:, None]) / span
-            d = np.where(inside[:, None], ds[k] + s * step, np.where((t <= ts[0])[:, None],
-                                                                      ds[0], ds[-1]))
-            u = np.where(inside[:, None], step / span, 0.0)
+            k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, max(len(ts) - 2, 0))
+            k1 = np.minimum(k + 1, len(ts) - 1)
+            with np.errstate(divide="ignore", invalid="ignore"):    # one knot: never inside
+                span = (ts[k1] - ts[k])[:, None]
+                step = ds[k1] - ds[k]
+                s = (t[:, None] - ts[k][:, None]) / span
+                d = np.where(inside[:, None], ds[k] + s * step,
+                             np.where((t <= ts[0])[:, None], ds[0], ds[-1]))
+                u = np.where(inside[:, None], step / span, 0.0)
             return d, u
         return PrescribedMotion(f, table=table)
 
