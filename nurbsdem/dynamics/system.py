@@ -829,8 +829,9 @@ class DemSystem:
 
         A scene provider on one rank (:class:`~nurbsdem.dynamics.deck_steps.DeckSteps`; not
         Hertz–Mindlin with NURBS particles) runs them in compiled code, with the same results
-        as :meth:`step`; it returns early when the time-step control needs its exact estimate,
-        and a deck step on which a guard fires or an LCP fails is repeated by :meth:`step`
+        as :meth:`step`; it returns early when the time-step control changes the sub-step
+        count (it takes the exact estimate itself where the count stands), and a deck step on
+        which a guard fires or an LCP fails is repeated by :meth:`step`
         (which refines it, answers the failed LCP, or raises).  Other scenes: one
         :meth:`step`."""
         self.initialize()
