@@ -923,11 +923,16 @@ def _paper_runs(workdir: Path) -> tuple[list, list]:
             sorted(runs[True], key=lambda r: r.wall_time))
 
 
+def _walls_in_order(runs: list) -> str:
+    """The runs' wall times in the order they ran ("33.3 s, 32.1 s")."""
+    return ", ".join(f"{r.wall_time:.1f} s" for r in sorted(runs, key=lambda r: r.order))
+
+
 def _best_of(runs: list) -> str:
     """The sentence saying which of the alternated runs a figure is from."""
-    walls = ", ".join(f"{r.wall_time:.1f} s" for r in sorted(runs, key=lambda r: r.order))
     return (f"The faster of {len(runs)} runs alternated with the deck with few samples below "
-            f"(their wall times in the order run: {walls}; this VM's speed moves by up to a "
+            f"(their wall times in the order run: {_walls_in_order(runs)}; this VM's speed "
+            f"moves by up to a "
             f"third from one minute to the next, and a run's contact work is the same bits "
             f"each time).")
 
@@ -946,8 +951,7 @@ def _paper_with_few_frames(rep: Report, workdir: Path, shipped, runs: list) -> N
     rep.add(f"The same deck with `VTK Every {bench_paper.FEW_EVERY}` ({len(frames[0])} "
             f"ParaView samples of the "
             f"particles instead of {len(frames[1])}, {mb:.2f} MB each; monitors as shipped), "
-            f"the faster of its runs (in the order run: "
-            f"{', '.join(f'{r.wall_time:.1f}' for r in sorted(runs, key=lambda r: r.order))} s): "
+            f"the faster of its runs (in the order run: {_walls_in_order(runs)}): "
             f"**{s.wall_time:.1f} s** wall "
             f"time against {shipped.wall_time:.1f} s, LCP {t['LCP']:.1f} s against "
             f"{t0['LCP']:.1f} s, output (main thread) {t['output']:.1f} s against "

@@ -24,7 +24,7 @@ import numba
 from numba import njit, prange
 
 from ..geometry.connectivity import POLE
-from ..geometry.kernel import MAX_DEGREE, _WS_ROWS, make_workspace, power_form
+from ..geometry.kernel import make_workspace, power_form
 from ..jit import fetch_add, kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
@@ -298,11 +298,8 @@ def _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, ro
     """LCPs of pairs k0..k1-1 with one set of workspaces (one thread). ``mask_a/b`` (K, P)
     candidate patches per pair for cold starts (P = 0: no candidates given); ``nc`` (S,)
     non-convexity heights of the shapes (m)."""
-    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
-    wf = np.zeros((lcp.WORK_ROWS, 3))
-    wi = np.zeros((4, 4), np.int64)
-    wfs = np.zeros((4, 3))
-    w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
+    ws = make_workspace()
+    wf, wi, wfs, w4 = make_work()
     _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b, prev_f,
                  prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4)
 
@@ -323,11 +320,8 @@ def _solve_chunks(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, r
                   prev_f, prev_i, mask_a, mask_b, res_f, res_i, taken):
     """:func:`_solve_chunk` of the chunks :func:`next_chunk` hands this thread, with one set
     of workspaces (every pair's result is independent of the workspaces' history)."""
-    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
-    wf = np.zeros((lcp.WORK_ROWS, 3))
-    wi = np.zeros((4, 4), np.int64)
-    wfs = np.zeros((4, 3))
-    w4 = np.zeros((lcp.W4_ROWS, lcp.W4_COLS))
+    ws = make_workspace()
+    wf, wi, wfs, w4 = make_work()
     k0, k1 = next_chunk(taken, sa.shape[0])
     while k0 < k1:
         _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,

@@ -85,6 +85,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from ..jit import kernel
 from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
@@ -172,9 +173,11 @@ _EV, _EV2, _TMP, _EA, _EB, _D, _T1, _T2, _DT, _H = 24, 30, 36, 37, 38, 39, 40, 4
 _TR = 45     # 3 rows: scratch of the trust-region step (rows 45..47)
 
 
+@njit(cache=True)
 def make_work() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per-thread work arrays of :func:`solve_pair`: (float rows (96, 3), int states (4, 4),
-    float states (4, 3), stage-1 float rows (24, 8))."""
+    float states (4, 3), stage-1 float rows (24, 8); compiled: the threads of a parallel batch
+    make theirs)."""
     return (np.zeros((WORK_ROWS, 3)), np.zeros((4, 4), np.int64), np.zeros((4, 3)),
             np.zeros((W4_ROWS, W4_COLS)))
 

@@ -30,7 +30,7 @@ import numpy as np
 import numba
 from numba import njit, prange
 
-from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
+from ..geometry.kernel import make_workspace
 from ..jit import kernel
 from . import lcp
 from .analytic import parallelogram_coordinates
@@ -38,7 +38,8 @@ from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work
                      table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
                   I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP,
-                  full_rows, _predicted_params, _rot_t, _store_prediction, _to_world)
+                  full_rows, make_work, _predicted_params, _rot_t, _store_prediction,
+                  _to_world)
 from .support import CREASE, seed_start, support_map
 
 
@@ -189,10 +190,8 @@ def _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
 def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
                 prev_f, prev_i, res_f, res_i, k0, k1):
     """Body/wall contacts k0..k1-1 with one set of workspaces (one thread)."""
-    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
-    wf = np.zeros((lcp.WORK_ROWS, 3))
-    wi = np.zeros((4, 4), np.int64)
-    wfs = np.zeros((4, 3))
+    ws = make_workspace()
+    wf, wi, wfs, _ = make_work()
     no_mask = np.zeros(0, np.bool_)
     _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom, prev_f,
                 prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
@@ -203,10 +202,8 @@ def _wall_chunks(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom
                  prev_f, prev_i, res_f, res_i, taken):
     """:func:`_wall_chunk` of the chunks :func:`~nurbsdem.contact.detect.next_chunk` hands
     this thread, with one set of workspaces."""
-    ws = np.zeros((_WS_ROWS, MAX_DEGREE + 1))
-    wf = np.zeros((lcp.WORK_ROWS, 3))
-    wi = np.zeros((4, 4), np.int64)
-    wfs = np.zeros((4, 3))
+    ws = make_workspace()
+    wf, wi, wfs, _ = make_work()
     no_mask = np.zeros(0, np.bool_)
     k0, k1 = next_chunk(taken, sid.shape[0])
     while k0 < k1:

@@ -53,8 +53,10 @@ MAX_DEGREE = 9
 _WS_ROWS = (MAX_DEGREE + 1) + 16
 
 
+@njit(cache=True)
 def make_workspace() -> np.ndarray:
-    """A workspace for :func:`patch_derivs` (one per thread)."""
+    """A workspace for :func:`patch_derivs` (one per thread; compiled: the threads of a
+    parallel batch make theirs)."""
     return np.zeros((_WS_ROWS, MAX_DEGREE + 1))
 
 
