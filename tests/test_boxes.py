@@ -6,7 +6,8 @@ import pytest
 from scipy.optimize import linprog
 from scipy.spatial.transform import Rotation
 
-from nurbsdem.contact.boxes import (candidate_patch_pairs, candidate_patch_pairs_batch,
+from nurbsdem.contact.boxes import (MASK_CHUNK, candidate_patch_masks_batch_jit,
+                                    candidate_patch_pairs, candidate_patch_pairs_batch,
                                     candidate_patches_wall, candidate_patches_wall_batch,
                                     obb_overlap, pack_boxes)
 from nurbsdem.contact.broadphase import wall_geometry
@@ -196,6 +197,33 @@ def test_batch_matches_single():
         np.testing.assert_array_equal(got[got[:, 0] == k, 1:], ref)
     assert len(candidate_patch_pairs_batch(boxes, off, body_shape, pos, rot,
                                            np.zeros((0, 2), np.int64))) == 0
+
+
+@pytest.mark.parametrize("n", [6, 30])
+def test_masks_mark_the_patches_of_the_overlapping_box_pairs(n):
+    """The neighbour list's masks (boxes skipped where both patches are marked already,
+    shares on the threads for more than MASK_CHUNK pairs) mark exactly the patches of the
+    rows of candidate_patch_pairs_batch, which tests every pair of boxes."""
+    rng = np.random.default_rng(n)
+    shapes = [sphere(0.02), ellipsoid(0.03, 0.02, 0.012)]
+    boxes, off = pack_boxes(shapes)
+    P = int(np.diff(off).max())
+    body_shape = rng.integers(0, 2, n)
+    pos = rng.uniform(0, 0.05 * n ** (1 / 3), (n, 3))
+    rot = np.array([_rand_rot(rng) for _ in range(n)])
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)], np.int64)
+    assert (len(pairs) > 2 * MASK_CHUNK) == (n == 30)
+    for margin in (0.0, 1e-3, 1e-2):
+        keep, mask_a, mask_b = candidate_patch_masks_batch_jit(boxes, off, body_shape, pos, rot,
+                                                               pairs, margin, P)
+        rows = candidate_patch_pairs_batch(boxes, off, body_shape, pos, rot, pairs, margin)
+        want_a, want_b = np.zeros_like(mask_a), np.zeros_like(mask_b)
+        want_a[rows[:, 0], rows[:, 1]] = True
+        want_b[rows[:, 0], rows[:, 2]] = True
+        np.testing.assert_array_equal(keep, np.isin(np.arange(len(pairs)), rows[:, 0]))
+        np.testing.assert_array_equal(mask_a, want_a)
+        np.testing.assert_array_equal(mask_b, want_b)
+        assert 0 < keep.sum() < len(pairs)
 
 
 def test_wall_candidates():

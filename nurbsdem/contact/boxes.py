@@ -23,7 +23,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 #: Added to |R_ij| in the separating-axis test (Ericson §4.4.1): guards the edge-edge axes
 #: against round-off when two edges are (nearly) parallel. Dimensionless (a cosine).
@@ -108,6 +108,52 @@ def obb_overlap(center_a: np.ndarray, axes_a: np.ndarray, half_a: np.ndarray,
 
 
 # --------------------------------------------------------------------------- patch boxes
+@njit(cache=True, inline='always')
+def _frame_of_b(pos_a, Ra, pos_b, Rb, R, AbsR, d0) -> None:
+    """B's file frame in A's (in place): R = Ra^T Rb and AbsR from :func:`_relative`, d0 (3,)
+    the origin of B's file frame in A's file frame (m)."""
+    _relative(Ra, Rb, R, AbsR)
+    for i in range(3):
+        s = 0.0
+        for k in range(3):
+            s += (pos_b[k] - pos_a[k]) * Ra[k, i]
+        d0[i] = s
+
+
+@njit(cache=True, inline='always')
+def _box_of_b(boxes, jb, d0, R, hm, cb, hb) -> float:
+    """B's box jb in A's frame (in place): its centre cb (3,) and half sizes hb (3,),
+    inflated by hm (m); returns its squared half diagonal (m²)."""
+    nb = 0.0
+    for i in range(3):
+        hb[i] = 0.5 * (boxes[jb, 1, i] - boxes[jb, 0, i]) + hm
+        nb += hb[i] * hb[i]
+    for i in range(3):
+        s = d0[i]
+        for k in range(3):
+            s += R[i, k] * 0.5 * (boxes[jb, 0, k] + boxes[jb, 1, k])
+        cb[i] = s
+    return nb
+
+
+@njit(cache=True, inline='always')
+def _box_overlaps_b(boxes, ia, cb, hb, nb, R, AbsR, hm, ha, t) -> bool:
+    """Whether A's box ia (inflated by hm) overlaps B's box (cb, hb, nb of
+    :func:`_box_of_b`): the boxes' bounding spheres first (a cheap reject), then
+    :func:`_sat`; ha, t (3,) workspaces."""
+    na = 0.0
+    tt = 0.0
+    for i in range(3):
+        ha[i] = 0.5 * (boxes[ia, 1, i] - boxes[ia, 0, i]) + hm
+        na += ha[i] * ha[i]
+        t[i] = cb[i] - 0.5 * (boxes[ia, 0, i] + boxes[ia, 1, i])
+        tt += t[i] * t[i]
+    rs = np.sqrt(na) + np.sqrt(nb)
+    if tt > rs * rs * (1.0 + 1e-12):
+        return False
+    return _sat(t, R, AbsR, ha, hb)
+
+
 @njit(cache=True)
 def _pair_boxes(boxes, a0, a1, pos_a, Ra, b0, b1, pos_b, Rb, margin, tag, buf, n):
     """Append (tag, patch_a, patch_b) for overlapping boxes of one body pair to buf[n:].
@@ -115,44 +161,14 @@ def _pair_boxes(boxes, a0, a1, pos_a, Ra, b0, b1, pos_b, Rb, margin, tag, buf, n
     boxes: (P, 2, 3) file-frame AABBs; rows a0:a1 are A's patches, b0:b1 B's.
     Returns (buf, n) (buf grows by doubling).
     """
-    R = np.empty((3, 3))
-    AbsR = np.empty((3, 3))
-    _relative(Ra, Rb, R, AbsR)
-    d0 = np.empty(3)  # origin of B's file frame in A's file frame
-    for i in range(3):
-        s = 0.0
-        for k in range(3):
-            s += (pos_b[k] - pos_a[k]) * Ra[k, i]
-        d0[i] = s
+    R, AbsR = np.empty((3, 3)), np.empty((3, 3))
+    d0, ha, hb, cb, t = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    _frame_of_b(pos_a, Ra, pos_b, Rb, R, AbsR, d0)
     hm = 0.5 * margin
-    ha = np.empty(3)
-    hb = np.empty(3)
-    cb = np.empty(3)
-    t = np.empty(3)
     for jb in range(b0, b1):
-        # centre of B's box in A's frame, B's half sizes
-        nb = 0.0
-        for i in range(3):
-            hb[i] = 0.5 * (boxes[jb, 1, i] - boxes[jb, 0, i]) + hm
-            nb += hb[i] * hb[i]
-        for i in range(3):
-            s = d0[i]
-            for k in range(3):
-                s += R[i, k] * 0.5 * (boxes[jb, 0, k] + boxes[jb, 1, k])
-            cb[i] = s
+        nb = _box_of_b(boxes, jb, d0, R, hm, cb, hb)
         for ia in range(a0, a1):
-            na = 0.0
-            tt = 0.0
-            for i in range(3):
-                ha[i] = 0.5 * (boxes[ia, 1, i] - boxes[ia, 0, i]) + hm
-                na += ha[i] * ha[i]
-                t[i] = cb[i] - 0.5 * (boxes[ia, 0, i] + boxes[ia, 1, i])
-                tt += t[i] * t[i]
-            # bounding spheres of the boxes first (cheap reject)
-            rs = np.sqrt(na) + np.sqrt(nb)
-            if tt > rs * rs * (1.0 + 1e-12):
-                continue
-            if _sat(t, R, AbsR, ha, hb):
+            if _box_overlaps_b(boxes, ia, cb, hb, nb, R, AbsR, hm, ha, t):
                 if n >= buf.shape[0]:
                     nbuf = np.empty((2 * buf.shape[0], 3), dtype=np.int64)
                     nbuf[:n] = buf[:n]
@@ -162,6 +178,59 @@ def _pair_boxes(boxes, a0, a1, pos_a, Ra, b0, b1, pos_b, Rb, margin, tag, buf, n
                 buf[n, 2] = jb - b0
                 n += 1
     return buf, n
+
+
+@njit(cache=True)
+def _mark_patches(boxes, box_offsets, body_shape, positions, rotations, pairs, hm, p0, p1,
+                  keep, mask_a, mask_b) -> None:
+    """:func:`candidate_patch_masks_batch_jit` for the pairs p0:p1 (in place), boxes
+    inflated by hm (m), with one set of workspaces."""
+    R, AbsR = np.empty((3, 3)), np.empty((3, 3))
+    d0, ha, hb, cb, t = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    for p in range(p0, p1):
+        a, b = pairs[p, 0], pairs[p, 1]
+        a0, a1 = box_offsets[body_shape[a]], box_offsets[body_shape[a] + 1]
+        b0, b1 = box_offsets[body_shape[b]], box_offsets[body_shape[b] + 1]
+        _frame_of_b(positions[a], rotations[a], positions[b], rotations[b], R, AbsR, d0)
+        for jb in range(b0, b1):
+            nb = _box_of_b(boxes, jb, d0, R, hm, cb, hb)
+            for ia in range(a0, a1):
+                if mask_a[p, ia - a0] and mask_b[p, jb - b0]:
+                    continue
+                if _box_overlaps_b(boxes, ia, cb, hb, nb, R, AbsR, hm, ha, t):
+                    mask_a[p, ia - a0] = True
+                    mask_b[p, jb - b0] = True
+                    keep[p] = True
+
+
+#: body pairs per share of :func:`candidate_patch_masks_batch_jit` (fewer: one thread)
+MASK_CHUNK = 64
+
+
+@njit(cache=True, parallel=True)
+def candidate_patch_masks_batch_jit(boxes, box_offsets, body_shape, positions, rotations,
+                                    pairs, margin, n_patches):
+    """The candidate patches of many body pairs as masks: (keep (K,) bool — some pair of
+    boxes overlaps —, mask_a (K, n_patches), mask_b (K, n_patches) bool — the patches of A,
+    of B in some overlapping pair), the same as the rows of
+    :func:`candidate_patch_pairs_batch_jit` marked into masks.  A pair of boxes whose patches
+    are both marked already is not tested (its result would change nothing); no rows, no
+    sorting (2.8 -> 1.1 ms on one thread for the 425 body pairs of a settled paper pack);
+    shares of :data:`MASK_CHUNK` pairs on the threads."""
+    K = pairs.shape[0]
+    keep = np.zeros(K, np.bool_)
+    mask_a = np.zeros((K, n_patches), np.bool_)
+    mask_b = np.zeros((K, n_patches), np.bool_)
+    shares = (K + MASK_CHUNK - 1) // MASK_CHUNK
+    if shares < 2:
+        _mark_patches(boxes, box_offsets, body_shape, positions, rotations, pairs,
+                      0.5 * margin, 0, K, keep, mask_a, mask_b)
+        return keep, mask_a, mask_b
+    for c in prange(shares):
+        _mark_patches(boxes, box_offsets, body_shape, positions, rotations, pairs,
+                      0.5 * margin, c * MASK_CHUNK, min(K, (c + 1) * MASK_CHUNK), keep,
+                      mask_a, mask_b)
+    return keep, mask_a, mask_b
 
 
 @njit(cache=True)

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from .analytic import closed_form_into, sphere_centres
-from .boxes import candidate_patch_pairs_batch_jit, candidate_patches_wall_batch_jit
+from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
 from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
 from .detect import PARALLEL_MIN_PAIRS, _batch_kernel, _solve_chunk, accept_within_nonconvexity
 from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
@@ -75,16 +75,10 @@ def scene_tables(scene) -> SceneTables:
 def _directed(st, pairs, pos, R, m):
     """The NURBS body pairs whose patch boxes overlap (within m), with their candidate
     patches as (K, P) masks (paper 3.1)."""
-    cand = candidate_patch_pairs_batch_jit(st.boxes, st.box_offsets, st.body_shape, pos, R,
-                                           pairs, m)
-    keep = np.unique(cand[:, 0])
-    mask_a = np.zeros((keep.shape[0], st.n_patches), np.bool_)
-    mask_b = np.zeros((keep.shape[0], st.n_patches), np.bool_)
-    row = np.searchsorted(keep, cand[:, 0])
-    for c in range(cand.shape[0]):
-        mask_a[row[c], cand[c, 1]] = True
-        mask_b[row[c], cand[c, 2]] = True
-    return pairs[keep], mask_a, mask_b
+    keep, mask_a, mask_b = candidate_patch_masks_batch_jit(st.boxes, st.box_offsets,
+                                                           st.body_shape, pos, R, pairs, m,
+                                                           st.n_patches)
+    return pairs[keep], mask_a[keep], mask_b[keep]
 
 
 @njit(cache=True)
