@@ -91,6 +91,10 @@ def tiled_model(ckpt: Path, nx: int, ny: int, relax: int, measure: int, out: Pat
     return model
 
 
+#: the time loop's parts timed (the solver's timers), in the order of ``split_us``
+PARTS = ("global search", "LCP", "forces + integration")
+
+
 def measure(model, n: int) -> dict:
     """Run the model's first step, then time its second: cost per deck step of the second
     (global search + LCP + forces/integration), per particle-step, and its figures."""
@@ -107,22 +111,31 @@ def measure(model, n: int) -> dict:
     e2 = s.end_energy
     summary = s.finish()
     steps = summary.steps - summary0[0]
-    comp = sum(summary.timers[k] - timers0[k] for k in ("global search", "LCP",
-                                                        "forces + integration"))
-    per = comp / steps
+    parts = {k: summary.timers[k] - timers0[k] for k in PARTS}
+    per = sum(parts.values()) / steps
     return dict(n=n, first_s=t_first, kinetic_first=e["kinetic"], kinetic_end=e2["kinetic"],
                 potential=e2["potential"], steps=steps, ms_per_step=per * 1e3,
                 us_per_particle_step=per / n * 1e6,
                 substeps=(summary.substeps - summary0[1]) / steps,
                 lcps_per_step=(summary.lcps - summary0[2]) / steps,
                 active_per_step=(summary.active_total - summary0[3]) / steps,
-                failed=summary.failed)
+                failed=summary.failed,
+                split_us=[parts[k] / steps / n * 1e6 for k in PARTS])
 
 
 def _row_text(r: dict) -> str:
+    split = " / ".join(f"{v:.1f}" for v in r["split_us"])
     return (f"{r['ms_per_step']:.1f} ms per step, {r['us_per_particle_step']:.2f} µs per "
-            f"particle-step, {r['substeps']:.1f} sub-steps, {r['active_per_step']:.0f} "
-            f"contacts, {r['lcps_per_step']:.0f} LCPs per deck step, {r['failed']} failed")
+            f"particle-step ({split}: {' / '.join(PARTS)}), {r['substeps']:.1f} sub-steps, "
+            f"{r['active_per_step']:.0f} contacts, {r['lcps_per_step']:.0f} LCPs per deck "
+            f"step, {r['failed']} failed")
+
+
+def growth(rows: list[dict], values: list[float]) -> float:
+    """The exponent p of a least-squares fit values ∝ N^p over the rows' particle counts N."""
+    if len(rows) < 2:
+        return math.nan
+    return float(np.polyfit(np.log([r["n"] for r in rows]), np.log(values), 1)[0])
 
 
 def settle_and_measure(n: int, settle: float, steps: int) -> dict:
@@ -154,11 +167,12 @@ def tiles(n: int, settle: float, tilings: list[tuple[int, int]], relax: int, ste
             print(f"{r['n']} particles ({nx} x {ny} copies of {n} settled for {settle} s; "
                   f"kinetic energy {r['kinetic_end']:.3g} J after {relax} + {steps} deck "
                   f"steps): " + _row_text(r), flush=True)
-    slope = (float(np.polyfit(np.log([r["n"] for r in rows]),
-                              np.log([r["ms_per_step"] for r in rows]), 1)[0])
-             if len(rows) > 1 else math.nan)
-    print(f"cost per deck step ∝ N^{slope:.2f} over N = {rows[0]['n']} … {rows[-1]['n']}")
-    return dict(n=n, settle=settle, relax=relax, measure=steps, rows=rows, exponent=slope)
+    slope = growth(rows, [r["ms_per_step"] for r in rows])
+    parts = [growth(rows, [r["split_us"][k] * r["n"] for r in rows]) for k in range(len(PARTS))]
+    print(f"cost per deck step ∝ N^{slope:.2f} over N = {rows[0]['n']} … {rows[-1]['n']} ("
+          + ", ".join(f"{p} N^{e:.2f}" for p, e in zip(PARTS, parts)) + ")")
+    return dict(n=n, settle=settle, relax=relax, measure=steps, rows=rows, exponent=slope,
+                part_exponents=dict(zip(PARTS, parts)))
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -58,19 +58,21 @@ def test_failed_warm_starts_are_retried_cold():
 
     prev_i = np.zeros((4, NI), np.int64)
     prev_i[:3, I_VALID] = 1            # pairs 0-2 have a previous solution, pair 3 is new
-    rf = np.zeros((4, NF))
-    rf[:, F_SD] = -1e-6 * np.arange(1, 5)
-    ri = np.zeros((4, NI), np.int64)
-    ri[[1, 2, 3], I_FAIL] = 1          # warm: 1 and 2 fail; 3 fails from its (cold) start
-    again = _retry_cold(rf, ri, prev_i, np.empty(4, np.int64))
-    assert again.tolist() == [1, 2]    # pair 3 was cold already: not solved again
+    warm = prev_i[:, I_VALID] == 1
+    rf = np.zeros((5, NF))             # the list's rows (row 0 not due), solved in place
+    rf[1:, F_SD] = -1e-6 * np.arange(1, 5)
+    ri = np.zeros((5, NI), np.int64)
+    ri[[2, 3, 4], I_FAIL] = 1          # warm: 2 and 3 fail; 4 fails from its (cold) start
+    idx = np.arange(1, 5)
+    again = _retry_cold(ri, idx, warm)
+    assert again.tolist() == [2, 3]    # pair 4 was cold already: not solved again
     cf = np.zeros((2, NF))
     cf[:, F_SD] = [-2.5e-6, -3.5e-6]
     ci = np.zeros((2, NI), np.int64)
-    ci[1, I_FAIL] = 1                  # pair 2 fails cold as well
+    ci[1, I_FAIL] = 1                  # pair 3 fails cold as well
     _take_converged(rf, ri, again, cf, ci)
-    assert ri[:, I_FAIL].tolist() == [0, 0, 1, 1]     # 1 recovered by the cold retry
-    assert rf[1, F_SD] == -2.5e-6 and rf[2, F_SD] == -3e-6
+    assert ri[:, I_FAIL].tolist() == [0, 0, 0, 1, 1]     # 2 recovered by the cold retry
+    assert rf[2, F_SD] == -2.5e-6 and rf[3, F_SD] == -3e-6
 
 
 def test_neighbour_lists_and_certificates_do_not_change_the_results(tmp_path):

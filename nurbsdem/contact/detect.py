@@ -264,7 +264,7 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
         ri[I_FAIL] = 1
         ri[I_VALID] = 0
     accept_within_nonconvexity(np.asarray(ta.nonconvexity + tb.nonconvexity, float).reshape(1),
-                               rf.reshape(1, -1), ri.reshape(1, -1))
+                               rf.reshape(1, -1), ri.reshape(1, -1), np.zeros(1, np.int64))
     return ContactResult.from_rows(rf, ri)
 
 
@@ -277,31 +277,41 @@ CHUNK_PAIRS = 8
 
 
 @kernel
-def _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4):
-    """The loop of :func:`_solve_chunk` over its workspaces.  Without reference counting
-    (:func:`nurbsdem.jit.kernel`): the rows it hands to ``solve_pair`` are views of arrays
-    that every thread shares, whose reference counts were updated atomically by all threads
-    (8 % of the LCP time of a compaction)."""
+def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                 mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4, prev_f, prev_i):
+    """The loop of :func:`_solve_chunk` over its workspaces: pair j = rows[k] for k in
+    k0..k1-1, bodies body_a[j], body_b[j] (shape[·], pos[·], rot[·]), candidate patches
+    mask_a[j], mask_b[j]; its rows res_f[j], res_i[j] hold the previous solution (warm
+    start) and receive the new one in place, the previous one copied into prev_f (NF,),
+    prev_i (NI,) first.  Without reference counting (:func:`nurbsdem.jit.kernel`): the rows
+    it hands to ``solve_pair`` are views of arrays that every thread shares, whose reference
+    counts were updated atomically by all threads (8 % of the LCP time of a compaction)."""
     for k in range(k0, k1):
-        a = sa[k]
-        b = sb[k]
+        j = rows[k]
+        ia = body_a[j]
+        ib = body_b[j]
+        a = shape[ia]
+        b = shape[ib]
+        for c in range(prev_f.shape[0]):
+            prev_f[c] = res_f[j, c]
+        for c in range(prev_i.shape[0]):
+            prev_i[c] = res_i[j, c]
         solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
-                   pos_a[k], rot_a[k], pos_b[k], rot_b[k], prev_f[k], prev_i[k],
-                   mask_a[k], mask_b[k], seeds, seeds, ws, wf, wi, wfs, w4, res_f[k], res_i[k],
-                   nc[a] + nc[b])
+                   pos[ia], rot[ia], pos[ib], rot[ib], prev_f, prev_i, mask_a[j], mask_b[j],
+                   seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j], nc[a] + nc[b])
 
 
 @njit(cache=True)
-def _solve_chunk(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                 prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1):
-    """LCPs of pairs k0..k1-1 with one set of workspaces (one thread). ``mask_a/b`` (K, P)
-    candidate patches per pair for cold starts (P = 0: no candidates given); ``nc`` (S,)
-    non-convexity heights of the shapes (m)."""
+def _solve_chunk(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                 mask_a, mask_b, res_f, res_i, k0, k1):
+    """LCPs of the pairs rows[k0:k1] (:func:`_solve_range`) with one set of workspaces (one
+    thread). ``mask_a/b`` (L, P) candidate patches per pair for cold starts (P = 0: no
+    candidates given); ``nc`` (S,) non-convexity heights of the shapes (m)."""
     ws = make_workspace()
     wf, wi, wfs, w4 = make_work()
-    _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b, prev_f,
-                 prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4)
+    _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows, mask_a,
+                 mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4, np.empty(NF),
+                 np.empty(NI, np.int64))
 
 
 @njit(cache=True)
@@ -316,30 +326,51 @@ def next_chunk(taken: np.ndarray, n: int) -> tuple[int, int]:
 
 
 @njit(cache=True)
-def _solve_chunks(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                  prev_f, prev_i, mask_a, mask_b, res_f, res_i, taken):
+def _solve_chunks(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                  mask_a, mask_b, res_f, res_i, taken):
     """:func:`_solve_chunk` of the chunks :func:`next_chunk` hands this thread, with one set
     of workspaces (every pair's result is independent of the workspaces' history)."""
     ws = make_workspace()
     wf, wi, wfs, w4 = make_work()
-    k0, k1 = next_chunk(taken, sa.shape[0])
+    prev_f, prev_i = np.empty(NF), np.empty(NI, np.int64)
+    k0, k1 = next_chunk(taken, rows.shape[0])
     while k0 < k1:
-        _solve_range(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                     prev_f, prev_i, mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4)
-        k0, k1 = next_chunk(taken, sa.shape[0])
+        _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                     mask_a, mask_b, res_f, res_i, k0, k1, ws, wf, wi, wfs, w4, prev_f, prev_i)
+        k0, k1 = next_chunk(taken, rows.shape[0])
 
 
 @njit(cache=True, parallel=True)
-def _batch_kernel(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                  prev_f, prev_i, mask_a, mask_b, res_f, res_i, nt):
-    """The LCPs of the batch on nt threads, which take chunks of pairs as they go."""
-    K = sa.shape[0]
+def _batch_kernel(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                  mask_a, mask_b, res_f, res_i, nt):
+    """The LCPs of the pairs ``rows`` (:func:`_solve_range`, in place) on nt threads, which
+    take chunks of pairs as they go."""
+    K = rows.shape[0]
     if nt > K:
         nt = max(K, 1)
     taken = np.zeros(1, np.int64)
     for t in prange(nt):
-        _solve_chunks(tab, info, cen, rad, seeds, nc, sa, pos_a, rot_a, sb, pos_b, rot_b,
-                      prev_f, prev_i, mask_a, mask_b, res_f, res_i, taken)
+        _solve_chunks(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                      mask_a, mask_b, res_f, res_i, taken)
+
+
+@njit(cache=True)
+def solve_rows(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows, mask_a,
+               mask_b, res_f, res_i, nt) -> None:
+    """The LCPs of the pairs ``rows`` in place (:func:`_solve_range`): on nt threads from
+    :data:`PARALLEL_MIN_PAIRS` pairs, else on this one; then
+    :func:`accept_within_nonconvexity` of their rows."""
+    K = rows.shape[0]
+    if K >= PARALLEL_MIN_PAIRS:
+        _batch_kernel(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                      mask_a, mask_b, res_f, res_i, nt)
+    elif K:
+        _solve_chunk(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
+                     mask_a, mask_b, res_f, res_i, 0, K)
+    tol = np.empty(K)
+    for k in range(K):
+        tol[k] = nc[shape[body_a[rows[k]]]] + nc[shape[body_b[rows[k]]]]
+    accept_within_nonconvexity(tol, res_f, res_i, rows)
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,
@@ -379,37 +410,36 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
         prev_i = np.zeros((K, NI), np.int64)
     if out is None:
         out = (np.zeros((K, NF)), np.zeros((K, NI), np.int64))
+    out[0][:] = full_rows(prev_f)           # solved in place from the previous rows
+    out[1][:] = prev_i
     no_mask = np.zeros((K, 0), np.bool_)
     mask_a = no_mask if mask_a is None else np.ascontiguousarray(mask_a, dtype=np.bool_)
     mask_b = no_mask if mask_b is None else np.ascontiguousarray(mask_b, dtype=np.bool_)
-    args = (table.tab, table.info, table.centroid, table.radius, table.seeds, table.nonconvexity,
-            sa, pos_a, rot_a, sb, pos_b, rot_b,
-            full_rows(prev_f), np.ascontiguousarray(prev_i, dtype=np.int64),
-            mask_a, mask_b, out[0], out[1])
-    if K >= PARALLEL_MIN_PAIRS:
-        _batch_kernel(*args, numba.get_num_threads())
-    elif K:
-        _solve_chunk(*args, 0, K)
-    accept_within_nonconvexity(table.nonconvexity[sa] + table.nonconvexity[sb], *out)
+    k = np.arange(K, dtype=np.int64)        # pair k: bodies k (A) and K + k (B), row k
+    solve_rows(table.tab, table.info, table.centroid, table.radius, table.seeds,
+               table.nonconvexity, np.concatenate((sa, sb)), np.concatenate((pos_a, pos_b)),
+               np.concatenate((rot_a, rot_b)), k, K + k, k, mask_a, mask_b, out[0], out[1],
+               numba.get_num_threads())
     return out
 
 
 @njit(cache=True)
-def accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.ndarray) -> None:
+def accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.ndarray,
+                               rows: np.ndarray) -> None:
     """A direction search that stalls on a *nearly* convex shape (a saddle at a CAD patch
     corner makes the support function non-smooth there) is accepted, not counted as failed,
     when its valid result lies within the two shapes' non-convexity heights of touching,
     |signed distance| <= h_A + h_B: the contact is grazing to within the geometric tolerance
     the shapes were accepted with (a force of at most εn (h_A + h_B)); stalls at deeper
     contacts are handled in the kernel (:func:`lcp.solve_pair`, "saddle stall").  Convex
-    shapes have h = 0: nothing changes for them.  tol (K,) = h_A + h_B per row (m); rows
-    (K, NF), (K, NI) updated in place.  Compiled: the scene's dispatch
-    (:mod:`nurbsdem.contact.listed`) calls it too."""
+    shapes have h = 0: nothing changes for them.  tol (K,) = h_A + h_B (m) of the rows
+    rows[k] of res_f (·, NF), res_i (·, NI), updated in place."""
     if not np.any(tol != 0.0):
         return
-    for k in range(res_f.shape[0]):
-        if res_i[k, I_FAIL] == 1 and res_i[k, I_VALID] == 1 and abs(res_f[k, F_SD]) <= tol[k]:
-            res_i[k, I_FAIL] = 0
+    for k in range(rows.shape[0]):
+        j = rows[k]
+        if res_i[j, I_FAIL] == 1 and res_i[j, I_VALID] == 1 and abs(res_f[j, F_SD]) <= tol[k]:
+            res_i[j, I_FAIL] = 0
 
 
 # --------------------------------------------------------------------------- stage 1 alone

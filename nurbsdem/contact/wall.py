@@ -175,54 +175,83 @@ def detect_wall(shape, pose, wall, previous: ContactResult | None = None) -> Con
 
 
 @kernel
-def _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                prev_f, prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask):
-    """The loop of :func:`_wall_chunk`, without reference counting (see
-    :func:`nurbsdem.contact.detect._solve_range`)."""
+def _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                origin, wa, wb, wdom, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask, prev_f,
+                prev_i):
+    """The loop of :func:`_wall_chunk`: contact j = rows[k] for k in k0..k1-1 of body
+    body[j] (shape[·], pos[·], rot[·]) against wall w = wall[j] − wall_base (origin[w],
+    wa[w], wb[w], wdom[w]); its rows res_f[j], res_i[j] hold the previous solution and
+    receive the new one in place (the previous one copied into prev_f, prev_i first).
+    Without reference counting (see :func:`nurbsdem.contact.detect._solve_range`)."""
     for k in range(k0, k1):
-        s = sid[k]
-        solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[k], rot[k], origin[k], wa[k],
-                   wb[k], wdom[k], prev_f[k], prev_i[k], ws, wf, wi, wfs, no_mask, res_f[k],
-                   res_i[k])
+        j = rows[k]
+        i = body[j]
+        w = wall[j] - wall_base
+        s = shape[i]
+        for c in range(prev_f.shape[0]):
+            prev_f[c] = res_f[j, c]
+        for c in range(prev_i.shape[0]):
+            prev_i[c] = res_i[j, c]
+        solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[i], rot[i], origin[w], wa[w],
+                   wb[w], wdom[w], prev_f, prev_i, ws, wf, wi, wfs, no_mask, res_f[j],
+                   res_i[j])
 
 
 @njit(cache=True)
-def _wall_chunk(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                prev_f, prev_i, res_f, res_i, k0, k1):
-    """Body/wall contacts k0..k1-1 with one set of workspaces (one thread)."""
+def _wall_chunk(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                origin, wa, wb, wdom, res_f, res_i, k0, k1):
+    """Body/wall contacts rows[k0:k1] (:func:`_wall_range`) with one set of workspaces (one
+    thread)."""
     ws = make_workspace()
     wf, wi, wfs, _ = make_work()
-    no_mask = np.zeros(0, np.bool_)
-    _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom, prev_f,
-                prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
+    _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                origin, wa, wb, wdom, res_f, res_i, k0, k1, ws, wf, wi, wfs,
+                np.zeros(0, np.bool_), np.empty(NF), np.empty(NI, np.int64))
 
 
 @njit(cache=True)
-def _wall_chunks(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                 prev_f, prev_i, res_f, res_i, taken):
+def _wall_chunks(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                 origin, wa, wb, wdom, res_f, res_i, taken):
     """:func:`_wall_chunk` of the chunks :func:`~nurbsdem.contact.detect.next_chunk` hands
     this thread, with one set of workspaces."""
     ws = make_workspace()
     wf, wi, wfs, _ = make_work()
     no_mask = np.zeros(0, np.bool_)
-    k0, k1 = next_chunk(taken, sid.shape[0])
+    prev_f, prev_i = np.empty(NF), np.empty(NI, np.int64)
+    k0, k1 = next_chunk(taken, rows.shape[0])
     while k0 < k1:
-        _wall_range(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom, prev_f,
-                    prev_i, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask)
-        k0, k1 = next_chunk(taken, sid.shape[0])
+        _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                    origin, wa, wb, wdom, res_f, res_i, k0, k1, ws, wf, wi, wfs, no_mask,
+                    prev_f, prev_i)
+        k0, k1 = next_chunk(taken, rows.shape[0])
 
 
 @njit(cache=True, parallel=True)
-def _wall_batch_kernel(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                       prev_f, prev_i, res_f, res_i, nt):
-    """The body/wall contacts of the batch on nt threads, which take chunks as they go."""
-    K = sid.shape[0]
+def _wall_batch_kernel(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base,
+                       rows, origin, wa, wb, wdom, res_f, res_i, nt):
+    """The body/wall contacts ``rows`` (in place) on nt threads, which take chunks as they
+    go."""
+    K = rows.shape[0]
     if nt > K:
         nt = max(K, 1)
     taken = np.zeros(1, np.int64)
     for t in prange(nt):
-        _wall_chunks(tab, info, cen, rad, seeds, sid, pos, rot, origin, wa, wb, wdom,
-                     prev_f, prev_i, res_f, res_i, taken)
+        _wall_chunks(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                     origin, wa, wb, wdom, res_f, res_i, taken)
+
+
+@njit(cache=True)
+def solve_wall_rows(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                    origin, wa, wb, wdom, res_f, res_i, nt) -> None:
+    """The body/wall contacts ``rows`` in place (:func:`_wall_range`): on nt threads from
+    :data:`~nurbsdem.contact.detect.PARALLEL_MIN_PAIRS` contacts, else on this one."""
+    K = rows.shape[0]
+    if K >= PARALLEL_MIN_PAIRS:
+        _wall_batch_kernel(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base,
+                           rows, origin, wa, wb, wdom, res_f, res_i, nt)
+    elif K:
+        _wall_chunk(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
+                    origin, wa, wb, wdom, res_f, res_i, 0, K)
 
 
 def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=None, prev_i=None):
@@ -239,15 +268,11 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
     if prev_f is None or prev_i is None:
         prev_f = np.zeros((K, NF))
         prev_i = np.zeros((K, NI), np.int64)
-    res_f = np.zeros((K, NF))
-    res_i = np.zeros((K, NI), np.int64)
-    args = (table.tab, table.info, table.centroid, table.radius, table.seeds,
-            np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
-            f(rot, (K, 3, 3)), f(origin, (K, 3)), f(a, (K, 3)), f(b, (K, 3)),
-            f(dom, (K, 4)), full_rows(prev_f),
-            np.ascontiguousarray(prev_i, dtype=np.int64), res_f, res_i)
-    if K >= PARALLEL_MIN_PAIRS:
-        _wall_batch_kernel(*args, numba.get_num_threads())
-    elif K:
-        _wall_chunk(*args, 0, K)
+    res_f = full_rows(prev_f).copy()        # solved in place from the previous rows
+    res_i = np.array(prev_i, dtype=np.int64).reshape(K, NI)
+    k = np.arange(K, dtype=np.int64)        # contact k: body k against wall k, row k
+    solve_wall_rows(table.tab, table.info, table.centroid, table.radius, table.seeds,
+                    np.ascontiguousarray(shape_id, dtype=np.int64), f(pos, (K, 3)),
+                    f(rot, (K, 3, 3)), k, k, 0, k, f(origin, (K, 3)), f(a, (K, 3)),
+                    f(b, (K, 3)), f(dom, (K, 4)), res_f, res_i, numba.get_num_threads())
     return res_f, res_i

@@ -12,7 +12,8 @@ compiled loop over many deck steps:
 4. the contact search of the scene: odometers, the neighbour list with its skin and the
    candidate patches (:func:`~nurbsdem.contact.listed.scene_list`), certificates
    (:mod:`nurbsdem.contact.verlet`), the rows of the pairs not certified apart
-   (:func:`~nurbsdem.contact.listed.solve_due`: closed forms, point-to-surface, LCP batches),
+   (:func:`~nurbsdem.contact.listed.solve_due_into`: closed forms, point-to-surface, LCP
+   batches, in place),
 5. contact forces (paper Eq. 16–17, or Hertz–Mindlin with the contacts' exact equivalent
    radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii` — scenes of exact
    spheres only; :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential
@@ -61,8 +62,7 @@ import numpy as np
 from numba import njit
 
 from ..contact.analytic import closed_form_into
-from ..contact.lcp import I_FAIL
-from ..contact.listed import scene_list, solve_due
+from ..contact.listed import scene_list, solve_due_into
 from ..contact.verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
                               renew_certificates)
 from ..geometry.curvature import scene_contact_radii
@@ -158,18 +158,14 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     due = due[:n_due]
     c1 = cycles()
     failed = False
-    if sc.all_spheres:      # closed forms only: written in place (what solve_due does for them)
+    if sc.all_spheres:      # closed forms only (what solve_due_into does for them)
         t = sc.tables
         closed_form_into(rows_f, rows_i, due, a, b, t.n, pos, R, wall_d, t.body_shape,
                          t.sphere_center, t.sphere_radius, t.wall_origin, t.wall_a, t.wall_b,
                          t.wall_dom)
-    else:
-        rf, ri, points = solve_due(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i, due, pos,
-                                   R, wall_d, sc.threads)
-        for r in range(n_due):
-            rows_f[due[r]] = rf[r]
-            rows_i[due[r]] = ri[r]
-            failed = failed or ri[r, I_FAIL] != 0
+    else:                   # in place: the loop owns these arrays
+        points, failed = solve_due_into(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i, due,
+                                        pos, R, wall_d, sc.threads)
         counters[POINT_SOLVES] += points
     c2 = cycles()
     renew_certificates(budget, due, rows_f, rows_i, reach)
