@@ -125,6 +125,10 @@ print('YADE-RESULT ' + json.dumps(dict(wall=wall_t, height=h, law=law)))
 """
 
 
+#: runs of each code, alternated; the faster of each is compared
+ROUNDS = 2
+
+
 def run_nurbsdem(deck: Path, out: Path, warmup: Path | None = None) -> dict:
     """Time loop of nurbsdem on ``deck``; ``warmup`` (a short deck) is run first in another
     process so that numba's on-disk cache holds the compiled kernels (as for any user after
@@ -161,15 +165,27 @@ def main(argv: list[str]) -> dict:
         deck.write_text(nurbsdem_deck(pos, rad, T))
         warm = work / "warmup.inp"
         warm.write_text(nurbsdem_deck(pos, rad, 0.02))
-        nd = run_nurbsdem(deck, work / "out", warm)
-        yd = run_yade(pos, rad, T, work)
-    print(f"112 spheres, {T} s at dt {DT} s, one thread each")
-    print(f"nurbsdem: time loop {nd['loop']:.2f} s (whole run {nd['wall']:.2f} s, "
+        nds, yds = [], []
+        for k in range(ROUNDS):             # alternated: this VM's speed drifts
+            nds.append(run_nurbsdem(deck, work / "out", warm if k == 0 else None))
+            yds.append(run_yade(pos, rad, T, work))
+    nd = min(nds, key=lambda r: r["loop"])
+    yd = (min(yds, key=lambda r: r["wall"]) if all(isinstance(y, dict) for y in yds)
+          else next(y for y in yds if isinstance(y, str)))
+    nd["loops"] = [r["loop"] for r in nds]
+    if isinstance(yd, dict):
+        yd["walls"] = [y["wall"] for y in yds]
+    print(f"112 spheres, {T} s at dt {DT} s, one thread each, the faster of {ROUNDS} runs each "
+          f"(alternated)")
+    print(f"nurbsdem: time loop {nd['loop']:.2f} s (runs: "
+          f"{', '.join(f'{t:.2f}' for t in nd['loops'])} s; whole run {nd['wall']:.2f} s, "
           f"{nd['substeps']} internal steps), mean height at the end {nd['height']:.4f} m")
     if isinstance(yd, str):
         print(yd)
     else:
-        print(f"Yade:     time loop {yd['wall']:.2f} s, mean height at the end {yd['height']:.4f} m "
+        print(f"Yade:     time loop {yd['wall']:.2f} s (runs: "
+              f"{', '.join(f'{t:.2f}' for t in yd['walls'])} s), mean height at the end "
+              f"{yd['height']:.4f} m "
               f"(contact law kn, cn, ks = {yd['law']})")
         print(f"ratio nurbsdem / Yade: {nd['loop'] / yd['wall']:.2f}; mean heights differ by "
               f"{100 * abs(nd['height'] / yd['height'] - 1):.2f} %")

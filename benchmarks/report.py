@@ -1103,7 +1103,10 @@ def section_spheres(rep: Report) -> None:
     rep.add(f"`benchmarks/bench_yade.py`: the paper's box and contact law with 112 exact spheres "
             f"(volume-equivalent radii of A, B, C), released at rest, {r['T']} s at dt 1e-4 s, "
             "one thread each, the same positions; time of the time loop (compiled kernels "
-            "cached: a warm-up run first).\n\n" +
+            f"cached: a warm-up run first); the faster of {bench_yade.ROUNDS} runs of each, "
+            "alternated (nurbsdem: " + ", ".join(f"{t:.2f}" for t in nd["loops"]) + " s"
+            + ("; Yade: " + ", ".join(f"{t:.2f}" for t in yd["walls"]) + " s"
+               if isinstance(yd, dict) else "") + ").\n\n" +
             md_table(["code", "time loop s", "internal steps", "mean height at the end m"], rows)
             + "\n")
     if isinstance(yd, dict):
@@ -1410,6 +1413,10 @@ def build(outdir: Path, quick: bool) -> Path:
         bodies = {}
         # section 1 is written first, but measured while its workers run in the background
         for name, fn in sections:
+            if name == "cost" and sweep is not None:
+                # the sweep's workers compile the LCP anew after a change of its sources
+                # (minutes of CPU): the timed runs of section 5 must not share the cores
+                sweep.thread.join()
             t0 = time.perf_counter()
             n0 = len(rep.parts)
             try:
