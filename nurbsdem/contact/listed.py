@@ -7,7 +7,8 @@ then for each pair of NURBS bodies the patch boxes, whose overlaps become the pa
 patches (masks that direct a cold start); exact spheres need no boxes.
 
 Then the pairs of the list that are not certified apart (``due``) get their rows from
-:func:`solve_due`, each by what its shapes are (the scene's module docstring):
+:func:`solve_due_into`, in place in the list's rows (:func:`solve_due`: the scene's copy of
+it), each by what its shapes are (the scene's module docstring):
 
 * exact sphere against exact sphere or a flat wall: the closed forms of
   :mod:`nurbsdem.contact.analytic`;
