@@ -40,7 +40,7 @@ from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
 from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
 from .detect import solve_rows
-from .lcp import F_SD, I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
+from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
 from .wall import solve_wall_rows
 
