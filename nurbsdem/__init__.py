@@ -44,6 +44,13 @@ if _ranks_on_this_node() > 1:
     os.environ.setdefault("OPENBLAS_NUM_THREADS",
                           str(max(1, (os.cpu_count() or 1) // _ranks_on_this_node())))
 
+# numba's cache is checked per source file; a kernel inlined from another module that changed
+# would keep running its old code (a segmentation fault after an upgrade): one hash of all the
+# sources decides for the whole cache (nurbsdem.cachecheck), before any kernel loads.
+from .cachecheck import check_caches  # noqa: E402
+
+check_caches()
+
 __version__ = "0.1.0"
 
 #: Public names loaded on first use: name -> (module, attribute; None = the module itself).
