@@ -19,6 +19,7 @@ import pytest
 import nurbsdem
 from nurbsdem import shapes
 from nurbsdem.geometry.generators import box_walls, flat_wall
+from nurbsdem.errors import InputError
 from nurbsdem.io.checkpoint import load_checkpoint, save_checkpoint
 from nurbsdem.io.writers import (CONTACT_COLUMNS, ENERGY_COLUMNS, WALL_COLUMNS, MonitorWriter,
                                  OutputWriters, ParaViewWriter, ResultsWriter, read_pvd,
@@ -288,6 +289,38 @@ def test_checkpoint_round_trip(tmp_path):
     _assert_same(st, load_checkpoint(tmp_path / "ck.h5"))
     with h5py.File(tmp_path / "ck.h5", "r") as f:
         assert f.attrs["nurbsdem_version"] == nurbsdem.__version__
+
+
+def test_checkpoint_reads_format_1(tmp_path):
+    """A checkpoint of the earlier layout (a dataset per value; tests/data, written by the
+    version before format 2 from this state) still loads exactly."""
+    data = Path(__file__).parent / "data" / "checkpoint_format1.h5"
+    with h5py.File(data, "r") as f:
+        assert f.attrs["format"] == "nurbsdem-checkpoint-1"
+    _assert_same(_state(), load_checkpoint(data))
+
+
+def test_checkpoint_is_two_datasets_whatever_it_holds(tmp_path):
+    """Format 2 packs every value into one data set and a manifest (HDF5 objects cost ~0.2 ms
+    each to create: the reason for the packing)."""
+    state = {f"v{i}": {"a": np.full(i, float(i)), "s": "x" * i, "n": i} for i in range(60)}
+    save_checkpoint(tmp_path / "ck.h5", state)
+    with h5py.File(tmp_path / "ck.h5", "r") as f:
+        assert sorted(f.keys()) == ["data", "manifest"]
+        assert f.attrs["format"] == "nurbsdem-checkpoint-2"
+    _assert_same(state, load_checkpoint(tmp_path / "ck.h5"))
+
+
+def test_checkpoint_with_a_damaged_manifest_is_an_input_error(tmp_path):
+    path = tmp_path / "ck.h5"
+    save_checkpoint(path, {"a": np.arange(4.0), "b": b"xyz"})
+    for damage in (b'{"dict":[["a",{"ndarray":["<f8",[4],0,320]}]]}', b"{not json",
+                   b'{"nothing":1}'):
+        with h5py.File(path, "r+") as f:
+            del f["manifest"]
+            f["manifest"] = np.frombuffer(damage, np.uint8)
+        with pytest.raises(InputError, match="corrupted checkpoint"):
+            load_checkpoint(path)
 
 
 def test_checkpoint_rejects_unstorable(tmp_path):
