@@ -26,7 +26,7 @@ import logging
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +36,7 @@ from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.energy import EnergySample
 from .dynamics.hertz import law_from_deck as hertz_law_from_deck
-from .dynamics.monitor import MonitorSample
+from .dynamics.monitor import MonitorSample, StateSample, contact_output_of
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
@@ -393,9 +393,11 @@ class Solver:
             writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction)
 
     def _sample(self, writers: OutputWriters, force: bool = False,
-                samples: tuple[MonitorSample, ...] = ()) -> None:
-        """Write the monitor ``samples`` the deck steps took, then what falls due now (with
-        ``force`` the monitors too: the start of a run)."""
+                samples: tuple[MonitorSample, ...] = (),
+                states: tuple[StateSample, ...] = ()) -> None:
+        """Write the monitor ``samples`` and the ParaView and results ``states`` the deck
+        steps took, then what falls due now (with ``force`` the monitors too: the start of a
+        run)."""
         t0 = time.perf_counter()
         out = self.model.output
         t = self.time
@@ -405,6 +407,8 @@ class Solver:
                 self._write_monitors(writers, smp)
             if force:
                 self._write_monitors(writers, s.monitor_sample())
+        for st in states:
+            self._write_state(writers, st)
         vtk = force or _due(t, out.vtk_every)
         results = force or _due(t, out.results_interval)
         if vtk or results:
@@ -416,20 +420,27 @@ class Solver:
             writers.results.append(t, self.bodies)
         self.timers["output"] += time.perf_counter() - t0
 
+    def _write_state(self, writers: OutputWriters, st: StateSample) -> None:
+        """The ParaView and results samples due at a state the deck steps kept (what
+        :meth:`_sample` writes live from the system at the present time)."""
+        out = self.model.output
+        bodies = replace(self.bodies, position=st.position, quaternion=st.quaternion,
+                         velocity=st.velocity, angular_velocity=st.angular_velocity)
+        if _due(st.time, out.vtk_every):
+            writers.paraview.write(st.time, bodies, wall_displacement=st.wall_displacement,
+                                   contacts=st.contacts)
+        if _due(st.time, out.results_interval):
+            writers.results.append(st.time, bodies)
+
     def _contact_output(self) -> dict | None:
         s = self.system
         cs = self.scene.last if self.scene is not None else None
         if cs is None or cs.active == 0 or s.c_a.shape[0] != cs.active:
             return None
-        tab = s.contact_table()
-        n = cs.normal
-        fn = tab["fn"][:, None] * n
-        out = dict(point=tab["point"], force_normal=fn, force_tangential=tab["force"] - fn,
-                   penetration=cs.depth, degenerated=cs.degenerated,
-                   body_a=cs.body_a, body_b=cs.body_b)
-        if s.uses_hertz and s.c_coeffs.shape[0] == cs.active:   # Hertz–Mindlin laws
-            out.update(stiffness_normal=s.c_coeffs[:, 0], contact_radius=s.c_radius)
-        return out
+        hertz = s.uses_hertz and s.c_coeffs.shape[0] == cs.active   # Hertz–Mindlin laws
+        return contact_output_of(cs.body_a, cs.body_b, s.c_point, s.c_ftot, s.c_fn, cs.normal,
+                                 cs.depth, cs.degenerated, s.c_coeffs if hertz else None,
+                                 s.c_radius if hertz else None)
 
     # ------------------------------------------------------------------ checkpoints
     def _checkpoint(self, writers: OutputWriters) -> None:
@@ -519,11 +530,13 @@ class Solver:
             e0 = self.scene.timers.calls
             n = self._steps_to_event(n_total - self.step_progress, ck_every)
             try:
-                done = sysm.steps(n, self._monitors_due(n))
+                done = sysm.steps(n, self._monitors_due(n), self._states_due(n))
             except InstabilityError:
                 self.time = sysm.time
                 for smp in sysm.last_steps.samples:     # the deck steps done before it
                     self._write_monitors(writers, smp)
+                for st in sysm.last_steps.states:
+                    self._write_state(writers, st)
                 self._sync_bodies_from_system()
                 self._checkpoint(writers)
                 raise
@@ -545,7 +558,7 @@ class Solver:
             self.summary.active_total += tally.active_sum
             self.summary.degenerated += tally.degenerated_sum
             self.summary.failed += tally.failed_sum
-            self._sample(writers, samples=tally.samples)
+            self._sample(writers, samples=tally.samples, states=tally.states)
             if _due(self.time, ck_every) and self.step_progress < n_total:
                 self._sync_bodies_from_system()
                 self._checkpoint(writers)
@@ -560,18 +573,28 @@ class Solver:
         self._close_system()
 
     def _steps_to_event(self, left: int, ck_every: float) -> int:
-        """Deck steps from now to the next one at which VTK or results output or a checkpoint
-        falls due (monitors too with Hertz–Mindlin laws), or to the end of the solution step
-        (``left`` deck steps), at most MAX_COMPILED_STEPS."""
+        """Deck steps from now to the next one at which a checkpoint falls due (monitors too
+        with Hertz–Mindlin laws), or to the end of the solution step (``left`` deck steps), at
+        most MAX_COMPILED_STEPS.  The monitors, ParaView and results samples in between are
+        taken by the system at the deck steps' ends (:meth:`_monitors_due`,
+        :meth:`_states_due`): the compiled loop runs on through them."""
         out = self.model.output
         sysm = self.system
         n = min(left, MAX_COMPILED_STEPS)
         # monitors are recorded inside the compiled loop, except the Hertz row (taken live)
         monitors = out.monitors_every if sysm.uses_hertz else 0.0
-        for every in (monitors, out.vtk_every, out.results_interval, ck_every):
+        for every in (monitors, ck_every):
             if every > 0:
                 n = min(n, _steps_to_due(sysm.t0, sysm.step_count, sysm.dt, every, n))
         return n
+
+    def _states_due(self, n: int) -> np.ndarray:
+        """(n,) bool: the next n deck steps at whose end ParaView or results output falls
+        due."""
+        sysm, out = self.system, self.model.output
+        return np.array([_due(t, out.vtk_every) or _due(t, out.results_interval)
+                         for t in (sysm.t0 + (sysm.step_count + k) * sysm.dt
+                                   for k in range(1, n + 1))], bool)
 
     def _monitors_due(self, n: int) -> np.ndarray:
         """(n,) bool: the next n deck steps at whose end the monitors fall due."""

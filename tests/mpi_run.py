@@ -40,8 +40,8 @@ def main(argv: list[str]) -> int:
     if a.kill_after is not None:
         sample = Solver._sample
 
-        def dying(self, writers, force=False, samples=()):
-            sample(self, writers, force, samples)
+        def dying(self, writers, force=False, samples=(), states=()):
+            sample(self, writers, force, samples, states)
             if self.time > a.kill_after:
                 raise Killed
         Solver._sample = dying

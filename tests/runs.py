@@ -61,8 +61,8 @@ def killed_and_restarted(deck: Path, out: Path, kill_after: float, monkeypatch) 
         pass
     original = Solver._sample
 
-    def dying(self, writers, force=False, samples=()):
-        original(self, writers, force, samples)
+    def dying(self, writers, force=False, samples=(), states=()):
+        original(self, writers, force, samples, states)
         if self.time > kill_after:
             raise Killed
     monkeypatch.setattr(Solver, "_sample", dying)

@@ -187,8 +187,8 @@ def test_restart_from_a_checkpoint_through_the_api(runs, tmp_path, monkeypatch):
 
     original = Solver._sample
 
-    def dying_sample(self, writers, force=False, samples=()):
-        original(self, writers, force, samples)
+    def dying_sample(self, writers, force=False, samples=(), states=()):
+        original(self, writers, force, samples, states)
         if self.time > 0.071:             # in step 5 (the lid moving), after a checkpoint
             raise Killed
     monkeypatch.setattr(Solver, "_sample", dying_sample)
@@ -418,8 +418,8 @@ def test_cli_restart_goes_through_the_simulation(runs, tmp_path, monkeypatch):
     out = tmp_path / "out"
     original = Solver._sample
 
-    def dying_sample(self, writers, force=False, samples=()):
-        original(self, writers, force, samples)
+    def dying_sample(self, writers, force=False, samples=(), states=()):
+        original(self, writers, force, samples, states)
         if self.time > 0.051:             # in step 3, after the checkpoint at 0.05 s
             raise KeyboardInterrupt
     monkeypatch.setattr(Solver, "_sample", dying_sample)

@@ -96,10 +96,12 @@ PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget o
 #: constants of the bodies and the contact laws
 BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
                        "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
-#: the last force evaluation: per-contact arrays, histories and loads
+#: the last force evaluation: per-contact arrays (``depth`` (K,) m and ``deg`` (K,) the
+#: contacts' penetrations and degeneration flags, for the ParaView samples), histories and
+#: loads
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
                         "radius fallback hist_keys hist_springs force torque slip near_a near_b "
-                        "near_point near_normal near_gap reach monitored degenerated")
+                        "near_point near_normal near_gap reach monitored degenerated depth deg")
 #: step-control and guard settings (floats and flags); ``heavy``: the sub-step count from which
 #: the caller warns (once: afterwards larger than any count)
 Control = namedtuple("Control", "dt refine_decay safety dt_apriori forced recheck fall "
@@ -236,7 +238,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
                             radius, n_fall, key.copy(), spring.copy(), force, torque, slip,
                             near_a, near_b, near_point, near_normal, gap, reach, monitored,
-                            np.count_nonzero(deg))
+                            np.count_nonzero(deg), dep, deg)
 
 
 # --------------------------------------------------------------------------- integration
@@ -369,12 +371,14 @@ def _balance(bc, ev, x, v, q, L, ledger) -> float:
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                   counters, peak, acc_growth, estimate, sample_at, rows):
+                   counters, peak, acc_growth, estimate, sample_at, rows, state_at):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
 
     sample_at (n_deck,) bool: the deck steps at whose end a monitor row is written into rows
-    (n_deck, row_width(W)) (:func:`~nurbsdem.dynamics.monitor.record_row`).
+    (n_deck, row_width(W)) (:func:`~nurbsdem.dynamics.monitor.record_row`).  state_at
+    (n_deck,) bool: the deck steps at whose end the state is kept for the ParaView and
+    results output: (deck step, x, q, v, L, wall_d, the Evaluation) in the list ``states``.
 
     walls_d, walls_u (n_deck·n_run, W, 3): the walls' displacements (m) and velocities
     (m/s) at the end of each internal step.  Body state (x, v, q, L), ledger (5,) J, wall_work
@@ -385,7 +389,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     :mod:`nurbsdem.dynamics.accuracy`) a deck step whose balance error grows beyond its
     budget is rolled back (REFINE, the state of its start) and one after which the factor
     falls ends the call (RECOUNT).  Returns (status, deck steps done, PairList, Evaluation,
-    wall_d, wall_u).
+    wall_d, wall_u, states).
     """
     n_run = substeps * counters[ACC_REFINE]
     h = cc.dt / n_run
@@ -394,6 +398,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     accuracy = cc.accuracy > 0.0
     # the balance error at the start of the deck step (then carried from its end)
     balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
+    states = [(0, x, q, v, L, wall_d, ev) for _ in range(0)]    # typed by its items
     for j in range(n_deck):
         if accuracy:
             sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
@@ -407,27 +412,27 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count,
                                            bc.alt_floor_x, bc.alt_floor_L, inv_h)
                 if worst >= 0 and alt_count[worst] >= ALTERNATION_STEPS:
-                    return GUARD, j, pl, ev, wall_d, wall_u
+                    return GUARD, j, pl, ev, wall_d, wall_u, states
             drift(x, v, q, L, bc.inv_I, h)
             omega = omega_world(q, L, bc.inv_I)
             wall_d, wall_u = d_new.copy(), u_new.copy()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
             pl, reach, monitored, failed = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
             if failed:
-                return GUARD, j, pl, ev, wall_d, wall_u
+                return GUARD, j, pl, ev, wall_d, wall_u, states
             counters[EVALS] += 1
             counters[MONITORED] += monitored
             ok, ev = _evaluate(sc, bc, cc, pl, reach, monitored, ev, x, v, q, L, omega, R,
                                wall_d, wall_u, h, counters)
             if not ok:
-                return GUARD, j, pl, ev, wall_d, wall_u
+                return GUARD, j, pl, ev, wall_d, wall_u, states
             omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
             if not _finite(x, v, q, L, ev.force):
-                return GUARD, j, pl, ev, wall_d, wall_u
+                return GUARD, j, pl, ev, wall_d, wall_u, states
         counters[STEP_COUNT] += 1
         ok, balance = _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak)
         if not ok:
-            return GUARD, j, pl, ev, wall_d, wall_u
+            return GUARD, j, pl, ev, wall_d, wall_u, states
         acc = counters[ACC_REFINE]
         if accuracy:
             growth = abs(balance - balance0)
@@ -440,7 +445,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 counters[ACC_CALM] = 0
                 counters[ACC_REPEATS] += 1
                 acc_growth[0] = growth
-                return REFINE, j, sn.pl, sn.ev, sn.wall_d, sn.wall_u
+                return REFINE, j, sn.pl, sn.ev, sn.wall_d, sn.wall_u, states
             acc_growth[0] = np.inf
             balance0 = balance
             counters[ACC_REFINE], counters[ACC_CALM] = after_accepted(growth, budget, acc,
@@ -456,11 +461,13 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         if sample_at[j]:
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
                        ev.monitored, active, ev.degenerated, wall_d, ev.force)
+        if state_at[j]:
+            states.append((j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         if not _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters, estimate):
-            return CONTROL, j + 1, pl, ev, wall_d, wall_u
+            return CONTROL, j + 1, pl, ev, wall_d, wall_u, states
         if counters[ACC_REFINE] != acc:
-            return RECOUNT, j + 1, pl, ev, wall_d, wall_u
-    return DONE, n_deck, pl, ev, wall_d, wall_u
+            return RECOUNT, j + 1, pl, ev, wall_d, wall_u, states
+    return DONE, n_deck, pl, ev, wall_d, wall_u, states
 
 
 # --------------------------------------------------------------------------- the Python side
@@ -530,7 +537,8 @@ class DeckSteps:
                           np.ascontiguousarray(cs.near_point, float),
                           np.ascontiguousarray(cs.near_normal, float),
                           np.asarray(cs.near_gap, float), reach, int(cs.monitored),
-                          int(cs.degenerated_count))
+                          int(cs.degenerated_count), np.ascontiguousarray(cs.depth, float),
+                          np.ascontiguousarray(cs.degenerated, np.int64))
 
     def _control(self) -> Control:
         from .system import (FALL_HYSTERESIS, HEAVY_SUBSTEPS, NETWORK_BOUND_SLACK,
@@ -559,10 +567,11 @@ class DeckSteps:
         counters[ACC_REFINE] = 1            # the loop divides the deck step by the count
         self._loop(0, max(int(s.substeps), 1), walls_d, walls_u, s.ledger.to_array(), counters,
                    np.array([s._peak]), np.array([s.acc_last_growth]), self._estimate(),
-                   np.zeros(0, np.bool_), np.zeros((0, row_width(s.walls.n))))
+                   np.zeros(0, np.bool_), np.zeros((0, row_width(s.walls.n))),
+                   np.zeros(0, np.bool_))
 
     def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, ledger, counters, peak,
-              acc_growth, estimate, sample_at, rows):
+              acc_growth, estimate, sample_at, rows, state_at):
         """:func:`run_deck_steps` on the system's state (the one call of the loop, so that
         :meth:`load` and :meth:`run` pass the same argument types)."""
         s, b = self.system, self.system.bodies
@@ -570,12 +579,14 @@ class DeckSteps:
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
             s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
-            estimate, sample_at, rows)
+            estimate, sample_at, rows, state_at)
 
-    def run(self, n_deck: int, sample_at: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
+    def run(self, n_deck: int, sample_at: np.ndarray,
+            state_at: np.ndarray | None = None) -> tuple[int, int, np.ndarray, np.ndarray, list]:
         """Up to n_deck deck steps; returns (status, deck steps done, counters, the monitor
-        rows (n_deck, row_width(W)) of the deck steps ``sample_at`` (n_deck,) bool).  On GUARD
-        the system and scene are left in an undefined state: the caller restores them."""
+        rows (n_deck, row_width(W)) of the deck steps ``sample_at`` (n_deck,) bool, the states
+        kept at the deck steps ``state_at`` (n_deck,) bool (:func:`run_deck_steps`)).  On
+        GUARD the system and scene are left in an undefined state: the caller restores them."""
         s = self.system
         walls_d, walls_u = self._wall_tables(n_deck, s.substeps * s.acc_refine)
         counters = np.zeros(N_COUNTERS, np.int64)
@@ -586,17 +597,19 @@ class DeckSteps:
         estimate = self._estimate()
         ledger = s.ledger.to_array()
         sample_at = np.ascontiguousarray(sample_at[:n_deck], np.bool_)
+        state_at = (np.zeros(n_deck, np.bool_) if state_at is None
+                    else np.ascontiguousarray(state_at[:n_deck], np.bool_))
         rows = np.zeros((n_deck, row_width(s.walls.n)))
-        status, done, pl, ev, wall_d, wall_u = self._loop(
+        status, done, pl, ev, wall_d, wall_u, states = self._loop(
             n_deck, s.substeps, walls_d, walls_u, ledger, counters, peak, acc_growth, estimate,
-            sample_at, rows)
+            sample_at, rows, state_at)
         if status == GUARD:
-            return status, done, counters, rows
+            return status, done, counters, rows, []
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
         s.acc_last_growth = float(acc_growth[0])
         s.dt_bound, s.dt_network, s.dt_critical = (float(e) for e in estimate)
         s.network_estimates += int(counters[NETWORK_ESTIMATES])
-        return status, done, counters, rows
+        return status, done, counters, rows, states
 
     def _store(self, pl, ev, wall_d, wall_u, ledger, counters, peak) -> None:
         """Write the loop's results back into the system and the scene."""

@@ -97,3 +97,39 @@ def record_row(row: np.ndarray, mass: np.ndarray, x: np.ndarray, v: np.ndarray, 
         for k in range(3):
             row[ROW_WALLS + 3 * w + k] = wall_d[w, k]
             row[ROW_WALLS + 3 * W + 3 * w + k] = -force[N + w, k]
+
+
+@dataclass(frozen=True)
+class StateSample:
+    """The state the ParaView and ``results.h5`` writers take at the end of a deck step at
+    time ``time`` (s): the particles' centroids (N,3) m, file->world quaternions (N,4),
+    velocities (N,3) m/s and angular velocities (N,3) rad/s (as
+    :meth:`~nurbsdem.dynamics.system.DemSystem.body_state` gives them), the walls'
+    displacements (W,3) m and the contacts (:func:`contact_output_of`, None without any).
+    The compiled deck steps record one at each deck step where output falls due, so that they
+    need not return to Python for it (:mod:`nurbsdem.dynamics.deck_steps`)."""
+
+    time: float
+    position: np.ndarray
+    quaternion: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    wall_displacement: np.ndarray
+    contacts: dict | None
+
+
+def contact_output_of(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                      force: np.ndarray, fn: np.ndarray, normal: np.ndarray, depth: np.ndarray,
+                      degenerated: np.ndarray, coeffs: np.ndarray | None = None,
+                      radius: np.ndarray | None = None) -> dict:
+    """The contact points' arrays the ParaView writer takes (copies): point (K,3) m,
+    force_normal fn·n and force_tangential (K,3) N (the force on B), penetration (K,) m,
+    degenerated, body_a, body_b; with Hertz–Mindlin laws (coeffs (K,4), radius (K,) given)
+    also stiffness_normal (N/m) and contact_radius (m)."""
+    fn_vec = np.asarray(fn)[:, None] * normal
+    out = dict(point=np.array(point, copy=True), force_normal=fn_vec,
+               force_tangential=np.asarray(force) - fn_vec, penetration=depth,
+               degenerated=degenerated, body_a=body_a, body_b=body_b)
+    if coeffs is not None and radius is not None:
+        out.update(stiffness_normal=coeffs[:, 0], contact_radius=radius)
+    return out

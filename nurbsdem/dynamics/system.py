@@ -79,7 +79,7 @@ from .forces import InterfaceTable, add_kick_work, contact_loads, match_history,
 from .hertz import has_hertz
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_with_terms, state_is_finite
-from .monitor import MonitorSample, energy_sample
+from .monitor import MonitorSample, StateSample, contact_output_of, energy_sample
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, REFINE,
                          DeckSteps)
@@ -194,6 +194,9 @@ class StepTally:
     failed_sum: int = 0
     #: MonitorSample of each deck step asked for, in order
     samples: tuple = ()
+    #: StateSample of each deck step asked for but the last one done, in order
+    #: (:meth:`DemSystem.steps`)
+    states: tuple = ()
 
 
 class DemSystem:
@@ -819,13 +822,18 @@ class DemSystem:
         if fast is not None:
             fast.load()
 
-    def steps(self, n_max: int, sample_at: np.ndarray | None = None) -> int:
+    def steps(self, n_max: int, sample_at: np.ndarray | None = None,
+              state_at: np.ndarray | None = None) -> int:
         """Advance up to ``n_max`` deck steps (at least one) and return how many were done.
 
         sample_at (n_max,) bool: the deck steps (0 = the first of this call) at whose end the
         monitors are sampled (:meth:`monitor_sample`); the samples are in
         ``last_steps.samples``.  The compiled loop records them as rows
-        (:mod:`nurbsdem.dynamics.monitor`), so it need not return at each sample.
+        (:mod:`nurbsdem.dynamics.monitor`), so it need not return at each sample.  state_at
+        (n_max,) bool: the deck steps at whose end the state is kept for the ParaView and
+        results output (:class:`~nurbsdem.dynamics.monitor.StateSample`, in
+        ``last_steps.states``), all but the last deck step done: the caller takes that one
+        live.
 
         A scene provider on one rank (:class:`~nurbsdem.dynamics.deck_steps.DeckSteps`; not
         Hertz–Mindlin with NURBS particles) runs them in compiled code, with the same results
@@ -838,6 +846,8 @@ class DemSystem:
         fast = self._compiled_stepper() if n_max >= 1 else None
         sample_at = (np.zeros(max(int(n_max), 1), bool) if sample_at is None
                      else np.asarray(sample_at, bool))
+        state_at = (np.zeros(max(int(n_max), 1), bool) if state_at is None
+                    else np.asarray(state_at, bool))
         self.last_steps = StepTally()
         if not fast:
             self._tallied_step(bool(sample_at[0]))
@@ -847,12 +857,12 @@ class DemSystem:
             snap = self.provider.snapshot()
             n_run = self.substeps * self.acc_refine
             t0, count = self.t0, self.step_count
-            status, done, counters, rows = fast.run(int(n_max), sample_at)
+            status, done, counters, rows, kept = fast.run(int(n_max), sample_at, state_at)
             if status == GUARD:
                 self._put_back(good)
                 self.provider.restore(snap)
                 for j in range(done + 1):
-                    self._tallied_step(bool(sample_at[j]))
+                    self._tallied_step(bool(sample_at[j]), bool(state_at[j]) and j < done)
                 return done + 1
             if status != REFINE or done:
                 break       # REFINE on the first deck step: again with the new count
@@ -861,9 +871,11 @@ class DemSystem:
                    for j in range(done - 1) if sample_at[j]]
         if done and sample_at[done - 1]:       # the present state: taken live (Hertz rows too)
             samples.append(self.monitor_sample())
+        states = tuple(self._state_of_loop(t0 + (count + k[0] + 1) * self.dt, k) for k in kept
+                       if k[0] < done - 1)
         self.last_steps = StepTally(done * n_run, int(counters[ACTIVE_SUM]),
                                     int(counters[ACTIVE_MAX]), int(counters[DEGENERATED_SUM]),
-                                    0, tuple(samples))
+                                    0, tuple(samples), states)
         if status == CONTROL:
             self._control_step()
         return done
@@ -885,8 +897,9 @@ class DemSystem:
         for k in _LOOP_IN_PLACE:
             setattr(self, k, kept[k])
 
-    def _tallied_step(self, sample: bool = False) -> None:
-        """:meth:`step`, counted in :attr:`last_steps` (with its monitor sample if asked)."""
+    def _tallied_step(self, sample: bool = False, state: bool = False) -> None:
+        """:meth:`step`, counted in :attr:`last_steps` (with its monitor sample and its state
+        sample if asked)."""
         self.step()
         n_sub = self.last_substeps
         cs = self.last_contacts
@@ -896,7 +909,8 @@ class DemSystem:
             t.substeps + n_sub, t.active_sum + active, max(t.active_max, active),
             t.degenerated_sum + int(getattr(cs, "degenerated_count", 0) or 0),
             t.failed_sum + int(getattr(cs, "failed", 0) or 0),
-            t.samples + ((self.monitor_sample(),) if sample else ()))
+            t.samples + ((self.monitor_sample(),) if sample else ()),
+            t.states + ((self.state_sample(),) if state else ()))
 
     def _try_step(self) -> EnergySample:
         """The internal steps of one deck step and the guards; raises _Unstable."""
@@ -1020,9 +1034,47 @@ class DemSystem:
         (N,3) m, file->world quaternions (N,4) (w, x, y, z), velocities (N,3) m/s and angular
         velocities (N,3) rad/s, world frame."""
         b = self.bodies
-        R, _ = body_poses(b.q, b.P, b.x, b.centroid_file)
-        return (b.x.copy(), matrix_to_quat(R).reshape(-1, 4), b.v.copy(),
-                omega_world(b.q, b.L, self._inv_I))
+        return self._body_state_of(b.x.copy(), b.q, b.v.copy(), b.L)
+
+    def _body_state_of(self, x: np.ndarray, q: np.ndarray, v: np.ndarray,
+                       L: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`body_state` of the centroids x, principal quaternions q, velocities v and
+        angular momenta L (N,·) given (x and v are returned as they are)."""
+        b = self.bodies
+        R, _ = body_poses(q, b.P, x, b.centroid_file)
+        return x, matrix_to_quat(R).reshape(-1, 4), v, omega_world(q, L, self._inv_I)
+
+    def contact_output(self) -> dict | None:
+        """The last evaluation's contacts as the ParaView writer takes them
+        (:func:`~nurbsdem.dynamics.monitor.contact_output_of`; None without any)."""
+        cs = self.last_contacts
+        active = int(getattr(cs, "active", 0) or 0)
+        if active == 0 or self.c_a.shape[0] != active:
+            return None
+        hertz = self.uses_hertz and self.c_coeffs.shape[0] == active
+        return contact_output_of(cs.body_a, cs.body_b, self.c_point, self.c_ftot, self.c_fn,
+                                 cs.normal, cs.depth, cs.degenerated,
+                                 self.c_coeffs if hertz else None,
+                                 self.c_radius if hertz else None)
+
+    def state_sample(self) -> StateSample:
+        """The present state for the ParaView and results output (copies)."""
+        return StateSample(self.time, *self.body_state(), self.wall_displacement,
+                           self.contact_output())
+
+    def _state_of_loop(self, time: float, kept: tuple) -> StateSample:
+        """The StateSample of a state the compiled loop kept at a deck step's end: (deck
+        step, x, q, v, L, wall_d, Evaluation) (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`),
+        the same arrays :meth:`state_sample` takes live."""
+        _, x, q, v, L, wall_d, ev = kept
+        active = ev.a.shape[0]
+        contacts = None
+        if active:
+            hertz = self.uses_hertz and ev.coeffs.shape[0] == active
+            contacts = contact_output_of(ev.a, ev.b, ev.point, ev.ftot, ev.fn, ev.normal,
+                                         ev.depth, ev.deg, ev.coeffs if hertz else None,
+                                         ev.radius if hertz else None)
+        return StateSample(time, *self._body_state_of(x, q, v, L), wall_d, contacts)
 
     @property
     def wall_contact_force(self) -> np.ndarray:
