@@ -51,6 +51,10 @@ log = logging.getLogger("nurbsdem")
 CHECKPOINT_NAME = "checkpoint.h5"
 #: most deck steps handed to DemSystem.steps at once (compiled scenes; progress granularity)
 MAX_COMPILED_STEPS = 200
+#: the most bytes of ParaView/results states (:class:`~nurbsdem.dynamics.monitor.StateSample`)
+#: the compiled loop keeps in one call: a call ends at the sample that would pass it (10^5
+#: particles with 2.4·10^5 contacts: ~57 MB per sample)
+STATE_BUDGET_BYTES = 256 * 2 ** 20
 
 
 @dataclass
@@ -586,6 +590,10 @@ class Solver:
         for every in (monitors, ck_every):
             if every > 0:
                 n = min(n, _steps_to_due(sysm.t0, sysm.step_count, sysm.dt, every, n))
+        due = np.flatnonzero(self._states_due(n))
+        most = max(1, STATE_BUDGET_BYTES // max(sysm.state_sample_bytes(), 1))
+        if len(due) > most:             # the last deck step's sample is taken live
+            n = int(due[most - 1]) + 1
         return n
 
     def _states_due(self, n: int) -> np.ndarray:

@@ -148,6 +148,29 @@ def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
     assert sum(done for done, _ in calls) == 280 and len(calls) < 280 / 2
 
 
+def test_samples_kept_by_the_loop_or_taken_live_give_the_same_files(runs, tmp_path,
+                                                                    monkeypatch):
+    """With a state budget of one byte the compiled loop stops at every ParaView/results
+    sample and the solver takes it live (as before stop 31): every file the same as the
+    run whose loop kept the samples' states, in fewer calls."""
+    import nurbsdem.solver as solver_module
+    deck, out = runs
+    kept_dir = out[True][0]
+    calls = []
+    original = system_module.DemSystem.steps
+
+    def counting(self, n_max, sample_at=None, state_at=None):
+        done = original(self, n_max, sample_at, state_at)
+        calls.append(len(self.last_steps.states))
+        return done
+    monkeypatch.setattr(system_module.DemSystem, "steps", counting)
+    monkeypatch.setattr(solver_module, "STATE_BUDGET_BYTES", 1)
+    live = tmp_path / "live"
+    Solver(parse_deck(deck), output=live, quiet=True).run()
+    assert calls and not any(calls)                 # every sample taken live
+    _same_results(kept_dir, live)
+
+
 def test_guard_inside_the_compiled_loop_falls_back_to_the_python_step(tmp_path):
     """A guard that fires inside the compiled loop (here: an energy tolerance of 1e-14, so it
     fires on round-off) hands the deck step to the Python path, which repeats it with more

@@ -367,6 +367,15 @@ def _balance(bc, ev, x, v, q, L, ledger) -> float:
     return balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger)[1]
 
 
+@njit(cache=True)
+def _kept(j: int, x, q, v, L, wall_d, ev):
+    """What the loop keeps of deck step j's end for the ParaView and results output: the body
+    state, the walls and the contact arrays the writers take (not the whole Evaluation: its
+    histories and near pairs would stay alive too)."""
+    return (j, x, q, v, L, wall_d, ev.a, ev.b, ev.point, ev.ftot, ev.fn, ev.normal, ev.depth,
+            ev.deg, ev.coeffs, ev.radius)
+
+
 # --------------------------------------------------------------------------- the loop
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
@@ -378,7 +387,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     sample_at (n_deck,) bool: the deck steps at whose end a monitor row is written into rows
     (n_deck, row_width(W)) (:func:`~nurbsdem.dynamics.monitor.record_row`).  state_at
     (n_deck,) bool: the deck steps at whose end the state is kept for the ParaView and
-    results output: (deck step, x, q, v, L, wall_d, the Evaluation) in the list ``states``.
+    results output, in the list ``states``: (deck step, x, q, v, L, wall_d, and the
+    Evaluation's a, b, point, ftot, fn, normal, depth, deg, coeffs, radius).
 
     walls_d, walls_u (n_deck·n_run, W, 3): the walls' displacements (m) and velocities
     (m/s) at the end of each internal step.  Body state (x, v, q, L), ledger (5,) J, wall_work
@@ -398,7 +408,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     accuracy = cc.accuracy > 0.0
     # the balance error at the start of the deck step (then carried from its end)
     balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
-    states = [(0, x, q, v, L, wall_d, ev) for _ in range(0)]    # typed by its items
+    states = [_kept(0, x, q, v, L, wall_d, ev) for _ in range(0)]    # typed by its items
     for j in range(n_deck):
         if accuracy:
             sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
@@ -462,7 +472,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
                        ev.monitored, active, ev.degenerated, wall_d, ev.force)
         if state_at[j]:
-            states.append((j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
+            states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         if not _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters, estimate):
             return CONTROL, j + 1, pl, ev, wall_d, wall_u, states
         if counters[ACC_REFINE] != acc:

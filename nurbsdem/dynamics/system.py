@@ -1063,18 +1063,24 @@ class DemSystem:
                            self.contact_output())
 
     def _state_of_loop(self, time: float, kept: tuple) -> StateSample:
-        """The StateSample of a state the compiled loop kept at a deck step's end: (deck
-        step, x, q, v, L, wall_d, Evaluation) (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`),
-        the same arrays :meth:`state_sample` takes live."""
-        _, x, q, v, L, wall_d, ev = kept
-        active = ev.a.shape[0]
+        """The StateSample of a state the compiled loop kept at a deck step's end
+        (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`): the same arrays
+        :meth:`state_sample` takes live."""
+        (_, x, q, v, L, wall_d, a, b, point, ftot, fn, normal, depth, deg, coeffs,
+         radius) = kept
+        active = a.shape[0]
         contacts = None
         if active:
-            hertz = self.uses_hertz and ev.coeffs.shape[0] == active
-            contacts = contact_output_of(ev.a, ev.b, ev.point, ev.ftot, ev.fn, ev.normal,
-                                         ev.depth, ev.deg, ev.coeffs if hertz else None,
-                                         ev.radius if hertz else None)
+            hertz = self.uses_hertz and coeffs.shape[0] == active
+            contacts = contact_output_of(a, b, point, ftot, fn, normal, depth, deg,
+                                         coeffs if hertz else None, radius if hertz else None)
         return StateSample(time, *self._body_state_of(x, q, v, L), wall_d, contacts)
+
+    def state_sample_bytes(self) -> int:
+        """About how many bytes a StateSample of the present scene holds (the particles'
+        state, the contacts' arrays): what the solver budgets the states the compiled loop
+        keeps in one call by."""
+        return 8 * (16 * self.n_particles + 24 * int(self.c_a.shape[0]) + 3 * self.walls.n)
 
     @property
     def wall_contact_force(self) -> np.ndarray:
