@@ -36,7 +36,7 @@ from .contact.scene import SceneContacts
 from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.energy import EnergySample
 from .dynamics.hertz import law_from_deck as hertz_law_from_deck
-from .dynamics.monitor import MonitorSample, StateSample, contact_output_of
+from .dynamics.monitor import MonitorSample, StateSample
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import InstabilityError
 from .errors import InputError
@@ -437,14 +437,10 @@ class Solver:
             writers.results.append(st.time, bodies)
 
     def _contact_output(self) -> dict | None:
-        s = self.system
-        cs = self.scene.last if self.scene is not None else None
-        if cs is None or cs.active == 0 or s.c_a.shape[0] != cs.active:
+        """The last evaluation's contacts for the ParaView writer (None without a scene)."""
+        if self.scene is None or self.system is None:
             return None
-        hertz = s.uses_hertz and s.c_coeffs.shape[0] == cs.active   # Hertz–Mindlin laws
-        return contact_output_of(cs.body_a, cs.body_b, s.c_point, s.c_ftot, s.c_fn, cs.normal,
-                                 cs.depth, cs.degenerated, s.c_coeffs if hertz else None,
-                                 s.c_radius if hertz else None)
+        return self.system.contact_output()
 
     # ------------------------------------------------------------------ checkpoints
     def _checkpoint(self, writers: OutputWriters) -> None:
@@ -532,9 +528,10 @@ class Solver:
             t_before = time.perf_counter()
             g0, l0, n0 = self.scene.timers.global_search, self.scene.timers.lcp, self.scene.timers.lcps
             e0 = self.scene.timers.calls
-            n = self._steps_to_event(n_total - self.step_progress, ck_every)
+            n, monitors_due, states_due = self._steps_to_event(n_total - self.step_progress,
+                                                               ck_every)
             try:
-                done = sysm.steps(n, self._monitors_due(n), self._states_due(n))
+                done = sysm.steps(n, monitors_due, states_due)
             except InstabilityError:
                 self.time = sysm.time
                 for smp in sysm.last_steps.samples:     # the deck steps done before it
@@ -576,12 +573,14 @@ class Solver:
         self._snapshot()
         self._close_system()
 
-    def _steps_to_event(self, left: int, ck_every: float) -> int:
-        """Deck steps from now to the next one at which a checkpoint falls due (monitors too
+    def _steps_to_event(self, left: int,
+                        ck_every: float) -> tuple[int, np.ndarray, np.ndarray]:
+        """Deck steps n from now to the next one at which a checkpoint falls due (monitors too
         with Hertz–Mindlin laws), or to the end of the solution step (``left`` deck steps), at
-        most MAX_COMPILED_STEPS.  The monitors, ParaView and results samples in between are
-        taken by the system at the deck steps' ends (:meth:`_monitors_due`,
-        :meth:`_states_due`): the compiled loop runs on through them."""
+        most MAX_COMPILED_STEPS, and at most as many ParaView/results states as
+        STATE_BUDGET_BYTES holds; with the flags of :meth:`_due_flags` for those n deck
+        steps.  The monitors, ParaView and results samples in between are taken by the system
+        at the deck steps' ends: the compiled loop runs on through them."""
         out = self.model.output
         sysm = self.system
         n = min(left, MAX_COMPILED_STEPS)
@@ -590,25 +589,22 @@ class Solver:
         for every in (monitors, ck_every):
             if every > 0:
                 n = min(n, _steps_to_due(sysm.t0, sysm.step_count, sysm.dt, every, n))
-        due = np.flatnonzero(self._states_due(n))
+        monitors_due, states_due = self._due_flags(n)
+        due = np.flatnonzero(states_due)
         most = max(1, STATE_BUDGET_BYTES // max(sysm.state_sample_bytes(), 1))
         if len(due) > most:             # the last deck step's sample is taken live
             n = int(due[most - 1]) + 1
-        return n
+        return n, monitors_due[:n], states_due[:n]
 
-    def _states_due(self, n: int) -> np.ndarray:
-        """(n,) bool: the next n deck steps at whose end ParaView or results output falls
-        due."""
+    def _due_flags(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(monitors, states), (n,) bool each: the next n deck steps at whose end the monitors
+        fall due, and the ParaView or results output."""
         sysm, out = self.system, self.model.output
-        return np.array([_due(t, out.vtk_every) or _due(t, out.results_interval)
-                         for t in (sysm.t0 + (sysm.step_count + k) * sysm.dt
-                                   for k in range(1, n + 1))], bool)
-
-    def _monitors_due(self, n: int) -> np.ndarray:
-        """(n,) bool: the next n deck steps at whose end the monitors fall due."""
-        sysm, every = self.system, self.model.output.monitors_every
-        return np.array([_due(sysm.t0 + (sysm.step_count + k) * sysm.dt, every)
-                         for k in range(1, n + 1)], bool)
+        times = [sysm.t0 + (sysm.step_count + k) * sysm.dt for k in range(1, n + 1)]
+        monitors = np.array([_due(t, out.monitors_every) for t in times], bool)
+        states = np.array([_due(t, out.vtk_every) or _due(t, out.results_interval)
+                           for t in times], bool)
+        return monitors, states
 
     def _run_replicate(self, step: ReplicateStep, writers: OutputWriters) -> None:
         before = self._mechanical_of(self.bodies)

@@ -171,6 +171,29 @@ def test_samples_kept_by_the_loop_or_taken_live_give_the_same_files(runs, tmp_pa
     _same_results(kept_dir, live)
 
 
+def test_the_state_budget_counts_what_the_loop_keeps(runs, tmp_path, monkeypatch):
+    """DemSystem.state_sample_bytes, by which the solver budgets the states the compiled loop
+    keeps in one call, bounds the bytes of every state kept (its arrays' nbytes) and is
+    within 30 % of them."""
+    from nurbsdem.dynamics import deck_steps
+    deck, _ = runs
+    seen = []
+    original = deck_steps.DeckSteps.run
+
+    def recording(self, n_deck, sample_at, state_at=None):
+        result = original(self, n_deck, sample_at, state_at)
+        for kept in result[4]:
+            held = sum(a.nbytes for a in kept[1:])
+            seen.append((held, self.system.state_sample_bytes(kept[6].shape[0])))
+        return result
+    monkeypatch.setattr(deck_steps.DeckSteps, "run", recording)
+    Solver(parse_deck(deck), output=tmp_path / "budget", quiet=True).run()
+    assert seen
+    assert any(held > 8 * 24 * 30 for held, _ in seen)     # states with contacts
+    for held, budget in seen:
+        assert held <= budget <= 1.3 * held
+
+
 def test_guard_inside_the_compiled_loop_falls_back_to_the_python_step(tmp_path):
     """A guard that fires inside the compiled loop (here: an energy tolerance of 1e-14, so it
     fires on round-off) hands the deck step to the Python path, which repeats it with more

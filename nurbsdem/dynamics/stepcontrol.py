@@ -126,44 +126,77 @@ def shape_compliance(shape, mass: float, inertia: np.ndarray, centroid: np.ndarr
 
 # --------------------------------------------------------------------------- network operator
 @njit(cache=True)
-def _relative_displacement(y, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, out):
-    """out = J y: relative displacement (m-scaled) of B w.r.t. A at the contact (3,)."""
-    for k in range(3):
-        out[k] = 0.0
-    for side in range(2):
-        i = b if side == 0 else a
-        if i >= n_part:
-            continue
-        sign = 1.0 if side == 0 else -1.0
-        r = r_b if side == 0 else r_a
-        # rotation in the world: theta_w = Q (y_rot / sqrt(I))
-        t0 = y[6 * i + 3] / sq_I[i, 0]
-        t1 = y[6 * i + 4] / sq_I[i, 1]
-        t2 = y[6 * i + 5] / sq_I[i, 2]
-        w0 = Q[i, 0, 0] * t0 + Q[i, 0, 1] * t1 + Q[i, 0, 2] * t2
-        w1 = Q[i, 1, 0] * t0 + Q[i, 1, 1] * t1 + Q[i, 1, 2] * t2
-        w2 = Q[i, 2, 0] * t0 + Q[i, 2, 1] * t1 + Q[i, 2, 2] * t2
-        out[0] += sign * (y[6 * i] / sq_m[i] + w1 * r[2] - w2 * r[1])
-        out[1] += sign * (y[6 * i + 1] / sq_m[i] + w2 * r[0] - w0 * r[2])
-        out[2] += sign * (y[6 * i + 2] / sq_m[i] + w0 * r[1] - w1 * r[0])
+def network_blocks(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.ndarray,
+                   Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The contacts' rows of J in Eq. (2), formed once per estimate so that each product
+    :func:`apply_blocks` is multiply–adds only: s (K,2) 1/√m and C (K,2,3,3) the map
+    −[r]× Q diag(1/√I) of a body's scaled rotation to the displacement of the contact point
+    (m·√kg⁻¹ per unit y), for B (side 0) and A (side 1); walls (index ≥ N) get zeros.  The
+    relative displacement of B w.r.t. A is J_c y = Σ_side ±(s y_trans + C y_rot)."""
+    K, n_part = body_a.shape[0], x.shape[0]
+    s = np.zeros((K, 2))
+    C = np.zeros((K, 2, 3, 3))
+    for c in range(K):
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i >= n_part:
+                continue
+            r0, r1, r2 = point[c, 0] - x[i, 0], point[c, 1] - x[i, 1], point[c, 2] - x[i, 2]
+            s[c, side] = 1.0 / sq_m[i]
+            for j in range(3):      # column j: the displacement Q e_j / √I_j × r
+                w0, w1, w2 = (Q[i, 0, j] / sq_I[i, j], Q[i, 1, j] / sq_I[i, j],
+                              Q[i, 2, j] / sq_I[i, j])
+                C[c, side, 0, j] = w1 * r2 - w2 * r1
+                C[c, side, 1, j] = w2 * r0 - w0 * r2
+                C[c, side, 2, j] = w0 * r1 - w1 * r0
+    return s, C
 
 
 @njit(cache=True)
-def _scatter_force(f, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, z):
-    """z += Jᵀ f: the contact force f on B (−f on A) as scaled generalised forces."""
-    for side in range(2):
-        i = b if side == 0 else a
-        if i >= n_part:
-            continue
-        sign = 1.0 if side == 0 else -1.0
-        r = r_b if side == 0 else r_a
-        m0 = r[1] * f[2] - r[2] * f[1]
-        m1 = r[2] * f[0] - r[0] * f[2]
-        m2 = r[0] * f[1] - r[1] * f[0]
+def _contact_displacement(y, c, i, side, s, C, d) -> None:
+    """d += ± (s y_trans + C y_rot) of body i on side ``side`` of contact c (+ for B)."""
+    sign = 1.0 if side == 0 else -1.0
+    o = 6 * i
+    for k in range(3):
+        d[k] += sign * (s[c, side] * y[o + k] + C[c, side, k, 0] * y[o + 3]
+                        + C[c, side, k, 1] * y[o + 4] + C[c, side, k, 2] * y[o + 5])
+
+
+@njit(cache=True)
+def _scatter_contact_force(f, c, i, side, s, C, z) -> None:
+    """z += ± (s f, Cᵀ f) of body i: the force f on B (−f on A) as scaled generalised forces."""
+    sign = 1.0 if side == 0 else -1.0
+    o = 6 * i
+    for k in range(3):
+        z[o + k] += sign * s[c, side] * f[k]
+    for j in range(3):
+        z[o + 3 + j] += sign * (C[c, side, 0, j] * f[0] + C[c, side, 1, j] * f[1]
+                                + C[c, side, 2, j] * f[2])
+
+
+@njit(cache=True)
+def apply_blocks(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, normal: np.ndarray,
+                 k_n: np.ndarray, k_t: np.ndarray, s: np.ndarray, C: np.ndarray,
+                 z: np.ndarray) -> None:
+    """z (6N,) = A y of Eq. (2) (in place) with the blocks of :func:`network_blocks` and
+    per-contact normal/tangential coefficients k_n, k_t (N/m, or N s/m)."""
+    n_part = y.shape[0] // 6
+    z[:] = 0.0
+    d = np.empty(3)
+    f = np.empty(3)
+    for c in range(body_a.shape[0]):
+        d[:] = 0.0
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i < n_part:
+                _contact_displacement(y, c, i, side, s, C, d)
+        dn = d[0] * normal[c, 0] + d[1] * normal[c, 1] + d[2] * normal[c, 2]
         for k in range(3):
-            z[6 * i + k] += sign * f[k] / sq_m[i]
-        for k in range(3):
-            z[6 * i + 3 + k] += sign * (Q[i, 0, k] * m0 + Q[i, 1, k] * m1 + Q[i, 2, k] * m2) / sq_I[i, k]
+            f[k] = k_n[c] * dn * normal[c, k] + k_t[c] * (d[k] - dn * normal[c, k])
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i < n_part:
+                _scatter_contact_force(f, c, i, side, s, C, z)
 
 
 @njit(cache=True)
@@ -173,22 +206,9 @@ def network_apply(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, point: 
     """z = A y for the operator of Eq. (2) with per-contact normal/tangential coefficients
     k_n, k_t (stiffness N/m, or damping N s/m).  y, z (6N,); x (N,3) centroids; Q (N,3,3)
     principal→world; sq_m (N,) √m; sq_I (N,3) √(principal moments).  Walls: index ≥ N."""
-    n_part = x.shape[0]
-    z = np.zeros(y.shape[0])
-    rel = np.empty(3)
-    f = np.empty(3)
-    r_a = np.zeros(3)
-    r_b = np.zeros(3)
-    for c in range(body_a.shape[0]):
-        a, b = body_a[c], body_b[c]
-        for k in range(3):
-            r_a[k] = point[c, k] - x[a, k] if a < n_part else 0.0
-            r_b[k] = point[c, k] - x[b, k] if b < n_part else 0.0
-        _relative_displacement(y, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, rel)
-        dn = rel[0] * normal[c, 0] + rel[1] * normal[c, 1] + rel[2] * normal[c, 2]
-        for k in range(3):
-            f[k] = k_n[c] * dn * normal[c, k] + k_t[c] * (rel[k] - dn * normal[c, k])
-        _scatter_force(f, a, b, n_part, r_a, r_b, Q, sq_m, sq_I, z)
+    s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
+    z = np.empty(y.shape[0])
+    apply_blocks(y, body_a, body_b, normal, k_n, k_t, s, C, z)
     return z
 
 
@@ -429,11 +449,19 @@ def _largest_ritz(alpha: np.ndarray, beta: np.ndarray, m: int) -> tuple[float, n
 
 @njit(cache=True)
 def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """a · b summed in index order (the same bits whatever BLAS and its threads)."""
-    s = 0.0
-    for i in range(a.shape[0]):
-        s += a[i] * b[i]
-    return s
+    """a · b in a fixed order (four interleaved partial sums, then their sum: the same bits
+    whatever BLAS and its threads, and not held to one addition's latency per term)."""
+    n = a.shape[0]
+    s0 = s1 = s2 = s3 = 0.0
+    m = n - n % 4
+    for i in range(0, m, 4):
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+    for i in range(m, n):
+        s0 += a[i] * b[i]
+    return (s0 + s1) + (s2 + s3)
 
 
 @njit(cache=True)
@@ -453,14 +481,24 @@ def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                     Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray, steps: int = LANCZOS_STEPS,
                     rtol: float = 1e-4) -> tuple[float, np.ndarray]:
     """Largest eigenvalue and Ritz vector (6N,) of the network operator of
-    :func:`network_apply` (symmetric positive semi-definite).
+    :func:`network_apply` (symmetric positive semi-definite): :func:`lanczos_blocks` on the
+    blocks of :func:`network_blocks`."""
+    s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
+    return lanczos_blocks(body_a, body_b, normal, k_n, k_t, s, C, 6 * x.shape[0], steps, rtol)
+
+
+@njit(cache=True)
+def lanczos_blocks(body_a: np.ndarray, body_b: np.ndarray, normal: np.ndarray,
+                   k_n: np.ndarray, k_t: np.ndarray, s: np.ndarray, C: np.ndarray, dim: int,
+                   steps: int = LANCZOS_STEPS, rtol: float = 1e-4) -> tuple[float, np.ndarray]:
+    """Largest eigenvalue and Ritz vector (dim = 6N,) of the operator of :func:`apply_blocks`.
 
     Lanczos with full re-orthogonalisation from a fixed start vector (deterministic), at most
     ``steps`` products, stopping early when the largest Ritz value changes by less than
     ``rtol`` over 5 steps.  The Ritz value is a lower bound of λmax that converges from below
-    (to round-off within a few tens of steps here).  Vector products are loops in index order,
-    not BLAS, whose threaded reductions would make the bits depend on the thread count."""
-    dim = 6 * x.shape[0]
+    (to round-off within a few tens of steps here).  Vector products are loops in a fixed
+    order (:func:`_dot`), not BLAS, whose threaded reductions would make the bits depend on
+    the thread count."""
     if dim == 0:
         return 0.0, np.zeros(0)
     v = 1.0 + 0.5 * np.sin(np.arange(dim) * 1.2345 + 0.1)
@@ -469,12 +507,13 @@ def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     V = np.zeros((m, dim))
     alpha = np.zeros(m)
     beta = np.zeros(m)
+    w = np.empty(dim)
     last = -1.0
     size = 0
     for k in range(m):
         size = k + 1
         V[k] = v
-        w = network_apply(v, body_a, body_b, point, normal, k_n, k_t, x, Q, sq_m, sq_I)
+        apply_blocks(v, body_a, body_b, normal, k_n, k_t, s, C, w)
         alpha[k] = _dot(v, w)
         for _ in range(2):                                  # full re-orthogonalisation
             _orthogonalise(w, V[:size])
@@ -521,10 +560,11 @@ def network_rates_scaled(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarr
         return 0.0, 0.0, -1
     kn, cn = coeffs[:, 0].copy(), coeffs[:, 1].copy()
     kt, ct = coeffs[:, 2].copy(), coeffs[:, 3].copy()
-    omega2, vec = network_lanczos(body_a, body_b, point, normal, kn, kt, x, Q, sq_m, sq_I)
+    s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
+    omega2, vec = lanczos_blocks(body_a, body_b, normal, kn, kt, s, C, 6 * N)
     gamma = 0.0
     if cn.any() or ct.any():
-        gamma = network_lanczos(body_a, body_b, point, normal, cn, ct, x, Q, sq_m, sq_I)[0]
+        gamma = lanczos_blocks(body_a, body_b, normal, cn, ct, s, C, 6 * N)[0]
     return omega2, gamma, _dominant_body(vec, N)
 
 

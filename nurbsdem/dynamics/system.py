@@ -1076,11 +1076,14 @@ class DemSystem:
                                          coeffs if hertz else None, radius if hertz else None)
         return StateSample(time, *self._body_state_of(x, q, v, L), wall_d, contacts)
 
-    def state_sample_bytes(self) -> int:
-        """About how many bytes a StateSample of the present scene holds (the particles'
-        state, the contacts' arrays): what the solver budgets the states the compiled loop
-        keeps in one call by."""
-        return 8 * (16 * self.n_particles + 24 * int(self.c_a.shape[0]) + 3 * self.walls.n)
+    def state_sample_bytes(self, contacts: int | None = None) -> int:
+        """Bytes of one state the compiled loop keeps for the output (at most; the particles'
+        state, the walls' displacements and the contacts' arrays of
+        :func:`~nurbsdem.dynamics.deck_steps._kept`, 8 bytes a number), with ``contacts``
+        contacts (default: the last evaluation's): what the solver budgets the states kept in
+        one call by (tested against the arrays' nbytes)."""
+        k = int(self.c_a.shape[0]) if contacts is None else int(contacts)
+        return 8 * (16 * self.n_particles + 24 * k + 3 * self.walls.n)
 
     @property
     def wall_contact_force(self) -> np.ndarray:
