@@ -184,13 +184,13 @@ def test_the_state_budget_counts_what_the_loop_keeps(runs, tmp_path, monkeypatch
         result = original(self, n_deck, sample_at, state_at)
         for kept in result[4]:
             held = sum(a.nbytes for a in kept[1:])
-            seen.append((held, self.system.state_sample_bytes(kept[6].shape[0])))
+            contacts = kept[6].shape[0]
+            seen.append((held, self.system.state_sample_bytes(contacts), contacts))
         return result
     monkeypatch.setattr(deck_steps.DeckSteps, "run", recording)
     Solver(parse_deck(deck), output=tmp_path / "budget", quiet=True).run()
-    assert seen
-    assert any(held > 8 * 24 * 30 for held, _ in seen)     # states with contacts
-    for held, budget in seen:
+    assert seen and max(contacts for _, _, contacts in seen) > 0
+    for held, budget, _ in seen:
         assert held <= budget <= 1.3 * held
 
 

@@ -127,12 +127,14 @@ def shape_compliance(shape, mass: float, inertia: np.ndarray, centroid: np.ndarr
 # --------------------------------------------------------------------------- network operator
 @njit(cache=True)
 def network_blocks(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.ndarray,
-                   Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                   Q: np.ndarray, sq_m: np.ndarray,
+                   sq_I: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The contacts' rows of J in Eq. (2), formed once per estimate so that each product
     :func:`apply_blocks` is multiply–adds only: s (K,2) 1/√m and C (K,2,3,3) the map
     −[r]× Q diag(1/√I) of a body's scaled rotation to the displacement of the contact point
-    (m·√kg⁻¹ per unit y), for B (side 0) and A (side 1); walls (index ≥ N) get zeros.  The
-    relative displacement of B w.r.t. A is J_c y = Σ_side ±(s y_trans + C y_rot)."""
+    (both 1/√kg: metres per unit of the scaled coordinates), for B (side 0) and A (side 1);
+    walls (index ≥ N) get zeros.  The relative displacement of B w.r.t. A is
+    J_c y = Σ_side ±(s y_trans + C y_rot)."""
     K, n_part = body_a.shape[0], x.shape[0]
     s = np.zeros((K, 2))
     C = np.zeros((K, 2, 3, 3))
