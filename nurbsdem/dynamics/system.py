@@ -1051,11 +1051,20 @@ class DemSystem:
         active = int(getattr(cs, "active", 0) or 0)
         if active == 0 or self.c_a.shape[0] != active:
             return None
-        hertz = self.uses_hertz and self.c_coeffs.shape[0] == active
-        return contact_output_of(cs.body_a, cs.body_b, self.c_point, self.c_ftot, self.c_fn,
-                                 cs.normal, cs.depth, cs.degenerated,
-                                 self.c_coeffs if hertz else None,
-                                 self.c_radius if hertz else None)
+        return self._contacts_for_output(cs.body_a, cs.body_b, self.c_point, self.c_ftot,
+                                         self.c_fn, cs.normal, cs.depth, cs.degenerated,
+                                         self.c_coeffs, self.c_radius)
+
+    def _contacts_for_output(self, a, b, point, ftot, fn, normal, depth, deg, coeffs,
+                             radius) -> dict | None:
+        """:func:`~nurbsdem.dynamics.monitor.contact_output_of` of the contacts a, b (None
+        without any), with the Hertz–Mindlin columns (coeffs, radius) only under those laws."""
+        active = a.shape[0]
+        if active == 0:
+            return None
+        hertz = self.uses_hertz and coeffs.shape[0] == active
+        return contact_output_of(a, b, point, ftot, fn, normal, depth, deg,
+                                 coeffs if hertz else None, radius if hertz else None)
 
     def state_sample(self) -> StateSample:
         """The present state for the ParaView and results output (copies)."""
@@ -1066,15 +1075,9 @@ class DemSystem:
         """The StateSample of a state the compiled loop kept at a deck step's end
         (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`): the same arrays
         :meth:`state_sample` takes live."""
-        (_, x, q, v, L, wall_d, a, b, point, ftot, fn, normal, depth, deg, coeffs,
-         radius) = kept
-        active = a.shape[0]
-        contacts = None
-        if active:
-            hertz = self.uses_hertz and coeffs.shape[0] == active
-            contacts = contact_output_of(a, b, point, ftot, fn, normal, depth, deg,
-                                         coeffs if hertz else None, radius if hertz else None)
-        return StateSample(time, *self._body_state_of(x, q, v, L), wall_d, contacts)
+        _, x, q, v, L, wall_d, *contacts = kept
+        return StateSample(time, *self._body_state_of(x, q, v, L), wall_d,
+                           self._contacts_for_output(*contacts))
 
     def state_sample_bytes(self, contacts: int | None = None) -> int:
         """Bytes of one state the compiled loop keeps for the output (at most; the particles'
