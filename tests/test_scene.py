@@ -131,3 +131,68 @@ def test_the_list_goes_stale_on_displacement_not_on_path():
     assert not list_is_stale(*built, x, R, wall + [[0, 0, 4.9e-4]], radius, skin)
     assert list_is_stale(*built, x, R, wall + [[0, 0, 6e-4]], radius, skin)
     assert list_is_stale(*built, x, R, wall, radius, 0.0)  # no skin: built at every call
+
+
+def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build():
+    """Each body keeps its own built pose: a rebuild renews the poses of the bodies (and
+    walls) that moved more than REPOSE_FRACTION of half the skin and tests only their pairs'
+    patch boxes; the list equals a full build at the bodies' built poses, to the bit, and
+    still holds every pair whose patch boxes overlap at the present poses (with at least
+    those candidate patches)."""
+    from scipy.spatial.transform import Rotation
+
+    from nurbsdem.contact.boxes import candidate_patch_masks_batch_jit
+    from nurbsdem.contact.listed import scene_list
+    from nurbsdem.contact.verlet import REPOSE_FRACTION
+
+    rng = np.random.default_rng(7)
+    shapes = [ellipsoid(0.012, 0.009, 0.007), sphere(0.008)]
+    g = np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    n = g.shape[0]
+    body_shape = (np.arange(n) % 4 == 3).astype(np.int64)   # a sphere every fourth body
+    x = 0.03 + 0.021 * g + rng.uniform(-1e-3, 1e-3, (n, 3))
+    R = Rotation.random(n, random_state=3).as_matrix()
+    walls = list(box_walls([0, 0, 0], [0.12, 0.12, 0.12]).values())
+    W = len(walls)
+    skin = 2e-3
+    scene = SceneContacts(shapes, body_shape, walls, skin=skin)
+    kin = kinematics(x, R, shapes, body_shape, W)
+    scene(kin)
+    assert scene.builds == 1
+    m = scene.margin + scene.skin
+    for step in range(6):
+        old = scene.built_pose
+        move = np.zeros(n)
+        some = rng.permutation(n)
+        move[some[:3]] = rng.uniform(0.6, 1.5, 3) * skin          # past half the skin
+        move[some[3:7]] = rng.uniform(0.0, 0.2, 4) * skin         # a little
+        d = rng.normal(size=(n, 3))
+        x = x + d / np.linalg.norm(d, axis=1, keepdims=True) * move[:, None]
+        R = Rotation.from_rotvec(rng.normal(scale=0.02 * skin / 0.012, size=(n, 3))).as_matrix() @ R
+        kin = kinematics(x, R, shapes, body_shape, W)
+        kin.wall_displacement[-1] = [0, 0, -0.4 * skin * step]          # the lid comes down
+        scene(kin)
+        assert scene.builds == 2 + step
+        bx, bR, bw, bp = scene.built_pose
+        renewed = np.any(bx != old[0], axis=1)
+        assert 3 <= renewed.sum() < n // 2                 # the moved bodies, not all
+        np.testing.assert_array_equal(bx[~renewed], old[0][~renewed])
+        np.testing.assert_array_equal(bx[renewed], x[renewed])
+        assert np.all(np.linalg.norm(x - bx, axis=1) <= REPOSE_FRACTION * skin / 2 + 0.03 * skin)
+        full = scene_list(scene.tables(), bx, bp, bR, bw, np.ones(n, np.bool_), m,
+                          np.zeros(0, np.int64), np.zeros((0, scene.P), np.bool_),
+                          np.zeros((0, scene.P), np.bool_), np.ones(n + W, np.bool_))
+        ps = scene.pairs
+        for got, want in zip((ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b), full):
+            np.testing.assert_array_equal(got, want)
+        # a valid list at the present poses: every pair of overlapping patch boxes is in it
+        nurbs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
+                          if body_shape[i] == 0 or body_shape[j] == 0])
+        t = scene.tables()
+        keep, ma, mb = candidate_patch_masks_batch_jit(t.boxes, t.box_offsets, t.body_shape,
+                                                       kin.position, R, nurbs, 0.0, scene.P)
+        listed = {int(k): r for r, k in enumerate(ps.keys)}
+        assert keep.sum() > 10
+        for (i, j), k, a_, b_ in zip(nurbs[keep], keep[keep], ma[keep], mb[keep]):
+            r = listed[int(i * scene.nb + j)]
+            assert np.all(ps.mask_a[r] >= a_) and np.all(ps.mask_b[r] >= b_)

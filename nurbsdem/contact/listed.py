@@ -73,19 +73,55 @@ def scene_tables(scene) -> SceneTables:
 
 # --------------------------------------------------------------------------- the list
 @njit(cache=True)
-def _directed(st, pairs, pos, R, m):
+def _listed_before(old_keys: np.ndarray, key: int) -> int:
+    """The position of ``key`` in the sorted ``old_keys``, −1 if absent."""
+    M = old_keys.shape[0]
+    if M == 0:
+        return -1
+    j = min(np.searchsorted(old_keys, key), M - 1)
+    return j if old_keys[j] == key else -1
+
+
+@njit(cache=True)
+def _directed(st, pairs, pos, R, m, old_keys, old_mask_a, old_mask_b, fresh):
     """The NURBS body pairs whose patch boxes overlap (within m), with their candidate
-    patches as (K, P) masks (paper 3.1)."""
-    keep, mask_a, mask_b = candidate_patch_masks_batch_jit(st.boxes, st.box_offsets,
-                                                           st.body_shape, pos, R, pairs, m,
-                                                           st.n_patches)
+    patches as (K, P) masks (paper 3.1).  Only the pairs with a ``fresh`` body are tested; the
+    others keep the old list's masks, or stay out of it (:func:`scene_list`)."""
+    K, P = pairs.shape[0], st.n_patches
+    keep = np.zeros(K, np.bool_)
+    mask_a = np.zeros((K, P), np.bool_)
+    mask_b = np.zeros((K, P), np.bool_)
+    tested = np.empty(K, np.int64)
+    n_tested = 0
+    for r in range(K):
+        i, j = pairs[r, 0], pairs[r, 1]
+        if fresh[i] or fresh[j]:
+            tested[n_tested] = r
+            n_tested += 1
+            continue
+        o = _listed_before(old_keys, i * st.nb + j)
+        if o >= 0:
+            keep[r] = True
+            mask_a[r, :] = old_mask_a[o, :]
+            mask_b[r, :] = old_mask_b[o, :]
+    if n_tested:
+        tested = tested[:n_tested]
+        kt, mat, mbt = candidate_patch_masks_batch_jit(st.boxes, st.box_offsets, st.body_shape,
+                                                       pos, R, pairs[tested], m, P)
+        for s in range(n_tested):
+            r = tested[s]
+            keep[r] = kt[s]
+            mask_a[r, :] = mat[s, :]
+            mask_b[r, :] = mbt[s, :]
     return pairs[keep], mask_a[keep], mask_b[keep]
 
 
 @njit(cache=True)
-def _wall_candidates(st, x, pos, R, wall_d, owned, m):
+def _wall_candidates(st, x, pos, R, wall_d, owned, m, old_keys, fresh):
     """(body, wall) pairs within reach of each other: exact spheres by their bounding sphere,
-    NURBS bodies when a patch box reaches the wall."""
+    NURBS bodies when a patch box reaches the wall (tested for the pairs with a ``fresh``
+    body or wall only; the others as in the old list, :func:`scene_list`)."""
+    N = st.n
     wc = st.wall_center + wall_d
     wp = sphere_wall_pairs_jit(x, st.body_radius, wc, st.wall_axes, st.wall_half, m)
     mine = np.zeros(wp.shape[0], np.bool_)
@@ -96,20 +132,36 @@ def _wall_candidates(st, x, pos, R, wall_d, owned, m):
     for r in range(wp.shape[0]):
         ball[r] = st.is_sphere[wp[r, 0]]
     balls, wp = wp[ball], wp[~ball]
-    if wp.shape[0]:
+    keep = np.zeros(wp.shape[0], np.bool_)
+    test = np.zeros(wp.shape[0], np.bool_)
+    for r in range(wp.shape[0]):
+        i, w = wp[r, 0], wp[r, 1]
+        test[r] = fresh[i] or fresh[N + w]
+        keep[r] = not test[r] and _listed_before(old_keys, i * st.nb + N + w) >= 0
+    tested = wp[test]
+    if tested.shape[0]:
         cand = candidate_patches_wall_batch_jit(st.boxes, st.box_offsets, st.body_shape, pos, R,
-                                                wc, st.wall_axes, st.wall_half, wp, m,
+                                                wc, st.wall_axes, st.wall_half, tested, m,
                                                 st.depth_wall)
-        wp = wp[np.unique(cand[:, 0])]
-    return np.concatenate((wp, balls))
+        idx = np.nonzero(test)[0]
+        for c in range(cand.shape[0]):
+            keep[idx[cand[c, 0]]] = True
+    return np.concatenate((wp[keep], balls))
 
 
 @njit(cache=True)
-def scene_list(st, x, pos, R, wall_d, owned, m):
+def scene_list(st, x, pos, R, wall_d, owned, m, old_keys, old_mask_a, old_mask_b, fresh):
     """The neighbour list: (a, b, keys, mask_a, mask_b) sorted by key a·(N+W) + b, of the
     pairs within m (the margin plus the skin, m) of each other with a body this rank owns
-    (``owned`` (N,) bool; all True on one rank).  x (N,3) centroids, pos (N,3) and R (N,3,3)
-    the poses, wall_d (W,3) the walls' displacements (m)."""
+    (``owned`` (N,) bool; all True on one rank), at the poses x (N,3) centroids, pos (N,3) and
+    R (N,3,3), wall_d (W,3) the walls' displacements (m): each body's built pose.
+
+    A rebuild tests the patch boxes (level 2) only of the pairs with a ``fresh`` body (N+W,)
+    bool, those whose built pose changed (:func:`~nurbsdem.contact.verlet.reposed_bodies`):
+    any other pair has the poses and m of the old list's build (old_keys sorted, old_mask_a,
+    old_mask_b), so it is listed with the old masks if the old list held it and left out if
+    not, the same bits as testing it again.  A full build: ``fresh`` all True.  (Several MPI
+    ranks build in full: a rank's old list lacks the pairs of particles it did not own.)"""
     N, P = st.n, st.n_patches
     pairs = sphere_pairs_jit(x, st.body_radius, m) if N > 1 else np.zeros((0, 2), np.int64)
     mine = np.zeros(pairs.shape[0], np.bool_)
@@ -121,10 +173,11 @@ def scene_list(st, x, pos, R, wall_d, owned, m):
     mask_a = np.zeros((0, P), np.bool_)
     mask_b = np.zeros((0, P), np.bool_)
     if pairs.shape[0]:
-        pairs, mask_a, mask_b = _directed(st, pairs, pos, R, m)
+        pairs, mask_a, mask_b = _directed(st, pairs, pos, R, m, old_keys, old_mask_a,
+                                          old_mask_b, fresh)
     wpairs = np.zeros((0, 2), np.int64)
     if st.wall_center.shape[0] and N:
-        wpairs = _wall_candidates(st, x, pos, R, wall_d, owned, m)
+        wpairs = _wall_candidates(st, x, pos, R, wall_d, owned, m, old_keys, fresh)
     K, S, W = pairs.shape[0], spheres.shape[0], wpairs.shape[0]
     a = np.empty(K + S + W, np.int64)
     b = np.empty(K + S + W, np.int64)

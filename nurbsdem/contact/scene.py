@@ -15,6 +15,10 @@ holds every pair that can touch) until some body's largest point displacement si
 build, |Δx| + 2 sin(Δθ/2)·r (r its bounding radius; walls: |Δd|), exceeds s/2: the
 displacement between the two poses, not the path, so that a body jiggling in a pack does not
 make the list stale; then it is built again.  With s = 0 it is built at every evaluation.
+Each body keeps its own built pose: a rebuild renews those of the bodies that moved
+(:func:`~nurbsdem.contact.verlet.reposed_bodies`) and tests the patch boxes of their pairs
+only; the other pairs keep their candidate patches (a list that equals a full build at the
+bodies' built poses).
 Each body also carries an **odometer**, the sum over force evaluations of that displacement
 (the certificates' measure, below).
 
@@ -77,10 +81,13 @@ from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
 from .verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
-                     renew_certificates)
+                     renew_certificates, repose, reposed_bodies)
 from .wall import wall_frame
 
 log = logging.getLogger("nurbsdem")
+
+#: the names of the built poses in a scene's state (``SceneContacts.built_pose``)
+BUILT_POSE = ("built_x", "built_R", "built_wall", "built_pos")
 
 
 @dataclass
@@ -163,7 +170,8 @@ class SceneContacts:
         self.pairs = _PairState.empty(self.P)
         #: odometer of every body (m, the certificates' measure)
         self.odo = np.zeros(self.nb)
-        #: the poses the list was built at: centroids (N,3), rotations (N,3,3), walls (W,3)
+        #: each body's pose at the list's builds (:func:`~nurbsdem.contact.verlet.reposed_bodies`):
+        #: centroids (N,3), rotations (N,3,3), walls (W,3), pose positions (N,3)
         self.built_pose: tuple | None = None
         #: poses of the previous call: pose positions (N,3), rotations (N,3,3), walls (W,3),
         #: centroids (N,3)
@@ -199,7 +207,7 @@ class SceneContacts:
         st["odo"] = self.odo
         if self.built_pose is not None:
             st.update(built_x=self.built_pose[0], built_R=self.built_pose[1],
-                      built_wall=self.built_pose[2])
+                      built_wall=self.built_pose[2], built_pos=self.built_pose[3])
         if self.prev_pose is not None:
             st.update(prev_pos=self.prev_pose[0], prev_R=self.prev_pose[1],
                       prev_wall=self.prev_pose[2], prev_x=self.prev_pose[3])
@@ -209,10 +217,10 @@ class SceneContacts:
         """Restore :meth:`local_state`."""
         self.pairs = _PairState.from_dict(st, self.P)
         self.odo = np.array(st.get("odo", np.zeros(self.nb)), float)
-        # (a checkpoint of an older version has "built_odo" or "built_pose": the list is
-        # built again)
-        self.built_pose = ((np.array(st["built_x"], float), np.array(st["built_R"], float),
-                            np.array(st["built_wall"], float)) if "built_x" in st else None)
+        # (a checkpoint of an older version has "built_odo", "built_pose" or no "built_pos":
+        # the list is built again)
+        self.built_pose = (tuple(np.array(st[k], float) for k in BUILT_POSE)
+                           if "built_pos" in st else None)
         self.prev_pose = ((np.array(st["prev_pos"]), np.array(st["prev_R"]),
                            np.array(st["prev_wall"]), np.array(st["prev_x"]))
                           if "prev_x" in st else None)
@@ -242,20 +250,32 @@ class SceneContacts:
         """Whether some body has moved more than half the skin since the list was built
         (pose: this call's (pose positions, rotations, walls, centroids))."""
         _, R, wall, x = pose
-        return self.built_pose is None or list_is_stale(*self.built_pose, x, R, wall,
+        return self.built_pose is None or list_is_stale(*self.built_pose[:3], x, R, wall,
                                                         self.radius, self.skin)
 
     def _build_list(self, kin, pos: np.ndarray, R: np.ndarray) -> None:
-        """Neighbour list with the skin (levels 1–2, :func:`~nurbsdem.contact.listed.scene_list`),
-        carrying over the per-pair arrays."""
-        owned = (np.ones(self.n, np.bool_) if self.domain is None
-                 else np.ascontiguousarray(self.domain.owned, np.bool_))
+        """Neighbour list with the skin (levels 1–2, :func:`~nurbsdem.contact.listed.scene_list`)
+        at the bodies' built poses, the moved ones' renewed
+        (:func:`~nurbsdem.contact.verlet.reposed_bodies`), carrying over the per-pair arrays."""
+        x = np.ascontiguousarray(kin.x, float)
+        wall = np.ascontiguousarray(kin.wall_displacement, float)
+        if self.built_pose is None:
+            fresh = np.ones(self.nb, np.bool_)
+            built = (x.copy(), np.array(R, float), wall.copy(), np.array(pos, float))
+        else:
+            fresh = reposed_bodies(*self.built_pose[:3], x, R, wall, self.radius, self.skin)
+            built = repose(*self.built_pose, x, R, wall, pos, fresh)
+        if self.domain is None:
+            owned = np.ones(self.n, np.bool_)
+        else:                   # a rank's old list lacks the pairs of particles it did not own
+            owned = np.ascontiguousarray(self.domain.owned, np.bool_)
+            fresh = np.ones(self.nb, np.bool_)
+        ps = self.pairs
         a, b, keys, mask_a, mask_b = scene_list(
-            self.tables(), np.ascontiguousarray(kin.x, float), pos, R,
-            np.ascontiguousarray(kin.wall_displacement, float), owned, self.margin + self.skin)
-        self.pairs = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
-        self.built_pose = (np.array(kin.x, float), np.array(R, float),
-                           np.array(kin.wall_displacement, float))
+            self.tables(), built[0], built[3], built[1], built[2], owned, self.margin + self.skin,
+            ps.keys, ps.mask_a, ps.mask_b, fresh)
+        self.pairs = ps.rebuilt(a, b, keys, mask_a, mask_b)
+        self.built_pose = built
         self.builds += 1
 
     def tables(self) -> SceneTables:

@@ -64,7 +64,7 @@ from numba import njit
 from ..contact.analytic import closed_form_into
 from ..contact.listed import scene_list, solve_due_into
 from ..contact.verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
-                              renew_certificates)
+                              renew_certificates, repose, reposed_bodies)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
@@ -92,7 +92,7 @@ SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates 
 #: the neighbour list and its per-pair arrays, odometers, the poses it was built at and the
 #: previous poses
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
-                      "built_R built_wall prev_pos prev_R prev_wall prev_x")
+                      "built_R built_wall built_pos prev_pos prev_R prev_wall prev_x")
 #: constants of the bodies and the contact laws
 BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
                        "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
@@ -139,14 +139,17 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     c0 = cycles()
     odo = advance_odometers(pl.odo, x, pl.prev_x, R, pl.prev_R, sc.radius, wall_d, pl.prev_wall)
     a, b, keys = pl.a, pl.b, pl.keys
-    built_x, built_R, built_wall = pl.built_x, pl.built_R, pl.built_wall
+    built_x, built_R, built_wall, built_pos = pl.built_x, pl.built_R, pl.built_wall, pl.built_pos
     mask_a, mask_b = pl.mask_a, pl.mask_b
     if list_is_stale(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin):
-        a, b, keys, mask_a, mask_b = scene_list(sc.tables, x, pos, R, wall_d, sc.owned,
-                                                sc.margin + sc.skin)
+        fresh = reposed_bodies(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
+        built_x, built_R, built_wall, built_pos = repose(built_x, built_R, built_wall, built_pos,
+                                                         x, R, wall_d, pos, fresh)
+        a, b, keys, mask_a, mask_b = scene_list(sc.tables, built_x, built_pos, built_R,
+                                                built_wall, sc.owned, sc.margin + sc.skin,
+                                                pl.keys, pl.mask_a, pl.mask_b, fresh)
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
-        built_x, built_R, built_wall = x.copy(), R.copy(), wall_d.copy()
         counters[BUILDS] += 1
     else:       # updated in place: the loop owns these arrays (copied at its start)
         rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
@@ -174,7 +177,7 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     counters[SEARCH_CYCLES] += (c1 - c0) + (cycles() - c2)
     counters[ROW_CYCLES] += c2 - c1
     return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built_x, built_R,
-                     built_wall, pos, R, wall_d, x), reach, n_due, failed)
+                     built_wall, built_pos, pos, R, wall_d, x), reach, n_due, failed)
 
 
 # --------------------------------------------------------------------------- forces
@@ -340,7 +343,8 @@ def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, 
     """The state at the start of a deck step (copies of what the loop changes in place)."""
     pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
                        pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_x, pl.built_R,
-                       pl.built_wall, pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
+                       pl.built_wall, pl.built_pos, pl.prev_pos, pl.prev_R, pl.prev_wall,
+                       pl.prev_x)
     return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
                     wall_work.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
                     pl_copy, ev, wall_d, wall_u, peak[0])
@@ -526,10 +530,11 @@ class DeckSteps:
         sc = self.scene
         ps = sc.pairs
         pos, R, wall, x = (np.ascontiguousarray(a, float) for a in sc.prev_pose)
-        built_x, built_R, built_wall = (np.ascontiguousarray(a, float) for a in sc.built_pose)
+        built_x, built_R, built_wall, built_pos = (np.ascontiguousarray(a, float)
+                                                   for a in sc.built_pose)
         return PairList(ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b, ps.rows_f.copy(),
                         ps.rows_i.copy(), ps.budget.copy(), sc.odo, built_x, built_R,
-                        built_wall, pos, R, wall, x)
+                        built_wall, built_pos, pos, R, wall, x)
 
     def _evaluation(self) -> Evaluation:
         s, cs = self.system, self.scene.last
@@ -628,7 +633,7 @@ class DeckSteps:
         s, sc = self.system, self.scene
         sc.pairs = _PairState(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f, pl.rows_i,
                               pl.budget, np.zeros(pl.a.shape[0], bool))
-        sc.odo, sc.built_pose = pl.odo, (pl.built_x, pl.built_R, pl.built_wall)
+        sc.odo, sc.built_pose = pl.odo, (pl.built_x, pl.built_R, pl.built_wall, pl.built_pos)
         sc.prev_pose = (pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
         sc.builds += int(counters[BUILDS])
         sc.timers.calls += int(counters[EVALS])
