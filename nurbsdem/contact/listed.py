@@ -73,34 +73,36 @@ def scene_tables(scene) -> SceneTables:
 
 # --------------------------------------------------------------------------- the list
 @njit(cache=True)
-def _listed_before(old_keys: np.ndarray, key: int) -> int:
-    """The position of ``key`` in the sorted ``old_keys``, −1 if absent."""
+def _advance(old_keys: np.ndarray, o: int, key: int) -> int:
+    """The first position from o of the sorted ``old_keys`` whose key is >= key (their length
+    if none): one step of a merge that looks up increasing keys."""
     M = old_keys.shape[0]
-    if M == 0:
-        return -1
-    j = min(np.searchsorted(old_keys, key), M - 1)
-    return j if old_keys[j] == key else -1
+    while o < M and old_keys[o] < key:
+        o += 1
+    return o
 
 
 @njit(cache=True)
 def _directed(st, pairs, pos, R, m, old_keys, old_mask_a, old_mask_b, fresh):
-    """The NURBS body pairs whose patch boxes overlap (within m), with their candidate
-    patches as (K, P) masks (paper 3.1).  Only the pairs with a ``fresh`` body are tested; the
-    others keep the old list's masks, or stay out of it (:func:`scene_list`)."""
+    """The NURBS body pairs (sorted, as :func:`~nurbsdem.contact.broadphase.sphere_pairs_jit`
+    gives them) whose patch boxes overlap (within m), with their candidate patches as (K, P)
+    masks (paper 3.1).  Only the pairs with a ``fresh`` body are tested; the others keep the
+    old list's masks, or stay out of it (:func:`scene_list`)."""
     K, P = pairs.shape[0], st.n_patches
     keep = np.zeros(K, np.bool_)
     mask_a = np.zeros((K, P), np.bool_)
     mask_b = np.zeros((K, P), np.bool_)
     tested = np.empty(K, np.int64)
     n_tested = 0
+    o = 0                       # pairs and old keys both sorted: a merge
     for r in range(K):
         i, j = pairs[r, 0], pairs[r, 1]
         if fresh[i] or fresh[j]:
             tested[n_tested] = r
             n_tested += 1
             continue
-        o = _listed_before(old_keys, i * st.nb + j)
-        if o >= 0:
+        o = _advance(old_keys, o, i * st.nb + j)
+        if o < old_keys.shape[0] and old_keys[o] == i * st.nb + j:
             keep[r] = True
             mask_a[r, :] = old_mask_a[o, :]
             mask_b[r, :] = old_mask_b[o, :]
@@ -134,10 +136,13 @@ def _wall_candidates(st, x, pos, R, wall_d, owned, m, old_keys, fresh):
     balls, wp = wp[ball], wp[~ball]
     keep = np.zeros(wp.shape[0], np.bool_)
     test = np.zeros(wp.shape[0], np.bool_)
+    o = 0                       # pairs (body-major) and old keys both sorted: a merge
     for r in range(wp.shape[0]):
         i, w = wp[r, 0], wp[r, 1]
         test[r] = fresh[i] or fresh[N + w]
-        keep[r] = not test[r] and _listed_before(old_keys, i * st.nb + N + w) >= 0
+        if not test[r]:
+            o = _advance(old_keys, o, i * st.nb + N + w)
+            keep[r] = o < old_keys.shape[0] and old_keys[o] == i * st.nb + N + w
     tested = wp[test]
     if tested.shape[0]:
         cand = candidate_patches_wall_batch_jit(st.boxes, st.box_offsets, st.body_shape, pos, R,
