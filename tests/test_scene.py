@@ -193,6 +193,6 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build():
                                                        kin.position, R, nurbs, 0.0, scene.P)
         listed = {int(k): r for r, k in enumerate(ps.keys)}
         assert keep.sum() > 10
-        for (i, j), k, a_, b_ in zip(nurbs[keep], keep[keep], ma[keep], mb[keep]):
+        for (i, j), a_, b_ in zip(nurbs[keep], ma[keep], mb[keep]):
             r = listed[int(i * scene.nb + j)]
             assert np.all(ps.mask_a[r] >= a_) and np.all(ps.mask_b[r] >= b_)
