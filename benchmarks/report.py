@@ -857,7 +857,12 @@ def section_cost(rep: Report, workdir: Path) -> None:
         _section_settled(rep)
     section_spheres(rep)
     section_point_surface(rep)
-    # the paper's example
+    _section_paper(rep, workdir, quick)
+
+
+def _section_paper(rep: Report, workdir: Path, quick: bool) -> None:
+    """The paper's example as shipped and with few samples (:func:`_paper_runs`), its time
+    split, and its damping variants."""
     rep.add("### The paper's example\n")
     if quick:
         rep.add("Not run in quick mode: the full mode runs `inputs/paper/compaction.inp` "
@@ -866,7 +871,12 @@ def section_cost(rep: Report, workdir: Path) -> None:
     shipped, few = _paper_runs(workdir)
     s, sparse = shipped[0], few[0]
     t = s.timers
-    rows = [[k, fmt(v, ".1f"), f"{100 * v / s.wall_time:.1f}"] for k, v in t.items()]
+    rows = []
+    for k, v in t.items():
+        rows.append([k, fmt(v, ".1f"), f"{100 * v / s.wall_time:.1f}"])
+        if k == "forces + integration":        # its measured parts (RunSummary.split)
+            rows += [[f"… of which {part}", fmt(w, ".1f"), f"{100 * w / s.wall_time:.1f}"]
+                     for part, w in s.split.items()]
     rest = s.wall_time - sum(t.values())
     rows.append(["other (steps bookkeeping)", fmt(rest, ".1f"), f"{100 * rest / s.wall_time:.1f}"])
     rows.append(["**total wall time**", fmt(s.wall_time, ".1f"), "100"])
@@ -884,6 +894,9 @@ def section_cost(rep: Report, workdir: Path) -> None:
             f"{abs(s.balance_error):.3e} J ({abs(s.balance_error) / max(s.balance_scale, 1e-300):.2e} "
             f"of the energy turned over). {_best_of(shipped)}\n\n" +
             md_table(["part", "s", "%"], rows) + "\n\n" +
+            f"Time outside the LCP kernel (everything but the LCP row): "
+            f"{_outside_lcp(s):.2f} × the LCP time (issue 10's measure, target at most 0.5; "
+            f"before the step engine 1.7).\n\n"
             f"Before the step engine of issue 10 (numbers of record on this machine class): "
             f"{BEFORE['paper_s']:.0f} s, {BEFORE['paper_split']}.\n")
     _paper_with_few_frames(rep, workdir, s, few)
@@ -893,6 +906,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
                                  sparse_frames=sparse.frames,
                                  frames=sparse.frames_shipped,
                                  lcps_per_active=_lcps_per_active(s),
+                                 outside=_outside_lcp(s), sparse_outside=_outside_lcp(sparse),
                                  particles=s.particles, failed=s.failed)
 
 
@@ -956,10 +970,18 @@ def _paper_with_few_frames(rep: Report, workdir: Path, shipped, runs: list) -> N
             f"time against {shipped.wall_time:.1f} s, LCP {t['LCP']:.1f} s against "
             f"{t0['LCP']:.1f} s, output (main thread) {t['output']:.1f} s against "
             f"{t0['output']:.1f} s, {s.substeps} internal steps against {shipped.substeps} "
-            f"(the same when the two runs' contact states agree to the bit). The samples are "
+            f"(the same when the two runs' contact states agree to the bit); time outside the "
+            f"LCP {_outside_lcp(s):.2f} × the LCP time (of forces + integration "
+            f"{t['forces + integration']:.1f} s: "
+            + ", ".join(f"{k} {v:.1f} s" for k, v in s.split.items()) + "). The samples are "
             f"written by a worker thread; what they cost beyond its own CPU time is the LCP's "
             f"two threads running slower meanwhile (DEVNOTES: measured on this 2-core "
             f"virtual machine).\n")
+
+
+def _outside_lcp(s) -> float:
+    """The wall time outside the LCP kernel over the LCP time (issue 10's measure)."""
+    return (s.wall_time - s.timers["LCP"]) / max(s.timers["LCP"], 1e-300)
 
 
 def _lcps_per_active(s) -> float:
@@ -1372,7 +1394,9 @@ def _headline_md(rep: Report) -> str:
                    f"{p['sparse_frames']} ParaView samples instead of {p['frames']}), "
                    f"{p['lcps']} LCPs "
                    f"({p['lcps_per_active']:.2f} per active contact and evaluation), "
-                   f"{p['failed']} failed.")
+                   f"{p['failed']} failed; time outside the LCP {p['outside']:.2f} × the LCP "
+                   f"time ({p['sparse_outside']:.2f} with few samples; target at most 0.5, "
+                   f"before 1.7).")
     dm = h.get("damping")
     if dm:
         out.append(f"* Paper example as shipped (`Damping Implicit Accuracy 3e-5 Safety "

@@ -38,7 +38,7 @@ from .dynamics.energy import EnergySample
 from .dynamics.hertz import law_from_deck as hertz_law_from_deck
 from .dynamics.monitor import MonitorSample, StateSample
 from .dynamics.stepcontrol import shape_compliance
-from .dynamics.system import InstabilityError
+from .dynamics.system import SPLIT_PARTS, InstabilityError
 from .errors import InputError
 from .geometry.rotation import quat_to_matrix
 from .io.checkpoint import save_checkpoint
@@ -78,6 +78,9 @@ class RunSummary:
     simulated_time: float = 0.0
     particles: int = 0
     timers: dict = field(default_factory=dict)
+    #: two parts of ``timers["forces + integration"]`` (s): the implicit dashpots' solves and
+    #: the time-step control (Gershgorin gates and exact estimates) in the time loop
+    split: dict = field(default_factory=dict)
 
     def _balance_share(self) -> str:
         """The balance error relative to the energy turned over (dissipated + external work),
@@ -91,6 +94,7 @@ class RunSummary:
         t = self.timers
         total = max(self.wall_time, 1e-12)
         split = ", ".join(f"{k} {v:.1f} s ({100 * v / total:.0f} %)" for k, v in t.items())
+        parts = ", ".join(f"{k} {v:.1f} s" for k, v in self.split.items() if v > 0.0)
         return (f"done: {self.simulated_time:.4g} s simulated, {self.particles} particles, "
                 f"{self.steps} time steps ({self.substeps} internal), wall time "
                 f"{self.wall_time:.1f} s\n"
@@ -101,7 +105,8 @@ class RunSummary:
                 f"energy balance error: {self.balance_error:.3e} J {self._balance_share()}\n"
                 + (f"accuracy control: {self.accuracy_repeats} deck steps repeated with more "
                    f"sub-steps\n" if self.accuracy_repeats else "")
-                + f"time split: {split}")
+                + f"time split: {split}"
+                + (f" (of forces + integration: {parts})" if parts else ""))
 
 
 class Progress:
@@ -225,6 +230,8 @@ class Solver:
         self.system: DemSystem | None = None
         self.scene: SceneContacts | None = None
         self.summary = RunSummary()
+        #: parts of timers["forces + integration"] (:attr:`RunSummary.split`)
+        self.split = dict.fromkeys(SPLIT_PARTS, 0.0)
         self.timers = {"global search": 0.0, "LCP": 0.0, "forces + integration": 0.0,
                        "output": 0.0, "setup": 0.0}
         self._carry_hist = None
@@ -528,6 +535,7 @@ class Solver:
             t_before = time.perf_counter()
             g0, l0, n0 = self.scene.timers.global_search, self.scene.timers.lcp, self.scene.timers.lcps
             e0 = self.scene.timers.calls
+            parts0 = dict(sysm.split)
             n, monitors_due, states_due = self._steps_to_event(n_total - self.step_progress,
                                                                ck_every)
             try:
@@ -547,6 +555,8 @@ class Solver:
             self.timers["global search"] += g
             self.timers["LCP"] += lc
             self.timers["forces + integration"] += dt_wall - g - lc
+            for k, v in sysm.split.items():
+                self.split[k] += v - parts0[k]
             self.step_progress += done
             self.time = sysm.time
             self.summary.steps += done
@@ -777,6 +787,7 @@ class Solver:
         s.simulated_time = self.time
         s.particles = len(self.bodies)
         s.timers = {k: v for k, v in self.timers.items()}
+        s.split = dict(self.split)
         row = self._last_energy
         s.balance_error = row.get("balance_error", 0.0)
         s.balance_scale = max(abs(row.get("dissipated", 0.0)) + abs(row.get("external_work", 0.0)), 0.0)

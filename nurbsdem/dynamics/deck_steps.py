@@ -126,7 +126,11 @@ DEGENERATED_SUM = 14
 ACC_REFINE, ACC_CALM, ACC_REPEATS = 15, 16, 17
 #: ... and the exact (Lanczos) estimates the loop took itself
 NETWORK_ESTIMATES = 18
-N_COUNTERS = 19
+#: ... and the CPU cycles spent in the implicit dashpots and in the time-step control (two
+#: parts of the solver's "forces + integration", :attr:`DemSystem.split
+#: <nurbsdem.dynamics.system.DemSystem.split>`)
+DASHPOT_CYCLES, CONTROL_CYCLES = 19, 20
+N_COUNTERS = 21
 
 
 # --------------------------------------------------------------------------- contact search
@@ -228,10 +232,12 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
     given = cc.implicit and h > 0.0 and a.shape[0] > 0
     dashpot = np.zeros(0)
     if given:
+        c0 = cycles()
         dashpot, rounds, iterations = dashpots_of_evaluation(
             a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
             bc.inv_mass_all, radius, bc.mass, bc.gravity, q, L, bc.inv_I, quats_to_matrices(q),
             bc.sq_m, bc.sq_I)
+        counters[DASHPOT_CYCLES] += cycles() - c0
         counters[DASHPOT_SOLVES] += 1
         counters[DASHPOT_SOLVES + 1] += rounds
         counters[DASHPOT_SOLVES + 2] += iterations
@@ -477,7 +483,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                        ev.monitored, active, ev.degenerated, wall_d, ev.force)
         if state_at[j]:
             states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
-        if not _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters, estimate):
+        c0 = cycles()
+        stands = _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters, estimate)
+        counters[CONTROL_CYCLES] += cycles() - c0
+        if not stands:
             return CONTROL, j + 1, pl, ev, wall_d, wall_u, states
         if counters[ACC_REFINE] != acc:
             return RECOUNT, j + 1, pl, ev, wall_d, wall_u, states
@@ -659,3 +668,5 @@ class DeckSteps:
         s._peak = float(peak[0])
         s.failed_in_step = 0
         s.dashpot_solves += counters[DASHPOT_SOLVES:DASHPOT_SOLVES + 3]
+        s.split["implicit dashpots"] += float(counters[DASHPOT_CYCLES]) * seconds_per_cycle()
+        s.split["time-step control"] += float(counters[CONTROL_CYCLES]) * seconds_per_cycle()

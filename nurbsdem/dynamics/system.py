@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Protocol
 
@@ -155,6 +156,10 @@ def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
     a, b = float(m_i.min()), float(m_j.min())
     return a * b / (a + b)
 
+
+#: the parts of the solver's "forces + integration" time a system measures
+#: (:attr:`DemSystem.split`)
+SPLIT_PARTS = ("implicit dashpots", "time-step control")
 
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
                "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
@@ -251,6 +256,10 @@ class DemSystem:
         self.implicit_damping = bool(implicit_damping)
         #: active-set rounds and CG iterations of the implicit dashpots so far
         self.dashpot_solves = np.zeros(3, np.int64)
+        #: seconds spent so far in the implicit dashpots (:meth:`_implicit_dashpots`) and in
+        #: the time-step control (:meth:`_control_step`), the compiled deck steps' included:
+        #: two parts of the solver's "forces + integration" time
+        self.split = dict.fromkeys(SPLIT_PARTS, 0.0)
         self.energy_tolerance = float(energy_tolerance)
         self.check_energy = bool(check_energy)
         self.bodies = RigidBodies()
@@ -478,9 +487,18 @@ class DemSystem:
         return int(needed_substeps(self.dt, dt_safe))
 
     def _control_step(self, initial: bool = False) -> None:
-        """Choose the sub-steps of the next deck step from both limits (module docstring)."""
+        """Choose the sub-steps of the next deck step from both limits (module docstring);
+        its time is added to ``split``."""
         if not initial and self.forced_substeps is not None:
             return
+        t0 = time.perf_counter()
+        try:
+            self._choose_substeps(initial)
+        finally:
+            self.split["time-step control"] += time.perf_counter() - t0
+
+    def _choose_substeps(self, initial: bool) -> None:
+        """:meth:`_control_step` (the sub-step count and its log or error)."""
         net = self._network()
         if not initial and not periodic_recheck(self.step_count, NETWORK_RECHECK_STEPS,
                                                 self.refine, FALL_HYSTERESIS, self.substeps):
@@ -649,9 +667,11 @@ class DemSystem:
         """The normal dashpot forces (K,) N at the end of the internal step h (s)
         (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`)."""
         b = self.bodies
+        t0 = time.perf_counter()
         f, rounds, iterations = dashpots_of_evaluation(
             *law, spring, h, self._inv_mass_all, self.c_radius, b.mass, self.gravity, b.q, b.L,
             self._inv_I, b.principal_rotations(), self._sq_m, self._sq_I)
+        self.split["implicit dashpots"] += time.perf_counter() - t0
         self.dashpot_solves += (1, rounds, iterations)
         return f
 
@@ -1102,13 +1122,6 @@ class DemSystem:
     def wall_displacement(self) -> np.ndarray:
         """(W,3) current wall displacements (m)."""
         return self.wall_d.copy()
-
-    def contact_table(self) -> dict[str, np.ndarray]:
-        """Per-contact results of the last evaluation: body_a, body_b, key, point (application
-        point, m), force (on B, N), fn (N), stick (1/0), elastic (K,2) J."""
-        return dict(body_a=self.c_a.copy(), body_b=self.c_b.copy(), key=self.c_key.copy(),
-                    point=self.c_point.copy(), force=self.c_ftot.copy(), fn=self.c_fn.copy(),
-                    stick=self.c_stick.copy(), elastic=self.c_eel.copy())
 
     # ------------------------------------------------------------------ checkpoints
     def get_state(self) -> dict[str, np.ndarray]:
