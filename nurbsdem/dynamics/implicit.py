@@ -150,20 +150,19 @@ def _masked_dot(a: np.ndarray, b: np.ndarray, free: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _cg_free(f: np.ndarray, free: np.ndarray, inv_cn: np.ndarray, w0: np.ndarray,
-             h: float, precond: np.ndarray, tol: float, body_a, body_b, rows,
-             y: np.ndarray) -> int:
+def _cg_free(f: np.ndarray, free: np.ndarray, inv_cn: np.ndarray, h: float,
+             precond: np.ndarray, tol: float, body_a, body_b, rows, y: np.ndarray,
+             res: np.ndarray) -> int:
     """Conjugate gradients, Jacobi-preconditioned (``precond`` = 1 / diag A), for
     A_FF f_F = −(w₀ + A_FC f_C) on the free contacts (the others fixed at their bound), from
-    the present f; stops when |residual|₂ <= tol.  Returns the iterations."""
+    the present f, whose residual A f + w₀ over all contacts is ``res`` (:func:`_residual`);
+    stops when |residual|₂ <= tol.  Returns the iterations."""
     K = f.shape[0]
-    all_on = np.ones(K, np.bool_)
     r = np.empty(K)
     gf = np.empty(K)
-    _residual(f, inv_cn, w0, h, all_on, body_a, body_b, rows, y, gf, r)
     z = np.zeros(K)
     for c in range(K):
-        r[c] = -r[c] if free[c] else 0.0
+        r[c] = -res[c] if free[c] else 0.0
         z[c] = precond[c] * r[c]
     p = z.copy()
     ap = np.empty(K)
@@ -192,21 +191,22 @@ def _cg_free(f: np.ndarray, free: np.ndarray, inv_cn: np.ndarray, w0: np.ndarray
 
 @njit(cache=True)
 def _update_active_set(f: np.ndarray, free: np.ndarray, damped: np.ndarray, lower: np.ndarray,
-                       res: np.ndarray) -> bool:
+                       res: np.ndarray) -> tuple[bool, bool]:
     """Free contacts below their bound are clipped; clipped (damped) ones whose multiplier
-    (A f + w₀)_c is negative are freed.  Returns whether the set changed."""
-    changed = False
+    (A f + w₀)_c is negative are freed.  Returns (whether the set changed, whether a force
+    was clipped: f changed, so its residual must be taken again)."""
+    changed = clipped = False
     for c in range(f.shape[0]):
         if not damped[c]:
             continue
         if free[c] and f[c] < lower[c]:
             free[c] = False
             f[c] = lower[c]
-            changed = True
+            changed = clipped = True
         elif not free[c] and res[c] < 0.0:
             free[c] = True
             changed = True
-    return changed
+    return changed, clipped
 
 
 @njit(cache=True)
@@ -218,18 +218,32 @@ def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray, n_p
     normal velocities w₀ (K,) m/s, for the two half kicks (h s in all) of an internal step h;
     ``rows`` from :func:`normal_rows`.  Contacts with cn = 0 get f = 0.  Returns (active-set
     rounds, CG iterations)."""
+    return solve_dashpots_from(body_a, body_b, rows, n_particles, cn, f_el, w0, h, f,
+                               np.empty(0))
+
+
+@njit(cache=True)
+def solve_dashpots_from(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray,
+                        n_particles: int, cn: np.ndarray, f_el: np.ndarray, w0: np.ndarray,
+                        h: float, f: np.ndarray, gf0: np.ndarray) -> tuple[int, int]:
+    """:func:`solve_dashpots` given gf0 (K,) = G f of the starting f (m/s per N s, from
+    :func:`delassus_apply` over all contacts), which saves the product of the first residual
+    when no starting force is moved to its bound (the same bits: the same product); an
+    empty gf0 when not known."""
     K = f.shape[0]
     inv_cn = np.zeros(K)
     lower = np.empty(K)
     free = np.zeros(K, np.bool_)
     precond = np.zeros(K)
     scale = 0.0
+    moved = gf0.shape[0] != K            # the starting f's G f unknown, or f moved below
     for c in range(K):
         lower[c] = -f_el[c]
         if cn[c] > 0.0:
             inv_cn[c] = 1.0 / cn[c]
             if f[c] < lower[c]:
                 f[c] = lower[c]
+                moved = True
             free[c] = f[c] > lower[c]
             g = 0.0                               # G_cc, the contact's own compliance
             for side in range(2):
@@ -237,6 +251,7 @@ def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray, n_p
                     g += rows[c, side, k] * rows[c, side, k]
             precond[c] = 1.0 / (inv_cn[c] + h * g)
         else:
+            moved = moved or f[c] != 0.0
             f[c] = 0.0
             lower[c] = 0.0
         scale = max(scale, abs(w0[c]), abs(f_el[c]) * inv_cn[c])
@@ -246,13 +261,21 @@ def solve_dashpots(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray, n_p
     gf = np.empty(K)
     all_on = np.ones(K, np.bool_)
     damped = cn > 0.0
+    if moved:
+        _residual(f, inv_cn, w0, h, all_on, body_a, body_b, rows, y, gf, res)
+    else:                            # _residual's arithmetic on the given product
+        for c in range(K):
+            res[c] = inv_cn[c] * f[c] + h * gf0[c] + w0[c]
     rounds, iterations = 0, 0
     while rounds < MAX_ROUNDS:
         rounds += 1
-        iterations += _cg_free(f, free, inv_cn, w0, h, precond, tol, body_a, body_b, rows, y)
+        iterations += _cg_free(f, free, inv_cn, h, precond, tol, body_a, body_b, rows, y, res)
         _residual(f, inv_cn, w0, h, all_on, body_a, body_b, rows, y, gf, res)
-        if not _update_active_set(f, free, damped, lower, res):
+        changed, clipped = _update_active_set(f, free, damped, lower, res)
+        if not changed:
             break
+        if clipped:                  # else f is unchanged and so is its residual
+            _residual(f, inv_cn, w0, h, all_on, body_a, body_b, rows, y, gf, res)
     for c in range(K):          # an unfinished active set still gives forces within the law
         if f[c] < lower[c]:
             f[c] = lower[c]
@@ -302,7 +325,7 @@ def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     for c in range(K):
         w0[c] = (w3[c, 0] * normal[c, 0] + w3[c, 1] * normal[c, 1] + w3[c, 2] * normal[c, 2]
                  - h * gf[c])
-    rounds, iterations = solve_dashpots(body_a, body_b, rows, N, cn, f_el, w0, h, f)
+    rounds, iterations = solve_dashpots_from(body_a, body_b, rows, N, cn, f_el, w0, h, f, gf)
     return f, rounds, iterations
 
 
