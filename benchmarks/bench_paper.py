@@ -56,8 +56,8 @@ def run(few_frames: bool, quick: bool, workdir: Path, k: int) -> dict:
     s = Solver(parse_deck(deck), output=workdir / name, quiet=True).run()
     samples = len(list((workdir / name / "vtk").glob("particles_*.vtu")))
     return dict(variant="VTK Every 0.5" if few_frames else "as shipped", wall=s.wall_time,
-                timers=dict(s.timers), split=dict(s.split), substeps=s.substeps, lcps=s.lcps, failed=s.failed,
-                balance=abs(s.balance_error), samples=samples)
+                timers=dict(s.timers), split=dict(s.split), substeps=s.substeps,
+                lcps=s.lcps, failed=s.failed, balance=abs(s.balance_error), samples=samples)
 
 
 def row(r: dict) -> str:
