@@ -42,6 +42,7 @@ from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
 from .detect import solve_rows
 from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
+from .verlet import merge_find
 from .wall import solve_wall_rows
 
 #: the scene's constant tables: the packed shapes (:class:`~nurbsdem.contact.detect.ContactTable`:
@@ -73,16 +74,6 @@ def scene_tables(scene) -> SceneTables:
 
 # --------------------------------------------------------------------------- the list
 @njit(cache=True)
-def _advance(old_keys: np.ndarray, o: int, key: int) -> int:
-    """The first position from o of the sorted ``old_keys`` whose key is >= key (their length
-    if none): one step of a merge that looks up increasing keys."""
-    M = old_keys.shape[0]
-    while o < M and old_keys[o] < key:
-        o += 1
-    return o
-
-
-@njit(cache=True)
 def _directed(st, pairs, pos, R, m, old_keys, old_mask_a, old_mask_b, fresh):
     """The NURBS body pairs (sorted, as :func:`~nurbsdem.contact.broadphase.sphere_pairs_jit`
     gives them) whose patch boxes overlap (within m), with their candidate patches as (K, P)
@@ -101,8 +92,8 @@ def _directed(st, pairs, pos, R, m, old_keys, old_mask_a, old_mask_b, fresh):
             tested[n_tested] = r
             n_tested += 1
             continue
-        o = _advance(old_keys, o, i * st.nb + j)
-        if o < old_keys.shape[0] and old_keys[o] == i * st.nb + j:
+        o, listed = merge_find(old_keys, o, i * st.nb + j)
+        if listed:
             keep[r] = True
             mask_a[r, :] = old_mask_a[o, :]
             mask_b[r, :] = old_mask_b[o, :]
@@ -141,8 +132,8 @@ def _wall_candidates(st, x, pos, R, wall_d, owned, m, old_keys, fresh):
         i, w = wp[r, 0], wp[r, 1]
         test[r] = fresh[i] or fresh[N + w]
         if not test[r]:
-            o = _advance(old_keys, o, i * st.nb + N + w)
-            keep[r] = o < old_keys.shape[0] and old_keys[o] == i * st.nb + N + w
+            o, listed = merge_find(old_keys, o, i * st.nb + N + w)
+            keep[r] = listed
     tested = wp[test]
     if tested.shape[0]:
         cand = candidate_patches_wall_batch_jit(st.boxes, st.box_offsets, st.body_shape, pos, R,

@@ -115,6 +115,16 @@ def repose(built_x: np.ndarray, built_R: np.ndarray, built_wall: np.ndarray,
 
 
 @njit(cache=True)
+def merge_find(old_keys: np.ndarray, o: int, key: int) -> tuple[int, bool]:
+    """One step of a merge that looks up increasing keys in the sorted ``old_keys``: the first
+    position from o whose key is >= key (their length if none), and whether it holds key."""
+    M = old_keys.shape[0]
+    while o < M and old_keys[o] < key:
+        o += 1
+    return o, o < M and old_keys[o] == key
+
+
+@njit(cache=True)
 def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
                old_budget: np.ndarray, old_reused: np.ndarray, keys: np.ndarray):
     """Rows, certificates and reused flags of a new sorted list ``keys`` (L,): carried over
@@ -124,12 +134,10 @@ def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
     rows_i = np.zeros((L, NI), np.int64)
     budget = np.full(L, -np.inf)
     reused = np.zeros(L, np.bool_)
-    M = old_keys.shape[0]
     j = 0                       # both sorted: a merge
     for r in range(L):
-        while j < M and old_keys[j] < keys[r]:
-            j += 1
-        if j < M and old_keys[j] == keys[r]:
+        j, listed = merge_find(old_keys, j, keys[r])
+        if listed:
             rows_f[r] = old_f[j]
             rows_i[r] = old_i[j]
             budget[r] = old_budget[j]
