@@ -103,14 +103,17 @@ def repose(built_x: np.ndarray, built_R: np.ndarray, built_wall: np.ndarray,
     present pose, the others' kept."""
     bx, bR, bw, bp = built_x.copy(), built_R.copy(), built_wall.copy(), built_pos.copy()
     n = x.shape[0]
-    for i in range(n):
+    for i in range(n):          # entry by entry: no views of the rows in the loop
         if fresh[i]:
-            bx[i] = x[i]
-            bR[i] = R[i]
-            bp[i] = pos[i]
+            for k in range(3):
+                bx[i, k] = x[i, k]
+                bp[i, k] = pos[i, k]
+                for m in range(3):
+                    bR[i, k, m] = R[i, k, m]
     for w in range(wall.shape[0]):
         if fresh[n + w]:
-            bw[w] = wall[w]
+            for k in range(3):
+                bw[w, k] = wall[w, k]
     return bx, bR, bw, bp
 
 
@@ -137,9 +140,11 @@ def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
     j = 0                       # both sorted: a merge
     for r in range(L):
         j, listed = merge_find(old_keys, j, keys[r])
-        if listed:
-            rows_f[r] = old_f[j]
-            rows_i[r] = old_i[j]
+        if listed:              # entry by entry: no views of the rows in the loop
+            for k in range(NF):
+                rows_f[r, k] = old_f[j, k]
+            for k in range(NI):
+                rows_i[r, k] = old_i[j, k]
             budget[r] = old_budget[j]
             reused[r] = old_reused[j]
     return rows_f, rows_i, budget, reused

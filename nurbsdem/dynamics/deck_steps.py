@@ -269,9 +269,20 @@ def _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, hk, ledger, wall_work) -> n
 
 
 @njit(cache=True)
+def _all_finite(arr: np.ndarray) -> bool:
+    """Whether every entry of the 2-D array is finite (a loop: ``np.isfinite(a).all()``
+    makes a temporary array)."""
+    for i in range(arr.shape[0]):
+        for k in range(arr.shape[1]):
+            if not math.isfinite(arr[i, k]):
+                return False
+    return True
+
+
+@njit(cache=True)
 def _finite(x, v, q, L, force) -> bool:
-    return (np.isfinite(x).all() and np.isfinite(v).all() and np.isfinite(q).all()
-            and np.isfinite(L).all() and np.isfinite(force).all())
+    return (_all_finite(x) and _all_finite(v) and _all_finite(q) and _all_finite(L)
+            and _all_finite(force))
 
 
 @njit(cache=True)

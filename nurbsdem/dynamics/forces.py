@@ -190,7 +190,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
     for c in range(K):
         a = body_a[c]
         b = body_b[c]
-        law = table[material[a], material[b]]
+        ma, mb = material[a], material[b]     # the law table[ma, mb] read in place (no view)
         n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
         p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
         p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
@@ -206,23 +206,24 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
         wn = w0 * n0 + w1 * n1 + w2 * n2
         d = depth[c]
         ddot = -wn
-        mu = law[MU]
+        mu = table[ma, mb, MU]
         aa = 0.0
         dp = 0.0
-        if law[MODEL] == HERTZ:
+        if table[ma, mb, MODEL] == HERTZ:
             dp = d if d > 0.0 else 0.0
             aa = math.sqrt(radius[c] * dp)
-            knt = 2.0 * law[ESTAR] * aa
-            et = 8.0 * law[GSTAR] * aa
+            knt = 2.0 * table[ma, mb, ESTAR] * aa
+            et = 8.0 * table[ma, mb, GSTAR] * aa
             imass = inv_mass[a] + inv_mass[b]
             meff = 1.0 / imass if imass > 0.0 else 0.0
-            cn = 2.0 * law[ZETA] * math.sqrt(knt * meff)
-            ct = 2.0 * law[ZETA] * math.sqrt(et * meff)
+            cn = 2.0 * table[ma, mb, ZETA] * math.sqrt(knt * meff)
+            ct = 2.0 * table[ma, mb, ZETA] * math.sqrt(et * meff)
             fel = (2.0 / 3.0) * knt * dp          # (4/3) E* √R δ^{3/2}
             eel_n = 0.4 * fel * dp
             coeffs[c, 0] = knt
         else:
-            en, cn, et, ct = law[EN], law[CN], law[ET], law[CT]
+            en, cn = table[ma, mb, EN], table[ma, mb, CN]
+            et, ct = table[ma, mb, ET], table[ma, mb, CT]
             fel = en * d
             eel_n = 0.5 * en * d * d
             coeffs[c, 0] = en
@@ -239,7 +240,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
         if spm > 0.0:
             sc = smag / spm
             s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
-        if law[MODEL] == HERTZ and ddot > 0.0 and aa > 0.0:
+        if table[ma, mb, MODEL] == HERTZ and ddot > 0.0 and aa > 0.0:
             # loading: the force so far keeps its value, the increment takes the new stiffness
             # (k_t,old s = k_t,new s'); unloading keeps s, so the force falls with k_t
             d_old = dp - h * ddot

@@ -40,7 +40,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..geometry.rotation import quat_mul_into
+from ..geometry.rotation import quat_mul
 from .forces import kick_work_terms
 from .rigid import omega_world
 
@@ -57,13 +57,14 @@ def half_kick(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np.ndarra
 
 
 @njit(cache=True)
-def _rotate_about_axis(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, axis: int, h: float,
-                       tmp: np.ndarray, out: np.ndarray) -> None:
-    """Exact flow of T_axis = π_axis²/(2 I_axis) over h: q ← q ⊗ exp(θ/2 e_axis), θ = h π_axis/I_axis.
+def _rotate_about_axis(q: np.ndarray, i: int, L: np.ndarray, inv_I: np.ndarray, axis: int,
+                       h: float) -> None:
+    """Exact flow of T_axis = π_axis²/(2 I_axis) over h for body i (rows of q (N,4), L, 1/I
+    (N,3), read in place): q ← q ⊗ exp(θ/2 e_axis), θ = h π_axis/I_axis.
 
     π_axis = (Q e_axis)·L is the body-frame component of the world angular momentum L.
     """
-    w, x, y, z = q[0], q[1], q[2], q[3]
+    w, x, y, z = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
     # column `axis` of Q(q)
     if axis == 0:
         c0, c1, c2 = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)
@@ -71,31 +72,29 @@ def _rotate_about_axis(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, axis: in
         c0, c1, c2 = 2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)
     else:
         c0, c1, c2 = 2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)
-    pi_k = c0 * L[0] + c1 * L[1] + c2 * L[2]
-    half = 0.5 * h * pi_k * inv_I[axis]
-    tmp[0] = math.cos(half)
-    tmp[1] = 0.0
-    tmp[2] = 0.0
-    tmp[3] = 0.0
-    tmp[1 + axis] = math.sin(half)
-    quat_mul_into(q, tmp, out)
-    q[0], q[1], q[2], q[3] = out[0], out[1], out[2], out[3]
+    pi_k = c0 * L[i, 0] + c1 * L[i, 1] + c2 * L[i, 2]
+    half = 0.5 * h * pi_k * inv_I[i, axis]
+    sn = math.sin(half)
+    q[i, 0], q[i, 1], q[i, 2], q[i, 3] = quat_mul(w, x, y, z, math.cos(half),
+                                                  sn if axis == 0 else 0.0,
+                                                  sn if axis == 1 else 0.0,
+                                                  sn if axis == 2 else 0.0)
 
 
 @njit(cache=True)
-def _rotate_isotropic(q: np.ndarray, L: np.ndarray, inv_I: float, h: float, tmp: np.ndarray,
-                      out: np.ndarray) -> None:
-    """Exact flow of T = |L|²/(2I) over h for a body with equal principal moments (a sphere):
-    ω = L/I is constant, q ← exp(θ/2 L̂) ⊗ q with θ = h |L| / I (a rotation about the world
-    axis L̂).  The DLM splitting would give it only to O(h³), at five times the cost."""
-    lm = math.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
+def _rotate_isotropic(q: np.ndarray, i: int, L: np.ndarray, inv_I: float, h: float) -> None:
+    """Exact flow of T = |L|²/(2I) over h for body i with equal principal moments (a sphere;
+    rows of q, L read in place): ω = L/I is constant, q ← exp(θ/2 L̂) ⊗ q with
+    θ = h |L| / I (a rotation about the world axis L̂).  The DLM splitting would give it only
+    to O(h³), at five times the cost."""
+    l0, l1, l2 = L[i, 0], L[i, 1], L[i, 2]
+    lm = math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
     if lm == 0.0:
         return
     half = 0.5 * h * lm * inv_I
     s = math.sin(half) / lm
-    tmp[0], tmp[1], tmp[2], tmp[3] = math.cos(half), s * L[0], s * L[1], s * L[2]
-    quat_mul_into(tmp, q, out)
-    q[0], q[1], q[2], q[3] = out[0], out[1], out[2], out[3]
+    q[i, 0], q[i, 1], q[i, 2], q[i, 3] = quat_mul(math.cos(half), s * l0, s * l1, s * l2,
+                                                  q[i, 0], q[i, 1], q[i, 2], q[i, 3])
 
 
 @njit(cache=True)
@@ -103,21 +102,19 @@ def free_rotation(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float) -> 
     """DLM symmetric splitting R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2) for every body (in place),
     the exact rotation for a body with equal principal moments (:func:`_rotate_isotropic`);
     the quaternion is renormalised afterwards (round-off only)."""
-    tmp = np.empty(4)
-    out = np.empty(4)
     for i in range(q.shape[0]):
-        qi = q[i]
         if inv_I[i, 0] == inv_I[i, 1] and inv_I[i, 1] == inv_I[i, 2]:
-            _rotate_isotropic(qi, L[i], inv_I[i, 0], h, tmp, out)
+            _rotate_isotropic(q, i, L, inv_I[i, 0], h)
         else:
-            _rotate_about_axis(qi, L[i], inv_I[i], 0, 0.5 * h, tmp, out)
-            _rotate_about_axis(qi, L[i], inv_I[i], 1, 0.5 * h, tmp, out)
-            _rotate_about_axis(qi, L[i], inv_I[i], 2, h, tmp, out)
-            _rotate_about_axis(qi, L[i], inv_I[i], 1, 0.5 * h, tmp, out)
-            _rotate_about_axis(qi, L[i], inv_I[i], 0, 0.5 * h, tmp, out)
-        nrm = math.sqrt(qi[0] * qi[0] + qi[1] * qi[1] + qi[2] * qi[2] + qi[3] * qi[3])
+            _rotate_about_axis(q, i, L, inv_I, 0, 0.5 * h)
+            _rotate_about_axis(q, i, L, inv_I, 1, 0.5 * h)
+            _rotate_about_axis(q, i, L, inv_I, 2, h)
+            _rotate_about_axis(q, i, L, inv_I, 1, 0.5 * h)
+            _rotate_about_axis(q, i, L, inv_I, 0, 0.5 * h)
+        nrm = math.sqrt(q[i, 0] * q[i, 0] + q[i, 1] * q[i, 1] + q[i, 2] * q[i, 2]
+                        + q[i, 3] * q[i, 3])
         for k in range(4):
-            qi[k] /= nrm
+            q[i, k] /= nrm
 
 
 @njit(cache=True)

@@ -35,7 +35,8 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
-from ..geometry.rotation import matrix_to_quat, quat_to_matrix_into, quats_to_matrices
+from ..geometry.rotation import (matrix_to_quat, quat_row_to_matrix_into, quat_to_matrix_into,
+                                 quats_to_matrices)
 
 
 def principal_frame(J0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -188,7 +189,7 @@ def body_poses(q: np.ndarray, P: np.ndarray, x: np.ndarray,
     R = np.empty((n, 3, 3))
     Q = np.empty((3, 3))
     for i in range(n):
-        quat_to_matrix_into(q[i], Q)
+        quat_row_to_matrix_into(q, i, Q)
         for j in range(3):
             for k in range(3):
                 R[i, j, k] = Q[j, 0] * P[i, k, 0] + Q[j, 1] * P[i, k, 1] + Q[j, 2] * P[i, k, 2]
@@ -202,7 +203,7 @@ def omega_world(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray) -> np.ndarray:
     out = np.empty((n, 3))
     Q = np.empty((3, 3))
     for i in range(n):
-        quat_to_matrix_into(q[i], Q)
+        quat_row_to_matrix_into(q, i, Q)
         p0 = Q[0, 0] * L[i, 0] + Q[1, 0] * L[i, 1] + Q[2, 0] * L[i, 2]
         p1 = Q[0, 1] * L[i, 0] + Q[1, 1] * L[i, 1] + Q[2, 1] * L[i, 2]
         p2 = Q[0, 2] * L[i, 0] + Q[1, 2] * L[i, 1] + Q[2, 2] * L[i, 2]

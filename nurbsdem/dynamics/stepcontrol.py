@@ -302,8 +302,9 @@ def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
     t1 = np.empty(3)
     t2 = np.empty(3)
     norms = np.empty((2, 2))          # |ĵ| of side A / B, normal / tangential
+    n = np.empty(3)                   # the contact's normal (a copy: no view per contact)
     for c in range(body_a.shape[0]):
-        n = normal[c]
+        n[0], n[1], n[2] = normal[c, 0], normal[c, 1], normal[c, 2]
         if not coarse:
             _tangent_basis(n, t1, t2)
         for side in range(2):
