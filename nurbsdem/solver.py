@@ -610,11 +610,9 @@ class Solver:
         """(monitors, states), (n,) bool each: the next n deck steps at whose end the monitors
         fall due, and the ParaView or results output."""
         sysm, out = self.system, self.model.output
-        times = [sysm.t0 + (sysm.step_count + k) * sysm.dt for k in range(1, n + 1)]
-        monitors = np.array([_due(t, out.monitors_every) for t in times], bool)
-        states = np.array([_due(t, out.vtk_every) or _due(t, out.results_interval)
-                           for t in times], bool)
-        return monitors, states
+        times = sysm.t0 + (sysm.step_count + np.arange(1, n + 1)) * sysm.dt
+        return (_due_mask(times, out.monitors_every),
+                _due_mask(times, out.vtk_every) | _due_mask(times, out.results_interval))
 
     def _run_replicate(self, step: ReplicateStep, writers: OutputWriters) -> None:
         before = self._mechanical_of(self.bodies)
@@ -860,7 +858,13 @@ def _steps_to_due(t0: float, count: int, dt: float, every: float, n_max: int) ->
 
 def _due(t: float, every: float) -> bool:
     """Whether time t (s) is on a multiple of ``every`` (s)."""
+    return bool(_due_mask(np.array([float(t)]), every)[0])
+
+
+def _due_mask(t: np.ndarray, every: float) -> np.ndarray:
+    """(n,) bool: whether each time t (n,) s is on a multiple of ``every`` (s) (to 1e-9 of
+    the larger of the two; the nearest multiple rounded half to even)."""
     if every <= 0:
-        return False
-    k = round(t / every)
-    return abs(t - k * every) <= 1e-9 * max(every, abs(t))
+        return np.zeros(t.shape, bool)
+    k = np.round(t / every)
+    return np.abs(t - k * every) <= 1e-9 * np.maximum(every, np.abs(t))
