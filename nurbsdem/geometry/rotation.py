@@ -16,11 +16,11 @@ Compiled functions (numba, for kernels; write into ``out``, no normalisation, ``
   scalars.
 * :func:`quat_to_matrix_into` — (4,) -> ``out`` (3, 3); :func:`quat_row_to_matrix_into` the
   same of a row of (N, 4) q; :func:`quat_matrix` the entries of scalars.
+* :func:`quats_to_matrices` — (N, 4) -> new (N, 3, 3).
 
 Kernels that loop over bodies or contacts read rows in place (``q[i, k]``) instead of taking
 views (``q[i]``): numba counts the references of every view atomically, which cost more than a
-quaternion product (the rigid-body drift of 112 bodies: 17 µs with views, 3 µs without).
-* :func:`quats_to_matrices` — (N, 4) -> new (N, 3, 3).
+quaternion product (the rigid-body drift of 112 spheres: 17 µs with views, 3 µs without).
 """
 from __future__ import annotations
 
@@ -130,7 +130,7 @@ def quat_mul_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def quat_matrix(w: float, x: float, y: float, z: float) -> tuple:
+def quat_matrix(w: float, x: float, y: float, z: float) -> tuple[float, ...]:
     """The rotation matrix of the unit quaternion (w, x, y, z): its 9 entries, row by row."""
     return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
             2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
