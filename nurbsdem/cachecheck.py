@@ -97,6 +97,13 @@ def drop_stale(folder: Path, digest: str) -> int:
     return dropped
 
 
+def compiles_first(package: Path = PACKAGE) -> bool:
+    """Whether the compiled deck loop is missing from numba's cache: the next run compiles
+    the kernels before it starts (minutes, once per install or upgrade; tell the user)."""
+    folder = cache_folder(package / "dynamics")
+    return folder is None or not any(folder.glob("deck_steps.run_deck_steps-*.nbi"))
+
+
 def check_caches(package: Path = PACKAGE) -> int:
     """:func:`drop_stale` in the cache folder of every source folder of ``package``; returns
     the files deleted.  Errors of the file system leave the caches as they are (numba's own

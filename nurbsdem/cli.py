@@ -460,6 +460,8 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     _setup_logging(quiet, verbose)
     sim = Simulation.from_deck(deck, output=output, restart=restart, quiet=quiet)
     rank = _launched_rank()
+    if not quiet and rank == 0:
+        _tell_first_compilation()
     if restart is not None and Path(restart).parent.is_dir() and rank == 0:
         from .io.writers import clean_output_directory
         clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries
@@ -469,6 +471,17 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     if not quiet and rank == 0:
         click.echo(summary.text())
         click.echo(f"results in {sim.solver.outdir}")
+
+
+def _tell_first_compilation() -> None:
+    """One log line when numba's cache lacks the compiled loop (a fresh install, an upgrade
+    or an edited source): the run starts only after minutes of compiling."""
+    import logging
+    from .cachecheck import compiles_first
+    if compiles_first():
+        logging.getLogger("nurbsdem").info(
+            "compiling the kernels for this machine first (once after an install or upgrade: "
+            "about 4 min on 2 cores; later runs load them in about a second)")
 
 
 def _launched_rank() -> int:

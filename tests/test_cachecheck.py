@@ -77,3 +77,29 @@ def test_the_installed_package_is_stamped():
     pkg = Path(nurbsdem.__file__).parent
     folder = cachecheck.cache_folder(pkg / "dynamics")
     assert (folder / cachecheck.STAMP).read_text().strip() == cachecheck.sources_hash(pkg)
+
+
+def test_a_missing_compiled_loop_is_told(tmp_path, monkeypatch, caplog):
+    """Before a run that must compile the kernels first (numba's cache without the compiled
+    deck loop: a fresh install, an upgrade), ``nurbsdem solve`` says so in one log line."""
+    import logging
+
+    import numba
+    from numba.core.caching import FunctionCache
+
+    from nurbsdem import cli
+    deck_steps = importlib.import_module("nurbsdem.dynamics.deck_steps")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setattr(logging.getLogger("nurbsdem"), "propagate", True)
+    caplog.set_level(logging.INFO, logger="nurbsdem")
+    assert cachecheck.compiles_first()
+    cli._tell_first_compilation()
+    assert [r.getMessage()[:29] for r in caplog.records] == ["compiling the kernels for thi"]
+    index = Path(FunctionCache(deck_steps.run_deck_steps.py_func)._cache_file._index_path)
+    index.parent.mkdir(parents=True, exist_ok=True)
+    index.write_bytes(b"")                            # where numba keeps the loop's index
+    caplog.clear()
+    assert not cachecheck.compiles_first()
+    cli._tell_first_compilation()
+    assert caplog.records == []

@@ -224,7 +224,7 @@ def candidate_patch_masks_batch_jit(boxes, box_offsets, body_shape, positions, r
     shares = (K + MASK_CHUNK - 1) // MASK_CHUNK
     if shares < 2:
         _mark_patches(boxes, box_offsets, body_shape, positions, rotations, pairs,
-                      0.5 * margin, 0, K, keep, mask_a, mask_b)
+                      0.5 * margin, np.int64(0), K, keep, mask_a, mask_b)
         return keep, mask_a, mask_b
     for c in prange(shares):
         _mark_patches(boxes, box_offsets, body_shape, positions, rotations, pairs,
@@ -390,7 +390,7 @@ def candidate_patches_wall_batch_jit(boxes, box_offsets, body_shape, positions, 
                                      wall_centers, wall_axes, wall_half, pairs, margin, depth):
     """Compiled :func:`candidate_patches_wall_batch` (no input checks)."""
     buf = np.empty((max(16, 2 * pairs.shape[0]), 2), dtype=np.int64)
-    n = 0
+    n = np.int64(0)             # not a literal: one specialisation of _wall_boxes
     for p in range(pairs.shape[0]):
         a = pairs[p, 0]
         w = pairs[p, 1]

@@ -276,7 +276,7 @@ def sphere_pairs_jit(centers, radii, margin):
     # ---- per cell: own level by the half shell (13 neighbours + itself), coarser levels by
     #      the cells that the cell's inflated bounding box reaches
     buf = np.empty((max(16, 4 * n), 2), dtype=np.int64)
-    npair = 0
+    npair = np.int64(0)         # not a literal: one specialisation of _push
     for c in range(ncell):
         kc = ckey[c, 0]
         cx = ckey[c, 1]
@@ -439,7 +439,7 @@ def sphere_wall_pairs_jit(centers, radii, wall_centers, wall_axes, wall_half, ma
     n = centers.shape[0]
     nw = wall_centers.shape[0]
     buf = np.empty((max(16, 2 * n), 2), dtype=np.int64)
-    npair = 0
+    npair = np.int64(0)         # not a literal: one specialisation of _push
     for i in range(n):
         for k in range(nw):
             du = 0.0

@@ -301,7 +301,7 @@ def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b
                    seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j], nc[a] + nc[b])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_chunk(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
                  mask_a, mask_b, res_f, res_i, k0, k1):
     """LCPs of the pairs rows[k0:k1] (:func:`_solve_range`) with one set of workspaces (one
@@ -325,7 +325,7 @@ def next_chunk(taken: np.ndarray, n: int) -> tuple[int, int]:
     return k0, min(n, k0 + CHUNK_PAIRS)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_chunks(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
                   mask_a, mask_b, res_f, res_i, taken):
     """:func:`_solve_chunk` of the chunks :func:`next_chunk` hands this thread, with one set
@@ -354,7 +354,7 @@ def _batch_kernel(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_
                       mask_a, mask_b, res_f, res_i, taken)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_rows(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows, mask_a,
                mask_b, res_f, res_i, nt) -> None:
     """The LCPs of the pairs ``rows`` in place (:func:`_solve_range`): on nt threads from
@@ -366,7 +366,7 @@ def solve_rows(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, 
                       mask_a, mask_b, res_f, res_i, nt)
     elif K:
         _solve_chunk(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
-                     mask_a, mask_b, res_f, res_i, 0, K)
+                     mask_a, mask_b, res_f, res_i, np.int64(0), K)
     tol = np.empty(K)
     for k in range(K):
         tol[k] = nc[shape[body_a[rows[k]]]] + nc[shape[body_b[rows[k]]]]

@@ -85,7 +85,7 @@ def _directed(st, pairs, pos, R, m, old_keys, old_mask_a, old_mask_b, fresh):
     mask_b = np.zeros((K, P), np.bool_)
     tested = np.empty(K, np.int64)
     n_tested = 0
-    o = 0                       # pairs and old keys both sorted: a merge
+    o = np.int64(0)             # pairs and old keys both sorted: a merge
     for r in range(K):
         i, j = pairs[r, 0], pairs[r, 1]
         if fresh[i] or fresh[j]:
@@ -127,7 +127,7 @@ def _wall_candidates(st, x, pos, R, wall_d, owned, m, old_keys, fresh):
     balls, wp = wp[ball], wp[~ball]
     keep = np.zeros(wp.shape[0], np.bool_)
     test = np.zeros(wp.shape[0], np.bool_)
-    o = 0                       # pairs (body-major) and old keys both sorted: a merge
+    o = np.int64(0)             # pairs (body-major) and old keys both sorted: a merge
     for r in range(wp.shape[0]):
         i, w = wp[r, 0], wp[r, 1]
         test[r] = fresh[i] or fresh[N + w]
@@ -189,7 +189,7 @@ def scene_list(st, x, pos, R, wall_d, owned, m, old_keys, old_mask_a, old_mask_b
 
 
 # --------------------------------------------------------------------------- the due rows
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f, rows_i, idx, nt,
                 walls) -> None:
     """The rows idx of the list (bodies list_a[j], list_b[j], candidate patches mask_a[j],
@@ -229,7 +229,7 @@ def _take_converged(rows_f, rows_i, again, cf, ci) -> None:
             rows_i[again[r]] = ci[r]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_retried_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f, rows_i,
                         idx, nt, walls) -> None:
     """:func:`_solve_into`, then the rows whose warm start failed solved once more cold (a
@@ -316,7 +316,7 @@ def _point_rows(st, a, b, pos, R, prev_f, prev_i, rf, ri):
                              prev_f, prev_i, rf, ri)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, wall_d,
                    nt) -> tuple[int, bool]:
     """The rows of the listed pairs ``due`` (indices into the list: bodies list_a/list_b,

@@ -327,7 +327,7 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
     lref = 0.0
     lmin = 0.0
     gn = 0.0
-    n = 0
+    n = np.int64(0)
     for _pass in range(max_it + 40):
         gl = math.sqrt(2.0 * f)
         for k in range(4):
@@ -385,7 +385,7 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
             gs[i] = gr[i] * wd[i]
             dmax = max(dmax, abs(Hs[i, i]))
         # ---- reduced problem on the free parameters (P_s, Eq. 12–13)
-        n = 0
+        n = np.int64(0)         # not a literal: one specialisation of jacobi_eig
         for k in range(4):
             fx = ist[k // 2, 1 + k % 2]
             if fx == FREE:

@@ -284,8 +284,8 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
         delta = 0.25 * width
     elif delta < 0.05 * width:
         delta = 0.05 * width
-    fixu = FREE
-    fixv = FREE
+    fixu = np.int64(FREE)       # not literals: one specialisation of support_derivatives
+    fixv = np.int64(FREE)
     nmig = 0
     npole = 0
     nretest = 0

@@ -137,7 +137,7 @@ def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
     rows_i = np.zeros((L, NI), np.int64)
     budget = np.full(L, -np.inf)
     reused = np.zeros(L, np.bool_)
-    j = 0                       # both sorted: a merge
+    j = np.int64(0)             # both sorted: a merge
     for r in range(L):
         j, listed = merge_find(old_keys, j, keys[r])
         if listed:              # entry by entry: no views of the rows in the loop

@@ -197,7 +197,7 @@ def _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_ba
                    res_i[j])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _wall_chunk(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
                 origin, wa, wb, wdom, res_f, res_i, k0, k1):
     """Body/wall contacts rows[k0:k1] (:func:`_wall_range`) with one set of workspaces (one
@@ -209,7 +209,7 @@ def _wall_chunk(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_ba
                 np.zeros(0, np.bool_), np.empty(NF), np.empty(NI, np.int64))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _wall_chunks(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
                  origin, wa, wb, wdom, res_f, res_i, taken):
     """:func:`_wall_chunk` of the chunks :func:`~nurbsdem.contact.detect.next_chunk` hands
@@ -240,7 +240,7 @@ def _wall_batch_kernel(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, 
                      origin, wa, wb, wdom, res_f, res_i, taken)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_wall_rows(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
                     origin, wa, wb, wdom, res_f, res_i, nt) -> None:
     """The body/wall contacts ``rows`` in place (:func:`_wall_range`): on nt threads from
@@ -251,7 +251,7 @@ def solve_wall_rows(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wal
                            rows, origin, wa, wb, wdom, res_f, res_i, nt)
     elif K:
         _wall_chunk(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_base, rows,
-                    origin, wa, wb, wdom, res_f, res_i, 0, K)
+                    origin, wa, wb, wdom, res_f, res_i, np.int64(0), K)
 
 
 def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=None, prev_i=None):

@@ -134,7 +134,7 @@ N_COUNTERS = 21
 
 
 # --------------------------------------------------------------------------- contact search
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray,
             counters: np.ndarray):
     """One call of the scene's contact search (:meth:`SceneContacts.__call__`): returns the
@@ -159,7 +159,7 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
         rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
     reach = odo[a] + odo[b]
     due = np.empty(a.shape[0], np.int64)
-    n_due = 0
+    n_due = np.int64(0)         # not a literal: one specialisation of _evaluate
     for j in range(a.shape[0]):
         if not (sc.certificates and budget[j] > reach[j]):
             due[n_due] = j
@@ -330,7 +330,8 @@ def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
         return True
     dt_bound, dt_network = math.inf, math.inf
     if a.shape[0]:
-        wk, wc = network_gershgorin(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I)
+        wk, wc = network_gershgorin(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I,
+                                    np.bool_(False))
         dt_bound = critical_step_from_rates(wk, wc)
         omega2, gamma, _ = network_rates_scaled(a, b, p, n, coeffs, x, Q, bc.sq_m, bc.sq_I)
         dt_network = critical_step_from_rates(omega2, gamma)
@@ -429,7 +430,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     accuracy = cc.accuracy > 0.0
     # the balance error at the start of the deck step (then carried from its end)
     balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
-    states = [_kept(0, x, q, v, L, wall_d, ev) for _ in range(0)]    # typed by its items
+    states = [_kept(np.int64(0), x, q, v, L, wall_d, ev) for _ in range(0)]   # typed by items
     for j in range(n_deck):
         if accuracy:
             sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,

@@ -343,7 +343,7 @@ def dashpots_of_evaluation(body_a, body_b, point_a, point_b, normal, depth, pos,
     N = mass.shape[0]
     force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
         body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material, table,
-        spring.copy(), h, inv_mass_all, radius, mass, gravity, False, np.zeros(0))
+        spring.copy(), h, inv_mass_all, radius, mass, gravity, np.bool_(False), np.zeros(0))
     return implicit_dashpots(body_a, body_b, point, normal, fn, fdn,
                              np.ascontiguousarray(coeffs[:, 1]), force, torque, pos[:N],
                              vel[:N], q, L, inv_I, inv_mass_all[:N], pos[N:], vel[N:], Q, sq_m,

@@ -451,7 +451,7 @@ class DemSystem:
             return math.inf
         b = self.bodies
         omega2, gamma = network_gershgorin(*net, b.x, b.principal_rotations(), self._inv_mass,
-                                           self._inv_I)
+                                           self._inv_I, False)   # the compiled loop's types
         return critical_step_from_rates(omega2, gamma)
 
     def _count_stands(self, net) -> bool:

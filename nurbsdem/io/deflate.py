@@ -39,7 +39,7 @@ MAX_MATCH, MAX_DIST = 258, 32768
 
 
 # -- bits ---------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _put(out: np.ndarray, state: np.ndarray, value: int, n: int) -> None:
     """Append the n low bits of value, least significant first (state: bit buffer, bits in
     it, bytes written)."""
@@ -52,7 +52,7 @@ def _put(out: np.ndarray, state: np.ndarray, value: int, n: int) -> None:
         state[1] -= 8
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _put_code(out: np.ndarray, state: np.ndarray, code: int, n: int) -> None:
     """Append a Huffman code of n bits (codes are sent most significant bit first)."""
     rev = 0
@@ -61,7 +61,7 @@ def _put_code(out: np.ndarray, state: np.ndarray, code: int, n: int) -> None:
     _put(out, state, rev, n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _put_symbol(out: np.ndarray, state: np.ndarray, s: int) -> None:
     """A literal/length symbol (0..287) in the fixed Huffman code (RFC 1951 3.2.6)."""
     if s < 144:
@@ -90,7 +90,7 @@ def _put_copy(out: np.ndarray, state: np.ndarray, length: int, dist: int) -> Non
 
 
 # -- one run of rows inside one block ---------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _adler_bytes(row: np.ndarray, phase: int, n: int, a: int, b: int) -> tuple[int, int]:
     """Adler-32 sums (a, b) after n bytes of the periodic ``row`` from byte ``phase``."""
     rec = row.shape[0]
@@ -188,7 +188,7 @@ def _blocks(rows: np.ndarray, counts: np.ndarray, block: int) -> tuple[np.ndarra
     worst = 2 + 1 + (9 * block + 7) // 8 + 4 + 8     # all literals of 9 bits
     out = np.empty(max(n_blocks, 1) * worst, np.uint8)
     used = 0
-    r = 0
+    r = np.int64(0)             # not a literal: one specialisation of _block
     for k in range(n_blocks):
         lo = k * block
         hi = min(total, lo + block)
