@@ -604,7 +604,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
             wi[r, 1] = 0
             wi[r, 2] = 0
             wi[r, 3] = 0
-        cls, it1, ne1 = stage1(tabA, posA, RA, tabB, posB, RB, scale, wi, wfs, S1_MAX_IT,
+        cls, it1, ne1 = stage1(tabA, posA, RA, tabB, posB, RB, scale, wi, wfs, np.int64(S1_MAX_IT),
                                S1_DELTA0, ws, wf, w4, s1out)
         nev += ne1
         gl = s1out[O_GL]

@@ -564,10 +564,11 @@ def network_rates_scaled(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarr
     kn, cn = coeffs[:, 0].copy(), coeffs[:, 1].copy()
     kt, ct = coeffs[:, 2].copy(), coeffs[:, 3].copy()
     s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
-    omega2, vec = lanczos_blocks(body_a, body_b, normal, kn, kt, s, C, 6 * N)
+    steps = np.int64(LANCZOS_STEPS)     # the types of network_lanczos' call: one compilation
+    omega2, vec = lanczos_blocks(body_a, body_b, normal, kn, kt, s, C, 6 * N, steps, 1e-4)
     gamma = 0.0
     if cn.any() or ct.any():
-        gamma = lanczos_blocks(body_a, body_b, normal, cn, ct, s, C, 6 * N)[0]
+        gamma = lanczos_blocks(body_a, body_b, normal, cn, ct, s, C, 6 * N, steps, 1e-4)[0]
     return omega2, gamma, _dominant_body(vec, N)
 
 

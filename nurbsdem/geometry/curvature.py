@@ -417,8 +417,8 @@ def contact_radii_for(provider, cs, bodies, K: int) -> tuple[np.ndarray, int]:
         r = np.empty(K)
         k = min(K, np.asarray(cs.params).shape[0])
         n_fall = scene_contact_radii(
-            deg, ncp, koff, coff, knots, cpw, dom, provider.table.info[:, 0], provider.body_shape,
-            provider.sphere_radius, provider.radius, bodies.rotations(),
+            deg, ncp, koff, coff, knots, cpw, dom, np.ascontiguousarray(provider.table.info[:, 0]),
+            provider.body_shape, provider.sphere_radius, provider.radius, bodies.rotations(),
             np.asarray(cs.body_a, np.int64), np.asarray(cs.body_b, np.int64),
             np.asarray(cs.patch_a, np.int64), np.asarray(cs.patch_b, np.int64),
             np.ascontiguousarray(cs.params, float), np.ascontiguousarray(cs.normal, float),

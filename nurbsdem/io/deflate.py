@@ -148,7 +148,7 @@ def _block(out: np.ndarray, rows: np.ndarray, starts: np.ndarray, lo: int, hi: i
     state[2] = 2
     _put(out, state, 1, 1)                 # the final block
     _put(out, state, 1, 2)                 # fixed Huffman codes
-    a, b = 1, 0
+    a, b = np.int64(1), np.int64(0)     # not literals: one specialisation of the sums
     r = first
     pos = lo
     while pos < hi:
