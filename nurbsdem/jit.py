@@ -16,13 +16,14 @@ LCP and an entry point (the compiled loop, the Python path's ``solve_due``) comp
 contact problem again.  Layers that only pass arrays on and are called from compiled code
 only are therefore ``njit(inline="always")`` (numba inlines their IR: no machine code of their
 own), e.g. ``listed._solve_into``, ``detect.solve_rows``, ``wall._wall_chunks``,
-``deck_steps._search``; large functions with several callers stay separate (one function of
-tens of thousands of LLVM instructions costs more to optimise than the copies it saves).  A
-literal argument (``0``, ``False``, a module constant, also a counter's ``n = 0`` before the
-loop raises it) gives the callee a second specialisation, i.e. a second compilation of
-everything it calls: counters start as ``np.int64(0)``, flags go in as ``np.bool_(False)``.
-Both keep the arithmetic, so the same bits; the paper deck's compilation took 226 s instead
-of 270 s (docs/DEVNOTES.md).
+``deck_steps._search``; the loop's other helpers (``_evaluate``, ``_step_control``) stay
+separate: inlined too, they made the loop's one function so large that optimising it cost what
+the copies saved (measured).  A literal argument (``0``, ``False``, a module constant, also a
+counter's ``n = 0`` before the loop raises it) gives the callee a second specialisation, i.e. a
+second compilation of everything it calls: counters start as ``np.int64(0)``, flags go in as
+``np.bool_(False)``.
+Both keep the arithmetic, so the same bits; the quick paper deck compiled in 226 s instead of
+270 s (docs/DEVNOTES.md).
 """
 from __future__ import annotations
 
