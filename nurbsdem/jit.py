@@ -21,9 +21,8 @@ separate: inlined too, they made the loop's one function so large that optimisin
 the copies saved (measured).  A literal argument (``0``, ``False``, a module constant, also a
 counter's ``n = 0`` before the loop raises it) gives the callee a second specialisation, i.e. a
 second compilation of everything it calls: counters start as ``np.int64(0)``, flags go in as
-``np.bool_(False)``.
-Both keep the arithmetic, so the same bits; the quick paper deck compiled in 226 s instead of
-270 s (docs/DEVNOTES.md).
+``np.bool_(False)``.  Both keep the arithmetic, so the same bits; the quick paper deck compiled
+in 226 s instead of 270 s (docs/DEVNOTES.md).
 """
 from __future__ import annotations
 

@@ -57,8 +57,10 @@ ALTERNATION_STEPS = 10
 ALTERNATION_COS = -0.9
 #: not decaying: |v_{n+1/2}| >= this × |v_{n-1/2}|
 ALTERNATION_RATIO = 0.9
-#: Lanczos steps of the network estimate
+#: Lanczos steps of the network estimate, and the relative change of its largest Ritz value
+#: that ends it earlier
 LANCZOS_STEPS = 30
+LANCZOS_RTOL = 1e-4
 
 
 def critical_step(k: float, c: float, m: float) -> tuple[float, float, float]:
@@ -481,7 +483,7 @@ def _orthogonalise(w: np.ndarray, basis: np.ndarray) -> None:
 def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                     normal: np.ndarray, k_n: np.ndarray, k_t: np.ndarray, x: np.ndarray,
                     Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray, steps: int = LANCZOS_STEPS,
-                    rtol: float = 1e-4) -> tuple[float, np.ndarray]:
+                    rtol: float = LANCZOS_RTOL) -> tuple[float, np.ndarray]:
     """Largest eigenvalue and Ritz vector (6N,) of the network operator of
     :func:`network_apply` (symmetric positive semi-definite): :func:`lanczos_blocks` on the
     blocks of :func:`network_blocks`."""
@@ -492,7 +494,8 @@ def network_lanczos(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
 @njit(cache=True)
 def lanczos_blocks(body_a: np.ndarray, body_b: np.ndarray, normal: np.ndarray,
                    k_n: np.ndarray, k_t: np.ndarray, s: np.ndarray, C: np.ndarray, dim: int,
-                   steps: int = LANCZOS_STEPS, rtol: float = 1e-4) -> tuple[float, np.ndarray]:
+                   steps: int = LANCZOS_STEPS,
+                   rtol: float = LANCZOS_RTOL) -> tuple[float, np.ndarray]:
     """Largest eigenvalue and Ritz vector (dim = 6N,) of the operator of :func:`apply_blocks`.
 
     Lanczos with full re-orthogonalisation (one modified Gram–Schmidt pass against every
@@ -565,10 +568,10 @@ def network_rates_scaled(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarr
     kt, ct = coeffs[:, 2].copy(), coeffs[:, 3].copy()
     s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
     steps = np.int64(LANCZOS_STEPS)     # the types of network_lanczos' call: one compilation
-    omega2, vec = lanczos_blocks(body_a, body_b, normal, kn, kt, s, C, 6 * N, steps, 1e-4)
+    omega2, vec = lanczos_blocks(body_a, body_b, normal, kn, kt, s, C, 6 * N, steps, LANCZOS_RTOL)
     gamma = 0.0
     if cn.any() or ct.any():
-        gamma = lanczos_blocks(body_a, body_b, normal, cn, ct, s, C, 6 * N, steps, 1e-4)[0]
+        gamma = lanczos_blocks(body_a, body_b, normal, cn, ct, s, C, 6 * N, steps, LANCZOS_RTOL)[0]
     return omega2, gamma, _dominant_body(vec, N)
 
 
