@@ -274,6 +274,16 @@ class Solver:
                                                       entry.mass_inertia(rho), entry.centroid)
         return self._compliances[key]
 
+    def _particle_kind(self, shape_id: int, material_id: int) -> dict:
+        """The arguments of :meth:`DemSystem.add_particle` that every particle of one shape
+        and material shares: mass (kg), inertia J0 (kg m^2, file frame), material index,
+        centroid in the file frame and bounding radius (m), a-priori compliances."""
+        entry = self.model.shapes[shape_id]
+        rho = self.model.materials[material_id].density
+        return dict(mass=entry.mass(rho), J0=entry.mass_inertia(rho),
+                    material=self.mat_index[material_id], centroid_file=entry.centroid,
+                    radius=entry.bounding_radius, compliance=self._compliance(shape_id, rho))
+
     def _wall_patches(self) -> list:
         return [w.patch for w in self.model.walls]
 
@@ -291,16 +301,13 @@ class Solver:
         sysm.compiled_steps = self.compiled_steps
         b = self.bodies
         Rs = b.rotation_matrices()
+        kinds: dict[tuple[int, int], dict] = {}     # what particles of a shape and material share
         particles = []
-        for i in range(len(b)):
-            entry = model.shapes[int(b.shape_id[i])]
-            rho = model.materials[int(b.material_id[i])].density
-            particles.append(dict(mass=entry.mass(rho), J0=entry.mass_inertia(rho),
-                                  x=b.position[i], R=Rs[i], v=b.velocity[i],
-                                  omega=b.angular_velocity[i],
-                                  material=self.mat_index[int(b.material_id[i])],
-                                  centroid_file=entry.centroid, radius=entry.bounding_radius,
-                                  compliance=self._compliance(int(b.shape_id[i]), rho)))
+        for i, kind in enumerate(zip(b.shape_id.tolist(), b.material_id.tolist())):
+            if kind not in kinds:
+                kinds[kind] = self._particle_kind(*kind)
+            particles.append(dict(kinds[kind], x=b.position[i], R=Rs[i], v=b.velocity[i],
+                                  omega=b.angular_velocity[i]))
         sysm.add_particles(particles)
         for k, w in enumerate(model.walls):
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)

@@ -164,3 +164,68 @@ def test_piecewise_linear_table_has_the_bits_of_the_function():
     d1, u1 = one_knot.table(times)
     np.testing.assert_array_equal(d1, [one_knot(t)[0] for t in times])
     assert not u1.any()
+
+
+def _row_alone(mass, J0, x, R=None, v=None, omega=None, material=0, centroid_file=None,
+               radius=0.0):
+    """One particle's row formed alone, as RigidBodies did before its rows were stacked."""
+    from nurbsdem.geometry.rotation import matrix_to_quat, quat_to_matrix_into
+    I, P = principal_frame(J0)
+    R = np.eye(3) if R is None else np.asarray(R, dtype=float)
+    q = matrix_to_quat(R @ P)
+    Qm = np.empty((3, 3))
+    quat_to_matrix_into(q, Qm)
+    omega = np.zeros(3) if omega is None else np.asarray(omega, dtype=float)
+    J0 = np.asarray(J0, float)
+    return dict(mass=mass, J0=0.5 * (J0 + J0.T), I=I, P=P, q=q, L=Qm @ (I * (Qm.T @ omega)),
+                x=np.asarray(x, float), v=np.zeros(3) if v is None else np.asarray(v, float),
+                centroid_file=np.zeros(3) if centroid_file is None else centroid_file,
+                material=material, radius=radius)
+
+
+def test_stacked_rows_have_the_bits_of_rows_formed_alone():
+    """add_many forms the rows of all particles on stacks (one principal frame per distinct
+    inertia tensor, stacked matmul): every array has the bits of forming each row alone."""
+    from nurbsdem.dynamics.rigid import RigidBodies
+    rng = np.random.default_rng(7)
+    tensors = []
+    for k in range(3):                  # three shapes: shared tensors, as a deck has
+        A = rng.normal(size=(3, 3))
+        tensors.append(0.1 * A @ A.T + 3 * np.eye(3))
+    particles = []
+    for i in range(300):
+        p = dict(mass=float(rng.uniform(0.1, 2.0)), J0=tensors[i % 3] if i % 7 else
+                 np.diag(rng.uniform(1.0, 1.5, 3)), x=rng.normal(size=3),
+                 material=int(i % 2), radius=float(rng.uniform(0.01, 0.02)))
+        if i % 5:
+            p["R"] = _random_rotation(i)
+        if i % 4:
+            p["omega"], p["v"] = rng.normal(size=3), rng.normal(size=3)
+        if i % 3:
+            p["centroid_file"] = rng.normal(size=3)
+        particles.append(p)
+    b = RigidBodies()
+    b.add_many(particles[:10])
+    b.add_many(particles[10:])
+    alone = [_row_alone(**p) for p in particles]
+    for name in ("mass", "J0", "I", "P", "q", "L", "x", "v", "centroid_file", "radius"):
+        got = getattr(b, name)
+        want = np.array([r[name] for r in alone], float)
+        assert got.shape == want.shape and np.array_equal(got.view(np.int64), want.view(np.int64)), name
+    assert np.array_equal(b.material, [r["material"] for r in alone])
+
+
+@pytest.mark.parametrize("bad, message", [
+    (dict(mass=0.0), "mass must be positive"),
+    (dict(J0=np.diag([1.0, 1.0, 3.0])), "triangle inequality"),
+    (dict(J0=np.ones((2, 2))), "3x3"),
+    (dict(R=np.diag([1.0, 1.0, -1.0])), "proper rotation"),
+    (dict(R=2 * np.eye(3)), "proper rotation"),
+])
+def test_add_many_refuses_a_bad_row_among_good_ones(bad, message):
+    from nurbsdem.dynamics.rigid import RigidBodies
+    good = dict(mass=1.0, J0=np.diag([1.0, 1.2, 1.4]), x=np.zeros(3))
+    b = RigidBodies()
+    with pytest.raises(InputError, match=message):
+        b.add_many([good, {**good, **bad}, good])
+    assert b.n == 0                     # nothing added
