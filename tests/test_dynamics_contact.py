@@ -163,3 +163,24 @@ def test_resting_sphere_comes_to_rest_with_contact_force_equal_to_weight():
     assert s.wall_reaction[0, 2] == pytest.approx(m * g, rel=1e-6)
     assert s.c_fn[0] == pytest.approx(m * g, rel=1e-6)
     assert abs(e.balance_error) < 1e-2 * e.dissipated
+
+
+@pytest.mark.parametrize("order", ["ascending", "shuffled"])
+def test_history_matching_by_key(order):
+    """match_history: a persisting key gets its stored spring, a new key zero; ascending
+    keys (the scene's order) by a merge, others by binary search: the same springs."""
+    from nurbsdem.dynamics.forces import match_history
+    rng = np.random.default_rng(3)
+    prev = np.unique(rng.integers(0, 400, 150))
+    springs = rng.normal(size=(prev.shape[0], 3))
+    keys = np.unique(np.concatenate([rng.choice(prev, 60, replace=False),
+                                     rng.integers(0, 500, 60)]))
+    if order == "shuffled":
+        keys = rng.permutation(keys)
+    stored = dict(zip(prev.tolist(), springs))
+    want = np.array([stored.get(k, np.zeros(3)) for k in keys.tolist()])
+    got = match_history(prev, springs, keys)
+    assert np.array_equal(got, want)
+    assert 0 < np.count_nonzero(got[:, 0]) < keys.shape[0]
+    assert match_history(prev, springs, keys[:0]).shape == (0, 3)
+    assert not match_history(prev[:0], springs[:0], keys).any()

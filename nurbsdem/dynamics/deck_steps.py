@@ -130,7 +130,11 @@ NETWORK_ESTIMATES = 18
 #: parts of the solver's "forces + integration", :attr:`DemSystem.split
 #: <nurbsdem.dynamics.system.DemSystem.split>`)
 DASHPOT_CYCLES, CONTROL_CYCLES = 19, 20
-N_COUNTERS = 21
+#: ... and the CPU cycles of the integration (half kicks, the period-2 watch, drift, angular
+#: velocities) and of the contact forces (the poses for the search, the contact arrays,
+#: histories and loads; not the dashpots): two more parts of "forces + integration"
+INTEGRATION_CYCLES, FORCES_CYCLES = 21, 22
+N_COUNTERS = 23
 
 
 # --------------------------------------------------------------------------- contact search
@@ -439,6 +443,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             t = j * n_run + k
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
+            c0 = cycles()
             omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
             if cc.watch_period2 and x.shape[0]:
                 worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count,
@@ -448,17 +453,23 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             drift(x, v, q, L, bc.inv_I, h)
             omega = omega_world(q, L, bc.inv_I)
             wall_d, wall_u = d_new.copy(), u_new.copy()
+            c1 = cycles()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
+            c2 = cycles()
             pl, reach, monitored, failed = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
             if failed:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             counters[EVALS] += 1
             counters[MONITORED] += monitored
+            c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
             ok, ev = _evaluate(sc, bc, cc, pl, reach, monitored, ev, x, v, q, L, omega, R,
                                wall_d, wall_u, h, counters)
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
+            c4 = cycles()
             omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
+            counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
+            counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
                 return GUARD, j, pl, ev, wall_d, wall_u, states
         counters[STEP_COUNT] += 1
@@ -682,3 +693,5 @@ class DeckSteps:
         s.dashpot_solves += counters[DASHPOT_SOLVES:DASHPOT_SOLVES + 3]
         s.split["implicit dashpots"] += float(counters[DASHPOT_CYCLES]) * seconds_per_cycle()
         s.split["time-step control"] += float(counters[CONTROL_CYCLES]) * seconds_per_cycle()
+        s.split["integration"] += float(counters[INTEGRATION_CYCLES]) * seconds_per_cycle()
+        s.split["contact forces"] += float(counters[FORCES_CYCLES]) * seconds_per_cycle()

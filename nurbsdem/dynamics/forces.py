@@ -129,12 +129,23 @@ class InterfaceTable:
 def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """Springs (K,3) for the current contacts: the stored one for a persisting key, 0 for a new one.
 
-    prev_keys must be sorted ascending (as stored by :func:`store_history`).
+    prev_keys must be sorted ascending (as stored by :func:`store_history`).  Current keys in
+    ascending order (as the scene gives them: its pairs are sorted by key) are matched by one
+    merge of the two lists, others by a binary search each.
     """
     k = keys.shape[0]
     out = np.zeros((k, 3))
     m = prev_keys.shape[0]
     if k == 0 or m == 0:
+        return out
+    if _ascending(keys):
+        j = 0
+        for c in range(k):
+            while j < m and prev_keys[j] < keys[c]:
+                j += 1
+            if j < m and prev_keys[j] == keys[c]:
+                for d in range(3):
+                    out[c, d] = prev_springs[j, d]
         return out
     for c in range(k):
         j = min(np.searchsorted(prev_keys, keys[c]), m - 1)
@@ -142,6 +153,15 @@ def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndar
             for d in range(3):
                 out[c, d] = prev_springs[j, d]
     return out
+
+
+@njit(cache=True)
+def _ascending(keys: np.ndarray) -> bool:
+    """Whether the keys are in non-decreasing order."""
+    for c in range(1, keys.shape[0]):
+        if keys[c] < keys[c - 1]:
+            return False
+    return True
 
 
 def store_history(keys: np.ndarray, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

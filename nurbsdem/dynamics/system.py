@@ -158,8 +158,13 @@ def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
 
 
 #: the parts of the solver's "forces + integration" time a system measures
-#: (:attr:`DemSystem.split`)
-SPLIT_PARTS = ("implicit dashpots", "time-step control")
+#: (:attr:`DemSystem.split`): the integration (half kicks with their work, the period-2 watch,
+#: drift), the contact forces (the poses for the search, contact arrays, histories and loads,
+#: with MPI the exchange of the ghosts' loads; not the search, the LCPs and the dashpots),
+#: the implicit dashpots, the time-step
+#: control.  What the solver's figure holds beyond them: the guards, snapshots and monitor
+#: rows of the deck steps and the Python around the compiled loop
+SPLIT_PARTS = ("integration", "contact forces", "implicit dashpots", "time-step control")
 
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
                "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
@@ -631,8 +636,12 @@ class DemSystem:
     def _evaluate(self, t: float, h: float) -> None:
         """Walls to time t, contact detection by the provider, Eq. 16–17, loads incl. gravity."""
         b = self.bodies
+        t0, dashpots = time.perf_counter(), self.split["implicit dashpots"]
         self.wall_d, self.wall_u = self.walls.kinematics(t)
-        cs = self.provider(self._kinematics(t))
+        kinematics = self._kinematics(t)
+        t1 = time.perf_counter()
+        cs = self.provider(kinematics)          # the search and the LCPs (the scene's timers)
+        t2 = time.perf_counter()
         self.last_contacts = cs
         self._book_dropped(cs)
         a, bb, pa, pb, nrm, dep, key = _unpack(cs, self.n_bodies)
@@ -662,6 +671,8 @@ class DemSystem:
         self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
         self.c_fet = fet
         self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
+        self.split["contact forces"] += ((t1 - t0) + (time.perf_counter() - t2)
+                                         - (self.split["implicit dashpots"] - dashpots))
 
     def _implicit_dashpots(self, law: tuple, spring: np.ndarray, h: float) -> np.ndarray:
         """The normal dashpot forces (K,) N at the end of the internal step h (s)
@@ -712,11 +723,15 @@ class DemSystem:
         b = self.bodies
         d_new, _ = self.walls.kinematics(t_new)
         u_mean = (d_new - self.wall_d) / h
+        t0 = time.perf_counter()
         self._kick(0.5 * h, u_mean)
         self._watch_alternation(h)
         drift(b.x, b.v, b.q, b.L, self._inv_I, h)
+        t1 = time.perf_counter()
         self._evaluate(t_new, h)
+        t2 = time.perf_counter()
         self._kick(0.5 * h, u_mean)
+        self.split["integration"] += (t1 - t0) + (time.perf_counter() - t2)
 
     def _watch_alternation(self, h: float) -> None:
         """Period-2 guard on the half-step velocities (module docstring)."""
