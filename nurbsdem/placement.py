@@ -22,6 +22,7 @@ import weakref
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
+from numba import njit
 
 from .errors import InputError
 from .geometry.rotation import quat_from_rotvec, random_quaternions
@@ -163,35 +164,102 @@ def check_explicit_overlaps(model: "Model", bodies: Bodies) -> None:
     check_body_overlaps(model, bodies)
 
 
-class _SphereGrid:
-    """Spheres placed so far, hashed on a grid of cells at least as large as any two radii
-    together, so that a candidate is tested against its 27 neighbouring cells only: O(1) per
-    test instead of O(placed), with the same outcome as testing every sphere (any sphere it
-    could overlap lies in those cells)."""
+# ---------------------------------------------------------------------------- random placement
+#: outcomes of :func:`_place_from`
+_PLACED, _NEEDS_DRAWS, _FAILED = 0, 1, 2
+#: uniform numbers drawn at a time for the random placement (3 per attempt)
+_DRAW_BLOCK = 3 * 4096
 
-    def __init__(self, cell: float) -> None:
-        self.cell = cell
-        self.cells: dict[tuple[int, int, int], list[tuple[float, float, float, float]]] = {}
 
-    def _key(self, c) -> tuple[int, int, int]:
-        return (math.floor(c[0] / self.cell), math.floor(c[1] / self.cell),
-                math.floor(c[2] / self.cell))
+@njit(cache=True)
+def _slot(keys: np.ndarray, used: np.ndarray, i: int, j: int, k: int) -> int:
+    """The slot of cell (i, j, k) in the open-addressing table (keys (cap,3), used (cap,);
+    cap a power of two): where it is, or the free slot where it goes."""
+    mask = used.shape[0] - 1
+    h = ((i * 73856093) ^ (j * 19349663) ^ (k * 83492791)) & mask
+    while used[h] and not (keys[h, 0] == i and keys[h, 1] == j and keys[h, 2] == k):
+        h = (h + 1) & mask
+    return h
 
-    def add(self, c, r: float) -> None:
-        self.cells.setdefault(self._key(c), []).append((float(c[0]), float(c[1]), float(c[2]), r))
 
-    def clear(self, c, r: float) -> bool:
-        """Whether a sphere (c, r) is clear of every sphere placed: |c − c_j| ≥ r_j + r."""
-        i, j, k = self._key(c)
-        x, y, z = float(c[0]), float(c[1]), float(c[2])
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                for dk in (-1, 0, 1):
-                    for cx, cy, cz, rj in self.cells.get((i + di, j + dj, k + dk), ()):
-                        dx, dy, dz = cx - x, cy - y, cz - z
-                        if math.sqrt(dx * dx + dy * dy + dz * dz) < rj + r:
-                            return False
-        return True
+@njit(cache=True)
+def _add_sphere(grid, s: int, x: float, y: float, z: float, r: float) -> None:
+    """Sphere s (centre m, radius m) into the grid: its cell's list."""
+    keys, used, head, spheres, nxt, cell = grid
+    i, j, k = math.floor(x / cell), math.floor(y / cell), math.floor(z / cell)
+    h = _slot(keys, used, i, j, k)
+    if not used[h]:
+        used[h] = True
+        keys[h, 0], keys[h, 1], keys[h, 2] = i, j, k
+        head[h] = -1
+    spheres[s, 0], spheres[s, 1], spheres[s, 2], spheres[s, 3] = x, y, z, r
+    nxt[s] = head[h]
+    head[h] = s
+
+
+@njit(cache=True)
+def _clear(grid, x: float, y: float, z: float, r: float) -> bool:
+    """Whether a sphere (x, y, z, r) is clear of every sphere in the grid, |c − c_j| ≥ r_j + r:
+    the spheres of its 27 neighbouring cells (the cells are at least as large as any two
+    radii together, so no other sphere can overlap it)."""
+    keys, used, head, spheres, nxt, cell = grid
+    i, j, k = math.floor(x / cell), math.floor(y / cell), math.floor(z / cell)
+    for di in range(-1, 2):
+        for dj in range(-1, 2):
+            for dk in range(-1, 2):
+                h = _slot(keys, used, i + di, j + dj, k + dk)
+                s = head[h] if used[h] else -1
+                while s >= 0:
+                    dx, dy, dz = spheres[s, 0] - x, spheres[s, 1] - y, spheres[s, 2] - z
+                    if math.sqrt(dx * dx + dy * dy + dz * dz) < spheres[s, 3] + r:
+                        return False
+                    s = nxt[s]
+    return True
+
+
+def _sphere_grid(n_spheres: int, cell: float) -> tuple:
+    """An empty grid for n_spheres spheres with cells of side ``cell`` (m): a hash table of
+    cells (at most one per sphere, at most half full) with a list of spheres each."""
+    cap = 1 << max(4, int(2 * max(n_spheres, 1) - 1).bit_length())
+    return (np.zeros((cap, 3), np.int64), np.zeros(cap, np.bool_), np.full(cap, -1, np.int64),
+            np.zeros((n_spheres, 4)), np.full(n_spheres, -1, np.int64), float(cell))
+
+
+@njit(cache=True)
+def _place_from(grid, order: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                draws: np.ndarray, at: int, start: int, tried: int, max_attempts: int,
+                first_sphere: int, position: np.ndarray) -> tuple[int, int, int, int]:
+    """Place the bodies order[start:] (radii (n,), m) one by one at uniform positions with
+    the sphere inside [lo + r, hi − r] and clear of the grid's spheres, up to max_attempts
+    each (the body order[start] has had ``tried`` already), taking three uniform numbers
+    of ``draws`` from ``at`` per attempt: x = (lo + r) + ((hi − r) − (lo + r)) u, the
+    arithmetic of ``Generator.uniform(lo + r, hi − r)``.  Placed bodies go into position
+    (n,3) and into the grid (as sphere first_sphere + their rank in order).  Returns
+    (the rank in order reached, its attempts so far, the next draw, _PLACED / _NEEDS_DRAWS /
+    _FAILED)."""
+    for p in range(start, order.shape[0]):
+        k = order[p]
+        r = radii[k]
+        attempts = tried if p == start else 0
+        ok = False
+        x = y = z = 0.0
+        while attempts < max_attempts:
+            if at + 3 > draws.shape[0]:
+                return p, attempts, at, _NEEDS_DRAWS
+            x0, y0, z0 = lo[0] + r, lo[1] + r, lo[2] + r
+            x = x0 + ((hi[0] - r) - x0) * draws[at]
+            y = y0 + ((hi[1] - r) - y0) * draws[at + 1]
+            z = z0 + ((hi[2] - r) - z0) * draws[at + 2]
+            at += 3
+            attempts += 1
+            if _clear(grid, x, y, z, r):
+                ok = True
+                break
+        if not ok:
+            return p, attempts, at, _FAILED
+        position[k, 0], position[k, 1], position[k, 2] = x, y, z
+        _add_sphere(grid, first_sphere + p, x, y, z, r)
+    return order.shape[0], 0, at, _PLACED
 
 
 def place_random_group(model: "Model", group: "RandomGroup",
@@ -217,27 +285,30 @@ def place_random_group(model: "Model", group: "RandomGroup",
             raise model.error(f"Random {group.id}: the region is too small for shape {sid} "
                               f"(bounding radius {r:.4g} m needs at least {2 * r:.4g} m in "
                               f"each direction)", group.line)
-    radii_all = np.concatenate([np.asarray(obstacles[1], float).reshape(-1), radii])
-    placed_spheres = _SphereGrid(2.0 * float(radii_all.max()) if radii_all.size else 1.0)
-    for c, r in zip(np.asarray(obstacles[0], float).reshape(-1, 3),
-                    np.asarray(obstacles[1], float).reshape(-1)):
-        placed_spheres.add(c, float(r))
+    centres = np.asarray(obstacles[0], float).reshape(-1, 3)
+    obstacle_radii = np.asarray(obstacles[1], float).reshape(-1)
+    radii_all = np.concatenate([obstacle_radii, radii])
+    grid = _sphere_grid(radii_all.shape[0], 2.0 * float(radii_all.max()) if radii_all.size
+                        else 1.0)
+    for s, (c, r) in enumerate(zip(centres, obstacle_radii)):
+        _add_sphere(grid, s, float(c[0]), float(c[1]), float(c[2]), float(r))
     position = np.zeros((n, 3))
     quats = random_quaternions(rng, n)
     order = np.argsort(-radii, kind="stable")
-    for placed, k in enumerate(order):
-        r = radii[k]
-        for _ in range(group.max_attempts):
-            c = rng.uniform(lo + r, hi - r)
-            if placed_spheres.clear(c, float(r)):
-                break
-        else:
-            raise model.error(
-                f"Random {group.id}: could not place particle {group.id + k} (shape "
-                f"{shape_ids[k]}) without overlap after {group.max_attempts} attempts "
-                f"({placed} of {n} placed); enlarge Region or reduce Counts", group.line)
-        position[k] = c
-        placed_spheres.add(c, float(r))
+    # the uniform numbers of rng.uniform(lo + r, hi - r) per attempt, drawn by the block
+    draws, at, placed, tried, outcome = rng.random(_DRAW_BLOCK), 0, 0, 0, _NEEDS_DRAWS
+    while outcome == _NEEDS_DRAWS:
+        placed, tried, at, outcome = _place_from(grid, order, radii, lo, hi, draws, at, placed,
+                                                 tried, int(group.max_attempts),
+                                                 centres.shape[0], position)
+        if outcome == _NEEDS_DRAWS:
+            draws, at = np.concatenate([draws[at:], rng.random(_DRAW_BLOCK)]), 0
+    if outcome == _FAILED:
+        k = order[placed]
+        raise model.error(
+            f"Random {group.id}: could not place particle {group.id + k} (shape "
+            f"{shape_ids[k]}) without overlap after {group.max_attempts} attempts "
+            f"({placed} of {n} placed); enlarge Region or reduce Counts", group.line)
     z = np.zeros((n, 3))
     return Bodies(id=np.arange(group.id, group.id + n), shape_id=shape_ids,
                   material_id=np.full(n, group.material_id), position=position,

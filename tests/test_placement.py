@@ -164,3 +164,82 @@ def test_paper_deck_placement():
     assert np.all(d >= r[:, None] + r[None])
     assert np.all(b.position - r[:, None] >= 0.01 - 1e-12)
     assert np.all(b.position + r[:, None] <= 0.24 + 1e-12)
+
+
+def _placed_by_python(model, group, obstacles):
+    """The positions of a Random group as placed before the placement was compiled (a grid of
+    Python lists, ``rng.uniform`` per attempt): the reference of the compiled one."""
+    import math
+
+    from nurbsdem.geometry.rotation import random_quaternions
+    rng = np.random.default_rng(group.seed)
+    shape_ids = np.repeat(np.array(group.shape_ids, np.int64), group.counts)
+    n = len(shape_ids)
+    radii = np.array([model.shapes[int(s)].bounding_radius for s in shape_ids])
+    lo, hi = np.asarray(group.region_lo, float), np.asarray(group.region_hi, float)
+    radii_all = np.concatenate([obstacles[1], radii])
+    cell = 2.0 * float(radii_all.max())
+    cells: dict = {}
+
+    def key(c):
+        return tuple(math.floor(v / cell) for v in c)
+
+    def clear(c, r):
+        i, j, k = key(c)
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                for dk in (-1, 0, 1):
+                    for cx, cy, cz, rj in cells.get((i + di, j + dj, k + dk), ()):
+                        dx, dy, dz = cx - c[0], cy - c[1], cz - c[2]
+                        if math.sqrt(dx * dx + dy * dy + dz * dz) < rj + r:
+                            return False
+        return True
+
+    for c, r in zip(obstacles[0], obstacles[1]):
+        cells.setdefault(key(c), []).append((*map(float, c), float(r)))
+    position = np.zeros((n, 3))
+    random_quaternions(rng, n)
+    for placed, k in enumerate(np.argsort(-radii, kind="stable")):
+        r = radii[k]
+        for _ in range(group.max_attempts):
+            c = rng.uniform(lo + r, hi - r)
+            if clear(c, float(r)):
+                break
+        else:
+            return position, (placed, k)
+        position[k] = c
+        cells.setdefault(key(c), []).append((*map(float, c), float(r)))
+    return position, None
+
+
+@pytest.mark.parametrize("counts, attempts, seed, block", [
+    ((5, 3, 6), 20000, 1, None), ((12, 20, 30), 20000, 4, 6), ((12, 20, 30), 20000, 6, None),
+    ((40, 60, 90), 20000, 4, 9), ((40, 60, 90), 3, 5, None)])
+def test_compiled_placement_has_the_bits_of_the_python_placement(deckdir, monkeypatch, counts,
+                                                                 attempts, seed, block):
+    """The compiled random placement (hash grid, uniform numbers drawn by the block) places
+    every body where the Python placement did, to the bit, around obstacles, with blocks of
+    draws that end between and within attempts, and fails at the same body with the same
+    message where the region is too full."""
+    from dataclasses import replace
+
+    from nurbsdem import placement
+    if block is not None:
+        monkeypatch.setattr(placement, "_DRAW_BLOCK", block)
+    m = _model(deckdir, seed=seed)
+    full = counts == (40, 60, 90)           # too many for the region: fails
+    group = replace(m.random_groups[0], counts=counts, max_attempts=attempts, seed=seed,
+                    region_lo=np.array([0.0, 0.0, 0.0]),
+                    region_hi=np.array([0.25, 0.25, 0.2]) if full else np.array([0.4, 0.4, 0.3]))
+    obstacles = (np.array([[0.1, 0.1, 0.1], [0.3, 0.1, 0.05], [0.2, 0.2, 0.19]]),
+                 np.array([0.03, 0.05, 0.02]))
+    want, failed = _placed_by_python(m, group, obstacles)
+    if failed is None:
+        got = placement.place_random_group(m, group, obstacles).position
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    else:
+        placed, k = failed
+        with pytest.raises(InputError, match=rf"could not place particle {group.id + k} .* "
+                                             rf"after {attempts} attempts \({placed} of"):
+            placement.place_random_group(m, group, obstacles)
+    assert (failed is not None) == full
