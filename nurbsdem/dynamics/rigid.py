@@ -27,7 +27,6 @@ it on the system is ``∫ reaction · u dt`` (see :mod:`nurbsdem.dynamics.energy
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
