@@ -198,6 +198,13 @@ def _add_sphere(grid, s: int, x: float, y: float, z: float, r: float) -> None:
 
 
 @njit(cache=True)
+def _add_spheres(grid, centres: np.ndarray, radii: np.ndarray) -> None:
+    """The spheres (centres (K,3), radii (K,), m) into the grid as spheres 0 .. K-1."""
+    for s in range(radii.shape[0]):
+        _add_sphere(grid, s, centres[s, 0], centres[s, 1], centres[s, 2], radii[s])
+
+
+@njit(cache=True)
 def _clear(grid, x: float, y: float, z: float, r: float) -> bool:
     """Whether a sphere (x, y, z, r) is clear of every sphere in the grid, |c − c_j| ≥ r_j + r:
     the spheres of its 27 neighbouring cells (the cells are at least as large as any two
@@ -290,8 +297,7 @@ def place_random_group(model: "Model", group: "RandomGroup",
     radii_all = np.concatenate([obstacle_radii, radii])
     grid = _sphere_grid(radii_all.shape[0], 2.0 * float(radii_all.max()) if radii_all.size
                         else 1.0)
-    for s, (c, r) in enumerate(zip(centres, obstacle_radii)):
-        _add_sphere(grid, s, float(c[0]), float(c[1]), float(c[2]), float(r))
+    _add_spheres(grid, centres, obstacle_radii)
     position = np.zeros((n, 3))
     quats = random_quaternions(rng, n)
     order = np.argsort(-radii, kind="stable")

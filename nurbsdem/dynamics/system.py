@@ -161,9 +161,9 @@ def _smallest_pair(m_i: np.ndarray, m_j: np.ndarray | None) -> float:
 #: (:attr:`DemSystem.split`): the integration (half kicks with their work, the period-2 watch,
 #: drift), the contact forces (the poses for the search, contact arrays, histories and loads,
 #: with MPI the exchange of the ghosts' loads; not the search, the LCPs and the dashpots),
-#: the implicit dashpots, the time-step
-#: control.  What the solver's figure holds beyond them: the guards, snapshots and monitor
-#: rows of the deck steps and the Python around the compiled loop
+#: the implicit dashpots, the time-step control.  What the solver's figure holds beyond them:
+#: the guards, snapshots and monitor rows of the deck steps and the Python around the
+#: compiled loop
 SPLIT_PARTS = ("integration", "contact forces", "implicit dashpots", "time-step control")
 
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
