@@ -191,15 +191,35 @@ def active_and_near(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
 
 
 @njit(cache=True)
-def contact_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
-                   keys: np.ndarray, budget: np.ndarray, reach: np.ndarray):
-    """The arrays of a :class:`~nurbsdem.dynamics.contactset.ContactSet` from the listed
-    pairs' rows (:func:`active_and_near`): per active contact body_a, body_b, point_a,
-    point_b (m), normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a,
-    patch_b; per separated pair near_a, near_b, near_point (midpoint of the closest points,
-    m), near_normal, near_gap (m)."""
-    sel, near, gap = active_and_near(rows_f, rows_i, budget, reach)
-    K, M = sel.shape[0], near.shape[0]
+def active_rows(rows_i: np.ndarray, due: np.ndarray) -> np.ndarray:
+    """The listed pairs in contact (valid and active) among the rows just solved, ``due``
+    (ascending list positions): a pair skipped by its certificate was apart when last solved,
+    so these are all the active pairs of the list, in list order (those of
+    :func:`active_and_near`), found without reading the other rows."""
+    sel = np.empty(due.shape[0], np.int64)
+    ns = 0
+    for r in range(due.shape[0]):
+        j = due[r]
+        if rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 1:
+            sel[ns] = j
+            ns += 1
+    return sel[:ns].copy()
+
+
+@njit(cache=True)
+def near_pairs(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
+               reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The separated pairs of the list and their gaps (m), as :func:`active_and_near`."""
+    _, near, gap = active_and_near(rows_f, rows_i, budget, reach)
+    return near, gap
+
+
+@njit(cache=True)
+def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
+                  keys: np.ndarray, sel: np.ndarray):
+    """Per active contact (the list positions ``sel``): body_a, body_b, point_a, point_b (m),
+    normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a, patch_b."""
+    K = sel.shape[0]
     pa, pb, nrm, params = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 4))
     depth = np.empty(K)
     deg, patch_a, patch_b = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
@@ -215,11 +235,32 @@ def contact_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.
         deg[r] = rows_i[j, I_DEG]
         patch_a[r] = rows_i[j, I_PA]
         patch_b[r] = rows_i[j, I_PB]
+    return a[sel], b[sel], pa, pb, nrm, depth, keys[sel], deg, params, patch_a, patch_b
+
+
+@njit(cache=True)
+def near_arrays(rows_f: np.ndarray, a: np.ndarray, b: np.ndarray, near: np.ndarray,
+                gap: np.ndarray):
+    """Per separated pair (the list positions ``near``, gaps ``gap`` m): near_a, near_b,
+    near_point (midpoint of the closest points, m), near_normal, near_gap."""
+    M = near.shape[0]
     near_point, near_normal = np.empty((M, 3)), np.empty((M, 3))
     for r in range(M):
         j = near[r]
         for c in range(3):
             near_point[r, c] = 0.5 * (rows_f[j, F_PA + c] + rows_f[j, F_PB + c])
             near_normal[r, c] = rows_f[j, F_N + c]
-    return (a[sel], b[sel], pa, pb, nrm, depth, keys[sel], deg, params, patch_a, patch_b,
-            a[near], b[near], near_point, near_normal, gap)
+    return a[near], b[near], near_point, near_normal, gap
+
+
+@njit(cache=True)
+def contact_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
+                   keys: np.ndarray, budget: np.ndarray, reach: np.ndarray):
+    """The arrays of a :class:`~nurbsdem.dynamics.contactset.ContactSet` from the listed
+    pairs' rows (:func:`active_and_near`): per active contact body_a, body_b, point_a,
+    point_b (m), normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a,
+    patch_b (:func:`active_arrays`); per separated pair near_a, near_b, near_point (midpoint
+    of the closest points, m), near_normal, near_gap (m) (:func:`near_arrays`)."""
+    sel, near, gap = active_and_near(rows_f, rows_i, budget, reach)
+    return (active_arrays(rows_f, rows_i, a, b, keys, sel)
+            + near_arrays(rows_f, a, b, near, gap))

@@ -63,8 +63,9 @@ from numba import njit
 
 from ..contact.analytic import closed_form_into
 from ..contact.listed import scene_list, solve_due_into
-from ..contact.verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
-                              renew_certificates, repose, reposed_bodies)
+from ..contact.verlet import (active_arrays, active_rows, advance_odometers, carry_rows,
+                              list_is_stale, near_arrays, near_pairs, renew_certificates,
+                              repose, reposed_bodies)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
@@ -98,7 +99,8 @@ BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass
                        "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
 #: the last force evaluation: per-contact arrays (``depth`` (K,) m and ``deg`` (K,) the
 #: contacts' penetrations and degeneration flags, for the ParaView samples), histories and
-#: loads
+#: loads; the separated pairs (``near_*``) of the last internal step of a deck step only
+#: (the time-step control's network; empty in between)
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
                         "radius fallback hist_keys hist_springs force torque slip near_a near_b "
                         "near_point near_normal near_gap reach monitored degenerated depth deg")
@@ -142,8 +144,8 @@ N_COUNTERS = 23
 def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray,
             counters: np.ndarray):
     """One call of the scene's contact search (:meth:`SceneContacts.__call__`): returns the
-    new PairList, the pairs' reach (sum of odometers), the number solved and whether an LCP
-    failed (the Python path answers it: module docstring)."""
+    new PairList, the pairs' reach (sum of odometers), the list positions solved (ascending)
+    and whether an LCP failed (the Python path answers it: module docstring)."""
     c0 = cycles()
     odo = advance_odometers(pl.odo, x, pl.prev_x, R, pl.prev_R, sc.radius, wall_d, pl.prev_wall)
     a, b, keys = pl.a, pl.b, pl.keys
@@ -185,7 +187,7 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     counters[SEARCH_CYCLES] += (c1 - c0) + (cycles() - c2)
     counters[ROW_CYCLES] += c2 - c1
     return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built_x, built_R,
-                     built_wall, built_pos, pos, R, wall_d, x), reach, n_due, failed)
+                     built_wall, built_pos, pos, R, wall_d, x), reach, due, failed)
 
 
 # --------------------------------------------------------------------------- forces
@@ -214,17 +216,26 @@ def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
 
 
 @njit(cache=True)
-def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarray,
-              v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray, R: np.ndarray,
-              wall_d: np.ndarray, wall_u: np.ndarray, h: float, counters: np.ndarray):
+def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev,
+              x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray,
+              R: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float,
+              counters: np.ndarray):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
     gravity (omega (N,3): the particles' angular velocities, rad/s; implicit dashpots when
-    ``cc.implicit``).  Returns (True, the new Evaluation), or (False, ev) when a contact has
-    no interface (the Python path raises the error)."""
-    (a, b, pa, pb, nrm, dep, key, deg, params, patch_a, patch_b, near_a, near_b, near_point,
-     near_normal, gap) = contact_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys, pl.budget,
-                                        reach)
+    ``cc.implicit``).  The active pairs are found among the rows just solved (``due``, list
+    positions: :func:`~nurbsdem.contact.verlet.active_rows`); the separated pairs, which only
+    the time-step control at the end of a deck step takes, with ``full`` only (else none).
+    Returns (True, the new Evaluation), or (False, ev) when a contact has no interface (the
+    Python path raises the error)."""
+    (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
+     patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys,
+                              active_rows(pl.rows_i, due))
+    if full:
+        near, gap = near_pairs(pl.rows_f, pl.rows_i, pl.budget, reach)
+    else:
+        near, gap = np.empty(0, np.int64), np.empty(0)
+    near_a, near_b, near_point, near_normal, gap = near_arrays(pl.rows_f, pl.a, pl.b, near, gap)
     if not _interfaces_defined(bc, a, b):
         return False, ev
     radius, n_fall = _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R)
@@ -250,7 +261,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, monitored: int, ev, x: np.ndarr
         bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
                             radius, n_fall, key.copy(), spring.copy(), force, torque, slip,
-                            near_a, near_b, near_point, near_normal, gap, reach, monitored,
+                            near_a, near_b, near_point, near_normal, gap, reach, due.shape[0],
                             np.count_nonzero(deg), dep, deg)
 
 
@@ -456,14 +467,14 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c1 = cycles()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
             c2 = cycles()
-            pl, reach, monitored, failed = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
+            pl, reach, due, failed = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
             if failed:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             counters[EVALS] += 1
-            counters[MONITORED] += monitored
+            counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
-            ok, ev = _evaluate(sc, bc, cc, pl, reach, monitored, ev, x, v, q, L, omega, R,
-                               wall_d, wall_u, h, counters)
+            ok, ev = _evaluate(sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
+                               omega, R, wall_d, wall_u, h, counters)
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             c4 = cycles()
