@@ -196,3 +196,34 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build():
         for (i, j), a_, b_ in zip(nurbs[keep], ma[keep], mb[keep]):
             r = listed[int(i * scene.nb + j)]
             assert np.all(ps.mask_a[r] >= a_) and np.all(ps.mask_b[r] >= b_)
+
+
+def test_every_contact_is_among_the_rows_just_solved(tmp_path, monkeypatch):
+    """The compiled loop takes the active contacts from the rows it has just solved
+    (verlet.active_rows) instead of reading every listed row: that needs every row in contact
+    to be due at the next search, i.e. never certified apart. Checked at every return of the
+    loop on the lid deck (a moving wall, certificates and rebuilds): the pairs not certified
+    at the present reach hold exactly the active rows of the whole list."""
+    from pathlib import Path
+
+    from nurbsdem.contact.verlet import active_and_near, active_rows
+    from nurbsdem.dynamics import deck_steps
+    from nurbsdem.io.deck import parse_deck
+    from nurbsdem.solver import Solver
+
+    seen = {"returns": 0, "certified": 0, "active": 0}
+    store = deck_steps.DeckSteps._store
+
+    def checked_store(self, pl, ev, *args):
+        due = np.flatnonzero(~(pl.budget > ev.reach))
+        sel = active_and_near(pl.rows_f, pl.rows_i, pl.budget, ev.reach)[0]
+        np.testing.assert_array_equal(active_rows(pl.rows_i, due), sel)
+        seen["returns"] += 1
+        seen["certified"] += pl.a.shape[0] - due.shape[0]
+        seen["active"] += sel.shape[0]
+        return store(self, pl, ev, *args)
+
+    monkeypatch.setattr(deck_steps.DeckSteps, "_store", checked_store)
+    deck = Path(__file__).resolve().parents[1] / "inputs" / "regression" / "lid_press.inp"
+    Solver(parse_deck(deck), output=tmp_path / "out", quiet=True).run()
+    assert seen["returns"] > 3 and seen["certified"] > 0 and seen["active"] > 0
