@@ -9,8 +9,8 @@ machine.  Runs on this 2-core VM move by 10-30 % from one to the next; compare o
 the same invocation.
 
 Printed per run: wall time, the solver's time split (global search, LCP, forces +
-integration, output on the main thread, set-up; of forces + integration: the implicit dashpots
-and the time-step control), the time outside the LCP over the LCP time (issue 10's measure,
+integration, output on the main thread, set-up; of forces + integration: the integration, the
+contact forces, the implicit dashpots and the time-step control), the time outside the LCP over the LCP time (issue 10's measure,
 target at most 0.5), internal steps, LCPs solved, failed LCPs
 and the energy-balance error (J; the integration's error: the accuracy figure beside the
 speed); then the best and the median wall time of each variant.

@@ -261,9 +261,10 @@ class DemSystem:
         self.implicit_damping = bool(implicit_damping)
         #: active-set rounds and CG iterations of the implicit dashpots so far
         self.dashpot_solves = np.zeros(3, np.int64)
-        #: seconds spent so far in the implicit dashpots (:meth:`_implicit_dashpots`) and in
-        #: the time-step control (:meth:`_control_step`), the compiled deck steps' included:
-        #: two parts of the solver's "forces + integration" time
+        #: seconds spent so far in the parts of the solver's "forces + integration" time
+        #: (:data:`SPLIT_PARTS`: the integration, the contact forces, the implicit dashpots of
+        #: :meth:`_implicit_dashpots`, the time-step control of :meth:`_control_step`), the
+        #: compiled deck steps' included
         self.split = dict.fromkeys(SPLIT_PARTS, 0.0)
         self.energy_tolerance = float(energy_tolerance)
         self.check_energy = bool(check_energy)
