@@ -37,6 +37,21 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 
+#: per-row passes (over bodies, contacts or listed pairs) of at least this many rows run on
+#: numba's threads (``prange`` over chunks of :data:`ROW_CHUNK` rows:
+#: :func:`nurbsdem.dynamics.integrator.drift`, the contact laws, the contact arrays ...);
+#: shorter ones run on the calling thread, where a parallel launch (~1.5 us with the omp layer
+#: on the 2-core VM, measured) would cost more than the pass.  A pass is written once, as a
+#: loop over a range of rows (``lo``, ``hi``) that writes only those rows' outputs: one call on
+#: the calling thread or one per chunk on the threads (a function per row instead cost the
+#: paper deck's contact laws 2-4 x: the call with its ~30 array arguments, or numba's reference
+#: counts where it was inlined).  Sums over rows stay in row order on one thread, so the bits
+#: depend neither on this number nor on the thread count.
+THREADED_ROWS = 4096
+#: rows per chunk of a threaded pass
+ROW_CHUNK = 1024
+
+
 def kernel(func: Callable | None = None, *, inline: str = "never"):
     """``numba.njit(cache=True)`` without reference counting, for kernels that take views of
     arrays passed in but create none (usable bare, ``@kernel``, or ``@kernel(inline=...)``)."""

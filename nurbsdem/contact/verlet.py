@@ -12,8 +12,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from ..jit import ROW_CHUNK, THREADED_ROWS
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_VALID, NF,
                   NI)
 
@@ -215,15 +216,12 @@ def near_pairs(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
 
 
 @njit(cache=True)
-def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
-                  keys: np.ndarray, sel: np.ndarray):
-    """Per active contact (the list positions ``sel``): body_a, body_b, point_a, point_b (m),
-    normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a, patch_b."""
-    K = sel.shape[0]
-    pa, pb, nrm, params = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 4))
-    depth = np.empty(K)
-    deg, patch_a, patch_b = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
-    for r in range(K):
+def _active_range(rows_f: np.ndarray, rows_i: np.ndarray, sel: np.ndarray, pa: np.ndarray,
+                  pb: np.ndarray, nrm: np.ndarray, params: np.ndarray, depth: np.ndarray,
+                  deg: np.ndarray, patch_a: np.ndarray, patch_b: np.ndarray, lo: int,
+                  hi: int) -> None:
+    """:func:`active_arrays`' rows lo .. hi-1 from the listed rows sel[lo:hi]."""
+    for r in range(lo, hi):
         j = sel[r]
         for c in range(3):
             pa[r, c] = rows_f[j, F_PA + c]
@@ -235,6 +233,32 @@ def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.n
         deg[r] = rows_i[j, I_DEG]
         patch_a[r] = rows_i[j, I_PA]
         patch_b[r] = rows_i[j, I_PB]
+
+
+@njit(cache=True, parallel=True)
+def _active_threads(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a,
+                    patch_b) -> None:
+    n = sel.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _active_range(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a, patch_b,
+                      t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
+                  keys: np.ndarray, sel: np.ndarray):
+    """Per active contact (the list positions ``sel``): body_a, body_b, point_a, point_b (m),
+    normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a, patch_b
+    (gathered on threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts)."""
+    K = sel.shape[0]
+    pa, pb, nrm, params = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 4))
+    depth = np.empty(K)
+    deg, patch_a, patch_b = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
+    if K >= THREADED_ROWS:
+        _active_threads(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a, patch_b)
+    else:
+        _active_range(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a, patch_b,
+                      0, K)
     return a[sel], b[sel], pa, pb, nrm, depth, keys[sel], deg, params, patch_a, patch_b
 
 

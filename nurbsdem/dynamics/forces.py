@@ -47,9 +47,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..errors import InputError
+from ..jit import ROW_CHUNK, THREADED_ROWS
 
 #: column indices of the interface table
 EN, CN, ET, CT, MU = 0, 1, 2, 3, 4
@@ -180,34 +181,14 @@ def _cross(a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
-def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
-                      table, spring, h, inv_mass, radius, force, torque, point, f_total, f_damp_n,
-                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs, dashpot_given,
-                      dashpot) -> float:
-    """Evaluate the contact law of each of K contacts and accumulate loads on the bodies:
-    Eq. 16–17 (module docstring) for linear rows of the table (MODEL 0), Hertz–Mindlin
-    (:mod:`nurbsdem.dynamics.hertz`) for MODEL 1 rows.
-
-    Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
-    angular velocity; material (B,) ids; table (M,M,9); spring (K,3) history from the previous
-    evaluation (updated **in place** to the new spring); h (s) the time since that evaluation
-    (0 for the initial evaluation: no spring increment); inv_mass (B,) 1/kg (walls 0) and radius
-    (K,) the equivalent contact radius (m), both used by Hertz rows only.
-
-    Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
-    f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts
-    (normal: (f_n − elastic) n, includes the clip), f_el_t (K,3) its tangential elastic (spring)
-    part, fn_out (K,) f_n (N), e_el (K,2) normal and tangential elastic energies (J), stick (K,)
-    1 stick / 0 slip, coeffs (K,4) (k_n, c_n, k_t, c_t): the tangent stiffnesses (N/m) and
-    damping (N s/m) for the time-step control.  Returns the return mapping's slip-work estimate
-    (J) (a diagnostic; the energy ledger uses the exact spring work instead).
-
-    dashpot_given: the normal dashpot force of contact c is dashpot[c] (N, along n on B; the
-    implicit dashpots of :mod:`nurbsdem.dynamics.implicit`) instead of cn ġn from vel/omg.
-    """
-    slip_work = 0.0
-    K = body_a.shape[0]
-    for c in range(K):
+def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                        material, table, spring, h, inv_mass, radius, point, f_total, f_damp_n,
+                        f_damp_t, f_el_t, fn_out, e_el, stick, coeffs, dashpot_given, dashpot,
+                        slip_out, lo: int, hi: int) -> None:
+    """The contact laws of contacts lo .. hi-1 (:func:`contact_forces`): their per-contact
+    outputs, springs and slip-work estimates slip_out (J, 0 where they stick).  Reads the
+    bodies, writes those rows only."""
+    for c in range(lo, hi):
         a = body_a[c]
         b = body_b[c]
         ma, mb = material[a], material[b]     # the law table[ma, mb] read in place (no view)
@@ -274,11 +255,12 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
         ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
         flim = mu * fn
         stick[c] = 1
+        slip = 0.0
         if ftm > flim:
             stick[c] = 0
             alpha = flim / ftm if ftm > 0.0 else 0.0
             smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-            slip_work += et * alpha * smag2 * (1.0 - alpha) * smag2
+            slip = et * alpha * smag2 * (1.0 - alpha) * smag2
             s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
             fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
             fe0, fe1, fe2 = alpha * fe0, alpha * fe1, alpha * fe2
@@ -292,20 +274,151 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
         fn_out[c] = fn
         e_el[c, 0] = eel_n
         e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
-        force[b, 0] += F0
-        force[b, 1] += F1
-        force[b, 2] += F2
-        force[a, 0] -= F0
-        force[a, 1] -= F1
-        force[a, 2] -= F2
-        tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
-        ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
-        torque[b, 0] += tb0
-        torque[b, 1] += tb1
-        torque[b, 2] += tb2
-        torque[a, 0] -= ta0
-        torque[a, 1] -= ta1
-        torque[a, 2] -= ta2
+        slip_out[c] = slip
+
+
+@njit(cache=True)
+def _add_contact_loads(contacts: np.ndarray, body_a: np.ndarray, body_b: np.ndarray,
+                       pos: np.ndarray, point: np.ndarray, f_total: np.ndarray,
+                       force: np.ndarray, torque: np.ndarray, lo: int, hi: int) -> None:
+    """Add to the loads (B,3) of the bodies lo .. hi-1 their share of the force f_total (K,3)
+    on B (−it on A) at the point of each of the ``contacts`` (ascending indices, those that
+    touch these bodies among them): the accumulation of :func:`contact_forces`, every body's
+    sum in contact order whatever bodies the range holds."""
+    for n in range(contacts.shape[0]):
+        c = contacts[n]
+        a = body_a[c]
+        b = body_b[c]
+        p0, p1, p2 = point[c, 0], point[c, 1], point[c, 2]
+        F0, F1, F2 = f_total[c, 0], f_total[c, 1], f_total[c, 2]
+        if lo <= b < hi:
+            rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
+            tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
+            force[b, 0] += F0
+            force[b, 1] += F1
+            force[b, 2] += F2
+            torque[b, 0] += tb0
+            torque[b, 1] += tb1
+            torque[b, 2] += tb2
+        if lo <= a < hi:
+            ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
+            ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
+            force[a, 0] -= F0
+            force[a, 1] -= F1
+            force[a, 2] -= F2
+            torque[a, 0] -= ta0
+            torque[a, 1] -= ta1
+            torque[a, 2] -= ta2
+
+
+@njit(cache=True)
+def _contacts_by_range(body_a: np.ndarray, body_b: np.ndarray, n_bodies: int,
+                       n_ranges: int) -> tuple[np.ndarray, np.ndarray]:
+    """The contacts touching each of R = n_ranges ranges of the B bodies, ascending: range r
+    (the bodies i with i R // B = r: from ⌈r B / R⌉ to ⌈(r+1) B / R⌉ − 1) holds
+    contacts[start[r]:start[r+1]]."""
+    start = np.zeros(n_ranges + 1, np.int64)
+    for c in range(body_a.shape[0]):
+        ra = body_a[c] * n_ranges // n_bodies
+        rb = body_b[c] * n_ranges // n_bodies
+        start[ra + 1] += 1
+        if rb != ra:
+            start[rb + 1] += 1
+    for r in range(n_ranges):
+        start[r + 1] += start[r]
+    fill = start[:-1].copy()
+    contacts = np.empty(start[n_ranges], np.int64)
+    for c in range(body_a.shape[0]):
+        ra = body_a[c] * n_ranges // n_bodies
+        rb = body_b[c] * n_ranges // n_bodies
+        contacts[fill[ra]] = c
+        fill[ra] += 1
+        if rb != ra:
+            contacts[fill[rb]] = c
+            fill[rb] += 1
+    return start, contacts
+
+
+#: ranges of bodies whose loads threads add at once (:func:`_contact_loads_threads`)
+LOAD_RANGES = 64
+
+
+@njit(cache=True, parallel=True)
+def _contact_loads_threads(body_a, body_b, pos, point, f_total, force, torque) -> None:
+    """:func:`_add_contact_loads` by :data:`LOAD_RANGES` ranges of bodies on the threads, each
+    from the contacts that touch it (:func:`_contacts_by_range`)."""
+    B = force.shape[0]
+    start, contacts = _contacts_by_range(body_a, body_b, B, LOAD_RANGES)
+    for r in prange(LOAD_RANGES):
+        _add_contact_loads(contacts[start[r]:start[r + 1]], body_a, body_b, pos, point,
+                           f_total, force, torque, (r * B + LOAD_RANGES - 1) // LOAD_RANGES,
+                           ((r + 1) * B + LOAD_RANGES - 1) // LOAD_RANGES)
+
+
+@njit(cache=True, parallel=True)
+def _contact_laws_threads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                          material, table, spring, h, inv_mass, radius, point, f_total,
+                          f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
+                          dashpot_given, dashpot, slip_out) -> None:
+    n = body_a.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                            material, table, spring, h, inv_mass, radius, point, f_total,
+                            f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
+                            dashpot_given, dashpot, slip_out, t * ROW_CHUNK,
+                            min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material,
+                      table, spring, h, inv_mass, radius, force, torque, point, f_total, f_damp_n,
+                      f_damp_t, f_el_t, fn_out, e_el, stick, coeffs, dashpot_given,
+                      dashpot) -> float:
+    """Evaluate the contact law of each of K contacts and accumulate loads on the bodies:
+    Eq. 16–17 (module docstring) for linear rows of the table (MODEL 0), Hertz–Mindlin
+    (:mod:`nurbsdem.dynamics.hertz`) for MODEL 1 rows.
+
+    Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
+    angular velocity; material (B,) ids; table (M,M,9); spring (K,3) history from the previous
+    evaluation (updated **in place** to the new spring); h (s) the time since that evaluation
+    (0 for the initial evaluation: no spring increment); inv_mass (B,) 1/kg (walls 0) and radius
+    (K,) the equivalent contact radius (m), both used by Hertz rows only.
+
+    Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
+    f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts
+    (normal: (f_n − elastic) n, includes the clip), f_el_t (K,3) its tangential elastic (spring)
+    part, fn_out (K,) f_n (N), e_el (K,2) normal and tangential elastic energies (J), stick (K,)
+    1 stick / 0 slip, coeffs (K,4) (k_n, c_n, k_t, c_t): the tangent stiffnesses (N/m) and
+    damping (N s/m) for the time-step control.  Returns the return mapping's slip-work estimate
+    (J) (a diagnostic; the energy ledger uses the exact spring work instead).
+
+    dashpot_given: the normal dashpot force of contact c is dashpot[c] (N, along n on B; the
+    implicit dashpots of :mod:`nurbsdem.dynamics.implicit`) instead of cn ġn from vel/omg.
+
+    From :data:`~nurbsdem.jit.THREADED_ROWS` contacts the laws run on threads by chunks of
+    contacts and the loads by ranges of bodies (every body's sum still in contact order: the
+    same bits).
+    """
+    K = body_a.shape[0]
+    slip = np.empty(K)
+    if K >= THREADED_ROWS:
+        _contact_laws_threads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                              material, table, spring, h, inv_mass, radius, point, f_total,
+                              f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
+                              dashpot_given, dashpot, slip)
+    else:
+        _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
+                            material, table, spring, h, inv_mass, radius, point, f_total,
+                            f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
+                            dashpot_given, dashpot, slip, 0, K)
+    if K >= THREADED_ROWS:
+        _contact_loads_threads(body_a, body_b, pos, point, f_total, force, torque)
+    else:
+        _add_contact_loads(np.arange(K), body_a, body_b, pos, point, f_total, force, torque,
+                           0, force.shape[0])
+    slip_work = 0.0
+    for c in range(K):
+        slip_work += slip[c]
     return slip_work
 
 
@@ -342,6 +455,43 @@ T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_A, T_WALL_B, N_TERMS = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True)
+def _work_range(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total, f_damp_n,
+                f_damp_t, f_el_t, hk, out, lo: int, hi: int) -> None:
+    """:func:`kick_work_terms` of contacts lo .. hi-1 (those rows of out)."""
+    for c in range(lo, hi):
+        m0 = 0.5 * (w_before[c, 0] + w_after[c, 0])
+        m1 = 0.5 * (w_before[c, 1] + w_after[c, 1])
+        m2 = 0.5 * (w_before[c, 2] + w_after[c, 2])
+        out[c, T_DAMP_N] = hk * (f_damp_n[c, 0] * m0 + f_damp_n[c, 1] * m1
+                                 + f_damp_n[c, 2] * m2)
+        out[c, T_DAMP_T] = hk * (f_damp_t[c, 0] * m0 + f_damp_t[c, 1] * m1
+                                 + f_damp_t[c, 2] * m2)
+        out[c, T_SPRING] = hk * (f_el_t[c, 0] * m0 + f_el_t[c, 1] * m1 + f_el_t[c, 2] * m2)
+        a = body_a[c]
+        b = body_b[c]
+        if a >= n_particles:   # wall A pushes B with F: work on the particles F·u_A
+            k = a - n_particles
+            out[c, T_WALL_A] = hk * (f_total[c, 0] * wall_vel[k, 0]
+                                     + f_total[c, 1] * wall_vel[k, 1]
+                                     + f_total[c, 2] * wall_vel[k, 2])
+        if b >= n_particles:   # wall B pushes A with -F
+            k = b - n_particles
+            out[c, T_WALL_B] = -hk * (f_total[c, 0] * wall_vel[k, 0]
+                                      + f_total[c, 1] * wall_vel[k, 1]
+                                      + f_total[c, 2] * wall_vel[k, 2])
+
+
+@njit(cache=True, parallel=True)
+def _work_threads(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total, f_damp_n,
+                  f_damp_t, f_el_t, hk, out) -> None:
+    n = body_a.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _work_range(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total,
+                    f_damp_n, f_damp_t, f_el_t, hk, out, t * ROW_CHUNK,
+                    min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
 def kick_work_terms(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
                     w_before: np.ndarray, w_after: np.ndarray, wall_vel: np.ndarray,
                     f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
@@ -352,26 +502,16 @@ def kick_work_terms(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
     and after).  Columns: T_DAMP_N, T_DAMP_T normal and tangential damping (the dissipation is
     minus them), T_SPRING work on the tangential spring (minus it), T_WALL_A / T_WALL_B the work
     done by a wall that is body A / body B (the wall velocity enters through the relative
-    velocity; its share J·u is external work), 0 for a particle."""
+    velocity; its share J·u is external work), 0 for a particle.  On threads from
+    :data:`~nurbsdem.jit.THREADED_ROWS` contacts (the same bits)."""
     K = body_a.shape[0]
     out = np.zeros((K, N_TERMS))
-    for c in range(K):
-        m0 = 0.5 * (w_before[c, 0] + w_after[c, 0])
-        m1 = 0.5 * (w_before[c, 1] + w_after[c, 1])
-        m2 = 0.5 * (w_before[c, 2] + w_after[c, 2])
-        out[c, T_DAMP_N] = hk * (f_damp_n[c, 0] * m0 + f_damp_n[c, 1] * m1 + f_damp_n[c, 2] * m2)
-        out[c, T_DAMP_T] = hk * (f_damp_t[c, 0] * m0 + f_damp_t[c, 1] * m1 + f_damp_t[c, 2] * m2)
-        out[c, T_SPRING] = hk * (f_el_t[c, 0] * m0 + f_el_t[c, 1] * m1 + f_el_t[c, 2] * m2)
-        a = body_a[c]
-        b = body_b[c]
-        if a >= n_particles:   # wall A pushes B with F: work on the particles F·u_A
-            k = a - n_particles
-            out[c, T_WALL_A] = hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
-                                     + f_total[c, 2] * wall_vel[k, 2])
-        if b >= n_particles:   # wall B pushes A with -F
-            k = b - n_particles
-            out[c, T_WALL_B] = -hk * (f_total[c, 0] * wall_vel[k, 0] + f_total[c, 1] * wall_vel[k, 1]
-                                      + f_total[c, 2] * wall_vel[k, 2])
+    if K >= THREADED_ROWS:
+        _work_threads(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total,
+                      f_damp_n, f_damp_t, f_el_t, hk, out)
+        return out
+    _work_range(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total, f_damp_n,
+                f_damp_t, f_el_t, hk, out, 0, K)
     return out
 
 

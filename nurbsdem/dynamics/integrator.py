@@ -31,29 +31,50 @@ Why this scheme
   limit for a spring–dashpot is the digest's Δt_cr = (2/ω)(√(1+ζ²) − ζ), used by the time-step
   control in :mod:`nurbsdem.dynamics.system`.
 
-All kernels are numba functions over (N,·) arrays, sequential, hence deterministic.
+All kernels are numba functions over (N,·) arrays, deterministic: the per-body and per-contact
+passes run on threads for large scenes (:data:`~nurbsdem.jit.THREADED_ROWS`), each row's
+arithmetic unchanged.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..geometry.rotation import quat_mul
+from ..jit import ROW_CHUNK, THREADED_ROWS
 from .forces import kick_work_terms
 from .rigid import omega_world
 
 
 @njit(cache=True)
-def half_kick(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np.ndarray,
-              inv_mass: np.ndarray, hk: float) -> None:
-    """v += hk F/m, L += hk τ (in place) for the N particles (force/torque rows 0..N-1)."""
-    n = v.shape[0]
-    for i in range(n):
+def _half_kick_range(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np.ndarray,
+                     inv_mass: np.ndarray, hk: float, lo: int, hi: int) -> None:
+    """:func:`half_kick` of bodies lo .. hi-1."""
+    for i in range(lo, hi):
         for k in range(3):
             v[i, k] += hk * force[i, k] * inv_mass[i]
             L[i, k] += hk * torque[i, k]
+
+
+@njit(cache=True, parallel=True)
+def _half_kick_threads(v, L, force, torque, inv_mass, hk) -> None:
+    n = v.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _half_kick_range(v, L, force, torque, inv_mass, hk, t * ROW_CHUNK,
+                         min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def half_kick(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np.ndarray,
+              inv_mass: np.ndarray, hk: float) -> None:
+    """v += hk F/m, L += hk τ (in place) for the N particles (force/torque rows 0..N-1);
+    on threads from :data:`~nurbsdem.jit.THREADED_ROWS` bodies (the same bits)."""
+    if v.shape[0] >= THREADED_ROWS:
+        _half_kick_threads(v, L, force, torque, inv_mass, hk)
+    else:
+        _half_kick_range(v, L, force, torque, inv_mass, hk, 0, v.shape[0])
 
 
 @njit(cache=True)
@@ -98,11 +119,10 @@ def _rotate_isotropic(q: np.ndarray, i: int, L: np.ndarray, inv_I: float, h: flo
 
 
 @njit(cache=True)
-def free_rotation(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float) -> None:
-    """DLM symmetric splitting R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2) for every body (in place),
-    the exact rotation for a body with equal principal moments (:func:`_rotate_isotropic`);
-    the quaternion is renormalised afterwards (round-off only)."""
-    for i in range(q.shape[0]):
+def _rotate_range(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float, lo: int,
+                  hi: int) -> None:
+    """:func:`free_rotation` of bodies lo .. hi-1."""
+    for i in range(lo, hi):
         if inv_I[i, 0] == inv_I[i, 1] and inv_I[i, 1] == inv_I[i, 2]:
             _rotate_isotropic(q, i, L, inv_I[i, 0], h)
         else:
@@ -118,14 +138,39 @@ def free_rotation(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float) -> 
 
 
 @njit(cache=True)
-def drift(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, inv_I: np.ndarray,
-          h: float) -> None:
-    """x += h v and the free rotation over h (in place)."""
-    n = x.shape[0]
-    for i in range(n):
+def free_rotation(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float) -> None:
+    """DLM symmetric splitting R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2) for every body (in place),
+    the exact rotation for a body with equal principal moments (:func:`_rotate_isotropic`);
+    the quaternion is renormalised afterwards (round-off only)."""
+    _rotate_range(q, L, inv_I, h, 0, q.shape[0])
+
+
+@njit(cache=True)
+def _drift_range(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray,
+                 inv_I: np.ndarray, h: float, lo: int, hi: int) -> None:
+    """:func:`drift` of bodies lo .. hi-1."""
+    for i in range(lo, hi):
         for k in range(3):
             x[i, k] += h * v[i, k]
-    free_rotation(q, L, inv_I, h)
+    _rotate_range(q, L, inv_I, h, lo, hi)
+
+
+@njit(cache=True, parallel=True)
+def _drift_threads(x, v, q, L, inv_I, h) -> None:
+    n = x.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _drift_range(x, v, q, L, inv_I, h, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def drift(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, inv_I: np.ndarray,
+          h: float) -> None:
+    """x += h v and the free rotation over h (in place); on threads from
+    :data:`~nurbsdem.jit.THREADED_ROWS` bodies (the same bits)."""
+    if x.shape[0] >= THREADED_ROWS:
+        _drift_threads(x, v, q, L, inv_I, h)
+    else:
+        _drift_range(x, v, q, L, inv_I, h, 0, x.shape[0])
 
 
 @njit(cache=True)
@@ -155,13 +200,12 @@ def state_is_finite(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray) 
 
 
 @njit(cache=True)
-def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
-                               x: np.ndarray, wall_d: np.ndarray, v: np.ndarray,
-                               omega: np.ndarray, wall_u: np.ndarray, out: np.ndarray) -> None:
-    """out (K,3): velocity of B relative to A at each contact point (m/s); bodies >= N are
-    walls (position wall_d, velocity wall_u, no rotation)."""
+def _point_velocities_range(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                            x: np.ndarray, v: np.ndarray, omega: np.ndarray,
+                            wall_u: np.ndarray, out: np.ndarray, lo: int, hi: int) -> None:
+    """:func:`_relative_point_velocities` of contacts lo .. hi-1."""
     N = x.shape[0]
-    for c in range(body_a.shape[0]):
+    for c in range(lo, hi):
         for k in range(3):
             out[c, k] = 0.0
         for side in range(2):
@@ -176,6 +220,28 @@ def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np
             out[c, 0] += sign * (v[i, 0] + w1 * r2 - w2 * r1)
             out[c, 1] += sign * (v[i, 1] + w2 * r0 - w0 * r2)
             out[c, 2] += sign * (v[i, 2] + w0 * r1 - w1 * r0)
+
+
+@njit(cache=True, parallel=True)
+def _point_velocities_threads(body_a, body_b, point, x, v, omega, wall_u, out) -> None:
+    n = body_a.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _point_velocities_range(body_a, body_b, point, x, v, omega, wall_u, out,
+                                t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                               x: np.ndarray, wall_d: np.ndarray, v: np.ndarray,
+                               omega: np.ndarray, wall_u: np.ndarray, out: np.ndarray) -> None:
+    """out (K,3): velocity of B relative to A at each contact point (m/s); bodies >= N are
+    walls (position wall_d, velocity wall_u, no rotation); on threads from
+    :data:`~nurbsdem.jit.THREADED_ROWS` contacts (the same bits)."""
+    if body_a.shape[0] >= THREADED_ROWS:
+        _point_velocities_threads(body_a, body_b, point, x, v, omega, wall_u, out)
+    else:
+        _point_velocities_range(body_a, body_b, point, x, v, omega, wall_u, out, 0,
+                                body_a.shape[0])
 
 
 @njit(cache=True)

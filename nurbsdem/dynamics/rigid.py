@@ -31,10 +31,11 @@ from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..errors import InputError
-from ..geometry.rotation import matrix_to_quat, quat_row_to_matrix_into, quats_to_matrices
+from ..geometry.rotation import matrix_to_quat, quat_matrix, quats_to_matrices
+from ..jit import ROW_CHUNK, THREADED_ROWS
 
 
 def principal_frame(J0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -235,36 +236,76 @@ def pose_positions_of(R: np.ndarray, x: np.ndarray, centroid_file: np.ndarray) -
 
 
 @njit(cache=True)
+def _poses_range(q: np.ndarray, P: np.ndarray, x: np.ndarray, centroid_file: np.ndarray,
+                 R: np.ndarray, pos: np.ndarray, lo: int, hi: int) -> None:
+    """:func:`body_poses` of bodies lo .. hi-1 (the arithmetic of :func:`pose_positions_of`)."""
+    for i in range(lo, hi):
+        m = quat_matrix(q[i, 0], q[i, 1], q[i, 2], q[i, 3])
+        for j in range(3):
+            for k in range(3):
+                R[i, j, k] = (m[3 * j] * P[i, k, 0] + m[3 * j + 1] * P[i, k, 1]
+                              + m[3 * j + 2] * P[i, k, 2])
+        for j in range(3):
+            pos[i, j] = x[i, j] - (R[i, j, 0] * centroid_file[i, 0]
+                                   + R[i, j, 1] * centroid_file[i, 1]
+                                   + R[i, j, 2] * centroid_file[i, 2])
+
+
+@njit(cache=True, parallel=True)
+def _poses_threads(q, P, x, centroid_file, R, pos) -> None:
+    n = q.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _poses_range(q, P, x, centroid_file, R, pos, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
 def body_poses(q: np.ndarray, P: np.ndarray, x: np.ndarray,
                centroid_file: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """File->world rotations R = Q Pᵀ (N,3,3) and pose positions x − R c (N,3) (m) from the
     quaternions q (N,4) (principal->world), principal axes P (N,3,3) and centroids c (N,3) in
-    the file frame: the one kernel every path uses, so that all see the same bits."""
+    the file frame: the one kernel every path uses, so that all see the same bits (on threads
+    from :data:`~nurbsdem.jit.THREADED_ROWS` bodies)."""
     n = q.shape[0]
     R = np.empty((n, 3, 3))
-    Q = np.empty((3, 3))
-    for i in range(n):
-        quat_row_to_matrix_into(q, i, Q)
-        for j in range(3):
-            for k in range(3):
-                R[i, j, k] = Q[j, 0] * P[i, k, 0] + Q[j, 1] * P[i, k, 1] + Q[j, 2] * P[i, k, 2]
-    return R, pose_positions_of(R, x, centroid_file)
+    pos = np.empty((n, 3))
+    if n >= THREADED_ROWS:
+        _poses_threads(q, P, x, centroid_file, R, pos)
+    else:
+        _poses_range(q, P, x, centroid_file, R, pos, 0, n)
+    return R, pos
+
+
+@njit(cache=True)
+def _omega_range(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, out: np.ndarray, lo: int,
+                 hi: int) -> None:
+    """:func:`omega_world` of bodies lo .. hi-1."""
+    for i in range(lo, hi):
+        m = quat_matrix(q[i, 0], q[i, 1], q[i, 2], q[i, 3])
+        p0 = m[0] * L[i, 0] + m[3] * L[i, 1] + m[6] * L[i, 2]
+        p1 = m[1] * L[i, 0] + m[4] * L[i, 1] + m[7] * L[i, 2]
+        p2 = m[2] * L[i, 0] + m[5] * L[i, 1] + m[8] * L[i, 2]
+        w0, w1, w2 = p0 * inv_I[i, 0], p1 * inv_I[i, 1], p2 * inv_I[i, 2]
+        for k in range(3):
+            out[i, k] = m[3 * k] * w0 + m[3 * k + 1] * w1 + m[3 * k + 2] * w2
+
+
+@njit(cache=True, parallel=True)
+def _omega_threads(q, L, inv_I, out) -> None:
+    n = q.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _omega_range(q, L, inv_I, out, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 
 
 @njit(cache=True)
 def omega_world(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray) -> np.ndarray:
-    """World angular velocity omega = Q diag(1/I) Q^T L for (N,4) q, (N,3) L, (N,3) 1/I."""
+    """World angular velocity omega = Q diag(1/I) Q^T L for (N,4) q, (N,3) L, (N,3) 1/I (on
+    threads from :data:`~nurbsdem.jit.THREADED_ROWS` bodies)."""
     n = q.shape[0]
     out = np.empty((n, 3))
-    Q = np.empty((3, 3))
-    for i in range(n):
-        quat_row_to_matrix_into(q, i, Q)
-        p0 = Q[0, 0] * L[i, 0] + Q[1, 0] * L[i, 1] + Q[2, 0] * L[i, 2]
-        p1 = Q[0, 1] * L[i, 0] + Q[1, 1] * L[i, 1] + Q[2, 1] * L[i, 2]
-        p2 = Q[0, 2] * L[i, 0] + Q[1, 2] * L[i, 1] + Q[2, 2] * L[i, 2]
-        w0, w1, w2 = p0 * inv_I[i, 0], p1 * inv_I[i, 1], p2 * inv_I[i, 2]
-        for k in range(3):
-            out[i, k] = Q[k, 0] * w0 + Q[k, 1] * w1 + Q[k, 2] * w2
+    if n >= THREADED_ROWS:
+        _omega_threads(q, L, inv_I, out)
+    else:
+        _omega_range(q, L, inv_I, out, 0, n)
     return out
 
 
