@@ -107,8 +107,7 @@ def _forces_one_thread(a, b, pa, pb, nrm, dep, pos, vel, omg, material, table, s
     _contact_laws_range(a, b, pa, pb, nrm, dep, pos, vel, omg, material, table, spring, h,
                         inv_mass, radius, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs,
                         given, dashpot, slip, 0, a.shape[0])
-    _add_contact_loads(np.arange(a.shape[0]), a, b, pos, point, ftot, force, torque, 0,
-                       force.shape[0])
+    _add_contact_loads(a, b, pos, point, ftot, force, torque)
     total = 0.0
     for c in range(a.shape[0]):
         total += slip[c]
@@ -158,3 +157,30 @@ def test_contact_arrays_on_threads_have_the_bits_of_one_thread(threads):
     parts = [active_arrays(rows_f, rows_i, a, b, keys, sel[sl]) for sl in _slices(sel.size)]
     for k, arr in enumerate(whole):
         assert _same(arr, np.concatenate([p[k] for p in parts]))
+
+
+def test_implicit_dashpots_on_threads_have_the_bits_of_one_thread(scene, threads):
+    """The dashpots' lever arms, normal rows and the velocities of their Delassus products
+    on threads."""
+    from nurbsdem.dynamics.implicit import (_velocities_range, delassus_apply, lever_arms,
+                                            normal_rows)
+    s, rng = scene, scene["rng"]
+    r_a, r_b, rows = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 2, 6))
+    lever_arms(s["a"], s["b"], s["point"], s["x"], r_a, r_b)
+    nrm = rng.normal(size=(K, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    Q = rng.normal(size=(N, 3, 3))
+    sq_m, sq_I = 1.0 + rng.random(N), 1.0 + rng.random((N, 3))
+    normal_rows(s["a"], s["b"], r_a, r_b, nrm, Q, sq_m, sq_I, rows)
+    ra1, rb1, rows1 = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 2, 6))
+    for sl in _slices(K):
+        lever_arms(s["a"][sl], s["b"][sl], s["point"][sl], s["x"], ra1[sl], rb1[sl])
+        normal_rows(s["a"][sl], s["b"][sl], ra1[sl], rb1[sl], nrm[sl], Q, sq_m, sq_I, rows1[sl])
+    assert _same(ra1, r_a) and _same(rb1, r_b) and _same(rows1, rows)
+    f = rng.normal(size=K)
+    use = rng.random(K) < 0.9
+    y, g = np.empty(6 * N), np.empty(K)
+    delassus_apply(f, use, s["a"], s["b"], rows, y, g)
+    g1 = np.empty(K)
+    _velocities_range(s["a"], s["b"], rows, y, g1, 0, K)      # one thread, the same y
+    assert _same(g, g1)

@@ -278,81 +278,34 @@ def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, ve
 
 
 @njit(cache=True)
-def _add_contact_loads(contacts: np.ndarray, body_a: np.ndarray, body_b: np.ndarray,
-                       pos: np.ndarray, point: np.ndarray, f_total: np.ndarray,
-                       force: np.ndarray, torque: np.ndarray, lo: int, hi: int) -> None:
-    """Add to the loads (B,3) of the bodies lo .. hi-1 their share of the force f_total (K,3)
-    on B (−it on A) at the point of each of the ``contacts`` (ascending indices, those that
-    touch these bodies among them): the accumulation of :func:`contact_forces`, every body's
-    sum in contact order whatever bodies the range holds."""
-    for n in range(contacts.shape[0]):
-        c = contacts[n]
+def _add_contact_loads(body_a: np.ndarray, body_b: np.ndarray, pos: np.ndarray,
+                       point: np.ndarray, f_total: np.ndarray, force: np.ndarray,
+                       torque: np.ndarray) -> None:
+    """Add each contact's force f_total (K,3) on B (−it on A) at its point to the loads (B,3)
+    of its bodies, in contact order: the accumulation of :func:`contact_forces`.  (On one
+    thread: split into ranges of bodies, each adding from the contacts that touch it, it was
+    1.7 x slower on 2.4e5 contacts of 1e5 bodies, the contacts' rows read out of order.)"""
+    for c in range(body_a.shape[0]):
         a = body_a[c]
         b = body_b[c]
         p0, p1, p2 = point[c, 0], point[c, 1], point[c, 2]
+        ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
+        rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
         F0, F1, F2 = f_total[c, 0], f_total[c, 1], f_total[c, 2]
-        if lo <= b < hi:
-            rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
-            tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
-            force[b, 0] += F0
-            force[b, 1] += F1
-            force[b, 2] += F2
-            torque[b, 0] += tb0
-            torque[b, 1] += tb1
-            torque[b, 2] += tb2
-        if lo <= a < hi:
-            ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
-            ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
-            force[a, 0] -= F0
-            force[a, 1] -= F1
-            force[a, 2] -= F2
-            torque[a, 0] -= ta0
-            torque[a, 1] -= ta1
-            torque[a, 2] -= ta2
-
-
-@njit(cache=True)
-def _contacts_by_range(body_a: np.ndarray, body_b: np.ndarray, n_bodies: int,
-                       n_ranges: int) -> tuple[np.ndarray, np.ndarray]:
-    """The contacts touching each of R = n_ranges ranges of the B bodies, ascending: range r
-    (the bodies i with i R // B = r: from ⌈r B / R⌉ to ⌈(r+1) B / R⌉ − 1) holds
-    contacts[start[r]:start[r+1]]."""
-    start = np.zeros(n_ranges + 1, np.int64)
-    for c in range(body_a.shape[0]):
-        ra = body_a[c] * n_ranges // n_bodies
-        rb = body_b[c] * n_ranges // n_bodies
-        start[ra + 1] += 1
-        if rb != ra:
-            start[rb + 1] += 1
-    for r in range(n_ranges):
-        start[r + 1] += start[r]
-    fill = start[:-1].copy()
-    contacts = np.empty(start[n_ranges], np.int64)
-    for c in range(body_a.shape[0]):
-        ra = body_a[c] * n_ranges // n_bodies
-        rb = body_b[c] * n_ranges // n_bodies
-        contacts[fill[ra]] = c
-        fill[ra] += 1
-        if rb != ra:
-            contacts[fill[rb]] = c
-            fill[rb] += 1
-    return start, contacts
-
-
-#: ranges of bodies whose loads threads add at once (:func:`_contact_loads_threads`)
-LOAD_RANGES = 64
-
-
-@njit(cache=True, parallel=True)
-def _contact_loads_threads(body_a, body_b, pos, point, f_total, force, torque) -> None:
-    """:func:`_add_contact_loads` by :data:`LOAD_RANGES` ranges of bodies on the threads, each
-    from the contacts that touch it (:func:`_contacts_by_range`)."""
-    B = force.shape[0]
-    start, contacts = _contacts_by_range(body_a, body_b, B, LOAD_RANGES)
-    for r in prange(LOAD_RANGES):
-        _add_contact_loads(contacts[start[r]:start[r + 1]], body_a, body_b, pos, point,
-                           f_total, force, torque, (r * B + LOAD_RANGES - 1) // LOAD_RANGES,
-                           ((r + 1) * B + LOAD_RANGES - 1) // LOAD_RANGES)
+        force[b, 0] += F0
+        force[b, 1] += F1
+        force[b, 2] += F2
+        force[a, 0] -= F0
+        force[a, 1] -= F1
+        force[a, 2] -= F2
+        tb0, tb1, tb2 = _cross(rb0, rb1, rb2, F0, F1, F2)
+        ta0, ta1, ta2 = _cross(ra0, ra1, ra2, F0, F1, F2)
+        torque[b, 0] += tb0
+        torque[b, 1] += tb1
+        torque[b, 2] += tb2
+        torque[a, 0] -= ta0
+        torque[a, 1] -= ta1
+        torque[a, 2] -= ta2
 
 
 @njit(cache=True, parallel=True)
@@ -396,8 +349,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
     implicit dashpots of :mod:`nurbsdem.dynamics.implicit`) instead of cn ġn from vel/omg.
 
     From :data:`~nurbsdem.jit.THREADED_ROWS` contacts the laws run on threads by chunks of
-    contacts and the loads by ranges of bodies (every body's sum still in contact order: the
-    same bits).
+    contacts; the loads are added in contact order on the calling thread (the same bits).
     """
     K = body_a.shape[0]
     slip = np.empty(K)
@@ -411,11 +363,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
                             material, table, spring, h, inv_mass, radius, point, f_total,
                             f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
                             dashpot_given, dashpot, slip, 0, K)
-    if K >= THREADED_ROWS:
-        _contact_loads_threads(body_a, body_b, pos, point, f_total, force, torque)
-    else:
-        _add_contact_loads(np.arange(K), body_a, body_b, pos, point, f_total, force, torque,
-                           0, force.shape[0])
+    _add_contact_loads(body_a, body_b, pos, point, f_total, force, torque)
     slip_work = 0.0
     for c in range(K):
         slip_work += slip[c]

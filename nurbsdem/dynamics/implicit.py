@@ -51,8 +51,9 @@ The operator G works in the mass-scaled coordinates of :mod:`nurbsdem.dynamics.s
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from ..jit import ROW_CHUNK, THREADED_ROWS
 from .forces import contact_loads
 from .integrator import _relative_point_velocities
 from .rigid import omega_world
@@ -70,25 +71,40 @@ MAX_ROUNDS = 50
 
 
 @njit(cache=True)
-def lever_arms(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.ndarray,
-               r_a: np.ndarray, r_b: np.ndarray) -> None:
-    """r_a, r_b (K,3) = contact point − centroid (m) of A and B (walls, index ≥ N: 0)."""
+def _lever_arms_range(body_a, body_b, point, x, r_a, r_b, lo: int, hi: int) -> None:
+    """:func:`lever_arms` of contacts lo .. hi-1."""
     n_part = x.shape[0]
-    for c in range(body_a.shape[0]):
+    for c in range(lo, hi):
         for k in range(3):
             r_a[c, k] = point[c, k] - x[body_a[c], k] if body_a[c] < n_part else 0.0
             r_b[c, k] = point[c, k] - x[body_b[c], k] if body_b[c] < n_part else 0.0
 
 
+@njit(cache=True, parallel=True)
+def _lever_arms_threads(body_a, body_b, point, x, r_a, r_b) -> None:
+    n = body_a.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _lever_arms_range(body_a, body_b, point, x, r_a, r_b, t * ROW_CHUNK,
+                          min(n, (t + 1) * ROW_CHUNK))
+
+
 @njit(cache=True)
-def normal_rows(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b: np.ndarray,
-                normal: np.ndarray, Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray,
-                rows: np.ndarray) -> None:
-    """rows (K,2,6): the rows of N M^{-1/2}, a unit normal force at each contact as mass-scaled
-    generalised forces of B (side 0, +n) and A (side 1, −n): (±n/√m, ±Qᵀ(r × n)/√I) in the
-    coordinates of :mod:`nurbsdem.dynamics.stepcontrol` (walls, index ≥ N: zero rows)."""
+def lever_arms(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.ndarray,
+               r_a: np.ndarray, r_b: np.ndarray) -> None:
+    """r_a, r_b (K,3) = contact point − centroid (m) of A and B (walls, index ≥ N: 0); on
+    threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts (the same bits)."""
+    if body_a.shape[0] >= THREADED_ROWS:
+        _lever_arms_threads(body_a, body_b, point, x, r_a, r_b)
+    else:
+        _lever_arms_range(body_a, body_b, point, x, r_a, r_b, 0, body_a.shape[0])
+
+
+@njit(cache=True)
+def _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows, lo: int,
+                       hi: int) -> None:
+    """:func:`normal_rows` of contacts lo .. hi-1."""
     n_part = sq_m.shape[0]
-    for c in range(body_a.shape[0]):
+    for c in range(lo, hi):
         for side in range(2):
             i = body_b[c] if side == 0 else body_a[c]
             if i >= n_part:
@@ -105,11 +121,61 @@ def normal_rows(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b: np
                                                + Q[i, 2, k] * x2) / sq_I[i, k]
 
 
+@njit(cache=True, parallel=True)
+def _normal_rows_threads(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows) -> None:
+    n = body_a.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows,
+                           t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def normal_rows(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b: np.ndarray,
+                normal: np.ndarray, Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray,
+                rows: np.ndarray) -> None:
+    """rows (K,2,6): the rows of N M^{-1/2}, a unit normal force at each contact as mass-scaled
+    generalised forces of B (side 0, +n) and A (side 1, −n): (±n/√m, ±Qᵀ(r × n)/√I) in the
+    coordinates of :mod:`nurbsdem.dynamics.stepcontrol` (walls, index ≥ N: zero rows); on
+    threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts (the same bits)."""
+    if body_a.shape[0] >= THREADED_ROWS:
+        _normal_rows_threads(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows)
+    else:
+        _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows, 0,
+                           body_a.shape[0])
+
+
+@njit(cache=True)
+def _velocities_range(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray, y: np.ndarray,
+                      out: np.ndarray, lo: int, hi: int) -> None:
+    """out[c] = Σ rows[c, side] · y of its particles, for the contacts lo .. hi-1."""
+    n_part = y.shape[0] // 6
+    for c in range(lo, hi):
+        g = 0.0
+        for side in range(2):
+            i = body_b[c] if side == 0 else body_a[c]
+            if i < n_part:
+                for k in range(6):
+                    g += rows[c, side, k] * y[6 * i + k]
+        out[c] = g
+
+
+@njit(cache=True, parallel=True)
+def _velocities_threads(body_a, body_b, rows, y, out) -> None:
+    n = body_a.shape[0]
+    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+        _velocities_range(body_a, body_b, rows, y, out, t * ROW_CHUNK,
+                          min(n, (t + 1) * ROW_CHUNK))
+
+
 @njit(cache=True)
 def delassus_apply(f: np.ndarray, use: np.ndarray, body_a: np.ndarray, body_b: np.ndarray,
                    rows: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out (K,) = G f: the normal relative velocity (m/s) at every contact from the impulse
-    of the normal forces f (N, × 1 s) of the contacts with ``use``; workspace y (6N,)."""
+    of the normal forces f (N, × 1 s) of the contacts with ``use``; workspace y (6N,).  The
+    impulses are summed in contact order on the calling thread (split into ranges of bodies,
+    each from the contacts that touch it, it was slower: the contacts' rows read out of
+    order); the velocities run on threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts
+    (the same bits)."""
     n_part = y.shape[0] // 6
     y[:] = 0.0
     for c in range(body_a.shape[0]):
@@ -120,14 +186,10 @@ def delassus_apply(f: np.ndarray, use: np.ndarray, body_a: np.ndarray, body_b: n
             if i < n_part:
                 for k in range(6):
                     y[6 * i + k] += f[c] * rows[c, side, k]
-    for c in range(body_a.shape[0]):
-        g = 0.0
-        for side in range(2):
-            i = body_b[c] if side == 0 else body_a[c]
-            if i < n_part:
-                for k in range(6):
-                    g += rows[c, side, k] * y[6 * i + k]
-        out[c] = g
+    if body_a.shape[0] >= THREADED_ROWS:
+        _velocities_threads(body_a, body_b, rows, y, out)
+    else:
+        _velocities_range(body_a, body_b, rows, y, out, 0, body_a.shape[0])
 
 
 @njit(cache=True)
