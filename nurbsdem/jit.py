@@ -52,6 +52,16 @@ THREADED_ROWS = 4096
 ROW_CHUNK = 1024
 
 
+def launch_threads() -> None:
+    """Start numba's threads (``numba.get_num_threads`` does), before compiled work: numba
+    registers its thread scheduler's symbols only then, and a function compiled in a process
+    that has none cannot link a cached kernel that calls a threaded pass (``LLVM ERROR: Symbol
+    not found: allocate_sched``, an abort; measured with a script's own ``njit`` function
+    calling a cached kernel).  The solver and :class:`~nurbsdem.dynamics.DemSystem` call it."""
+    import numba
+    numba.get_num_threads()
+
+
 def kernel(func: Callable | None = None, *, inline: str = "never"):
     """``numba.njit(cache=True)`` without reference counting, for kernels that take views of
     arrays passed in but create none (usable bare, ``@kernel``, or ``@kernel(inline=...)``)."""

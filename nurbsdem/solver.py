@@ -43,6 +43,7 @@ from .errors import InputError
 from .geometry.rotation import quat_to_matrix
 from .io.checkpoint import save_checkpoint
 from .io.writers import OutputWriters
+from .jit import launch_threads
 from .model import Bodies, DynamicStep, Model, MoveWallStep, ReplicateStep
 from .placement import replicate_step
 
@@ -182,6 +183,7 @@ class Solver:
                  restart_check=None, compiled_steps: bool = True,
                  background_output: bool = True, comm=None) -> None:
         self.model = model
+        launch_threads()
         if comm is None:
             from .parallel import world
             comm = world()

@@ -74,6 +74,7 @@ import numpy as np
 
 from ..errors import InputError, NurbsdemError
 from ..geometry.rotation import matrix_to_quat
+from ..jit import launch_threads
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import EnergyLedger, EnergySample, balance_terms, energy_terms
 from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
@@ -247,6 +248,7 @@ class DemSystem:
             raise InputError(f"accuracy must be in (0, 1), got {accuracy}")
         if accuracy is not None and substeps is not None:
             raise InputError("forced substeps and the accuracy control exclude each other")
+        launch_threads()
         self.dt = float(dt)
         self.t0 = float(t0)
         self.gravity = np.asarray(gravity, dtype=float).reshape(3)
