@@ -55,9 +55,11 @@ ROW_CHUNK = 1024
 def launch_threads() -> None:
     """Start numba's threads (``numba.get_num_threads`` does), before compiled work: numba
     registers its thread scheduler's symbols only then, and a function compiled in a process
-    that has none cannot link a cached kernel that calls a threaded pass (``LLVM ERROR: Symbol
-    not found: allocate_sched``, an abort; measured with a script's own ``njit`` function
-    calling a cached kernel).  The solver and :class:`~nurbsdem.dynamics.DemSystem` call it."""
+    without them may fail to link a cached kernel that calls a threaded pass (``LLVM ERROR:
+    Symbol not found: allocate_sched``, an abort: seen once, a script's own ``njit`` function
+    calling the cached ``contact_loads``, and not reproduced since).  The solver and
+    :class:`~nurbsdem.dynamics.DemSystem` call it; the threads start at the first threaded
+    pass anyway."""
     import numba
     numba.get_num_threads()
 
