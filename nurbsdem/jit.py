@@ -43,10 +43,11 @@ from numba.extending import intrinsic
 #: shorter ones run on the calling thread, where a parallel launch (~1.5 us with the omp layer
 #: on the 2-core VM, measured) would cost more than the pass.  A pass is written once, as a
 #: loop over a range of rows (``lo``, ``hi``) that writes only those rows' outputs: one call on
-#: the calling thread or one per chunk on the threads (a function per row instead cost the
-#: paper deck's contact laws 2-4 x: the call with its ~30 array arguments, or numba's reference
-#: counts where it was inlined).  Sums over rows stay in row order on one thread, so the bits
-#: depend neither on this number nor on the thread count.
+#: the calling thread or one per chunk on the threads (a function per row instead made the
+#: paper deck's contact loads 2-5 x slower: the call with its ~30 array arguments, and numba's
+#: reference counts where the arrays pass through; docs/DEVNOTES.md, stop 38).  Sums over rows
+#: stay in row order on one thread, so the bits depend neither on this number nor on the
+#: thread count.
 THREADED_ROWS = 4096
 #: rows per chunk of a threaded pass
 ROW_CHUNK = 1024
