@@ -15,6 +15,9 @@ what it costs, and the benchmark impacts.
    theory where the sphere slides throughout (θ > atan 7μ).
 4. The same impact on a glass anvil (MFIX's DEM-05 verification case, Kharaz et al.'s
    experiment): e_t against MFIX's published curve and the measurements.
+5. A pack of paper particles deposited under Hertz–Mindlin (E 1e8 Pa): the compiled deck
+   steps against the Python path that drove such scenes before stop 39 (``compiled_steps``
+   off), wall time of each and whether every result is the same bit for bit.
 """
 from __future__ import annotations
 
@@ -191,6 +194,54 @@ def glass_anvil(angles) -> list[float]:
     return out
 
 
+def hertz_pack_deck(n: int, duration: float, out: Path) -> str:
+    """Deck text: n paper particles (A, B, C) released in the region of
+    :func:`bench_settled_pack.pack_region` onto the floor of a box, Hertz–Mindlin with
+    E = 1e8 Pa, ν 0.3, restitution 0.5, friction 0.5, for ``duration`` s of 1e-3 s steps."""
+    from bench_settled_pack import pack_region
+    from decks import paper_mix_deck
+    side, height = pack_region(n)
+    text = paper_mix_deck(n, (side, side, height), 2 * height, [duration], out,
+                          monitors_every=0.01)
+    return text.replace(
+        "Material 1 Density 2700", "Material 1 Density 2700 YoungModulus 1e8 PoissonRatio 0.3"
+    ).replace("Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 "
+              "TangentialDamping 0 Friction 0.5",
+              "Interface 1 Model HertzMindlin Restitution 0.5 Friction 0.5")
+
+
+def pack_paths(n: int = 60, duration: float = 0.3) -> dict:
+    """:func:`hertz_pack_deck` solved by the Python path and by the compiled deck steps (one
+    untimed run of each first: numba's cache): wall times (s), internal steps, LCPs, active
+    contacts at most, and whether the results (every sample of results.h5, the monitors with
+    ``hertz.csv``) are equal bit for bit."""
+    import tempfile
+    from nurbsdem.io.deck import parse_deck
+    from nurbsdem.io.writers import read_results_sample, read_results_times
+    from nurbsdem.solver import Solver
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for compiled in (False, True, False, True):
+            o = Path(tmp) / ("compiled" if compiled else "python")
+            deck = Path(tmp) / "hertz_pack.inp"
+            deck.write_text(hertz_pack_deck(n, duration, o))
+            t0 = time.perf_counter()
+            s = Solver(parse_deck(deck), quiet=True, compiled_steps=compiled).run()
+            out[compiled] = (time.perf_counter() - t0, s, o)
+        (t_py, s_py, o_py), (t_cc, s_cc, o_cc) = out[False], out[True]
+        times = read_results_times(o_py / "results.h5")
+        same = bool(np.array_equal(times, read_results_times(o_cc / "results.h5")))
+        for k in range(len(times)):
+            a, b = (read_results_sample(o / "results.h5", k) for o in (o_py, o_cc))
+            same = same and all(np.array_equal(a[key], b[key]) for key in a)
+        for name in ("energy.csv", "contacts.csv", "hertz.csv"):
+            same = same and ((o_py / "monitors" / name).read_bytes()
+                             == (o_cc / "monitors" / name).read_bytes())
+    return dict(n=n, duration=duration, python_s=t_py, compiled_s=t_cc, same=same,
+                substeps=s_cc.substeps, lcps=s_cc.lcps, active_max=s_cc.active_max,
+                failed=s_cc.failed)
+
+
 def main(argv=None) -> int:
     quick = "--quick" in (argv if argv is not None else sys.argv[1:])
     print("1. equivalent radius: exact curvature vs volume-equivalent radius (force error at "
@@ -211,6 +262,12 @@ def main(argv=None) -> int:
         print(f"  {a:6.2f}  {et:.4f}  {ref:.4f}")
     for (a, ref), et in zip(KHARAZ_2001, glass_anvil([a for a, _ in KHARAZ_2001])):
         print(f"  {a:6.2f}  {et:.4f}  measured {ref:.4f}")
+    pk = pack_paths(30 if quick else 60)
+    print(f"5. {pk['n']} paper particles deposited under Hertz-Mindlin for {pk['duration']} s: "
+          f"Python path {pk['python_s']:.2f} s, compiled deck steps {pk['compiled_s']:.2f} s "
+          f"({pk['python_s'] / pk['compiled_s']:.1f} x), results "
+          f"{'bit for bit equal' if pk['same'] else 'NOT equal'}; {pk['substeps']} internal "
+          f"steps, {pk['lcps']} LCPs, at most {pk['active_max']} contacts, {pk['failed']} failed")
     return 0
 
 

@@ -31,6 +31,7 @@ import time
 from functools import lru_cache
 from typing import Callable
 
+import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils
@@ -124,3 +125,25 @@ def seconds_per_cycle() -> float:
         pass
     c1, t1 = _cycles_now(), time.perf_counter()
     return (t1 - t0) / (c1 - c0) if c1 > c0 else 0.0
+
+
+@njit(cache=True)
+def n_chunks(n: int) -> int:
+    """Chunks of :data:`ROW_CHUNK` rows that cover n rows."""
+    return (n + ROW_CHUNK - 1) // ROW_CHUNK
+
+
+@njit(cache=True)
+def pack_chunks(buf: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The rows a threaded selection kept, packed to the front of ``buf`` (in place) in
+    order: chunk t of :data:`ROW_CHUNK` rows wrote its ``counts[t]`` kept rows from
+    ``buf[t · ROW_CHUNK]`` on (each chunk's rows in ascending order).  Returns buf[:kept],
+    the rows a one-thread scan would have written.  Each chunk moves towards the front only,
+    so chunk by chunk in order overwrites nothing still to be moved."""
+    n = np.int64(0)
+    for t in range(counts.shape[0]):
+        lo = t * ROW_CHUNK
+        for k in range(counts[t]):
+            buf[n + k] = buf[lo + k]
+        n += counts[t]
+    return buf[:n]

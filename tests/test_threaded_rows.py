@@ -184,3 +184,79 @@ def test_implicit_dashpots_on_threads_have_the_bits_of_one_thread(scene, threads
     g1 = np.empty(K)
     _velocities_range(s["a"], s["b"], rows, y, g1, 0, K)      # one thread, the same y
     assert _same(g, g1)
+
+
+def test_search_passes_on_threads_select_what_a_scan_selects(threads):
+    """The neighbour list's passes of each evaluation: the pairs' reach and the due rows
+    (``due_rows``), the certificates' renewal, the active rows among the due ones and the
+    bodies' displacements, threaded above the threshold, give a one-thread scan's arrays
+    (chunks that keep none of their rows, all of them, or some)."""
+    from nurbsdem.contact.lcp import F_SD, I_ACTIVE, I_FAIL, I_VALID
+    from nurbsdem.contact.verlet import (active_rows, due_rows, largest_displacements,
+                                         renew_certificates)
+    from nurbsdem.jit import ROW_CHUNK
+    rng = np.random.default_rng(11)
+    M = 4 * THREADED_ROWS + 17
+    a, b = rng.integers(0, N + W, M), rng.integers(0, N + W, M)
+    odo = rng.random(N + W)
+    budget = np.where(rng.random(M) < 0.5, -np.inf, 2.5 * rng.random(M))
+    budget[:ROW_CHUNK] = np.inf                      # a chunk with no due row
+    budget[ROW_CHUNK:2 * ROW_CHUNK] = -np.inf        # one with every row due
+    reach_ref = odo[a] + odo[b]
+    for cert in (True, False):
+        reach, due = due_rows(a, b, odo, budget, cert)
+        want = np.nonzero(~(budget > reach_ref))[0] if cert else np.arange(M)
+        assert _same(reach, reach_ref) and _same(due, want)
+    reach, due = due_rows(a, b, odo, budget, True)
+    rows_f, rows_i = rng.normal(size=(M, NF)), rng.integers(0, 2, (M, NI))
+    rows_i[:, I_FAIL] = rng.random(M) < 0.1
+    rows_i[due[:ROW_CHUNK], I_ACTIVE] = 0                  # a chunk of due rows with none active
+    keep = (rows_i[due, I_VALID] == 1) & (rows_i[due, I_ACTIVE] == 1)
+    assert _same(active_rows(rows_i, due), due[keep])
+    renewed = budget.copy()
+    renew_certificates(renewed, due, rows_f, rows_i, reach)
+    pieces = budget.copy()
+    for sl in _slices(due.size):
+        renew_certificates(pieces, due[sl], rows_f, rows_i, reach)
+    assert _same(renewed, pieces)
+    apart = ((rows_i[due, I_VALID] == 1) & (rows_i[due, I_ACTIVE] == 0)
+             & (rows_i[due, I_FAIL] == 0) & (rows_f[due, F_SD] > 0))
+    assert np.isfinite(renewed[due[apart]]).all() and np.isneginf(renewed[due[~apart]]).all()
+    R = np.linalg.qr(rng.normal(size=(N, 3, 3)))[0]
+    R0 = np.linalg.qr(rng.normal(size=(N, 3, 3)))[0]
+    x, x0, rad = rng.normal(size=(N, 3)), rng.normal(size=(N, 3)), rng.random(N)
+    wall, wall0 = rng.normal(size=(W, 3)), rng.normal(size=(W, 3))
+    whole = largest_displacements(x, x0, R, R0, rad, wall, wall0)
+    parts = [largest_displacements(x[sl], x0[sl], R[sl], R0[sl], rad[sl], wall[:0], wall0[:0])
+             for sl in _slices(N)]
+    assert _same(whole[:N], np.concatenate(parts))
+    d = wall - wall0
+    assert _same(whole[N:], np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]))
+
+
+def test_rows_carried_over_a_rebuild_on_threads_are_a_merges(threads):
+    """``carry_rows`` (a rebuild of the list) on threads, each chunk's merge started by a
+    binary search: every new key listed before takes its old row, certificate and flag, the
+    others zeros, −inf and False (chunks with all, none or some of their keys listed)."""
+    from nurbsdem.contact.verlet import carry_rows
+    from nurbsdem.jit import ROW_CHUNK
+    rng = np.random.default_rng(5)
+    M = 3 * THREADED_ROWS
+    old_keys = np.unique(rng.integers(0, 10 * M, M))
+    M = old_keys.size
+    old_f, old_i = rng.normal(size=(M, NF)), rng.integers(0, 9, (M, NI))
+    old_budget, old_reused = rng.normal(size=M), rng.random(M) < 0.5
+    fresh = np.setdiff1d(np.arange(10 * M), old_keys)
+    keys = np.unique(np.concatenate((old_keys[ROW_CHUNK:3 * ROW_CHUNK],      # all listed
+                                     fresh[:ROW_CHUNK],                      # none listed
+                                     rng.choice(old_keys, THREADED_ROWS),    # some
+                                     rng.choice(fresh, THREADED_ROWS))))
+    rows_f, rows_i, budget, reused = carry_rows(old_keys, old_f, old_i, old_budget, old_reused,
+                                                keys)
+    idx = np.minimum(np.searchsorted(old_keys, keys), M - 1)
+    listed = old_keys[idx] == keys
+    assert 0 < listed.sum() < keys.size and keys.size > THREADED_ROWS
+    assert _same(rows_f, np.where(listed[:, None], old_f[idx], 0.0))
+    assert _same(rows_i, np.where(listed[:, None], old_i[idx], 0))
+    assert _same(budget, np.where(listed, old_budget[idx], -np.inf))
+    assert _same(reused, listed & old_reused[idx])

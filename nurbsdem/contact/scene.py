@@ -80,7 +80,7 @@ from .broadphase import wall_geometry
 from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
-from .verlet import (advance_odometers, carry_rows, contact_arrays, list_is_stale,
+from .verlet import (advance_odometers, carry_rows, contact_arrays, due_rows, list_is_stale,
                      renew_certificates, repose, reposed_bodies)
 from .wall import wall_frame
 
@@ -302,9 +302,7 @@ class SceneContacts:
             if dom is not None:
                 dom.after_build(self.pairs.a, self.pairs.b)
         ps = self.pairs
-        reach = self.odo[ps.a] + self.odo[ps.b]
-        certified = (ps.budget > reach) if self.certificates else np.zeros(ps.a.shape[0], bool)
-        due = np.nonzero(~certified)[0]
+        reach, due = due_rows(ps.a, ps.b, self.odo, ps.budget, np.bool_(self.certificates))
         t1 = time.perf_counter()
         rf, ri = self._solve(due, pos, R, pose[2])
         t2 = time.perf_counter()

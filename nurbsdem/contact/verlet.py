@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..jit import ROW_CHUNK, THREADED_ROWS
+from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks, pack_chunks
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_DEG, I_FAIL, I_PA, I_PB, I_VALID, NF,
                   NI)
 
@@ -26,14 +26,9 @@ REPOSE_FRACTION = 0.5
 
 
 @njit(cache=True)
-def largest_displacements(x: np.ndarray, x0: np.ndarray, R: np.ndarray, R0: np.ndarray,
-                          radius: np.ndarray, wall: np.ndarray, wall0: np.ndarray) -> np.ndarray:
-    """(N+W,) m: the largest displacement of any point of each body between two poses,
-    |Δx| + 2 sin(Δθ/2)·r for particles (centroids x, x0 (N,3), rotations R, R0 (N,3,3),
-    bounding radii r (N,)), |Δd| for walls (displacements wall, wall0 (W,3))."""
-    n = x.shape[0]
-    out = np.empty(n + wall.shape[0])
-    for i in range(n):
+def _displacements_range(x, x0, R, R0, radius, out, lo: int, hi: int) -> None:
+    """:func:`largest_displacements` of the particles lo .. hi-1."""
+    for i in range(lo, hi):
         s = 0.0
         for j in range(3):
             for k in range(3):
@@ -42,6 +37,29 @@ def largest_displacements(x: np.ndarray, x0: np.ndarray, R: np.ndarray, R0: np.n
         chord = math.sqrt(s / 2.0)                    # 2 sin(θ/2) = ‖R − R0‖_F / √2
         dx0, dx1, dx2 = x[i, 0] - x0[i, 0], x[i, 1] - x0[i, 1], x[i, 2] - x0[i, 2]
         out[i] = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2) + chord * radius[i]
+
+
+@njit(cache=True, parallel=True)
+def _displacements_threads(x, x0, R, R0, radius, out) -> None:
+    n = x.shape[0]
+    for t in prange(n_chunks(n)):
+        _displacements_range(x, x0, R, R0, radius, out, t * ROW_CHUNK,
+                             min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def largest_displacements(x: np.ndarray, x0: np.ndarray, R: np.ndarray, R0: np.ndarray,
+                          radius: np.ndarray, wall: np.ndarray, wall0: np.ndarray) -> np.ndarray:
+    """(N+W,) m: the largest displacement of any point of each body between two poses,
+    |Δx| + 2 sin(Δθ/2)·r for particles (centroids x, x0 (N,3), rotations R, R0 (N,3,3),
+    bounding radii r (N,)), |Δd| for walls (displacements wall, wall0 (W,3)); the particles
+    on threads from :data:`~nurbsdem.jit.THREADED_ROWS` of them (the same bits)."""
+    n = x.shape[0]
+    out = np.empty(n + wall.shape[0])
+    if n >= THREADED_ROWS:
+        _displacements_threads(x, x0, R, R0, radius, out)
+    else:
+        _displacements_range(x, x0, R, R0, radius, out, 0, n)
     for w in range(wall.shape[0]):
         d0, d1, d2 = wall[w, 0] - wall0[w, 0], wall[w, 1] - wall0[w, 1], wall[w, 2] - wall0[w, 2]
         out[n + w] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
@@ -129,17 +147,14 @@ def merge_find(old_keys: np.ndarray, o: int, key: int) -> tuple[int, bool]:
 
 
 @njit(cache=True)
-def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
-               old_budget: np.ndarray, old_reused: np.ndarray, keys: np.ndarray):
-    """Rows, certificates and reused flags of a new sorted list ``keys`` (L,): carried over
-    from the old sorted list where a key was listed before (zeros / −inf / False otherwise)."""
-    L = keys.shape[0]
-    rows_f = np.zeros((L, NF))
-    rows_i = np.zeros((L, NI), np.int64)
-    budget = np.full(L, -np.inf)
-    reused = np.zeros(L, np.bool_)
-    j = np.int64(0)             # both sorted: a merge
-    for r in range(L):
+def _carry_range(old_keys, old_f, old_i, old_budget, old_reused, keys, rows_f, rows_i, budget,
+                 reused, lo: int, hi: int) -> None:
+    """:func:`carry_rows` of the new rows lo .. hi-1: a merge from the first old key >=
+    keys[lo] (a binary search; 0 for the first row, where the merge starts anyway)."""
+    if lo >= hi:
+        return
+    j = np.int64(0) if lo == 0 else np.int64(np.searchsorted(old_keys, keys[lo]))
+    for r in range(lo, hi):
         j, listed = merge_find(old_keys, j, keys[r])
         if listed:              # entry by entry: no views of the rows in the loop
             for k in range(NF):
@@ -148,7 +163,101 @@ def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
                 rows_i[r, k] = old_i[j, k]
             budget[r] = old_budget[j]
             reused[r] = old_reused[j]
+        else:
+            for k in range(NF):
+                rows_f[r, k] = 0.0
+            for k in range(NI):
+                rows_i[r, k] = 0
+            budget[r] = -np.inf
+            reused[r] = False
+
+
+@njit(cache=True, parallel=True)
+def _carry_threads(old_keys, old_f, old_i, old_budget, old_reused, keys, rows_f, rows_i, budget,
+                   reused) -> None:
+    L = keys.shape[0]
+    for t in prange(n_chunks(L)):
+        _carry_range(old_keys, old_f, old_i, old_budget, old_reused, keys, rows_f, rows_i,
+                     budget, reused, t * ROW_CHUNK, min(L, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def carry_rows(old_keys: np.ndarray, old_f: np.ndarray, old_i: np.ndarray,
+               old_budget: np.ndarray, old_reused: np.ndarray, keys: np.ndarray):
+    """Rows, certificates and reused flags of a new sorted list ``keys`` (L,): carried over
+    from the old sorted list where a key was listed before (zeros / −inf / False otherwise);
+    on threads from :data:`~nurbsdem.jit.THREADED_ROWS` rows (the same arrays)."""
+    L = keys.shape[0]
+    rows_f = np.empty((L, NF))
+    rows_i = np.empty((L, NI), np.int64)
+    budget = np.empty(L)
+    reused = np.empty(L, np.bool_)
+    if L >= THREADED_ROWS:
+        _carry_threads(old_keys, old_f, old_i, old_budget, old_reused, keys, rows_f, rows_i,
+                       budget, reused)
+    else:
+        _carry_range(old_keys, old_f, old_i, old_budget, old_reused, keys, rows_f, rows_i,
+                     budget, reused, np.int64(0), L)
     return rows_f, rows_i, budget, reused
+
+
+@njit(cache=True)
+def _due_range(a, b, odo, budget, certificates, reach, due, lo: int, hi: int) -> int:
+    """:func:`due_rows` of the listed pairs lo .. hi-1: their reach, and those due written
+    to due[lo:] in order; returns how many."""
+    n = lo
+    for j in range(lo, hi):
+        reach[j] = odo[a[j]] + odo[b[j]]
+        if not (certificates and budget[j] > reach[j]):
+            due[n] = j
+            n += 1
+    return n - lo
+
+
+@njit(cache=True, parallel=True)
+def _due_threads(a, b, odo, budget, certificates, reach, due, counts) -> None:
+    L = a.shape[0]
+    for t in prange(counts.shape[0]):
+        counts[t] = _due_range(a, b, odo, budget, certificates, reach, due, t * ROW_CHUNK,
+                               min(L, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
+def due_rows(a: np.ndarray, b: np.ndarray, odo: np.ndarray, budget: np.ndarray,
+             certificates: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(reach (L,) m, due): each listed pair's reach, the sum of its bodies' odometers
+    odo[a] + odo[b], and the list positions (ascending) of the pairs to solve, those whose
+    certificate ``budget`` does not exceed their reach (every pair without
+    ``certificates``); on threads from :data:`~nurbsdem.jit.THREADED_ROWS` pairs (the same
+    arrays)."""
+    L = a.shape[0]
+    reach = np.empty(L)
+    due = np.empty(L, np.int64)
+    if L >= THREADED_ROWS:
+        counts = np.empty(n_chunks(L), np.int64)
+        _due_threads(a, b, odo, budget, certificates, reach, due, counts)
+        return reach, pack_chunks(due, counts)
+    n = _due_range(a, b, odo, budget, certificates, reach, due, np.int64(0), L)
+    return reach, due[:n]
+
+
+@njit(cache=True)
+def _renew_range(budget, due, rows_f, rows_i, reach, lo: int, hi: int) -> None:
+    """:func:`renew_certificates` of due[lo:hi]."""
+    for r in range(lo, hi):
+        j = due[r]
+        sd = rows_f[j, F_SD]
+        apart = (rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 0 and rows_i[j, I_FAIL] == 0
+                 and sd > 0.0)
+        budget[j] = sd * CERTIFICATE_SHRINK + reach[j] if apart else -np.inf
+
+
+@njit(cache=True, parallel=True)
+def _renew_threads(budget, due, rows_f, rows_i, reach) -> None:
+    n = due.shape[0]
+    for t in prange(n_chunks(n)):
+        _renew_range(budget, due, rows_f, rows_i, reach, t * ROW_CHUNK,
+                     min(n, (t + 1) * ROW_CHUNK))
 
 
 @njit(cache=True)
@@ -156,13 +265,12 @@ def renew_certificates(budget: np.ndarray, due: np.ndarray, rows_f: np.ndarray,
                        rows_i: np.ndarray, reach: np.ndarray) -> None:
     """Certificates (in place) of the listed pairs ``due`` just solved (their rows
     rows_f[j], rows_i[j] of the whole list): a pair found apart by d cannot touch until its
-    bodies' odometers have grown by d together."""
-    for r in range(due.shape[0]):
-        j = due[r]
-        sd = rows_f[j, F_SD]
-        apart = (rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 0 and rows_i[j, I_FAIL] == 0
-                 and sd > 0.0)
-        budget[j] = sd * CERTIFICATE_SHRINK + reach[j] if apart else -np.inf
+    bodies' odometers have grown by d together; on threads from
+    :data:`~nurbsdem.jit.THREADED_ROWS` pairs (the same bits)."""
+    if due.shape[0] >= THREADED_ROWS:
+        _renew_threads(budget, due, rows_f, rows_i, reach)
+    else:
+        _renew_range(budget, due, rows_f, rows_i, reach, 0, due.shape[0])
 
 
 @njit(cache=True)
@@ -192,19 +300,40 @@ def active_and_near(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
 
 
 @njit(cache=True)
+def _active_rows_range(rows_i, due, sel, lo: int, hi: int) -> int:
+    """:func:`active_rows` among due[lo:hi], written to sel[lo:] in order; returns how
+    many."""
+    n = lo
+    for r in range(lo, hi):
+        j = due[r]
+        if rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 1:
+            sel[n] = j
+            n += 1
+    return n - lo
+
+
+@njit(cache=True, parallel=True)
+def _active_rows_threads(rows_i, due, sel, counts) -> None:
+    n = due.shape[0]
+    for t in prange(counts.shape[0]):
+        counts[t] = _active_rows_range(rows_i, due, sel, t * ROW_CHUNK,
+                                       min(n, (t + 1) * ROW_CHUNK))
+
+
+@njit(cache=True)
 def active_rows(rows_i: np.ndarray, due: np.ndarray) -> np.ndarray:
     """The listed pairs in contact (valid and active) among the rows just solved, ``due``
     (ascending list positions): a pair skipped by its certificate was apart when last solved,
     so these are all the active pairs of the list, in list order (those of
-    :func:`active_and_near`), found without reading the other rows."""
+    :func:`active_and_near`), found without reading the other rows; the scan on threads from
+    :data:`~nurbsdem.jit.THREADED_ROWS` due rows (the same array)."""
     sel = np.empty(due.shape[0], np.int64)
-    ns = 0
-    for r in range(due.shape[0]):
-        j = due[r]
-        if rows_i[j, I_VALID] == 1 and rows_i[j, I_ACTIVE] == 1:
-            sel[ns] = j
-            ns += 1
-    return sel[:ns].copy()
+    if due.shape[0] >= THREADED_ROWS:
+        counts = np.empty(n_chunks(due.shape[0]), np.int64)
+        _active_rows_threads(rows_i, due, sel, counts)
+        return pack_chunks(sel, counts).copy()
+    n = _active_rows_range(rows_i, due, sel, np.int64(0), due.shape[0])
+    return sel[:n].copy()
 
 
 @njit(cache=True)
@@ -216,13 +345,17 @@ def near_pairs(rows_f: np.ndarray, rows_i: np.ndarray, budget: np.ndarray,
 
 
 @njit(cache=True)
-def _active_range(rows_f: np.ndarray, rows_i: np.ndarray, sel: np.ndarray, pa: np.ndarray,
-                  pb: np.ndarray, nrm: np.ndarray, params: np.ndarray, depth: np.ndarray,
-                  deg: np.ndarray, patch_a: np.ndarray, patch_b: np.ndarray, lo: int,
-                  hi: int) -> None:
+def _active_range(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
+                  keys: np.ndarray, sel: np.ndarray, ca: np.ndarray, cb: np.ndarray,
+                  key: np.ndarray, pa: np.ndarray, pb: np.ndarray, nrm: np.ndarray,
+                  params: np.ndarray, depth: np.ndarray, deg: np.ndarray, patch_a: np.ndarray,
+                  patch_b: np.ndarray, lo: int, hi: int) -> None:
     """:func:`active_arrays`' rows lo .. hi-1 from the listed rows sel[lo:hi]."""
     for r in range(lo, hi):
         j = sel[r]
+        ca[r] = a[j]
+        cb[r] = b[j]
+        key[r] = keys[j]
         for c in range(3):
             pa[r, c] = rows_f[j, F_PA + c]
             pb[r, c] = rows_f[j, F_PB + c]
@@ -236,12 +369,12 @@ def _active_range(rows_f: np.ndarray, rows_i: np.ndarray, sel: np.ndarray, pa: n
 
 
 @njit(cache=True, parallel=True)
-def _active_threads(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a,
-                    patch_b) -> None:
+def _active_threads(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, params, depth,
+                    deg, patch_a, patch_b) -> None:
     n = sel.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
-        _active_range(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a, patch_b,
-                      t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
+    for t in prange(n_chunks(n)):
+        _active_range(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, params, depth,
+                      deg, patch_a, patch_b, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 
 
 @njit(cache=True)
@@ -251,15 +384,17 @@ def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.n
     normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a, patch_b
     (gathered on threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts)."""
     K = sel.shape[0]
+    ca, cb, key = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
     pa, pb, nrm, params = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 4))
     depth = np.empty(K)
     deg, patch_a, patch_b = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
     if K >= THREADED_ROWS:
-        _active_threads(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a, patch_b)
+        _active_threads(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, params,
+                        depth, deg, patch_a, patch_b)
     else:
-        _active_range(rows_f, rows_i, sel, pa, pb, nrm, params, depth, deg, patch_a, patch_b,
-                      0, K)
-    return a[sel], b[sel], pa, pb, nrm, depth, keys[sel], deg, params, patch_a, patch_b
+        _active_range(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, params, depth,
+                      deg, patch_a, patch_b, 0, K)
+    return ca, cb, pa, pb, nrm, depth, key, deg, params, patch_a, patch_b
 
 
 @njit(cache=True)

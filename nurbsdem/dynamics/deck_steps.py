@@ -64,7 +64,7 @@ from numba import njit
 from ..contact.analytic import closed_form_into
 from ..contact.listed import scene_list, solve_due_into
 from ..contact.verlet import (active_arrays, active_rows, advance_odometers, carry_rows,
-                              list_is_stale, near_arrays, near_pairs, renew_certificates,
+                              due_rows, list_is_stale, near_arrays, near_pairs, renew_certificates,
                               repose, reposed_bodies)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
@@ -163,14 +163,7 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
         counters[BUILDS] += 1
     else:       # updated in place: the loop owns these arrays (copied at its start)
         rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
-    reach = odo[a] + odo[b]
-    due = np.empty(a.shape[0], np.int64)
-    n_due = np.int64(0)         # not a literal: one specialisation of _evaluate
-    for j in range(a.shape[0]):
-        if not (sc.certificates and budget[j] > reach[j]):
-            due[n_due] = j
-            n_due += 1
-    due = due[:n_due]
+    reach, due = due_rows(a, b, odo, budget, sc.certificates)
     c1 = cycles()
     failed = False
     if sc.all_spheres:      # closed forms only (what solve_due_into does for them)
@@ -550,13 +543,12 @@ class DeckSteps:
     @staticmethod
     def for_system(system) -> "DeckSteps | None":
         """The compiled stepper when the provider is a scene on one rank that has been called
-        once, under linear contact laws or with exact spheres only (the Hertz radii of NURBS
-        contacts are taken in Python); else None."""
+        once (any contact law: the Hertz radii of NURBS contacts come from the curvature
+        kernel the Python path calls, :func:`_hertz_radii`); else None."""
         from ..contact.scene import SceneContacts
         scene = system.provider
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
-                or scene.prev_pose is None or scene.built_pose is None
-                or (system.uses_hertz and not scene.is_sphere.all())):
+                or scene.prev_pose is None or scene.built_pose is None):
             return None
         return DeckSteps(system, scene)
 
