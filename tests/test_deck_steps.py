@@ -127,14 +127,16 @@ def _hertz(text: str) -> str:
               "Interface 1 Model HertzMindlin Restitution 0.5 Friction 0.5")
 
 
-@pytest.mark.parametrize("name, text", [("paper_hm.inp", _hertz(PAPER)),
-                                        ("mixed_hm.inp", _hertz(MIXED))])
+@pytest.mark.parametrize("name, text", [
+    ("paper_hm.inp", _hertz(PAPER)), ("mixed_hm.inp", _hertz(MIXED)),
+    ("implicit_hm.inp", _hertz(MIXED).replace("TimeStep 1e-3", "TimeStep 1e-3 Damping Implicit"))])
 def test_compiled_hertz_mindlin_nurbs_steps_equal_the_python_path(tmp_path, monkeypatch, name,
                                                                    text):
     """Hertz–Mindlin between NURBS particles (and exact spheres with ellipsoids): the compiled
     loop takes the equivalent radii from the same curvature kernel as the Python path
     (``scene_contact_radii`` at the same poses): every sample, monitor (``hertz.csv`` too) and
-    ParaView file equal bit for bit, the same counts, and the compiled loop really ran."""
+    ParaView file equal bit for bit, the same counts, and the compiled loop really ran; also
+    with implicit dashpots (their damping from the Hertz laws' per-contact coefficients)."""
     used = []
     original = system_module.DemSystem.steps
 
