@@ -50,7 +50,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..errors import InputError
-from ..jit import ROW_CHUNK, THREADED_ROWS
+from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 
 #: column indices of the interface table
 EN, CN, ET, CT, MU = 0, 1, 2, 3, 4
@@ -314,7 +314,7 @@ def _contact_laws_threads(body_a, body_b, point_a, point_b, normal, depth, pos, 
                           f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
                           dashpot_given, dashpot, slip_out) -> None:
     n = body_a.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
                             material, table, spring, h, inv_mass, radius, point, f_total,
                             f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
@@ -433,7 +433,7 @@ def _work_range(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_tota
 def _work_threads(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total, f_damp_n,
                   f_damp_t, f_el_t, hk, out) -> None:
     n = body_a.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _work_range(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total,
                     f_damp_n, f_damp_t, f_el_t, hk, out, t * ROW_CHUNK,
                     min(n, (t + 1) * ROW_CHUNK))

@@ -53,7 +53,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ..jit import ROW_CHUNK, THREADED_ROWS
+from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 from .forces import contact_loads
 from .integrator import _relative_point_velocities
 from .rigid import omega_world
@@ -83,7 +83,7 @@ def _lever_arms_range(body_a, body_b, point, x, r_a, r_b, lo: int, hi: int) -> N
 @njit(cache=True, parallel=True)
 def _lever_arms_threads(body_a, body_b, point, x, r_a, r_b) -> None:
     n = body_a.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _lever_arms_range(body_a, body_b, point, x, r_a, r_b, t * ROW_CHUNK,
                           min(n, (t + 1) * ROW_CHUNK))
 
@@ -124,7 +124,7 @@ def _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows, lo
 @njit(cache=True, parallel=True)
 def _normal_rows_threads(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows) -> None:
     n = body_a.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows,
                            t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 
@@ -162,7 +162,7 @@ def _velocities_range(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray, 
 @njit(cache=True, parallel=True)
 def _velocities_threads(body_a, body_b, rows, y, out) -> None:
     n = body_a.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _velocities_range(body_a, body_b, rows, y, out, t * ROW_CHUNK,
                           min(n, (t + 1) * ROW_CHUNK))
 

@@ -43,7 +43,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry.rotation import quat_mul
-from ..jit import ROW_CHUNK, THREADED_ROWS
+from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 from .forces import kick_work_terms
 from .rigid import omega_world
 
@@ -61,7 +61,7 @@ def _half_kick_range(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np
 @njit(cache=True, parallel=True)
 def _half_kick_threads(v, L, force, torque, inv_mass, hk) -> None:
     n = v.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _half_kick_range(v, L, force, torque, inv_mass, hk, t * ROW_CHUNK,
                          min(n, (t + 1) * ROW_CHUNK))
 
@@ -158,7 +158,7 @@ def _drift_range(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray,
 @njit(cache=True, parallel=True)
 def _drift_threads(x, v, q, L, inv_I, h) -> None:
     n = x.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _drift_range(x, v, q, L, inv_I, h, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 
 
@@ -225,7 +225,7 @@ def _point_velocities_range(body_a: np.ndarray, body_b: np.ndarray, point: np.nd
 @njit(cache=True, parallel=True)
 def _point_velocities_threads(body_a, body_b, point, x, v, omega, wall_u, out) -> None:
     n = body_a.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _point_velocities_range(body_a, body_b, point, x, v, omega, wall_u, out,
                                 t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 

@@ -35,7 +35,7 @@ from numba import njit, prange
 
 from ..errors import InputError
 from ..geometry.rotation import matrix_to_quat, quat_matrix, quats_to_matrices
-from ..jit import ROW_CHUNK, THREADED_ROWS
+from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 
 
 def principal_frame(J0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -254,7 +254,7 @@ def _poses_range(q: np.ndarray, P: np.ndarray, x: np.ndarray, centroid_file: np.
 @njit(cache=True, parallel=True)
 def _poses_threads(q, P, x, centroid_file, R, pos) -> None:
     n = q.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _poses_range(q, P, x, centroid_file, R, pos, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 
 
@@ -292,7 +292,7 @@ def _omega_range(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, out: np.ndarra
 @njit(cache=True, parallel=True)
 def _omega_threads(q, L, inv_I, out) -> None:
     n = q.shape[0]
-    for t in prange((n + ROW_CHUNK - 1) // ROW_CHUNK):
+    for t in prange(n_chunks(n)):
         _omega_range(q, L, inv_I, out, t * ROW_CHUNK, min(n, (t + 1) * ROW_CHUNK))
 
 
