@@ -15,7 +15,11 @@ target at most 0.5), internal steps, LCPs solved, failed LCPs
 and the energy-balance error (J; the integration's error: the accuracy figure beside the
 speed); then the best and the median wall time of each variant.
 
-Usage: .venv/bin/python benchmarks/bench_paper.py [--rounds 2] [--quick]
+``--threads 1`` runs everything on one numba thread (the LCP batch is the one part of this
+112-particle deck that two threads speed up, so the measure outside/LCP depends on the count;
+the results are the same bits at any count).
+
+Usage: .venv/bin/python benchmarks/bench_paper.py [--rounds 2] [--quick] [--threads N]
 (quick: ``inputs/paper/compaction_quick.inp`` instead, a smoke test)
 """
 from __future__ import annotations
@@ -74,8 +78,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--threads", type=int, default=0,
+                    help="numba threads (default: all cores)")
     args = ap.parse_args()
     from common import machine_info, stamp
+    if args.threads:
+        import numba
+        numba.set_num_threads(args.threads)
+        print(f"numba threads: {numba.get_num_threads()}", flush=True)
     print(stamp(machine_info()), flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

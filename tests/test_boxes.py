@@ -199,20 +199,26 @@ def test_batch_matches_single():
                                            np.zeros((0, 2), np.int64))) == 0
 
 
-@pytest.mark.parametrize("n", [6, 30])
-def test_masks_mark_the_patches_of_the_overlapping_box_pairs(n):
+def _paper_shapes():
+    from nurbsdem.geometry.particles import paper_particle_shape
+    return [paper_particle_shape(k) for k in "ABC"]
+
+
+@pytest.mark.parametrize("n, paper", [(6, False), (30, False), (30, True), (60, True)])
+def test_masks_mark_the_patches_of_the_overlapping_box_pairs(n, paper):
     """The neighbour list's masks (boxes skipped where both patches are marked already,
     shares on the threads for more than MASK_CHUNK pairs) mark exactly the patches of the
-    rows of candidate_patch_pairs_batch, which tests every pair of boxes."""
+    rows of candidate_patch_pairs_batch, which tests every pair of boxes; also the paper's
+    particles (six patches each), packed densely."""
     rng = np.random.default_rng(n)
-    shapes = [sphere(0.02), ellipsoid(0.03, 0.02, 0.012)]
+    shapes = _paper_shapes() if paper else [sphere(0.02), ellipsoid(0.03, 0.02, 0.012)]
     boxes, off = pack_boxes(shapes)
     P = int(np.diff(off).max())
-    body_shape = rng.integers(0, 2, n)
-    pos = rng.uniform(0, 0.05 * n ** (1 / 3), (n, 3))
+    body_shape = rng.integers(0, len(shapes), n)
+    pos = rng.uniform(0, (0.03 if paper else 0.05) * n ** (1 / 3), (n, 3))
     rot = np.array([_rand_rot(rng) for _ in range(n)])
     pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)], np.int64)
-    assert (len(pairs) > 2 * MASK_CHUNK) == (n == 30)
+    assert (len(pairs) > 2 * MASK_CHUNK) == (n >= 30)
     for margin in (0.0, 1e-3, 1e-2):
         keep, mask_a, mask_b = candidate_patch_masks_batch_jit(boxes, off, body_shape, pos, rot,
                                                                pairs, margin, P)
