@@ -37,6 +37,27 @@ def test_random_polydisperse(seed):
     assert len(got) > 0
 
 
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("fraction", [0.0, 0.02, 0.3, 1.0])
+def test_the_pairs_of_some_bodies_are_those_of_all_that_hold_one(seed, fraction):
+    """sphere_pairs_of (a rebuild's search from the renewed bodies only) gives exactly the
+    pairs of sphere_pairs that hold a fresh body, in the same order: monodisperse and over
+    2.5 decades of radii (several size levels, each queried from either member), with a
+    margin; the brute force agrees with sphere_pairs."""
+    from nurbsdem.contact.broadphase import sphere_pairs_of
+    rng = np.random.default_rng(200 + seed)
+    n = 600
+    c = rng.uniform(-2, 2, (n, 3))
+    found = 0
+    for r in (np.full(n, 0.15), 10 ** rng.uniform(-3, -0.5, n)):
+        every = _check(c, r, 0.02)
+        fresh = rng.random(n) < fraction
+        got = sphere_pairs_of(c, r, 0.02, fresh)
+        np.testing.assert_array_equal(got, every[fresh[every[:, 0]] | fresh[every[:, 1]]])
+        found += len(got)
+    assert (found > 0) == (fraction > 0.0)
+
+
 def test_clustered_and_spread():
     rng = np.random.default_rng(7)
     clusters = rng.uniform(-1e6, 1e6, (6, 3))  # very spread-out domain: hashed cells

@@ -133,26 +133,31 @@ def test_the_list_goes_stale_on_displacement_not_on_path():
     assert list_is_stale(*built, x, R, wall, radius, 0.0)  # no skin: built at every call
 
 
-def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build():
+@pytest.mark.parametrize("side", [3, 6])
+def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
     """Each body keeps its own built pose: a rebuild renews the poses of the bodies (and
     walls) that moved more than REPOSE_FRACTION of half the skin and tests only their pairs'
-    patch boxes; the list equals a full build at the bodies' built poses, to the bit, and
-    still holds every pair whose patch boxes overlap at the present poses (with at least
-    those candidate patches)."""
+    patch boxes (and, past ALL_PAIRS_MAX bodies, searches only their bounding spheres); the
+    list equals a full build at the bodies' built poses, to the bit, and still holds every
+    pair whose patch boxes overlap at the present poses (with at least those candidate
+    patches)."""
     from scipy.spatial.transform import Rotation
 
     from nurbsdem.contact.boxes import candidate_patch_masks_batch_jit
-    from nurbsdem.contact.listed import scene_list
+    from nurbsdem.contact.broadphase import ALL_PAIRS_MAX
+    from nurbsdem.contact.listed import PARTIAL_SEARCH_MAX, scene_list
     from nurbsdem.contact.verlet import REPOSE_FRACTION
 
     rng = np.random.default_rng(7)
     shapes = [ellipsoid(0.012, 0.009, 0.007), sphere(0.008)]
-    g = np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    g = np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3)
     n = g.shape[0]
+    assert (n > ALL_PAIRS_MAX) == (side == 6)     # the bounding spheres of the renewed only
     body_shape = (np.arange(n) % 4 == 3).astype(np.int64)   # a sphere every fourth body
     x = 0.03 + 0.021 * g + rng.uniform(-1e-3, 1e-3, (n, 3))
     R = Rotation.random(n, random_state=3).as_matrix()
-    walls = list(box_walls([0, 0, 0], [0.12, 0.12, 0.12]).values())
+    top = 0.12 if side == 3 else 0.06 + 0.021 * side
+    walls = list(box_walls([0, 0, 0], [top, top, top]).values())
     W = len(walls)
     skin = 2e-3
     scene = SceneContacts(shapes, body_shape, walls, skin=skin)
@@ -176,6 +181,7 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build():
         bx, bR, bw, bp = scene.built_pose
         renewed = np.any(bx != old[0], axis=1)
         assert 3 <= renewed.sum() < n // 2                 # the moved bodies, not all
+        assert side == 3 or renewed.sum() <= PARTIAL_SEARCH_MAX * n
         np.testing.assert_array_equal(bx[~renewed], old[0][~renewed])
         np.testing.assert_array_equal(bx[renewed], x[renewed])
         assert np.all(np.linalg.norm(x - bx, axis=1) <= REPOSE_FRACTION * skin / 2 + 0.03 * skin)
@@ -185,9 +191,13 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build():
         ps = scene.pairs
         for got, want in zip((ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b), full):
             np.testing.assert_array_equal(got, want)
-        # a valid list at the present poses: every pair of overlapping patch boxes is in it
+        # a valid list at the present poses: every pair of overlapping bounding spheres
+        # (level 1: a patch box can reach beyond its body's bounding sphere) and patch boxes
+        # (level 2) is in it
+        r = scene.radius
         nurbs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
-                          if body_shape[i] == 0 or body_shape[j] == 0])
+                          if (body_shape[i] == 0 or body_shape[j] == 0)
+                          and np.linalg.norm(x[i] - x[j]) < r[i] + r[j]])
         t = scene.tables()
         keep, ma, mb = candidate_patch_masks_batch_jit(t.boxes, t.box_offsets, t.body_shape,
                                                        kin.position, R, nurbs, 0.0, scene.P)

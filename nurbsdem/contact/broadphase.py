@@ -18,7 +18,9 @@ levels (radius ratio ``LEVEL_RATIO`` = 4 between levels, at most ``MAX_LEVELS``)
 has its own grid with cell size ``2 R_L + margin`` (R_L the level's largest radius). A cell
 meets its own level through the half shell (itself + 13 neighbours, each pair once) and the
 coarser levels through the cells its spheres' bounding box reaches (each cross-level pair is
-found once, from its smaller member). The cost is ~linear in N.
+found once, from its smaller member). The cost is ~linear in N. A rebuild that renews few
+bodies asks :func:`sphere_pairs_of` for their pairs only: the same grid, queried from those
+bodies (each pair by the same comparison, so the same verdicts).
 
 Flat walls: :func:`sphere_wall_pairs` tests each bounding sphere against each wall
 rectangle (exact sphere-vs-rectangle distance).
@@ -28,6 +30,8 @@ functions (``*_jit``) that can be called from other compiled code; the public wr
 check and convert their input.
 """
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -141,15 +145,19 @@ def _sphere_pairs_all(centers, radii, margin):
     return out
 
 
-@njit(cache=True)
-def sphere_pairs_jit(centers, radii, margin):
-    """Compiled core of :func:`sphere_pairs` (no input checks). Returns int64 (K, 2)."""
-    n = centers.shape[0]
-    if n < 2:
-        return np.empty((0, 2), dtype=np.int64)
-    if n <= ALL_PAIRS_MAX:
-        return _sphere_pairs_all(centers, radii, margin)
+#: the linked cells of :func:`sphere_pairs_jit` over n bodies: nlev size levels (the largest
+#: radius lev_rmax and whether used, per level); cells of size 1/inv_h (per level) from the
+#: lower corner lo, in the hash table tab (mask) keyed (level, ix, iy, iz); ckey (ncell, 4)
+#: each cell's key; the bodies sorted by cell (start: each cell's first slot, sidx: the body
+#: in each slot), with their centres sc and radii + margin/2 sr by slot
+SphereGrid = namedtuple("SphereGrid", "nlev lev_rmax lev_used lo inv_h tab mask ckey ncell "
+                        "start sidx sc sr")
 
+
+@njit(cache=True)
+def _sphere_grid(centers, radii, margin) -> SphereGrid:
+    """The :class:`SphereGrid` of n ≥ 1 bounding spheres, for pairs closer than margin (m)."""
+    n = centers.shape[0]
     # ---- size levels: level k holds radii in [rb 2^k, rb 2^(k+1)), rb = rmax 2^-(L-1)
     rmax = 0.0
     rmin = np.inf
@@ -273,6 +281,34 @@ def sphere_pairs_jit(centers, radii, margin):
     for i in range(n):
         lev_used[level[i]] = True
 
+    return SphereGrid(nlev, lev_rmax, lev_used, lo, inv_h, tab, mask, ckey, ncell, start, sidx,
+                      sc, sr)
+
+
+@njit(cache=True, inline="always")
+def _slots_near(sc, sr, a, b) -> bool:
+    """The comparison of :func:`_near_each_other` for the bodies in grid slots a, b (sr holds
+    radius + margin/2: the same floating-point operations)."""
+    ex = sc[b, 0] - sc[a, 0]
+    ey = sc[b, 1] - sc[a, 1]
+    ez = sc[b, 2] - sc[a, 2]
+    t = sr[a] + sr[b]
+    return t > 0.0 and ex * ex + ey * ey + ez * ez < t * t
+
+
+@njit(cache=True)
+def sphere_pairs_jit(centers, radii, margin):
+    """Compiled core of :func:`sphere_pairs` (no input checks). Returns int64 (K, 2)."""
+    n = centers.shape[0]
+    if n < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    if n <= ALL_PAIRS_MAX:
+        return _sphere_pairs_all(centers, radii, margin)
+    g = _sphere_grid(centers, radii, margin)
+    nlev, lev_rmax, lev_used, lo, inv_h = g.nlev, g.lev_rmax, g.lev_used, g.lo, g.inv_h
+    tab, mask, ckey, ncell, start, sidx, sc, sr = (g.tab, g.mask, g.ckey, g.ncell, g.start,
+                                                   g.sidx, g.sc, g.sr)
+
     # ---- per cell: own level by the half shell (13 neighbours + itself), coarser levels by
     #      the cells that the cell's inflated bounding box reaches
     buf = np.empty((max(16, 4 * n), 2), dtype=np.int64)
@@ -299,11 +335,7 @@ def sphere_pairs_jit(centers, radii, margin):
                     for a in range(p0, p1):
                         b0 = a + 1 if same else start[nc]
                         for b in range(b0, start[nc + 1]):
-                            ex = sc[b, 0] - sc[a, 0]
-                            ey = sc[b, 1] - sc[a, 1]
-                            ez = sc[b, 2] - sc[a, 2]
-                            t = sr[a] + sr[b]
-                            if t > 0.0 and ex * ex + ey * ey + ez * ez < t * t:
+                            if _slots_near(sc, sr, a, b):
                                 i = sidx[a]
                                 j = sidx[b]
                                 if i < j:
@@ -345,11 +377,7 @@ def sphere_pairs_jit(centers, radii, margin):
                             continue
                         for a in range(p0, p1):
                             for b in range(start[nc], start[nc + 1]):
-                                ex = sc[b, 0] - sc[a, 0]
-                                ey = sc[b, 1] - sc[a, 1]
-                                ez = sc[b, 2] - sc[a, 2]
-                                t = sr[a] + sr[b]
-                                if t > 0.0 and ex * ex + ey * ey + ez * ez < t * t:
+                                if _slots_near(sc, sr, a, b):
                                     i = sidx[a]
                                     j = sidx[b]
                                     if i < j:
@@ -357,6 +385,58 @@ def sphere_pairs_jit(centers, radii, margin):
                                     else:
                                         buf = _push(buf, npair, j, i)
                                     npair += 1
+    return _sort_pairs(buf, npair, n)
+
+
+@njit(cache=True)
+def _pairs_of_slot(g, a, margin, fresh, buf, npair):
+    """The pairs (i, j), i < j, of the body in grid slot a with every other body, except
+    those with a fresh body of lower index (found from that one), appended to buf; returns
+    (buf, npair).  Each level's cells that the body's sphere, inflated by the level's largest
+    reach, touches (about 27 of its own level)."""
+    i = g.sidx[a]
+    for k in range(g.nlev):
+        if not g.lev_used[k]:
+            continue
+        # the farthest a partner's centre can be (slack: the cells only need to cover it)
+        w = (g.sr[a] + g.lev_rmax[k] + 0.5 * margin) * (1.0 + 1e-12)
+        lo, inv_h = g.lo, g.inv_h[k]
+        x0 = np.int64(np.floor((g.sc[a, 0] - w - lo[0]) * inv_h))
+        x1 = np.int64(np.floor((g.sc[a, 0] + w - lo[0]) * inv_h))
+        y0 = np.int64(np.floor((g.sc[a, 1] - w - lo[1]) * inv_h))
+        y1 = np.int64(np.floor((g.sc[a, 1] + w - lo[1]) * inv_h))
+        z0 = np.int64(np.floor((g.sc[a, 2] - w - lo[2]) * inv_h))
+        z1 = np.int64(np.floor((g.sc[a, 2] + w - lo[2]) * inv_h))
+        for iz in range(z0, z1 + 1):
+            for iy in range(y0, y1 + 1):
+                for ix in range(x0, x1 + 1):
+                    nc = _lookup(g.tab, g.mask, k, ix, iy, iz)
+                    if nc < 0:
+                        continue
+                    for b in range(g.start[nc], g.start[nc + 1]):
+                        j = g.sidx[b]
+                        if j == i or (fresh[j] and j < i) or not _slots_near(g.sc, g.sr, a, b):
+                            continue
+                        buf = _push(buf, npair, min(i, j), max(i, j))
+                        npair += 1
+    return buf, npair
+
+
+@njit(cache=True)
+def sphere_pairs_of(centers, radii, margin, fresh):
+    """The pairs of :func:`sphere_pairs_jit` that hold a ``fresh`` (n,) bool body, sorted
+    lexicographically: the grid over all bodies, queried from the fresh ones only (each pair
+    tested by the same comparison, so it is in both results or in neither).  Cost ~ n for the
+    grid plus the fresh bodies' neighbours."""
+    n = centers.shape[0]
+    if n < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    g = _sphere_grid(centers, radii, margin)
+    buf = np.empty((16, 2), dtype=np.int64)
+    npair = np.int64(0)
+    for a in range(n):
+        if fresh[g.sidx[a]]:
+            buf, npair = _pairs_of_slot(g, a, margin, fresh, buf, npair)
     return _sort_pairs(buf, npair, n)
 
 

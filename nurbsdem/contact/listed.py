@@ -38,7 +38,8 @@ from numba import njit
 
 from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
-from .broadphase import sphere_pairs_jit, sphere_wall_pairs_jit
+from .broadphase import (ALL_PAIRS_MAX, sphere_pairs_jit, sphere_pairs_of,
+                         sphere_wall_pairs_jit)
 from .detect import solve_rows
 from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
@@ -73,6 +74,66 @@ def scene_tables(scene) -> SceneTables:
 
 
 # --------------------------------------------------------------------------- the list
+#: a rebuild searches the bounding spheres of the renewed bodies only while they are at most
+#: this fraction of the bodies (beyond it the grid's own half-shell pass over all is faster)
+PARTIAL_SEARCH_MAX = 0.3
+
+
+@njit(cache=True)
+def _kept_body_pairs(old_keys, nb, n, fresh):
+    """The body pairs (rows (a, b), sorted) of the old list whose two bodies are not
+    ``fresh``."""
+    count = 0
+    for key in old_keys:
+        a, b = key // nb, key % nb
+        if b < n and not fresh[a] and not fresh[b]:
+            count += 1
+    out = np.empty((count, 2), np.int64)
+    k = 0
+    for key in old_keys:
+        a, b = key // nb, key % nb
+        if b < n and not fresh[a] and not fresh[b]:
+            out[k, 0], out[k, 1] = a, b
+            k += 1
+    return out
+
+
+@njit(cache=True)
+def _merge_pairs(p, q):
+    """Two disjoint sorted lists of pairs (rows (a, b)) as one sorted list."""
+    out = np.empty((p.shape[0] + q.shape[0], 2), np.int64)
+    i = j = 0
+    for k in range(out.shape[0]):
+        take_p = j == q.shape[0] or (i < p.shape[0] and (p[i, 0] < q[j, 0] or (
+            p[i, 0] == q[j, 0] and p[i, 1] < q[j, 1])))
+        if take_p:
+            out[k, 0], out[k, 1] = p[i, 0], p[i, 1]
+            i += 1
+        else:
+            out[k, 0], out[k, 1] = q[j, 0], q[j, 1]
+            j += 1
+    return out
+
+
+@njit(cache=True)
+def _body_pairs(st, x, m, old_keys, fresh):
+    """The body pairs whose bounding spheres at the built centroids x (N,3) are within m of
+    each other (:func:`~nurbsdem.contact.broadphase.sphere_pairs_jit`, sorted) — or, where a
+    rebuild renews few bodies (``fresh``, at most :data:`PARTIAL_SEARCH_MAX` of them), those
+    that :func:`scene_list` can still list: the pairs with a renewed body, searched anew, and
+    the old list's pairs of two kept bodies, whose verdict stands (their built poses and m
+    are those of the old list's build; a sphere pair of two kept bodies missing from the old
+    list was left out there, by its boxes, and would be again)."""
+    N = st.n
+    n_fresh = 0
+    for i in range(N):
+        n_fresh += fresh[i]
+    if N <= ALL_PAIRS_MAX or n_fresh > PARTIAL_SEARCH_MAX * N:
+        return sphere_pairs_jit(x, st.body_radius, m) if N > 1 else np.zeros((0, 2), np.int64)
+    return _merge_pairs(sphere_pairs_of(x, st.body_radius, m, fresh[:N]),
+                        _kept_body_pairs(old_keys, st.nb, N, fresh))
+
+
 @njit(cache=True)
 def _directed(st, pairs, pos, R, m, old_keys, old_mask_a, old_mask_b, fresh):
     """The NURBS body pairs (sorted, as :func:`~nurbsdem.contact.broadphase.sphere_pairs_jit`
@@ -156,10 +217,11 @@ def scene_list(st, x, pos, R, wall_d, owned, m, old_keys, old_mask_a, old_mask_b
     bool, those whose built pose changed (:func:`~nurbsdem.contact.verlet.reposed_bodies`):
     any other pair has the poses and m of the old list's build (old_keys sorted, old_mask_a,
     old_mask_b), so it is listed with the old masks if the old list held it and left out if
-    not, the same bits as testing it again.  A full build: ``fresh`` all True.  (Several MPI
+    not, the same bits as testing it again; the bounding spheres (level 1) likewise, where
+    few bodies are fresh (:func:`_body_pairs`).  A full build: ``fresh`` all True.  (Several MPI
     ranks build in full: a rank's old list lacks the pairs of particles it did not own.)"""
     N, P = st.n, st.n_patches
-    pairs = sphere_pairs_jit(x, st.body_radius, m) if N > 1 else np.zeros((0, 2), np.int64)
+    pairs = _body_pairs(st, x, m, old_keys, fresh)
     mine = np.zeros(pairs.shape[0], np.bool_)
     both = np.zeros(pairs.shape[0], np.bool_)
     for r in range(pairs.shape[0]):
