@@ -4,7 +4,11 @@
    random polydisperse spheres at ~30 % volume fraction, N = 1e2 ... 1e5: time per call,
    pairs found, mismatches against scipy's cKDTree (all N) and against brute force
    (N <= 1e4), and time per particle to show the ~linear scaling.
-2. Level 2: cost of one oriented-box separating-axis test, and of the candidate patch pairs
+2. A rebuild that renews few bodies: :func:`~nurbsdem.contact.broadphase.sphere_pairs_of`
+   (the pairs with a renewed body only) at 1 ... 30 % of the bodies renewed, against the
+   full search: time per call and mismatches against the full search's pairs that hold a
+   renewed body (must be 0).
+3. Level 2: cost of one oriented-box separating-axis test, and of the candidate patch pairs
    of one body pair (6 x 6 patch boxes of exact spheres) through the batch kernel.
 
 Run: ``.venv/bin/python benchmarks/bench_broadphase.py [--quick]``
@@ -20,7 +24,7 @@ from scipy.spatial import cKDTree
 
 from nurbsdem.contact.boxes import (_relative, _sat, candidate_patch_pairs_batch,
                                     pack_boxes)
-from nurbsdem.contact.broadphase import sphere_pairs, sphere_pairs_brute
+from nurbsdem.contact.broadphase import sphere_pairs, sphere_pairs_brute, sphere_pairs_of
 
 
 def make_spheres(n: int, phi: float = 0.3, ratio: float = 3.0, seed: int = 0):
@@ -100,6 +104,25 @@ def bench_level1(sizes, ratio: float, margin_rel: float = 0.1) -> None:
               f"{ek:9d} {tbs} {eb}")
 
 
+def bench_renewed(n: int, ratio: float = 3.0, margin_rel: float = 0.1) -> None:
+    """sphere_pairs_of at a few fractions of renewed bodies against the full search."""
+    c, r = make_spheres(n, ratio=ratio, seed=n)
+    m = margin_rel * r.min()
+    every = sphere_pairs(c, r, m)
+    t_all = timeit(lambda: sphere_pairs(c, r, m), 3)
+    rng = np.random.default_rng(3)
+    print(f"\nA rebuild renewing few of N = {n} bodies: sphere_pairs_of against the full "
+          f"search ({t_all * 1e3:.2f} ms, {len(every)} pairs)")
+    print(f"{'renewed':>8} {'pairs':>8} {'t/call ms':>10} {'x full':>7} {'mismatches':>11}")
+    for frac in (0.01, 0.05, 0.1, 0.3):
+        fresh = rng.random(n) < frac
+        want = every[fresh[every[:, 0]] | fresh[every[:, 1]]]
+        t = timeit(lambda: sphere_pairs_of(c, r, m, fresh), 3)
+        got = sphere_pairs_of(c, r, m, fresh)
+        print(f"{frac:8.0%} {len(got):8d} {t * 1e3:10.2f} {t / t_all:7.2f} "
+              f"{mismatches(got, want):11d}")
+
+
 @njit(cache=True)
 def _sat_loop(axes_a, axes_b, t, ha, hb):
     """Full OBB test (relative rotation + 15 axes) for each of M box pairs."""
@@ -156,6 +179,7 @@ def main() -> None:
     sizes = [100, 1_000, 10_000] if a.quick else [100, 1_000, 10_000, 100_000]
     bench_level1(sizes, ratio=3.0)
     bench_level1(sizes[-2:], ratio=30.0)
+    bench_renewed(sizes[-1])
     bench_level2(a.quick)
 
 
