@@ -139,8 +139,8 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
     walls) that moved more than REPOSE_FRACTION of half the skin and tests only their pairs'
     patch boxes (and, past ALL_PAIRS_MAX bodies, searches only their bounding spheres); the
     list equals a full build at the bodies' built poses, to the bit, and still holds every
-    pair whose patch boxes overlap at the present poses (with at least those candidate
-    patches)."""
+    pair whose bounding spheres and patch boxes overlap at the present poses (with at least
+    those candidate patches)."""
     from scipy.spatial.transform import Rotation
 
     from nurbsdem.contact.boxes import candidate_patch_masks_batch_jit
