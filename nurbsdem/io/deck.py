@@ -18,50 +18,9 @@ Every mistake raises :class:`~nurbsdem.errors.InputError` whose ``str()`` is one
 and, by default, also places the particles (``model.bodies``) so that placement problems
 are reported at check time.
 
-Entries (square brackets: optional, defaults in the model's docstrings)::
-
-    Environment
-      Gravity gx gy gz                                   # m/s^2, default 0 0 0
-    Materials
-      Material ID Density rho [YoungModulus E] [PoissonRatio nu]   # kg/m^3, Pa, -
-    Shapes
-      Shape ID File path.yaml | Sphere Radius r | Ellipsoid SemiAxes a b c
-               [Volume V] [Inertia Jxx Jyy Jzz Jxy Jxz Jyz]   # m^3, kg m^2 (mass inertia)
-               [ConvexityTolerance t]    # File: accepted non-convexity / size, default 1e-4
-    Particles
-      Random ID Shapes s1 s2.. Counts n1 n2.. Material m Region x0 y0 z0 x1 y1 z1
-                [Seed k] [MaxAttempts n]
-      Particle ID Shape s Material m Position x y z [Rotation rx ry rz]
-                [Velocity vx vy vz] [AngularVelocity wx wy wz]
-    Walls
-      Box ID Min x y z Max x y z [Top yes|no] [Material m]
-      Wall ID [Name n] Point x y z Normal nx ny nz Size lu lv [Axis ax ay az] [Material m]
-    Contact
-      Interface ID NormalPenalty en [TangentialPenalty et] [NormalDamping cn]
-                [TangentialDamping ct] [Friction mu]
-                [Between particle-particle|particle-wall] [Materials m1 m2 | Materials m]
-      Interface ID Model HertzMindlin Restitution e [Friction mu] [Between ..] [Materials ..]
-                # Hertz-Mindlin with the exact curvature; E, nu from the Materials (walls:
-                # the Material on the Box/Wall line, default rigid). Model LinearPenalty: above
-    Steps
-      Step ID Dynamic Duration T TimeStep dt [Damping Explicit|Implicit] [Accuracy eta]
-                [Safety f]
-      Step ID Replicate Layers L Height H
-      Step ID MoveWall name ToContact [Gap g] [Direction dx dy dz]
-      Step ID MoveWall name Displacement dx dy dz Duration T TimeStep dt [Damping ..]
-                # Damping Implicit: normal dashpots at the velocity after each evaluation's
-                # two half kicks, so that strong damping does not shorten the stable step
-                # (default Explicit). Accuracy eta: a deck step whose energy-balance error
-                # grows by more than eta x the energy scale is repeated with twice the
-                # sub-steps (more sub-steps only where impacts need them; default off).
-                # Safety f: the sub-step is f x the contact network's stability limit
-                # (0.01 to 0.95, default 0.5)
-    Output
-      Directory path                                     # default: results
-      VTK [Every t] [Resolution n]                       # default 0.01 s, 8
-      Monitors [Every t]                                 # default 1e-3 s
-      Results [Every t]                                  # results.h5, default = VTK Every
-      Checkpoint [Every t]                               # default 0.1 s
+Entries: every block, entry and key the parser accepts is :data:`SCHEMA`; their units,
+defaults and meaning are in ``docs/deck-reference.md``, generated from :data:`SCHEMA` by
+:mod:`nurbsdem.io.deck_reference` (a test fails when a key is undocumented).
 """
 from __future__ import annotations
 

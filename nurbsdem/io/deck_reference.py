@@ -1,0 +1,344 @@
+"""The deck reference, generated from the parser's schema.
+
+:data:`nurbsdem.io.deck.SCHEMA` says which blocks, entries and keys the parser accepts and how
+many values of which kind each key takes; this module adds what a user needs besides — units,
+default and meaning — in :data:`ENTRIES` (one line per entry) and :data:`KEYS` (one
+:class:`KeyDoc` per key), and renders both into ``docs/deck-reference.md``::
+
+    python -m nurbsdem.io.deck_reference            # writes docs/deck-reference.md
+    python -m nurbsdem.io.deck_reference --check    # exit 1 if the file differs
+
+Because the tables are keyed by the schema, :func:`undocumented` and :func:`unknown` list
+what drifted apart (``tests/test_deck_reference.py`` fails on either, and on a
+``docs/deck-reference.md`` that is not the rendered text).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from .deck import SCHEMA, Arg, EntrySpec
+
+#: The key under which a setting's own values (``Gravity gx gy gz``) are documented.
+HEAD = "(values)"
+
+
+@dataclass(frozen=True)
+class KeyDoc:
+    """units: SI unit ('-' for a pure number, '' for names and flags); default: the value
+    taken when the key is absent ('required', or what happens); meaning: one or two
+    sentences."""
+
+    units: str
+    default: str
+    meaning: str
+
+
+#: What each entry is, by (block, entry).
+ENTRIES: dict[tuple[str, str], str] = {
+    ("Environment", "Gravity"): "The gravitational acceleration, a vector in the world frame.",
+    ("Materials", "Material"): "A material; particles, walls and interfaces name it by its id.",
+    ("Shapes", "Shape"): (
+        "A particle shape: exactly one of `File`, `Sphere`, `Ellipsoid`. Mass and inertia "
+        "follow from the exact surface and the particle's material density unless "
+        "`Volume` / `Inertia` override them (like the paper's Table 1)."),
+    ("Particles", "Random"): (
+        "A group of particles placed at random in a region with disjoint bounding spheres; "
+        "its particles take the ids ID, ID+1, ... in the order of `Shapes`."),
+    ("Particles", "Particle"): "One particle at a given pose and velocity.",
+    ("Walls", "Box"): (
+        "Five flat walls (six with `Top yes`) bounding an axis-aligned box, facing inwards, "
+        "named bottom, x_min, x_max, y_min, y_max (and top)."),
+    ("Walls", "Wall"): (
+        "A flat one-sided rectangular wall; the particles must lie on the side its "
+        "`Normal` points to."),
+    ("Contact", "Interface"): (
+        "A contact law. The last interface that applies to a pair (by `Between` and "
+        "`Materials`) is the one used; a pair no interface covers does not interact."),
+    ("Steps", "Step"): (
+        "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
+        "with `ToContact` (instantaneous) or `Displacement` (timed). A timed step is split "
+        "into internal sub-steps below the contact network's stability limit."),
+    ("Output", "Directory"): "The results folder, relative to the deck.",
+    ("Output", "VTK"): "ParaView series of particles, walls and contact points.",
+    ("Output", "Monitors"): "CSV monitors (`monitors/*.csv`): energies, contacts, wall loads.",
+    ("Output", "Results"): "Samples of every body's state in `results.h5`.",
+    ("Output", "Checkpoint"): "The checkpoint that `nurbsdem solve --restart` continues from.",
+}
+
+_DAMPING = ("`Explicit` (the dashpots act at the half-step velocity) or `Implicit` (the "
+            "normal dashpots act at the velocity at the end of each interval, backward Euler: "
+            "strong damping no longer shortens the stable step, at first-order accuracy in the "
+            "damping; one MPI rank only)")
+
+#: Units, default and meaning of each key, by (block, entry, key).
+KEYS: dict[tuple[str, str, str], KeyDoc] = {
+    ("Environment", "Gravity", HEAD): KeyDoc("m/s^2", "0 0 0", "gx gy gz."),
+
+    ("Materials", "Material", "Density"): KeyDoc("kg/m^3", "required", "Mass density."),
+    ("Materials", "Material", "YoungModulus"): KeyDoc(
+        "Pa", "none", "Young's modulus; required for a material under a `HertzMindlin` "
+        "interface or named on a wall."),
+    ("Materials", "Material", "PoissonRatio"): KeyDoc(
+        "-", "0", "Poisson's ratio, in (-1, 0.5); used by `HertzMindlin` interfaces."),
+
+    ("Shapes", "Shape", "File"): KeyDoc(
+        "", "-", "A shape file (YAML, as written by `nurbsdem shape`, `fit`, `import-giraffe`, "
+        "`import-3dm`), relative to the deck; quote a path with blanks."),
+    ("Shapes", "Shape", "Sphere"): KeyDoc(
+        "", "-", "An exact sphere of `Radius` (six rational patches)."),
+    ("Shapes", "Shape", "Ellipsoid"): KeyDoc(
+        "", "-", "An exact ellipsoid of `SemiAxes`."),
+    ("Shapes", "Shape", "Radius"): KeyDoc("m", "required by `Sphere`", "The sphere's radius."),
+    ("Shapes", "Shape", "SemiAxes"): KeyDoc(
+        "m", "required by `Ellipsoid`", "a b c along the shape's x, y, z axes."),
+    ("Shapes", "Shape", "Volume"): KeyDoc(
+        "m^3", "the shape's", "Volume used for the mass (density x volume); the inertia "
+        "scales with it unless `Inertia` is given."),
+    ("Shapes", "Shape", "Inertia"): KeyDoc(
+        "kg m^2", "density x the shape's", "Jxx Jyy Jzz Jxy Jxz Jyz: the mass inertia tensor "
+        "about the centroid in the shape's frame (its entries; positive definite)."),
+    ("Shapes", "Shape", "ConvexityTolerance"): KeyDoc(
+        "-", "1e-4", "`File` shapes: the accepted non-convexity (largest height of the surface "
+        "above its own tangent planes) relative to the particle size; 0 is strict."),
+
+    ("Particles", "Random", "Shapes"): KeyDoc("", "required", "Shape ids s1 s2 ..."),
+    ("Particles", "Random", "Counts"): KeyDoc(
+        "", "required", "n1 n2 ...: how many particles of each shape in `Shapes`."),
+    ("Particles", "Random", "Material"): KeyDoc("", "required", "Material id of the group."),
+    ("Particles", "Random", "Region"): KeyDoc(
+        "m", "required", "x0 y0 z0 x1 y1 z1: the box the bounding spheres are placed in; "
+        "their volume may fill at most 38 % of it."),
+    ("Particles", "Random", "Seed"): KeyDoc(
+        "", "0", "Seed of the random positions and orientations (the same seed gives the same "
+        "placement)."),
+    ("Particles", "Random", "MaxAttempts"): KeyDoc(
+        "", "20000", "Attempts per particle before the placement is refused."),
+
+    ("Particles", "Particle", "Shape"): KeyDoc("", "required", "Shape id."),
+    ("Particles", "Particle", "Material"): KeyDoc("", "required", "Material id."),
+    ("Particles", "Particle", "Position"): KeyDoc(
+        "m", "required", "x y z of the centroid in the world."),
+    ("Particles", "Particle", "Rotation"): KeyDoc(
+        "rad", "0 0 0", "Rotation vector of the shape's frame relative to the world."),
+    ("Particles", "Particle", "Velocity"): KeyDoc(
+        "m/s", "0 0 0", "Velocity of the centroid, world frame."),
+    ("Particles", "Particle", "AngularVelocity"): KeyDoc(
+        "rad/s", "0 0 0", "Angular velocity, world frame."),
+
+    ("Walls", "Box", "Min"): KeyDoc("m", "required", "The box's lower corner x y z."),
+    ("Walls", "Box", "Max"): KeyDoc("m", "required", "The box's upper corner x y z."),
+    ("Walls", "Box", "Top"): KeyDoc("", "no", "`yes`: also a top wall (named top)."),
+    ("Walls", "Box", "Material"): KeyDoc(
+        "", "none (rigid)", "Material id of the box's walls, for `HertzMindlin` interfaces."),
+
+    ("Walls", "Wall", "Name"): KeyDoc(
+        "", "wallID", "The name `MoveWall` steps and `monitors/wall_NAME.csv` use."),
+    ("Walls", "Wall", "Point"): KeyDoc("m", "required", "Centre of the rectangle."),
+    ("Walls", "Wall", "Normal"): KeyDoc(
+        "-", "required", "Direction towards the particles' side (its length is irrelevant)."),
+    ("Walls", "Wall", "Size"): KeyDoc(
+        "m", "required", "Lu Lv: the side lengths along `Axis` and along Normal x Axis."),
+    ("Walls", "Wall", "Axis"): KeyDoc(
+        "-", "the global axis least aligned with Normal", "In-plane direction of the first "
+        "side (projected onto the wall's plane)."),
+    ("Walls", "Wall", "Material"): KeyDoc(
+        "", "none (rigid)", "Material id of the wall, for `HertzMindlin` interfaces."),
+
+    ("Contact", "Interface", "Model"): KeyDoc(
+        "", "LinearPenalty", "`LinearPenalty` (the paper's law, Eqs. 16-17) or `HertzMindlin` "
+        "(elliptical Hertz from both surfaces' principal curvatures, Mindlin tangential "
+        "stiffness, damping from `Restitution`; E and nu from the materials)."),
+    ("Contact", "Interface", "NormalPenalty"): KeyDoc(
+        "N/m", "required by LinearPenalty", "Normal penalty stiffness (paper's epsilon_n)."),
+    ("Contact", "Interface", "TangentialPenalty"): KeyDoc(
+        "N/m", "0", "Tangential spring stiffness (paper's epsilon_t)."),
+    ("Contact", "Interface", "NormalDamping"): KeyDoc(
+        "N s/m", "0", "Normal dashpot (paper's c_n); no adhesion: the normal force is never "
+        "negative."),
+    ("Contact", "Interface", "TangentialDamping"): KeyDoc(
+        "N s/m", "0", "Tangential dashpot (paper's c_t)."),
+    ("Contact", "Interface", "Friction"): KeyDoc("-", "0", "Coulomb friction coefficient."),
+    ("Contact", "Interface", "Restitution"): KeyDoc(
+        "-", "required by HertzMindlin", "Coefficient of restitution e in (0, 1] of a normal "
+        "impact, independent of the impact speed."),
+    ("Contact", "Interface", "Between"): KeyDoc(
+        "", "all pairs", "`particle-particle` or `particle-wall`."),
+    ("Contact", "Interface", "Materials"): KeyDoc(
+        "", "any", "`m1 m2`: particle-particle pairs of these materials (either order); `m`: "
+        "particle-wall pairs whose particle has material m."),
+
+    ("Steps", "Step", "Dynamic"): KeyDoc(
+        "", "-", "Integrate the particles' motion for `Duration` with deck step `TimeStep`."),
+    ("Steps", "Step", "Replicate"): KeyDoc(
+        "", "-", "Instantaneous: the particles become layer 0 and `Layers` - 1 copies are added, "
+        "shifted up by `Height` / (`Layers` - 1) each; all velocities are set to zero."),
+    ("Steps", "Step", "MoveWall"): KeyDoc(
+        "", "-", "The name of the wall to move (with `ToContact` or `Displacement`)."),
+    ("Steps", "Step", "Duration"): KeyDoc(
+        "s", "required by timed steps", "Simulated time; a whole number of `TimeStep`s."),
+    ("Steps", "Step", "TimeStep"): KeyDoc(
+        "s", "required by timed steps", "The deck step: monitors and output are sampled on it; "
+        "the solver divides it into internal sub-steps for stability (the log says how many "
+        "and why)."),
+    ("Steps", "Step", "Layers"): KeyDoc("", "required by `Replicate`", "Number of layers, >= 1."),
+    ("Steps", "Step", "Height"): KeyDoc(
+        "m", "required by `Replicate`", "Height from layer 0 to the top layer."),
+    ("Steps", "Step", "ToContact"): KeyDoc(
+        "", "-", "Instantaneous: translate the wall until its distance to the nearest particle "
+        "is `Gap`."),
+    ("Steps", "Step", "Gap"): KeyDoc("m", "0", "`ToContact`: the distance left."),
+    ("Steps", "Step", "Direction"): KeyDoc(
+        "-", "the wall's normal", "`ToContact`: the direction of travel (towards the "
+        "particles)."),
+    ("Steps", "Step", "Displacement"): KeyDoc(
+        "m", "-", "dx dy dz: the wall translates by this vector at constant velocity over "
+        "`Duration` while the particles move."),
+    ("Steps", "Step", "Damping"): KeyDoc("", "Explicit", _DAMPING + "."),
+    ("Steps", "Step", "Accuracy"): KeyDoc(
+        "-", "off", "eta: a deck step whose energy-balance error grows by more than eta x the "
+        "energy scale is repeated with twice the sub-steps (up to 16 x)."),
+    ("Steps", "Step", "Safety"): KeyDoc(
+        "-", "0.5", "The sub-step as a fraction of the contact network's stability limit, "
+        "0.01 to 0.95."),
+
+    ("Output", "Directory", HEAD): KeyDoc("", "results", "Folder of the result files."),
+    ("Output", "VTK", "Every"): KeyDoc("s", "0.01", "Interval of the ParaView samples."),
+    ("Output", "VTK", "Resolution"): KeyDoc(
+        "", "8", "Quads per patch and direction of the particles' tessellation."),
+    ("Output", "Monitors", "Every"): KeyDoc("s", "1e-3", "Interval of the monitor rows."),
+    ("Output", "Results", "Every"): KeyDoc(
+        "s", "VTK Every", "Interval of the samples in `results.h5`."),
+    ("Output", "Checkpoint", "Every"): KeyDoc(
+        "s", "0.1", "Interval of the checkpoints (simulated time); one is also written at the "
+        "end of every step."),
+}
+
+_HEADER = """\
+# Deck reference
+
+<!-- Generated by `python -m nurbsdem.io.deck_reference` from the parser's schema
+(nurbsdem/io/deck.py) and the descriptions in nurbsdem/io/deck_reference.py: edit those, not
+this file. tests/test_deck_reference.py checks that the two agree. -->
+
+A deck is a text file of blocks. A block opens with its keyword alone on a line
+(`Environment`, `Materials`, ...; any order, a block may appear more than once); inside a
+block, one entry per line: `Keyword [ID] Key value ... Key value ...`. Numbered entries carry
+an integer id after the keyword; settings take their own values directly. `#` starts a
+comment anywhere, `//` at the start of a line or after a blank; values may be quoted
+(`File "my shapes/A.yaml"`). Keywords are case-insensitive; names and paths are kept as
+written. SI units throughout; paths are relative to the deck's folder. `nurbsdem check
+CASE.inp` validates a deck without running it; every mistake is reported as one line
+`file:line: what is wrong`.
+
+Below, each entry's first line lists every key the parser accepts, in any order after the
+keyword (and its ID); its table says which are required and what the others default to.
+"""
+
+
+def keys_of(schema: dict[str, dict[str, EntrySpec]] = SCHEMA) -> list[tuple[str, str, str]]:
+    """Every (block, entry, key) of a schema, in schema order; a setting's own values are
+    the key :data:`HEAD`."""
+    out = []
+    for block, entries in schema.items():
+        for name, spec in entries.items():
+            if spec.head is not None:
+                out.append((block, name, HEAD))
+            out.extend((block, name, key) for key in spec.keys)
+    return out
+
+
+def undocumented(schema: dict[str, dict[str, EntrySpec]] = SCHEMA,
+                 keys: dict = KEYS, entries: dict = ENTRIES) -> list[str]:
+    """Entries and keys of the schema without a description, as 'Block/Entry[/Key]'."""
+    missing = [f"{b}/{e}" for b, ents in schema.items() for e in ents if (b, e) not in entries]
+    return missing + ["/".join(k) for k in keys_of(schema) if k not in keys]
+
+
+def unknown(schema: dict[str, dict[str, EntrySpec]] = SCHEMA,
+            keys: dict = KEYS, entries: dict = ENTRIES) -> list[str]:
+    """Descriptions of entries or keys the schema does not have, as 'Block/Entry[/Key]'."""
+    have = set(keys_of(schema))
+    known = {(b, e) for b, ents in schema.items() for e in ents}
+    return ([f"{b}/{e}" for (b, e) in entries if (b, e) not in known]
+            + ["/".join(k) for k in keys if k not in have])
+
+
+def values_text(arg: Arg) -> str:
+    """What follows a key, in words: '3 numbers', 'integers', 'yes/no', '-' for a flag."""
+    if arg.kind == "flag":
+        return "-"
+    if arg.kind == "bool":
+        return "yes/no"
+    word = {"float": "number", "int": "integer", "str": "word"}[arg.kind]
+    if arg.count is None:
+        return f"{word}s (one or more)"
+    return word if arg.count == 1 else f"{arg.count} {word}s"
+
+
+def _synopsis(name: str, spec: EntrySpec) -> str:
+    parts = [name] + (["ID"] if spec.numbered else [])
+    if spec.head is not None:
+        parts.append(f"<{values_text(spec.head)}>")
+    parts += [k if a.kind == "flag" else f"{k} <{values_text(a)}>" for k, a in spec.keys.items()]
+    return " ".join(parts)
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def render(schema: dict[str, dict[str, EntrySpec]] = SCHEMA, keys: dict = KEYS,
+           entries: dict = ENTRIES) -> str:
+    """The markdown of ``docs/deck-reference.md``: per block and entry its synopsis (the keys
+    the parser accepts, in schema order) and a table of values, units, default and meaning.
+    Raises ValueError when a description is missing (see :func:`undocumented`)."""
+    missing = undocumented(schema, keys, entries)
+    if missing:
+        raise ValueError("undocumented deck keys: " + ", ".join(missing))
+    out = [_HEADER]
+    for block, ents in schema.items():
+        out.append(f"## {block}\n")
+        for name, spec in ents.items():
+            out.append(f"### {name}\n")
+            out.append(f"`{_synopsis(name, spec)}`\n")
+            out.append(entries[(block, name)] + "\n")
+            rows = ["| key | values | units | default | meaning |", "|---|---|---|---|---|"]
+            args = ([(HEAD, spec.head)] if spec.head is not None else []) + list(spec.keys.items())
+            for key, arg in args:
+                d = keys[(block, name, key)]
+                label = "(after the keyword)" if key == HEAD else f"`{key}`"
+                rows.append(f"| {label} | {values_text(arg)} | {_cell(d.units) or '-'} | "
+                            f"{_cell(d.default)} | {_cell(d.meaning)} |")
+            out.append("\n".join(rows) + "\n")
+    return "\n".join(out)
+
+
+#: Where the rendered reference lives in the repository.
+REFERENCE_PATH = Path(__file__).resolve().parents[2] / "docs" / "deck-reference.md"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write (or with ``--check`` compare) ``docs/deck-reference.md``."""
+    ap = argparse.ArgumentParser(description="Render docs/deck-reference.md from the schema.")
+    ap.add_argument("--output", type=Path, default=REFERENCE_PATH)
+    ap.add_argument("--check", action="store_true", help="exit 1 if the file is not current")
+    a = ap.parse_args(argv)
+    text = render()
+    if a.check:
+        current = a.output.read_text(encoding="utf-8") if a.output.is_file() else ""
+        if current != text:
+            print(f"{a.output} is not current: run python -m nurbsdem.io.deck_reference",
+                  file=sys.stderr)
+            return 1
+        return 0
+    a.output.parent.mkdir(parents=True, exist_ok=True)
+    a.output.write_text(text, encoding="utf-8")
+    print(f"wrote {a.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
