@@ -22,8 +22,7 @@ run: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
-# numba's on-disk cache only notices edits to a function's own file: after editing a
-# kernel that others call (geometry/kernel.py, contact/support.py, ...) clear it.
+# Drops every compiled kernel (import nurbsdem already drops those whose sources changed).
 clean-cache:
 	find nurbsdem -name '*.nbi' -delete -o -name '*.nbc' -delete
 

@@ -45,8 +45,9 @@ if _ranks_on_this_node() > 1:
                           str(max(1, (os.cpu_count() or 1) // _ranks_on_this_node())))
 
 # numba's cache is checked per source file; a kernel inlined from another module that changed
-# would keep running its old code (a segmentation fault after an upgrade): one hash of all the
-# sources decides for the whole cache (nurbsdem.cachecheck), before any kernel loads.
+# would keep running its old code (a segmentation fault after an upgrade): each module's
+# kernels are dropped when its code or that of a package module it imports changed
+# (nurbsdem.cachecheck), before any kernel loads.
 from .cachecheck import check_caches  # noqa: E402
 
 check_caches()

@@ -1,13 +1,23 @@
-"""Stale compiled kernels: drop numba's on-disk cache when any source of the package changed.
+"""Stale compiled kernels: drop a module's kernels from numba's on-disk cache when the code
+they were compiled from changed, in that module or in a module of the package it imports.
 
 numba keys each cached kernel on its own source file only.  A kernel that calls (and
-inlines) a kernel of another module keeps its machine code after that other module
-changed — a ``git pull`` or an upgrade that edits ``contact/support.py`` but not
-``contact/detect.py`` left ``detect``'s cached batch calling the old layout of a table: wrong
-numbers or a segmentation fault at the first contact.  Here one hash of all the package's
-sources stands for the whole cache: each cache folder holds it in :data:`STAMP`, and where it
-differs from the sources the folder's ``*.nbi`` / ``*.nbc`` files are deleted before any
-kernel loads (numba compiles them again on first use, once).
+inlines) a kernel of another module, or reads its constants (numba freezes imported globals
+into the machine code), keeps its machine code after that other module changed — a
+``git pull`` or an upgrade that edits ``contact/support.py`` but not ``contact/detect.py``
+left ``detect``'s cached batch calling the old layout of a table: wrong numbers or a
+segmentation fault at the first contact.  Here each module's kernels stand on a hash of the
+module and of every package module it imports, directly or through others (imports inside
+functions included: :func:`module_hashes`).  Each cache folder holds the hashes of its
+modules in :data:`STAMP`; where a module's hash differs, its ``<module>.*.nbi`` / ``.nbc``
+files are deleted before any kernel loads (numba compiles them again on first use, once),
+and the kernels of the other modules stay.
+
+A module's hash is that of its syntax tree (``ast.dump``) without docstrings: an edit of a
+comment, a docstring or the layout changes no compiled code, so the kernels of the modules
+importing it stay (numba itself still recompiles the kernels of the edited file: its index
+checks the file's time stamp).  The bytes of all sources are hashed first
+(:func:`sources_hash`, milliseconds); the trees are parsed only when those changed.
 
 The folders are the ones numba's cache locators choose (``numba.core.caching``), without
 importing numba (``import nurbsdem`` stays light): ``$NUMBA_CACHE_DIR/<dir>_<sha1 of the
@@ -16,25 +26,125 @@ writable, else the user-wide cache (``~/.cache/numba/<dir>_<sha1>`` on Linux).
 """
 from __future__ import annotations
 
+import ast
 import hashlib
 import os
 import sys
 import tempfile
 from pathlib import Path
 
-#: the file in each cache folder that holds the hash of the sources its kernels came from
+#: the file in each cache folder that holds the hashes of the sources its kernels came from:
+#: a line ``sources <sources_hash>``, then one line ``<module> <module hash>`` per module
 STAMP = "nurbsdem-sources.sha1"
 PACKAGE = Path(__file__).resolve().parent
 
 
 def sources_hash(package: Path = PACKAGE) -> str:
-    """SHA-1 of every ``.py`` file of ``package`` (relative path and bytes, sorted).  numba's
-    own index checks its version, and the files' names carry Python's."""
+    """SHA-1 of every ``.py`` file of ``package`` (relative path and bytes, sorted): where
+    the stamps hold it, no module changed.  numba's own index checks its version, and the
+    files' names carry Python's."""
     h = hashlib.sha1()
-    for path in sorted(package.rglob("*.py")):
+    for path in _sources(package):
         h.update(str(path.relative_to(package)).encode() + b"\0")
         h.update(path.read_bytes())
     return h.hexdigest()
+
+
+def _sources(package: Path) -> list[Path]:
+    return sorted(p for p in package.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _without_docstrings(tree: ast.AST) -> ast.AST:
+    """``tree`` with the docstring of the module and of each class and function removed."""
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if (body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                    and isinstance(body[0].value.value, str)):
+                node.body = body[1:]
+    return tree
+
+
+def code_hash(source: bytes) -> str:
+    """SHA-1 of the code of one module: its syntax tree without docstrings (comments and
+    layout are not in the tree)."""
+    return _tree_hash(ast.parse(source))
+
+
+def _tree_hash(tree: ast.AST) -> str:
+    return hashlib.sha1(ast.dump(_without_docstrings(tree)).encode()).hexdigest()
+
+
+def _module_file(package: Path, parts: list[str]) -> Path | None:
+    """The file of the package module ``parts`` (relative to the package), if there is one."""
+    if not parts:
+        return package / "__init__.py" if (package / "__init__.py").is_file() else None
+    for path in (package.joinpath(*parts).with_suffix(".py"),
+                 package.joinpath(*parts, "__init__.py")):
+        if path.is_file():
+            return path
+    return None
+
+
+def imported_modules(path: Path, tree: ast.AST, package: Path) -> set[Path]:
+    """The files of the package modules that the module ``path`` imports (anywhere in it:
+    at the top, inside functions), absolute (``package.x.y``) or relative (``..x``).  For
+    ``from m import n`` that is ``n`` where it is a module, else ``m``."""
+    here = list(path.relative_to(package).parent.parts)
+    found: set[Path | None] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                names = alias.name.split(".")
+                if names[0] == package.name:
+                    found.add(_module_file(package, names[1:]))
+        elif isinstance(node, ast.ImportFrom):
+            names = node.module.split(".") if node.module else []
+            if node.level == 0 and names[:1] == [package.name]:
+                parts = names[1:]
+            elif 0 < node.level <= len(here) + 1:
+                parts = here[:len(here) + 1 - node.level] + names
+            else:
+                continue                    # another package's module
+            found.update(_from_import(package, parts, node.names))
+    found.discard(None)
+    found.discard(path)
+    return found                                          # type: ignore[return-value]
+
+
+def _from_import(package: Path, parts: list[str], names: list[ast.alias]) -> set[Path | None]:
+    """The files ``from <parts> import <names>`` reads: each name that is a module, and
+    ``parts`` itself where any name is not."""
+    found: set[Path | None] = set()
+    for alias in names:
+        sub = _module_file(package, parts + [alias.name]) if alias.name != "*" else None
+        found.add(sub if sub is not None else _module_file(package, parts))
+    return found
+
+
+def module_hashes(package: Path = PACKAGE) -> dict[Path, str]:
+    """Source file -> SHA-1 of its code (:func:`code_hash`) and of the code of every package
+    module it imports, directly or through others: what its compiled kernels were built
+    from."""
+    own: dict[Path, str] = {}
+    deps: dict[Path, set[Path]] = {}
+    for path in _sources(package):
+        tree = ast.parse(path.read_bytes())
+        deps[path] = imported_modules(path, tree, package)   # before the docstrings go
+        own[path] = _tree_hash(tree)
+    hashes = {}
+    for path in own:
+        closure, todo = {path}, [path]
+        while todo:
+            for dep in deps.get(todo.pop(), ()):
+                if dep not in closure and dep in own:
+                    closure.add(dep)
+                    todo.append(dep)
+        h = hashlib.sha1()
+        for dep in sorted(closure):
+            h.update(str(dep.relative_to(package)).encode() + b"\0" + own[dep].encode())
+        hashes[path] = h.hexdigest()
+    return hashes
 
 
 def _suitable_subpath(source_dir: Path) -> str:
@@ -73,27 +183,45 @@ def cache_folder(source_dir: Path) -> Path | None:
     return None
 
 
-def drop_stale(folder: Path, digest: str) -> int:
-    """Delete the numba cache files of ``folder`` unless its :data:`STAMP` holds ``digest``,
-    then write ``digest`` there (atomically); returns the number of files deleted."""
-    stamp = folder / STAMP
+def read_stamp(folder: Path) -> tuple[str, dict[str, str]]:
+    """The sources' hash and the module hashes (module name -> hash) that ``folder``'s
+    :data:`STAMP` holds (``""`` and none where it is missing or unreadable)."""
     try:
-        if stamp.read_text().strip() == digest:
-            return 0
+        lines = (folder / STAMP).read_text().splitlines()
     except OSError:
-        pass
+        return "", {}
+    digest, modules = "", {}
+    for line in lines:
+        key, _, value = line.partition(" ")
+        if key == "sources" and not digest:
+            digest = value.strip()
+        elif value and key != "sources":
+            modules[key] = value.strip()
+    return digest, modules
+
+
+def drop_stale(folder: Path, digest: str, modules: dict[str, str]) -> int:
+    """Delete the numba cache files (``<module>.*.nbi`` / ``.nbc``) of each module of
+    ``modules`` (module name -> hash) whose hash ``folder``'s :data:`STAMP` does not hold,
+    then write ``digest`` (:func:`sources_hash`) and ``modules`` there (atomically); returns
+    the number of files deleted."""
+    _, stamped = read_stamp(folder)
     dropped = 0
-    for pattern in ("*.nbi", "*.nbc"):
-        for path in folder.glob(pattern):
-            try:
-                path.unlink()
-                dropped += 1
-            except OSError:             # another process took it first
-                pass
+    for name in sorted(modules):
+        if stamped.get(name) == modules[name]:
+            continue
+        for pattern in (f"{name}.*.nbi", f"{name}.*.nbc"):
+            for path in folder.glob(pattern):
+                try:
+                    path.unlink()
+                    dropped += 1
+                except OSError:             # another process took it first
+                    pass
+    text = f"sources {digest}\n" + "".join(f"{name} {modules[name]}\n" for name in sorted(modules))
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=STAMP)
     with os.fdopen(fd, "w") as f:
-        f.write(digest + "\n")
-    os.replace(tmp, stamp)
+        f.write(text)
+    os.replace(tmp, folder / STAMP)
     return dropped
 
 
@@ -105,18 +233,24 @@ def compiles_first(package: Path = PACKAGE) -> bool:
 
 
 def check_caches(package: Path = PACKAGE) -> int:
-    """:func:`drop_stale` in the cache folder of every source folder of ``package``; returns
-    the files deleted.  Errors of the file system leave the caches as they are (numba's own
-    per-file check still applies)."""
+    """:func:`drop_stale` in the cache folder of every source folder of ``package`` whose
+    stamp does not hold the sources' hash; returns the files deleted.  Errors of the file
+    system leave the caches as they are (numba's own per-file check still applies)."""
     try:
         digest = sources_hash(package)
-        dirs = sorted({p.parent for p in package.rglob("*.py")
-                       if "__pycache__" not in p.parts})
+        by_dir: dict[Path, list[Path]] = {}
+        for path in _sources(package):
+            by_dir.setdefault(path.parent, []).append(path)
+        hashes: dict[Path, str] | None = None
         dropped = 0
-        for source_dir in dirs:
+        for source_dir in sorted(by_dir):
             folder = cache_folder(source_dir)
-            if folder is not None:
-                dropped += drop_stale(folder, digest)
+            if folder is None or read_stamp(folder)[0] == digest:
+                continue
+            if hashes is None:
+                hashes = module_hashes(package)
+            modules = {p.stem: hashes[p] for p in by_dir[source_dir]}
+            dropped += drop_stale(folder, digest, modules)
         return dropped
-    except OSError:
+    except (OSError, SyntaxError, ValueError):
         return 0

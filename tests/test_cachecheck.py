@@ -1,5 +1,6 @@
-"""numba's on-disk cache is dropped as a whole when any source of the package changes
-(nurbsdem.cachecheck): a kernel inlined from another module must not keep old code."""
+"""numba's on-disk cache loses a module's kernels when the code of that module or of a
+package module it imports changed (nurbsdem.cachecheck): a kernel inlined from another module
+must not keep old code, and an unrelated edit keeps the cache."""
 from __future__ import annotations
 
 import importlib
@@ -12,45 +13,94 @@ from nurbsdem import cachecheck
 
 
 def _package(root: Path) -> Path:
-    """A package of two folders, each with a module and a numba cache beside its bytecode."""
+    """A package of two folders: ``a`` imports ``sub.b`` (inside a function), ``sub.b``
+    imports ``sub.c`` (a chain), ``sub.d`` imports nothing of the package; each module has
+    kernels in numba's cache beside its bytecode."""
     pkg = root / "pkg"
-    for folder, module in ((pkg, "a.py"), (pkg / "sub", "b.py")):
-        (folder / "__pycache__").mkdir(parents=True)
-        (folder / module).write_text("X = 1\n")
-        for name in ("m.f-10.py311.nbi", "m.f-10.py311.1.nbc", "m.cpython-311.pyc"):
-            (folder / "__pycache__" / name).write_bytes(b"old")
+    sources = {pkg / "a.py": "def f():\n    from .sub.b import X\n    return X\n",
+               pkg / "sub" / "b.py": '"""b"""\nfrom pkg.sub import c\nX = c.Y  # one\n',
+               pkg / "sub" / "c.py": "import numpy as np\nY = 1\n",
+               pkg / "sub" / "d.py": "Z = 1\n"}
+    for path, text in sources.items():
+        (path.parent / "__pycache__").mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+        _compile(path)
+        (path.parent / "__pycache__" / f"{path.stem}.cpython-311.pyc").write_bytes(b"old")
     return pkg
 
 
+def _compile(module: Path) -> None:
+    """What numba writes for one kernel of ``module``: an index and a library."""
+    for name in (f"{module.stem}.f-10.py311.nbi", f"{module.stem}.f-10.py311.1.nbc"):
+        (module.parent / "__pycache__" / name).write_bytes(b"new")
+
+
 def _cached(pkg: Path) -> list[str]:
-    return sorted(p.name for p in pkg.rglob("__pycache__/*") if p.suffix in (".nbi", ".nbc"))
+    return sorted({p.name.split(".")[0] for p in pkg.rglob("__pycache__/*")
+                   if p.suffix in (".nbi", ".nbc")})
 
 
-def test_a_change_in_one_module_drops_the_kernels_of_every_folder(tmp_path, monkeypatch):
+def test_an_edit_drops_the_kernels_of_the_modules_built_from_it(tmp_path, monkeypatch):
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     pkg = _package(tmp_path)
-    assert cachecheck.check_caches(pkg) == 4         # no stamp yet: nothing is trusted
-    for folder in (pkg, pkg / "sub"):                 # numba compiles again, into the folders
-        for name in ("m.f-10.py311.nbi", "m.f-10.py311.1.nbc"):
-            (folder / "__pycache__" / name).write_bytes(b"new")
+    assert cachecheck.check_caches(pkg) == 8         # no stamp yet: nothing is trusted
+    for module in pkg.rglob("*.py"):                  # numba compiles again, into the folders
+        _compile(module)
     assert cachecheck.check_caches(pkg) == 0          # the same sources: the cache stays
-    assert len(_cached(pkg)) == 4
-    (pkg / "sub" / "b.py").write_text("X = 2\n")      # one module of one folder changes
-    assert cachecheck.check_caches(pkg) == 4          # ... and the kernels of both go
-    assert _cached(pkg) == []
-    assert len(list(pkg.rglob("*.pyc"))) == 2         # Python's bytecode is not numba's
+    assert _cached(pkg) == ["a", "b", "c", "d"]
+    (pkg / "sub" / "c.py").write_text("import numpy as np\nY = 2\n")
+    assert cachecheck.check_caches(pkg) == 6          # c, b importing it, a importing b
+    assert _cached(pkg) == ["d"]                      # ... in both folders; d stays
+    assert len(list(pkg.rglob("*.pyc"))) == 4         # Python's bytecode is not numba's
     assert cachecheck.check_caches(pkg) == 0
+    for module in pkg.rglob("*.py"):
+        _compile(module)
+    (pkg / "sub" / "b.py").write_text('"""b"""\nfrom pkg.sub import c\nX = -c.Y\n')
+    assert cachecheck.check_caches(pkg) == 4          # b and a; c and d stay
+    assert _cached(pkg) == ["c", "d"]
 
 
-def test_the_stamp_names_the_sources(tmp_path, monkeypatch):
+def test_an_edit_of_an_unrelated_module_keeps_the_kernels(tmp_path, monkeypatch):
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     pkg = _package(tmp_path)
     cachecheck.check_caches(pkg)
-    digest = cachecheck.sources_hash(pkg)
-    for folder in (pkg, pkg / "sub"):
-        assert (folder / "__pycache__" / cachecheck.STAMP).read_text().strip() == digest
-    (pkg / "a.py").write_text("X = 1  # the same code, another text\n")
-    assert cachecheck.sources_hash(pkg) != digest
+    for module in pkg.rglob("*.py"):
+        _compile(module)
+    (pkg / "sub" / "d.py").write_text("Z = 3\n")
+    assert cachecheck.check_caches(pkg) == 2          # d's own kernel only
+    assert _cached(pkg) == ["a", "b", "c"]
+
+
+def test_an_edit_of_comments_or_docstrings_keeps_the_kernels(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    pkg = _package(tmp_path)
+    cachecheck.check_caches(pkg)
+    for module in pkg.rglob("*.py"):
+        _compile(module)
+    (pkg / "sub" / "b.py").write_text('"""Another text."""\nfrom pkg.sub import c\n\n'
+                                      'X = c.Y   # two\n')
+    (pkg / "sub" / "c.py").write_text('import numpy as np\n\n\nY = 1  # the same\n')
+    before = (pkg / "sub" / "__pycache__" / cachecheck.STAMP).read_text()
+    assert cachecheck.check_caches(pkg) == 0
+    assert _cached(pkg) == ["a", "b", "c", "d"]
+    after = (pkg / "sub" / "__pycache__" / cachecheck.STAMP).read_text()
+    assert after.splitlines()[1:] == before.splitlines()[1:]    # the same module hashes
+    assert after.splitlines()[0] != before.splitlines()[0]      # new sources: parsed once
+
+
+def test_the_imports_found_are_the_package_modules(tmp_path):
+    """Relative and absolute imports, ``from p import module`` and ``from p import name``
+    (the package's ``__init__``), imports inside functions; other packages' are not."""
+    import ast
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    for name in ("__init__.py", "jit.py", "sub/__init__.py", "sub/lcp.py", "sub/x.py"):
+        (pkg / name).write_text("V = 1\n")
+    text = ("import numpy\nfrom numpy import linalg\nfrom . import lcp\nfrom .. import V\n"
+            "def g():\n    import pkg.jit\n    from .lcp import V\n")
+    found = cachecheck.imported_modules(pkg / "sub" / "x.py", ast.parse(text), pkg)
+    assert sorted(str(p.relative_to(pkg)) for p in found) == [
+        "__init__.py", "jit.py", "sub/lcp.py"]
 
 
 @pytest.mark.parametrize("user_dir", [False, True])
@@ -72,11 +122,15 @@ def test_the_folders_are_those_numba_caches_in(tmp_path, monkeypatch, user_dir):
 
 
 def test_the_installed_package_is_stamped():
-    """Importing nurbsdem checked its own caches: each folder's stamp is the sources' hash."""
+    """Importing nurbsdem checked its own caches: each folder's stamp holds the sources' hash
+    and the hashes of the folder's modules."""
     import nurbsdem
     pkg = Path(nurbsdem.__file__).parent
     folder = cachecheck.cache_folder(pkg / "dynamics")
-    assert (folder / cachecheck.STAMP).read_text().strip() == cachecheck.sources_hash(pkg)
+    digest, modules = cachecheck.read_stamp(folder)
+    assert digest == cachecheck.sources_hash(pkg)
+    hashes = cachecheck.module_hashes(pkg)
+    assert modules == {p.stem: h for p, h in hashes.items() if p.parent == pkg / "dynamics"}
 
 
 def test_a_missing_compiled_loop_is_told(tmp_path, monkeypatch, caplog):
