@@ -1,4 +1,5 @@
-"""Verification report: runs the benchmarks and writes ``docs/verification.md`` + PNG plots.
+"""Verification report: runs the benchmarks and writes ``docs/verification.md`` + PNG plots,
+and ``docs/performance.md`` (its timing sections: the headline numbers, sections 5 and 8).
 
 Sections (every number is measured by this script in this run; each error names its
 reference):
@@ -10,6 +11,11 @@ reference):
 5. Cost of a run: scaling with the number of particles; the paper's example (full mode).
 6. Fit to meshes (``nurbsdem fit``): ellipsoid meshes against the analytic ellipsoid; the
    synthetic scanned grain.
+7. Hertz–Mindlin with the exact curvature (radius errors, cost, impact benchmarks).
+8. Runs on several MPI ranks (speed-up, weak scaling, a model for more ranks).
+
+``--performance-only`` rewrites ``performance.md`` from the ``verification.md`` already in
+``--output`` without measuring anything.
 
 Usage::
 
@@ -887,7 +893,7 @@ def _section_paper(rep: Report, workdir: Path, quick: bool) -> None:
             f"control), {s.lcps} LCPs ({s.lcps / s.wall_time:.0f} per second of "
             f"wall time, {s.lcps / t['LCP'] if t['LCP'] else float('nan'):.3g} per second of LCP "
             f"time; {_lcps_per_active(s):.2f} LCPs per active contact and contact "
-            f"evaluation, issue 10's measure, target at most 1.3: {s.evaluations} evaluations, "
+            f"evaluation: {s.evaluations} evaluations, "
             f"{s.active_total / max(s.steps, 1):.0f} active contacts at the end of a deck step "
             f"on average), {s.degenerated} "
             f"degenerated, {s.failed} failed; energy-balance error "
@@ -895,10 +901,7 @@ def _section_paper(rep: Report, workdir: Path, quick: bool) -> None:
             f"of the energy turned over). {_best_of(shipped)}\n\n" +
             md_table(["part", "s", "%"], rows) + "\n\n" +
             f"Time outside the LCP kernel (everything but the LCP row): "
-            f"{_outside_lcp(s):.2f} × the LCP time (issue 10's measure, target at most 0.5; "
-            f"before the step engine 1.7).\n\n"
-            f"Before the step engine of issue 10 (numbers of record on this machine class): "
-            f"{BEFORE['paper_s']:.0f} s, {BEFORE['paper_split']}.\n")
+            f"{_outside_lcp(s):.2f} × the LCP time.\n")
     _paper_with_few_frames(rep, workdir, s, few)
     one = _paper_one_thread(rep, workdir, few[0])
     _section_damping(rep, workdir, s)
@@ -913,7 +916,7 @@ def _section_paper(rep: Report, workdir: Path, quick: bool) -> None:
 
 
 #: runs of the paper deck as shipped and with few samples, alternated (the report takes the
-#: faster of each: this VM's speed moves by a third from one minute to the next)
+#: faster of each: a shared machine's speed can move by a third from one minute to the next)
 PAPER_ROUNDS = 2
 
 
@@ -947,10 +950,9 @@ def _walls_in_order(runs: list) -> str:
 def _best_of(runs: list) -> str:
     """The sentence saying which of the alternated runs a figure is from."""
     return (f"The faster of {len(runs)} runs alternated with the deck with few samples below "
-            f"(their wall times in the order run: {_walls_in_order(runs)}; this VM's speed "
-            f"moves by up to a "
-            f"third from one minute to the next, and a run's contact work is the same bits "
-            f"each time).")
+            f"(their wall times in the order run: {_walls_in_order(runs)}; a shared machine's "
+            f"speed can move by up to a third from one minute to the next, and a run's contact "
+            f"work is the same bits each time).")
 
 
 def _paper_with_few_frames(rep: Report, workdir: Path, shipped, runs: list) -> None:
@@ -977,14 +979,13 @@ def _paper_with_few_frames(rep: Report, workdir: Path, shipped, runs: list) -> N
             f"{t['forces + integration']:.1f} s: "
             + ", ".join(f"{k} {v:.1f} s" for k, v in s.split.items()) + "). The samples are "
             f"written by a worker thread; what they cost beyond its own CPU time is the LCP's "
-            f"two threads running slower meanwhile (DEVNOTES: measured on this 2-core "
-            f"virtual machine).\n")
+            f"two threads running slower meanwhile when the machine has no spare core.\n")
 
 
 def _paper_one_thread(rep: Report, workdir: Path, two):
     """The deck with few samples once more on one numba thread (the LCP batch is the one part
-    of this 112-particle deck that the second thread speeds up, so issue 10's measure
-    outside/LCP depends on the count), beside ``two``, the faster run on all threads; returns
+    of this 112-particle deck that the second thread speeds up, so the ratio of the time
+    outside the LCP to the LCP time depends on the count), beside ``two``, the faster run on all threads; returns
     its summary."""
     import bench_paper
     import numba
@@ -1009,17 +1010,17 @@ def _paper_one_thread(rep: Report, workdir: Path, two):
             f"against {_outside_lcp(two):.2f} × ({s.lcps} LCPs and {s.substeps} internal steps"
             f"{', the same as on all threads' if same else ' (NOT the same as on all threads)'})."
             f" The time outside the LCP is serial passes over ~100-300 rows, which do not gain "
-            f"from a second thread at this size (DEVNOTES); the LCP batch does.\n")
+            f"from a second thread at this size; the LCP batch does.\n")
     return s
 
 
 def _outside_lcp(s) -> float:
-    """The wall time outside the LCP kernel over the LCP time (issue 10's measure)."""
+    """The wall time outside the LCP kernel over the LCP time."""
     return (s.wall_time - s.timers["LCP"]) / max(s.timers["LCP"], 1e-300)
 
 
 def _lcps_per_active(s) -> float:
-    """LCPs solved per active contact and contact evaluation (issue 10's measure): the LCPs
+    """LCPs solved per active contact and contact evaluation: the LCPs
     over the evaluations times the mean number of active contacts (sampled at the end of
     each deck step)."""
     return s.lcps / max(s.evaluations * s.active_total / max(s.steps, 1), 1e-300)
@@ -1137,17 +1138,8 @@ def section_point_surface(rep: Report) -> None:
     rep.headline["point_surface"] = rows
 
 
-#: numbers of record before the step engine of issue 10 (the issue's text): the paper example
-#: and the 112 spheres against Yade, on the same 2-core machine class
-BEFORE = {"paper_s": 106.0, "paper_split": "LCP 37 %, global search 24 %, forces + integration "
-          "17 %, output 23 % (5 sub-steps per deck step in the dense pack; 32 500 internal "
-          "steps, energy-balance error 0.165 J)",
-          "spheres_ratio": 47.0}
-
-
 def section_spheres(rep: Report) -> None:
-    """112 exact spheres against the real Yade (benchmarks/bench_yade.py), and the numbers of
-    record before the compiled step engine."""
+    """112 exact spheres against the real Yade (benchmarks/bench_yade.py), side by side."""
     import bench_yade
     rep.add("### 112 spheres against Yade\n")
     r = bench_yade.main(["--quick"] if rep.quick else [])
@@ -1167,8 +1159,7 @@ def section_spheres(rep: Report) -> None:
             + "\n")
     if isinstance(yd, dict):
         ratio = nd["loop"] / yd["wall"]
-        rep.add(f"Ratio nurbsdem / Yade: **{ratio:.2f}** (before the compiled deck steps: "
-                f"{BEFORE['spheres_ratio']:.0f}); mean heights differ by "
+        rep.add(f"Ratio nurbsdem / Yade: **{ratio:.2f}**; mean heights differ by "
                 f"{100 * abs(nd['height'] / yd['height'] - 1):.2f} %.\n")
         rep.headline["spheres"] = dict(ratio=ratio, nurbsdem=nd["loop"], yade=yd["wall"])
     else:
@@ -1245,7 +1236,7 @@ def section_fit(rep: Report) -> None:
 
 # =========================================================================== 7. Hertz
 def section_hertz(rep: Report) -> None:
-    """Hertz–Mindlin with the exact local curvature (issue 12): the exact force-equivalent
+    """Hertz–Mindlin with the exact local curvature: the exact force-equivalent
     radius against the volume-equivalent radius other codes use, as a force error at equal
     overlap, on ellipsoids and the paper particles; its cost; Chung & Ooi's test 4."""
     import bench_hertz as bh
@@ -1306,7 +1297,7 @@ def section_hertz(rep: Report) -> None:
     rep.add(f"A pack of {pk['n']} paper particles deposited under Hertz–Mindlin (E 1e8 Pa, ν "
             f"0.3, restitution 0.5, friction 0.5) for {pk['duration']:g} s: the compiled deck "
             f"steps {pk['compiled_s']:.2f} s against {pk['python_s']:.2f} s for the Python path "
-            f"that drove Hertz–Mindlin scenes of NURBS particles before stop 39 "
+            f"(the reference the compiled steps are checked against; several MPI ranks run it) "
             f"({pk['python_s'] / pk['compiled_s']:.1f} x; {pk['substeps']} internal steps, "
             f"{pk['lcps']} LCPs, at most {pk['active_max']} contacts, {pk['failed']} failed), "
             f"the results {'bit for bit equal' if pk['same'] else 'NOT equal'} (every sample, "
@@ -1431,7 +1422,7 @@ def _headline_md(rep: Report) -> str:
     sp = h.get("spheres")
     if sp and sp.get("ratio") is not None:
         out.append(f"* 112 spheres against Yade (one thread each): {sp['ratio']:.2f} x Yade's "
-                   f"time (before: {BEFORE['spheres_ratio']:.0f} x), section 5.")
+                   f"time, section 5.")
     st = h.get("settled")
     if st:
         lo, hi = st["rows"][0], st["rows"][-1]
@@ -1440,15 +1431,13 @@ def _headline_md(rep: Report) -> str:
                    f"{hi['n']} (cost ∝ N^{st['exponent']:.2f}), section 5.")
     p = h.get("paper")
     if p:
-        out.append(f"* Paper example: {p['wall']:.0f} s wall time (before the step engine "
-                   f"of issue 10: {BEFORE['paper_s']:.0f} s; {p['sparse_wall']:.0f} s with "
+        out.append(f"* Paper example: {p['wall']:.0f} s wall time ({p['sparse_wall']:.0f} s with "
                    f"{p['sparse_frames']} ParaView samples instead of {p['frames']}), "
                    f"{p['lcps']} LCPs "
                    f"({p['lcps_per_active']:.2f} per active contact and evaluation), "
                    f"{p['failed']} failed; time outside the LCP {p['outside']:.2f} × the LCP "
                    f"time ({p['sparse_outside']:.2f} with few samples, "
-                   f"{p['one_thread_outside']:.2f} with few samples on one thread; target at "
-                   f"most 0.5, before 1.7).")
+                   f"{p['one_thread_outside']:.2f} with few samples on one thread).")
     dm = h.get("damping")
     if dm:
         out.append(f"* Paper example as shipped (`Damping Implicit Accuracy 3e-5 Safety "
@@ -1465,6 +1454,46 @@ def _headline_md(rep: Report) -> str:
                    f"one rank, results {'bit for bit equal' if mp['same'] else 'NOT equal'} "
                    "(section 8).")
     return "\n".join(out) + "\n"
+
+
+#: The sections of the report that ``performance.md`` repeats: what the run costs.
+PERFORMANCE_SECTIONS = ("## Headline numbers", "## 5. Cost of a run",
+                        "## 8. Runs on several MPI ranks")
+
+
+def _sections(md: str) -> tuple[str, dict[str, str]]:
+    """A report's text before its first ``## `` heading, and each ``## `` section by its
+    heading line (the section's text includes the heading and its ``###`` subsections)."""
+    head, *rest = md.split("\n## ")
+    return head, {("## " + part).split("\n", 1)[0]: "## " + part for part in rest}
+
+
+def performance_md(verification: str) -> str:
+    """``performance.md``: the timing sections of a verification report's text (its machine,
+    version and date, the headline numbers, section 5 and section 8), so that the speed
+    figures a reader finds are those of the latest run and no older."""
+    head, sections = _sections(verification)
+    header = [ln for ln in head.splitlines() if ln.startswith("* ")]
+    generated = next((ln for ln in head.splitlines() if ln.startswith("Generated by")), "")
+    out = ["# nurbsdem performance\n",
+           "The speed figures of the latest run of the verification report "
+           "(`benchmarks/report.py`, which rewrites this file with "
+           "[verification.md](verification.md)); the accuracy figures, and the references "
+           "each error is measured against, are in [verification.md](verification.md). "
+           "Timings depend on the machine and its load; ratios measured side by side in one "
+           "run are the figures to compare.\n",
+           generated + "\n" if generated else "", "\n".join(header) + "\n"]
+    for title in PERFORMANCE_SECTIONS:
+        key = next((k for k in sections if k.startswith(title)), None)
+        if key is not None:
+            out.append(sections[key].rstrip() + "\n")
+    return "\n".join(part for part in out if part)
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
 
 
 def build(outdir: Path, quick: bool) -> Path:
@@ -1534,9 +1563,8 @@ def build(outdir: Path, quick: bool) -> Path:
     parts.append("## Run time of the report\n\n" + md_table(
         ["section", "s"], [[k, f"{v:.0f}"] for k, v in timings.items()] + [["total", f"{total:.0f}"]]) + "\n")
     md = outdir / "verification.md"
-    tmp_md = md.with_suffix(".md.tmp")
-    tmp_md.write_text("\n".join(parts), encoding="utf-8")
-    tmp_md.replace(md)
+    _write_atomically(md, "\n".join(parts))
+    _write_atomically(outdir / "performance.md", performance_md("\n".join(parts)))
     (rep.figdir / "headline.json").write_text(json.dumps(rep.headline, default=str, indent=1))
     print(f"report: wrote {md} ({len(rep.figures)} figures) in {total:.0f} s", file=sys.stderr)
     return md
@@ -1547,10 +1575,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="the CI mode (about two minutes)")
     ap.add_argument("--output", default=str(REPO / "docs"),
                     help="folder of verification.md (figures in its verification/ subfolder)")
+    ap.add_argument("--performance-only", action="store_true",
+                    help="only rewrite performance.md from the verification.md in --output")
     ap.add_argument("--lcp-worker", nargs=3, metavar=("IN", "OUT", "TOL"), help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.lcp_worker:
         lcp_worker(*a.lcp_worker)
+        return 0
+    if a.performance_only:
+        out = Path(a.output)
+        _write_atomically(out / "performance.md",
+                          performance_md((out / "verification.md").read_text(encoding="utf-8")))
         return 0
     build(Path(a.output), a.quick)
     return 0
