@@ -27,7 +27,7 @@ triangulation; a local maximum of a linear function on the edge graph of a conve
 global) when a :class:`Polyhedron` is given, warm-started from the previous support vertex of
 the same query. Both are exact for the polytope.
 
-Sign conventions as the NURBS contact result (``docs/DEVNOTES.md``): ``signed_distance`` < 0
+Sign conventions as the NURBS contact result (``docs/conventions.md``): ``signed_distance`` < 0
 is minus the penetration depth, > 0 the separation (m); ``normal`` is a unit vector from A
 towards B (force on A along −normal); ``point_a``, ``point_b`` are world points (m) on the
 two hulls with ``normal · (point_a − point_b) = −signed_distance``.

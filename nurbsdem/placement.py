@@ -11,7 +11,7 @@
 Orientation convention: unit quaternion ``q = (w, x, y, z)`` (scalar first) whose rotation
 matrix ``R`` maps the shape's file frame to the world; a body's surface point is
 ``x_world = position + R @ (x_file - centroid_file)`` where ``position`` is the centroid in
-the world (see docs/DEVNOTES.md: pose position = position - R @ centroid_file).
+the world (see docs/conventions.md: pose position = position - R @ centroid_file).
 """
 from __future__ import annotations
 

@@ -38,7 +38,7 @@ from .support import make_seeds
 # --------------------------------------------------------------------------- result
 @dataclass
 class ContactResult:
-    """Outcome of the LCP of one body pair (see ``docs/DEVNOTES.md``).
+    """Outcome of the LCP of one body pair (see ``docs/conventions.md``).
 
     Attributes
     ----------

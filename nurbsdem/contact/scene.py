@@ -61,7 +61,7 @@ On several MPI ranks (``domain``, :mod:`nurbsdem.parallel.domain`) the list hold
 with a particle the rank owns, a rebuild is decided by all ranks together and starts from every
 particle's state sent by its owner, and the counters count the pairs whose body A it owns.
 
-Units: metres, seconds. Global body indices: particles 0..N-1, walls N..N+W-1 (DEVNOTES).
+Units: metres, seconds. Global body indices: particles 0..N-1, walls N..N+W-1 (docs/conventions.md).
 """
 from __future__ import annotations
 

@@ -96,7 +96,7 @@ def norm3(a):
 # --------------------------------------------------------------------------- edges
 @kernel
 def edge_param(dom, ip, edge, u, v):
-    """Edge parameter s in [0, 1] of (u, v) on edge ``edge`` of patch ip (DEVNOTES)."""
+    """Edge parameter s in [0, 1] of (u, v) on edge ``edge`` of patch ip (docs/conventions.md)."""
     if edge < 2:
         w = dom[ip, 3] - dom[ip, 2]
         return (v - dom[ip, 2]) / w if w > 0.0 else 0.0

@@ -8,8 +8,9 @@ d = −n): one support mapping, no direction search. Then
 
 point_b is the projection of p_A onto the plane, and the contact is active only when that
 projection falls inside the wall's parallelogram o + α a + β b, 0 <= α, β <= 1 (a, b the
-wall's edge vectors along u and v). The contact normal (from A towards the wall, DEVNOTES)
-is −n, and gap = point_a − point_b satisfies normal · gap = −signed_distance.
+wall's edge vectors along u and v). The contact normal (from A towards the wall,
+docs/conventions.md) is −n, and gap = point_a − point_b satisfies
+normal · gap = −signed_distance.
 
 A warm start begins at the previous support point moved to first order by the body's turn
 since (its du/de and body-frame direction are kept in the row: ``lcp._predicted_params``),

@@ -1,7 +1,7 @@
-"""The record a contact provider hands to the dynamics at each force evaluation (DEVNOTES):
-arrays over the K active contacts, counters, and optional extras.  One record for every
-provider: the scene's (:class:`~nurbsdem.contact.scene.SceneContacts`) and the analytic test
-provider's (:class:`~nurbsdem.dynamics.analytic_contact.SpherePlaneProvider`).
+"""The record a contact provider hands to the dynamics at each force evaluation
+(docs/conventions.md): arrays over the K active contacts, counters, and optional extras.
+One record for every provider: the scene's (:class:`~nurbsdem.contact.scene.SceneContacts`)
+and the analytic test provider's (:class:`~nurbsdem.dynamics.analytic_contact.SpherePlaneProvider`).
 
 Units: metres; global body indices (particles 0..N-1, walls N..N+W-1); ``normal`` from A
 towards B; ``depth`` >= 0; ``key`` = body_a · (N+W) + body_b.
@@ -15,7 +15,8 @@ import numpy as np
 
 @dataclass
 class ContactSet:
-    """Active contacts of one evaluation (DEVNOTES): arrays over K contacts, plus counters."""
+    """Active contacts of one evaluation (docs/conventions.md): arrays over K contacts, plus
+    counters."""
 
     body_a: np.ndarray
     body_b: np.ndarray

@@ -14,8 +14,9 @@ State arrays over N bodies (SI units):
 Mass data: ``mass`` (N,) kg; ``J0`` (N,3,3) kg m^2 — inertia about the centroid in the body's
 *file* frame (shape volume inertia × density, or given by the deck); it is diagonalised once,
 ``J0 = P diag(I) P^T`` with ``I`` ascending and ``P`` a proper rotation (columns = principal axes
-in the file frame).  The file-frame rotation of the body (the pose's ``R``, DEVNOTES) is then
-``R = Q P^T``, and its pose position is ``x - R @ c`` with ``c`` the centroid in the file frame.
+in the file frame).  The body's file-frame rotation (the pose's ``R``, docs/conventions.md) is
+then ``R = Q P^T``, and its pose position is ``x - R @ c`` with ``c`` the centroid in the file
+frame.
 
 Prescribed-motion bodies
 ------------------------
@@ -204,7 +205,7 @@ class RigidBodies:
         return quats_to_matrices(self.q)
 
     def rotations(self) -> np.ndarray:
-        """(N,3,3) file->world rotations R = Q P^T (the pose rotation of DEVNOTES)."""
+        """(N,3,3) file->world rotations R = Q P^T (the pose rotation of docs/conventions.md)."""
         return body_poses(self.q, self.P, self.x, self.centroid_file)[0]
 
     def pose_positions(self, R: np.ndarray | None = None) -> np.ndarray:

@@ -3,7 +3,7 @@
 Connectivity (paper Sec. 3.2.2: "connectivity stored per particle, 4 neighbours per
 rectangular patch") is found automatically from the geometry: every edge of every patch is
 sampled at a few points and compared with every other edge, forward and reversed, within a
-tolerance relative to the particle size. Conventions (see ``docs/DEVNOTES.md``):
+tolerance relative to the particle size. Conventions (see ``docs/conventions.md``):
 
 * edge index e: 0 = u_min, 1 = u_max, 2 = v_min, 3 = v_max;
 * the edge parameter s in [0, 1] runs along increasing v on edges 0/1 and along increasing
