@@ -1,0 +1,67 @@
+"""Mesh files of equipment (nurbsdem.io.meshfile): the three formats, placement, and one clear
+line for each bad file."""
+import numpy as np
+import pytest
+import trimesh
+
+from nurbsdem.errors import InputError
+from nurbsdem.io.meshfile import read_wall_mesh, size_mismatch
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply"])
+def test_formats_read_the_same_placed_box(tmp_path, suffix):
+    box = trimesh.creation.box(extents=(2.0, 4.0, 6.0))
+    path = tmp_path / f"box{suffix}"
+    box.export(path)
+    got = read_wall_mesh(path, scale=0.5, position=(1, 2, 3), rotation=(0, 0, np.pi / 2))
+    assert got.faces.shape == (12, 3) and got.vertices.shape == (8, 3)
+    assert got.warnings == []
+    # half size, turned 90 degrees about z (x <-> y), centred at (1, 2, 3)
+    assert np.allclose(got.vertices.min(axis=0), [1 - 1.0, 2 - 0.5, 3 - 1.5], atol=1e-12)
+    assert np.allclose(got.vertices.max(axis=0), [1 + 1.0, 2 + 0.5, 3 + 1.5], atol=1e-12)
+
+
+def test_a_nan_vertex_in_a_ply_is_refused(tmp_path):
+    path = tmp_path / "bad.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                    "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                    "end_header\n0 0 0\n1 0 0\nnan 1 0\n3 0 1 2\n")
+    with pytest.raises(InputError, match=r"deck.inp:4: bad.ply: vertex 2 is not finite"):
+        read_wall_mesh(path, where="deck.inp:4")
+
+
+def test_a_degenerate_triangle_is_refused(tmp_path):
+    mesh = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 1, 3]],
+                           process=False)
+    path = tmp_path / "flat.stl"
+    mesh.export(path)
+    with pytest.raises(InputError, match="triangle 0 is degenerate"):
+        read_wall_mesh(path)
+
+
+def test_non_manifold_and_duplicate_triangles_warn(tmp_path):
+    verts = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]]
+    mesh = trimesh.Trimesh(verts, [[0, 1, 2], [0, 1, 3], [0, 1, 4], [0, 1, 4]], process=False)
+    path = tmp_path / "fan.ply"
+    mesh.export(path)
+    got = read_wall_mesh(path)
+    text = " ".join(got.warnings)
+    assert "shared by more than two triangles" in text and "duplicate triangles" in text
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda d: d / "none.stl", "no such mesh file"),
+    (lambda d: (d / "folder.stl").mkdir() or d / "folder.stl", "is a folder"),
+    (lambda d: d / "drum.step", "is not a mesh file"),
+    (lambda d: (d / "empty.stl").write_text("solid x\nendsolid x\n") and d / "empty.stl",
+     "holds no triangles|cannot read"),
+])
+def test_bad_paths_say_what_is_wrong(tmp_path, make, match):
+    with pytest.raises(InputError, match=match):
+        read_wall_mesh(make(tmp_path))
+
+
+def test_size_mismatch_flags_millimetres():
+    assert "millimetres" in size_mismatch(500.0, 0.01, "drum.stl")
+    assert "smaller than one particle" in size_mismatch(0.005, 0.01, "drum.stl")
+    assert size_mismatch(0.5, 0.01, "drum.stl") is None
