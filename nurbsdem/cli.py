@@ -111,20 +111,44 @@ def run_reporting_errors(call: Callable[[], Any]) -> Any:
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
-            return call()
+            result = call()
+            sys.stdout.flush()          # a closed pipe shows here (e.g. ``| head``)
+            return result
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
+        except BrokenPipeError:
+            _quiet_broken_pipe()
         except (NurbsdemError, OSError) as exc:
             fail(error_message(exc))
         except MemoryError:
             fail("out of memory: the model is too large for this machine")
-        except KeyboardInterrupt:
-            click.echo("nurbsdem: interrupted", err=True)
+        except KeyboardInterrupt as exc:
+            said = " ".join(str(exc).split())
+            click.echo(f"nurbsdem: {said}" if said else "nurbsdem: interrupted", err=True)
             raise click.exceptions.Exit(130)
         except Exception as exc:
             if os.environ.get("NURBSDEM_DEBUG"):
                 raise
             internal_error(exc)
+
+
+#: Exit status when the reader of the standard output went away (128 + SIGPIPE, what a
+#: program killed by SIGPIPE reports to the shell).
+EXIT_BROKEN_PIPE = 141
+
+
+def _quiet_broken_pipe() -> NoReturn:
+    """The reader of stdout closed the pipe (``nurbsdem info ... | head``): nothing more can
+    be shown there, so exit quietly.  stdout is pointed at /dev/null first so that the
+    interpreter's own flush at exit does not fail again and print a traceback."""
+    import os
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):     # not a real file (e.g. tests)
+        pass
+    raise click.exceptions.Exit(EXIT_BROKEN_PIPE)
 
 
 class NurbsdemGroup(click.Group):
@@ -243,21 +267,35 @@ def info(shape_file: str, density: float | None, convexity_tol: float | None) ->
 
 # ---------------------------------------------------------------------- shape
 _KINDS = ("sphere", "ellipsoid", "single-patch-sphere", "particle")
+#: open wall surfaces (:mod:`nurbsdem.geometry.surfaces`): written as patches, not particles
+_SURFACES = ("cylinder", "cone", "plane")
 
 
 @main.command()
-@click.argument("kind", type=click.Choice(_KINDS))
+@click.argument("kind", type=click.Choice(_KINDS + _SURFACES))
 @click.option("-o", "--output", required=True, metavar="FILE.yaml", help="Shape file to write.")
 @click.option("--radius", type=float, help="Radius (m) for sphere and single-patch-sphere.")
 @click.option("--semi-axes", type=(float, float, float), default=None, metavar="A B C",
               help="Semi-axes along x, y, z (m) for ellipsoid.")
 @click.option("--kind", "particle_kind", type=click.Choice(["A", "B", "C"]),
               help="Which of the paper's particles, for particle.")
+@click.option("--length", type=float, help="Length along the axis (m) for cylinder and cone.")
+@click.option("--top-radius", type=float, help="Radius at the far end (m) for cone.")
+@click.option("--size", type=(float, float), default=None, metavar="LU LV",
+              help="Side lengths (m) for plane.")
+@click.option("--outward", is_flag=True,
+              help="cylinder, cone: the front faces away from the axis (default: towards it).")
 @click.option("--name", default=None, help="Name stored in the file.")
 def shape(kind: str, output: str, radius: float | None, semi_axes, particle_kind: str | None,
+          length: float | None, top_radius: float | None, size, outward: bool,
           name: str | None) -> None:
     """Generate a shape file: KIND is sphere (--radius), ellipsoid (--semi-axes A B C),
-    single-patch-sphere (--radius) or particle (--kind A|B|C)."""
+    single-patch-sphere (--radius) or particle (--kind A|B|C); or an open wall surface:
+    cylinder (--radius --length), cone (--radius --top-radius --length) along z from the
+    origin, or plane (--size LU LV) through the origin with its front along +z."""
+    if kind in _SURFACES:
+        _surface_file(kind, output, radius, length, top_radius, size, outward, name)
+        return
     from .geometry import generators as gen
     from .geometry.shape import Shape
     from .io.shapefile import save_shape
@@ -292,6 +330,37 @@ def shape(kind: str, output: str, radius: float | None, semi_axes, particle_kind
     save_shape(output, sh)
     click.echo(f"wrote {output}: {sh.name}, {len(sh.patches)} patches, "
                f"volume {sh.volume:.9g} m^3")
+
+
+def _surface_file(kind: str, output: str, radius, length, top_radius, size, outward: bool,
+                  name: str | None) -> None:
+    """``nurbsdem shape cylinder|cone|plane``: one exact open patch written as a shape file."""
+    from .geometry import surfaces
+    from .io.shapefile import save_shape
+
+    def need(value, opt: str):
+        if value is None:
+            raise NurbsdemError(f"shape {kind}: {opt} is required")
+        return value
+
+    try:
+        if kind == "cylinder":
+            patch = surfaces.cylinder_patch(need(radius, "--radius"), need(length, "--length"),
+                                            inward=not outward)
+            default = f"cylinder r={radius:g} l={length:g}"
+        elif kind == "cone":
+            patch = surfaces.cone_patch(need(radius, "--radius"),
+                                        need(top_radius, "--top-radius"),
+                                        need(length, "--length"), inward=not outward)
+            default = f"cone r={radius:g}..{top_radius:g} l={length:g}"
+        else:
+            lu, lv = need(size, "--size LU LV")
+            patch = surfaces.plane_patch((0, 0, 0), (0, 0, 1), (lu, lv), (1, 0, 0))
+            default = f"plane {lu:g}x{lv:g}"
+    except ValueError as exc:
+        raise NurbsdemError(f"shape {kind}: {exc}") from None
+    save_shape(output, [patch], name=name if name is not None else default)
+    click.echo(f"wrote {output}: {name or default}, 1 open patch (a wall surface)")
 
 
 # ---------------------------------------------------------------------- imports

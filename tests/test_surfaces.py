@@ -75,3 +75,20 @@ def test_surfaces_round_trip_through_a_shape_file(tmp_path):
 def test_bad_arguments_say_what_is_wrong(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_shape_command_writes_wall_surfaces(tmp_path):
+    from click.testing import CliRunner
+
+    from nurbsdem.cli import main
+
+    runner = CliRunner()
+    out = tmp_path / "funnel.yaml"
+    res = runner.invoke(main, ["shape", "cone", "--radius", "0.3", "--top-radius", "0.05",
+                               "--length", "0.5", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    (patch,), _ = read_patches(out)
+    radial, h = _radial(patch.points(U, V), (0, 0, 0), (0, 0, 1))
+    assert np.allclose(np.linalg.norm(radial, axis=-1), 0.3 - 0.25 * h / 0.5, atol=1e-15)
+    res = runner.invoke(main, ["shape", "cylinder", "--radius", "0.3", "-o", str(out)])
+    assert res.exit_code == 2 and "shape cylinder: --length is required" in res.output
