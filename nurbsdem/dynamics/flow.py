@@ -1,0 +1,220 @@
+"""Inflow and outflow: where and when particles enter a scene, and which ones leave it.
+
+**Inlets** create particles during a dynamic step in a region (an axis-aligned box, or a disc
+given by a centre, an axis and a radius, with a thickness) at a rate (particles/s, or kg/s
+through the mean mass of the mix) until a count, a mass or a time is reached.  Each new
+particle draws its shape from the mix by the given fractions, a uniformly random orientation
+and the inlet's velocity.  Its position is drawn uniformly in the region and accepted only
+when its bounding sphere overlaps neither a particle already there nor one placed in the
+same call (a k-d tree over the bounding spheres near the region: scipy's ``cKDTree``, the
+well-tested neighbour search, since an insertion touches few bodies).  When the region has
+no room, the particles wait for the next call and :attr:`Inlet.waiting` says how many
+(the driver reports it once).
+
+**Outlets** remove the particles whose centroid is in a box or beyond a plane, and count
+them and their mass (:class:`Outlet`, with the rows of ``monitors/outlet_<name>.csv``).
+
+Units: SI (m, s, kg).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry.rotation import random_quaternions
+
+
+@dataclass
+class InsertionRegion:
+    """A box [lo, hi] (m), or a disc (``centre``, unit ``axis``, ``radius``, ``thickness``
+    m) when ``radius`` > 0."""
+
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    centre: np.ndarray | None = None
+    axis: np.ndarray | None = None
+    radius: float = 0.0
+    thickness: float = 0.0
+
+    def sample(self, rng: np.random.Generator, n: int, margin: np.ndarray) -> np.ndarray:
+        """n points (n,3) drawn uniformly in the region shrunk by ``margin`` (n,) m (each new
+        particle's bounding radius: it starts wholly inside)."""
+        if self.radius > 0:
+            e3 = self.axis / np.linalg.norm(self.axis)
+            e1 = np.cross(e3, np.eye(3)[int(np.argmin(np.abs(e3)))])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(e3, e1)
+            rho = np.sqrt(rng.uniform(0, 1, n)) * np.maximum(self.radius - margin, 0.0)
+            phi = rng.uniform(0, 2 * math.pi, n)
+            h = rng.uniform(-0.5, 0.5, n) * np.maximum(self.thickness - 2 * margin, 0.0)
+            return (self.centre + (rho * np.cos(phi))[:, None] * e1
+                    + (rho * np.sin(phi))[:, None] * e2 + h[:, None] * e3)
+        lo = self.lo[None] + margin[:, None]
+        hi = np.maximum(self.hi[None] - margin[:, None], lo)
+        return lo + rng.uniform(0, 1, (n, 3)) * (hi - lo)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The region's axis-aligned bounding box (m)."""
+        if self.radius > 0:
+            ext = np.full(3, self.radius + 0.5 * self.thickness)
+            return self.centre - ext, self.centre + ext
+        return self.lo, self.hi
+
+
+@dataclass
+class NewParticles:
+    """Particles an inlet created: shape indices into the mix's shapes (k,), positions (k,3)
+    m, orientations as unit quaternions (k,4) (w, x, y, z), velocities (k,3) m/s."""
+
+    shapes: np.ndarray
+    positions: np.ndarray
+    quaternions: np.ndarray
+    velocities: np.ndarray
+
+
+@dataclass
+class Inlet:
+    """An inlet (module docstring).
+
+    shapes: the mix's shape ids; fractions (same length, summing to 1) by number;
+    radii, masses: each mix shape's bounding radius (m) and mass (kg); rate: particles/s
+    (``rate_is_mass``: kg/s); limits: ``count``, ``mass`` (kg), ``until`` (s), any of them
+    None; ``start`` (s) when it opens; ``seed`` for its own random stream;
+    ``max_attempts`` draws per particle before it waits.
+    """
+
+    region: InsertionRegion
+    shapes: np.ndarray
+    fractions: np.ndarray
+    radii: np.ndarray
+    masses: np.ndarray
+    rate: float
+    rate_is_mass: bool = False
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    count: int | None = None
+    mass: float | None = None
+    until: float | None = None
+    start: float = 0.0
+    seed: int = 0
+    max_attempts: int = 50
+    inserted: int = 0
+    inserted_mass: float = 0.0
+    waiting: int = 0
+    _queue: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    _rng: np.random.Generator | None = None
+
+    def __post_init__(self) -> None:
+        self.fractions = np.asarray(self.fractions, float)
+        self._rng = np.random.default_rng(self.seed)
+
+    @property
+    def number_rate(self) -> float:
+        """Particles per second: the rate, or the mass rate over the mix's mean mass."""
+        if self.rate_is_mass:
+            return self.rate / float(np.dot(self.fractions, self.masses))
+        return self.rate
+
+    def due(self, t: float) -> int:
+        """How many particles the inlet owes by time t (s): rate × elapsed time, less those
+        inserted, within the count, mass and time limits."""
+        if t < self.start:
+            return 0
+        end = t if self.until is None else min(t, self.until)
+        total = int(math.floor(self.number_rate * (end - self.start) + 1e-9))
+        if self.count is not None:
+            total = min(total, self.count)
+        owed = max(total - self.inserted, 0)
+        if self.mass is not None and self.inserted_mass >= self.mass:
+            owed = 0
+        return owed
+
+    def _draw_shapes(self, n: int) -> np.ndarray:
+        """Indices into the mix for n more particles, kept in a queue so that a particle that
+        waits keeps its shape (the mix's fractions hold over the whole run)."""
+        if len(self._queue) < n:
+            more = self._rng.choice(len(self.shapes), size=n - len(self._queue),
+                                    p=self.fractions)
+            self._queue = np.concatenate([self._queue, more])
+        return self._queue[:n]
+
+    def insert(self, t: float, centers: np.ndarray, radii: np.ndarray) -> NewParticles:
+        """The particles due at t (s), placed without overlapping the bounding spheres
+        (centers (N,3), radii (N,) m) of the particles present; those that find no room
+        wait (:attr:`waiting`)."""
+        n = self.due(t)
+        kinds = self._draw_shapes(n)
+        r_new = self.radii[kinds]
+        lo, hi = self.region.bounds()
+        reach = (float(radii.max()) if len(radii) else 0.0) + (float(r_new.max()) if n else 0.0)
+        near = np.flatnonzero(np.all((centers >= lo - reach) & (centers <= hi + reach),
+                                     axis=1)) if len(centers) else np.zeros(0, np.int64)
+        tree = cKDTree(centers[near]) if len(near) else None
+        r_near = radii[near]
+        placed_x, placed_r, taken = [], [], []
+        for k in range(n):
+            x = self._place_one(r_new[k], tree, r_near, placed_x, placed_r, reach)
+            if x is None:
+                break                      # the region is full: the rest waits, in order
+            placed_x.append(x)
+            placed_r.append(r_new[k])
+            taken.append(kinds[k])
+        m = len(taken)
+        self._queue = self._queue[m:]
+        self.inserted += m
+        self.inserted_mass += float(self.masses[np.asarray(taken, np.int64)].sum()) if m else 0.0
+        self.waiting = n - m
+        return NewParticles(self.shapes[np.asarray(taken, np.int64)],
+                            np.array(placed_x).reshape(m, 3),
+                            random_quaternions(self._rng, m),
+                            np.repeat(np.asarray(self.velocity, float)[None], m, axis=0))
+
+    def _place_one(self, r, tree, r_near, placed_x, placed_r, reach):
+        """A position for a particle of bounding radius r clear of the present particles and
+        of those placed in this call, or None after ``max_attempts`` draws."""
+        for _ in range(self.max_attempts):
+            x = self.region.sample(self._rng, 1, np.array([r]))[0]
+            if tree is not None:
+                idx = tree.query_ball_point(x, r + reach)
+                if any(np.linalg.norm(tree.data[i] - x) < r + r_near[i] for i in idx):
+                    continue
+            if any(np.linalg.norm(p - x) < r + q for p, q in zip(placed_x, placed_r)):
+                continue
+            return x
+        return None
+
+
+@dataclass
+class Outlet:
+    """An outlet: a box [lo, hi] (m), or the half-space beyond a plane (``point``, unit
+    ``normal`` pointing out of the scene) when ``normal`` is given; it counts what it
+    removed."""
+
+    name: str
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    point: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    count: int = 0
+    mass: float = 0.0
+    rows: list[tuple[float, int, float, float]] = field(default_factory=list)
+
+    def catches(self, x: np.ndarray) -> np.ndarray:
+        """Bool (N,): the centroids x (N,3) that are in the outlet."""
+        if self.normal is not None:
+            return (x - self.point) @ self.normal > 0.0
+        return np.all((x >= self.lo) & (x <= self.hi), axis=1)
+
+    def remove(self, t: float, x: np.ndarray, masses: np.ndarray) -> np.ndarray:
+        """The indices of the particles (centroids x (N,3), masses (N,) kg) to remove at t
+        (s); adds them to the count and the discharged mass and appends a monitor row
+        (t, count, mass, mass flow rate since the previous row)."""
+        gone = np.flatnonzero(self.catches(x))
+        self.count += len(gone)
+        self.mass += float(masses[gone].sum())
+        t0, _, m0, _ = self.rows[-1] if self.rows else (t, 0, 0.0, 0.0)
+        rate = (self.mass - m0) / (t - t0) if t > t0 else 0.0
+        self.rows.append((t, self.count, self.mass, rate))
+        return gone
