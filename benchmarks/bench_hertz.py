@@ -181,7 +181,7 @@ def glass_anvil(angles) -> list[float]:
     """e_t of the MFIX DEM-05 / Kharaz set-up (E* of Al oxide on glass, e 0.98, μ 0.092)."""
     sys.path.insert(0, str(REPO / "tests"))
     from test_hertz import _law, _run_impact, _sphere_system
-    from nurbsdem.dynamics.hertz import hertz_impact
+    from nurbsdem.dynamics.laws.hertz_mindlin import hertz_impact
     r, rho, E, nu, mu, v = 2.5e-3, 4000.0, 3.8e11, 0.23, 0.092, 3.9
     m = rho * 4 / 3 * math.pi * r ** 3
     out = []

@@ -25,6 +25,7 @@ particle, like the companion file of the authors' code).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
@@ -205,11 +206,14 @@ class Interface:
     [NormalDamping cn] [TangentialDamping ct] [Friction mu] [Between particle-particle|particle-wall]
     [Materials m1 m2 | Materials m]``  (paper Eqs. 16-17), or
     ``Interface ID Model HertzMindlin Restitution e [Friction mu] [Between ..] [Materials ..]``
-    (Hertz–Mindlin with the exact local curvature, :mod:`nurbsdem.dynamics.hertz`; the elastic
+    (Hertz–Mindlin with the exact local curvature, :mod:`nurbsdem.dynamics.laws.hertz_mindlin`; the elastic
     constants come from the materials' YoungModulus and PoissonRatio).
 
-    model: ``"linear"`` (default) or ``"hertz"``; restitution: coefficient of restitution
-    (Hertz only, 0 < e <= 1).
+    model: the law's ``model`` id (:mod:`nurbsdem.dynamics.laws`: ``"linear"``, the default, or
+    ``"hertz"``); restitution: coefficient of restitution (Hertz only, 0 < e <= 1); params: the
+    keys of a law that are not fields here (by their Python name; a law added at run time).
+    Built by :func:`nurbsdem.dynamics.laws.interface.build_interface` for the deck and the
+    Python API alike.
 
     normal_penalty (N/m), tangential_penalty (N/m), normal_damping (N s/m),
     tangential_damping (N s/m), friction (Coulomb coefficient, -).
@@ -229,6 +233,7 @@ class Interface:
     line: int = 0
     model: str = "linear"
     restitution: float = 1.0
+    params: dict[str, float] = field(default_factory=dict)
 
     def applies(self, kind: str, materials: tuple[int, ...]) -> bool:
         """Whether this interface covers a pair of the given kind and material ids
@@ -240,6 +245,93 @@ class Interface:
         if len(self.materials) != len(materials):
             return False
         return sorted(self.materials) == sorted(materials)
+
+
+@dataclass(frozen=True)
+class MaterialPair:
+    """What a contact law may read of the two materials of an interface's pair, besides its
+    own keys (``from_interface`` of the laws in :mod:`nurbsdem.dynamics.laws`).
+
+    E_a, nu_a, E_b, nu_b: Young's moduli (Pa, ``inf``: rigid) and Poisson's ratios of the
+    particle material A and of B (a particle material, or a wall's); m_eff (kg), radius (m):
+    the reduced mass and the reduced bounding radius of the lightest particles of those
+    materials (``inf`` and 0 where the deck places none); speed (m/s): a reference impact speed
+    of the scene (:func:`material_pair`)."""
+
+    E_a: float
+    nu_a: float
+    E_b: float
+    nu_b: float
+    m_eff: float
+    radius: float
+    speed: float
+
+
+def material_pair(model: "Model", itf: Interface, law_name: str, mat_a: int, mat_b: int | None,
+                  wall_material: int | None = None) -> MaterialPair:
+    """The :class:`MaterialPair` of interface ``itf`` between particle materials mat_a and
+    mat_b (deck ids; mat_b None: a wall of material ``wall_material``, None: rigid).  The
+    reference speed is the largest of 1 m/s, the particles' initial speeds and the free-fall
+    speed over the scene's height.  A material without YoungModulus is an input error at the
+    interface's line (the laws that read the materials need it)."""
+    mats = model.materials
+
+    def elastic(mid: int) -> tuple[float, float]:
+        mat = mats[mid]
+        if mat.young_modulus is None:
+            raise model.error(f"Interface {itf.id} (Model {law_name}) needs YoungModulus on "
+                              f"Material {mat.id} (line {mat.line})", itf.line)
+        return float(mat.young_modulus), float(mat.poisson_ratio or 0.0)
+
+    E_a, nu_a = elastic(mat_a)
+    if mat_b is None:
+        E_b, nu_b = (math.inf, 0.0) if wall_material is None else elastic(wall_material)
+    else:
+        E_b, nu_b = elastic(mat_b)
+    light = _lightest(model)
+    m_a, r_a = light.get(mat_a, (math.inf, 0.0))
+    if mat_b is None:
+        m_eff, r = m_a, r_a
+    else:
+        m_b, r_b = light.get(mat_b, (math.inf, 0.0))
+        m_eff = m_a * m_b / (m_a + m_b) if math.isfinite(m_a + m_b) else min(m_a, m_b)
+        r = r_a * r_b / (r_a + r_b) if r_a + r_b > 0 else 0.0
+    return MaterialPair(E_a, nu_a, E_b, nu_b, m_eff, r, _reference_speed(model))
+
+
+def _lightest(model: "Model") -> dict[int, tuple[float, float]]:
+    """Per particle material id: (smallest mass kg, the bounding radius of that shape m)."""
+    out: dict[int, tuple[float, float]] = {}
+    pairs = [(s, g.material_id) for g in model.random_groups for s in g.shape_ids]
+    pairs += [(p.shape_id, p.material_id) for p in model.particles]
+    for sid, mid in pairs:
+        if sid not in model.shapes or mid not in model.materials:
+            continue
+        entry = model.shapes[sid]
+        m = entry.mass(model.materials[mid].density)
+        if m < out.get(mid, (math.inf, 0.0))[0]:
+            out[mid] = (m, float(entry.bounding_radius))
+    return out
+
+
+def _reference_speed(model: "Model") -> float:
+    """The largest of 1 m/s, the particles' initial speeds (centroid plus rotation at the
+    bounding radius) and the free-fall speed over the scene's height (m/s)."""
+    v = 1.0
+    for p in model.particles:
+        r = model.shapes[p.shape_id].bounding_radius if p.shape_id in model.shapes else 0.0
+        v = max(v, float(np.linalg.norm(p.velocity)) + float(np.linalg.norm(p.angular_velocity)) * r)
+    g = np.asarray(model.gravity, float)
+    gn = float(np.linalg.norm(g))
+    if gn > 0:
+        pts = [np.asarray(w.center, float) for w in model.walls]
+        pts += [np.asarray(gr.region_lo, float) for gr in model.random_groups]
+        pts += [np.asarray(gr.region_hi, float) for gr in model.random_groups]
+        pts += [np.asarray(p.position, float) for p in model.particles]
+        if len(pts) > 1:
+            h = np.asarray(pts) @ (g / gn)
+            v = max(v, math.sqrt(2.0 * gn * float(h.max() - h.min())))
+    return v
 
 
 @dataclass

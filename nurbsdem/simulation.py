@@ -47,9 +47,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import InputError
-from .model import (DAMPING_SCHEMES, PAIR_KINDS, Bodies, DynamicStep, Interface, Material, Model,
-                    MoveWallStep, Output, ParticleSpec, ReplicateStep, ShapeEntry, Step,
-                    WallSpec)
+from .model import (DAMPING_SCHEMES, Bodies, DynamicStep, Material, Model, MoveWallStep, Output,
+                    ParticleSpec, ReplicateStep, ShapeEntry, Step, WallSpec)
 
 #: ``Model.path`` of a scene built in Python (its errors carry no file location).
 PYTHON_SCENE = "<python>"
@@ -221,11 +220,13 @@ class Simulation:
         self.model.materials[mid] = Material(mid, rho, 0, E, nu)
         return mid
 
-    def add_interface(self, normal_penalty: float | None = None, tangential_penalty: float = 0.0,
-                      normal_damping: float = 0.0, tangential_damping: float = 0.0,
-                      friction: float = 0.0, between: str | None = None,
+    def add_interface(self, normal_penalty: float | None = None,
+                      tangential_penalty: float | None = None,
+                      normal_damping: float | None = None, tangential_damping: float | None = None,
+                      friction: float | None = None, between: str | None = None,
                       materials: Sequence[int] | None = None, id: int | None = None,
-                      model: str = "LinearPenalty", restitution: float | None = None) -> int:
+                      model: str = "LinearPenalty", restitution: float | None = None,
+                      **law_keys: float) -> int:
         """``Interface``: contact law of the pairs it covers.
 
         ``model="LinearPenalty"`` (paper Eqs. 16-17): normal_penalty, tangential_penalty (N/m),
@@ -233,8 +234,11 @@ class Simulation:
         (0 < e <= 1), the stiffness from the materials' young_modulus and poisson_ratio (walls:
         the ``material`` of add_box / add_wall, default rigid). Both: friction (Coulomb, -);
         between: ``None`` (all pairs), ``"particle-particle"`` or ``"particle-wall"``;
-        materials: ``(m1, m2)`` or ``(m,)`` as in the deck. Later interfaces override earlier
-        ones. Returns the id (default: the next free one).
+        materials: ``(m1, m2)`` or ``(m,)`` as in the deck; a law added at run time takes its
+        keys by their Python names (``law_keys``). Later interfaces override earlier ones.
+        The rules and messages are the deck's
+        (:func:`~nurbsdem.dynamics.laws.interface.build_interface`). Returns the id (default:
+        the next free one).
         """
         self._editable("add_interface")
         used = {i.id for i in self.model.interfaces}
@@ -242,61 +246,29 @@ class Simulation:
         if iid in used:
             raise InputError(f"add_interface: interface {iid} is already defined")
         what = f"interface {iid}"
-        kind = str(model).lower().replace("-", "").replace("_", "")
-        if kind not in ("linearpenalty", "linear", "hertzmindlin", "hertz"):
-            raise InputError(f"{what}: model must be 'LinearPenalty' or 'HertzMindlin', got "
-                             f"{model!r}")
-        hertz = kind.startswith("hertz")
-        if hertz:
-            given = [k for k, v in (("normal_penalty", normal_penalty),
-                                    ("tangential_penalty", tangential_penalty),
-                                    ("normal_damping", normal_damping),
-                                    ("tangential_damping", tangential_damping)) if v]
-            if given:
-                raise InputError(f"{what}: {given[0]} does not apply to a HertzMindlin interface "
-                                 f"(its stiffness and damping come from the materials and the "
-                                 f"restitution)")
-            if restitution is None:
-                raise InputError(f"{what}: a HertzMindlin interface needs restitution")
-            rest = self._number("Restitution", restitution, what)
-            if not 0.0 < rest <= 1.0:
-                raise InputError(f"{what}: restitution must lie in (0, 1], got {rest:g}")
-            vals = dict(normal_penalty=0.0, friction=self._number("Friction", friction, what,
-                                                                   nonnegative=True))
-        else:
-            if restitution is not None:
-                raise InputError(f"{what}: restitution applies to model='HertzMindlin' only")
-            if normal_penalty is None:
-                raise InputError(f"{what}: normal_penalty is missing")
-            vals = dict(normal_penalty=self._number("NormalPenalty", normal_penalty, what,
-                                                    positive=True))
-            for key, attr, val in (("TangentialPenalty", "tangential_penalty", tangential_penalty),
-                                   ("NormalDamping", "normal_damping", normal_damping),
-                                   ("TangentialDamping", "tangential_damping", tangential_damping),
-                                   ("Friction", "friction", friction)):
-                vals[attr] = self._number(key, val, what, nonnegative=True)
-        if between is not None:
-            if not isinstance(between, str) or between.lower() not in PAIR_KINDS:
-                raise InputError(f"{what}: between must be 'particle-particle' or "
-                                 f"'particle-wall', got {between!r}")
-            between = between.lower()
+        given = dict(normal_penalty=normal_penalty, tangential_penalty=tangential_penalty,
+                     normal_damping=normal_damping, tangential_damping=tangential_damping,
+                     friction=friction, restitution=restitution, **law_keys)
+        deck_key = {python_name(k.deck): k.deck for law in LAWS.values() for k in law.keys}
+        values = {}
+        for name, value in given.items():
+            if value is None:
+                continue
+            if name not in deck_key:
+                raise InputError(f"{what}: unknown key {name!r}")
+            values[deck_key[name]] = self._number(python_name(deck_key[name]), value, what)
+            self._range(deck_key[name], values[deck_key[name]], what)
+
+        def fail(message: str):
+            raise InputError(message)
         mats = None
         if materials is not None:
             mats = tuple(self._id(m, f"{what}: materials") for m in np.ravel(materials).tolist())
-            kind = {2: "particle-particle", 1: "particle-wall"}.get(len(mats))
-            if kind is None:
-                raise InputError(f"{what}: materials takes 2 ids (particle-particle) or 1 "
-                                 f"(particle-wall), got {len(mats)}")
-            if between is not None and between != kind:
-                raise InputError(f"{what}: materials with {len(mats)} id(s) means {kind} pairs, "
-                                 f"but between says {between}")
-            for m in mats:
-                if m not in self.model.materials:
-                    raise InputError(f"{what}: unknown material {m} (add_material first)")
-            between = kind
-        extra = {"model": "hertz", "restitution": rest} if hertz else {}
-        self.model.interfaces.append(Interface(iid, vals.pop("normal_penalty"), **vals,
-                                               between=between, materials=mats, **extra))
+        self.model.interfaces.append(build_interface(
+            iid, str(model), values, between, mats, Front(what, python_name, fail),
+            known_materials=self.model.materials))
+        from .dynamics.laws import LAWS
+        from .dynamics.laws.interface import Front, build_interface, python_name
         return iid
 
     def _shape_id(self, shape: Any) -> int:
@@ -632,16 +604,13 @@ class Simulation:
                              restart_check=self._restart_state, **self._solver_options)
 
     def _check_interfaces(self) -> None:
-        m = self.model
-        mats = sorted(m.particle_materials())
-        pairs = [("particle-particle", (a, b)) for i, a in enumerate(mats) for b in mats[i:]]
-        if m.walls:
-            pairs += [("particle-wall", (a,)) for a in mats]
-        for kind, mm in pairs:
-            if m.interface(kind, mm) is None:
-                raise InputError(f"no contact interface covers {kind} pairs of material"
-                                 f"{'s' if len(mm) > 1 else ''} {' and '.join(map(str, mm))}: "
-                                 f"add_interface(...) for them")
+        """The deck's check (:func:`~nurbsdem.dynamics.laws.interface.check_coverage`)."""
+        from .dynamics.laws.interface import check_coverage, python_name
+
+        def fail(message: str, line: int | None):
+            raise InputError(message)
+        check_coverage(self.model, fail, lambda material: None, python_name,
+                       ": add_interface(...) for them")
 
     # ------------------------------------------------------------------ restart
     def _restart_state(self, path: Path) -> dict:

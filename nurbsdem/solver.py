@@ -33,9 +33,9 @@ import numpy as np
 
 from . import __version__
 from .contact.scene import SceneContacts
-from .dynamics import ContactLaw, DemSystem, InterfaceTable, PrescribedMotion
+from .dynamics import DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.energy import EnergySample
-from .dynamics.hertz import law_from_deck as hertz_law_from_deck
+from .dynamics.laws import law_named
 from .dynamics.monitor import MonitorSample, StateSample
 from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import SPLIT_PARTS, InstabilityError
@@ -44,7 +44,7 @@ from .geometry.rotation import quat_to_matrix
 from .io.checkpoint import save_checkpoint
 from .io.writers import OutputWriters
 from .jit import launch_threads
-from .model import Bodies, DynamicStep, Model, MoveWallStep, ReplicateStep
+from .model import Bodies, DynamicStep, Model, MoveWallStep, ReplicateStep, material_pair
 from .placement import replicate_step
 
 log = logging.getLogger("nurbsdem")
@@ -249,12 +249,11 @@ class Solver:
         table = InterfaceTable(default=None)
         mats = sorted(self.mat_index)
 
-        def law(itf, ma, mb=None, wall=None):
-            if itf.model == "hertz":     # Hertz–Mindlin (mb None: a wall of material `wall`)
-                return hertz_law_from_deck(self.model, itf, ma, mb, wall)
-            return ContactLaw(en=itf.normal_penalty, cn=itf.normal_damping,
-                              et=itf.tangential_penalty, ct=itf.tangential_damping,
-                              mu=itf.friction)
+        def law(itf, ma, mb=None, wall=None):    # mb None: a wall of material `wall`
+            kind = law_named(itf.model)
+            pair = (material_pair(self.model, itf, kind.name, ma, mb, wall)
+                    if kind.uses_materials else None)
+            return kind.from_interface(itf, pair)
         for i, ma in enumerate(mats):
             for mb in mats[i:]:
                 itf = self.model.interface("particle-particle", (ma, mb))

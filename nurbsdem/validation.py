@@ -50,10 +50,10 @@ def pair_penetration(shape_a: "Shape", pos_a, R_a, shape_b: "Shape", pos_b, R_b)
 
     pos_*: centroids in the world (m); R_*: (3, 3) file-to-world rotations. Bounding
     spheres first; coincident centroids give ``inf``; otherwise the exact LCP, and the
-    surface-sample test of :func:`nurbsdem.placement.bodies_overlap` when the LCP fails.
+    surface-sample test of :func:`nurbsdem.geometry.overlap.bodies_overlap` when the LCP fails.
     """
     from .contact import detect
-    from .placement import bodies_overlap
+    from .geometry.overlap import bodies_overlap
 
     ra, rb = float(shape_a.bounding_radius), float(shape_b.bounding_radius)
     d = float(np.linalg.norm(np.asarray(pos_a, float) - np.asarray(pos_b, float)))

@@ -13,8 +13,9 @@ from scipy.special import ellipe, ellipk
 from nurbsdem import shapes
 from nurbsdem.contact.scene import SceneContacts
 from nurbsdem.dynamics import DemSystem, InterfaceTable
-from nurbsdem.dynamics.hertz import (HertzMindlinLaw, damping_ratio, effective_moduli,
-                                     hertz_impact, reference_linearisation)
+from nurbsdem.dynamics.laws.hertz_mindlin import (HertzMindlin as HertzMindlinLaw, damping_ratio,
+                                                  effective_moduli, hertz_impact,
+                                                  reference_linearisation)
 from nurbsdem.dynamics.rigid import omega_world
 from nurbsdem.geometry.curvature import hertz_radius, principal_curvatures
 from nurbsdem.geometry.generators import flat_wall
@@ -150,7 +151,7 @@ def test_restitution_map_is_velocity_independent_and_beats_the_linear_formula():
     assert out[0] == pytest.approx(out[1], rel=2e-3)
     assert out[0] == pytest.approx(0.6, rel=1e-2)
     # the linear oscillator's mapping (LIGGGHTS/EDEM) would miss it by far more
-    from nurbsdem.dynamics.hertz import _impact_restitution, linear_beta_zeta
+    from nurbsdem.dynamics.laws.hertz_mindlin import _impact_restitution, linear_beta_zeta
     assert abs(_impact_restitution(linear_beta_zeta(0.6)) - 0.6) > 0.02
 
 

@@ -8,7 +8,7 @@ import meshio
 import numpy as np
 import pytest
 
-from nurbsdem.dynamics.hertz import HertzMindlinLaw, effective_moduli
+from nurbsdem.dynamics.laws.hertz_mindlin import HertzMindlin as HertzMindlinLaw, effective_moduli
 from nurbsdem.errors import InputError
 from nurbsdem.io.deck import parse_deck
 from nurbsdem.solver import Solver

@@ -119,7 +119,7 @@ def test_contact_laws_on_threads_have_the_bits_of_one_thread(scene, threads, mod
     """Linear (Eq. 16-17) and Hertz-Mindlin rows, sliding and sticking contacts: the laws on
     threads, the loads added in contact order."""
     from nurbsdem.dynamics.forces import ContactLaw, InterfaceTable
-    from nurbsdem.dynamics.hertz import HertzMindlinLaw
+    from nurbsdem.dynamics.laws.hertz_mindlin import HertzMindlin as HertzMindlinLaw
     s, rng = scene, scene["rng"]
     B = N + W
     pos = np.concatenate((s["x"], s["wall_d"]))

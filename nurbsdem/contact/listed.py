@@ -41,6 +41,8 @@ from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch
 from .broadphase import (ALL_PAIRS_MAX, sphere_pairs_jit, sphere_pairs_of,
                          sphere_wall_pairs_jit)
 from .detect import solve_rows
+from .kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, POINT_SURFACE, SPHERE,
+                    WALL_SUPPORT, pair_solver)
 from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
 from .verlet import merge_find
@@ -313,22 +315,18 @@ def _solve_retried_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows
 
 @njit(cache=True)
 def _kinds(st, a, b):
-    """Per due pair: 0 closed form, 1 sphere against NURBS (point solver), 2 LCP, 3 NURBS
-    against a flat wall."""
+    """Per due pair: its pair solver (:mod:`nurbsdem.contact.kinds`: CLOSED_FORM,
+    POINT_SURFACE, LCP, WALL_SUPPORT) from the kinds of its bodies (body a is a particle,
+    body b a particle or a flat wall)."""
     N = st.n
     kind = np.empty(a.shape[0], np.int64)
     for r in range(a.shape[0]):
-        wall = b[r] >= N
-        sph_a = st.is_sphere[a[r]]
-        sph_b = (not wall) and st.is_sphere[b[r]]
-        if sph_a and (wall or sph_b):
-            kind[r] = 0
-        elif wall:
-            kind[r] = 3
-        elif st.point_surface and sph_a != sph_b:
-            kind[r] = 1
+        ka = SPHERE if st.is_sphere[a[r]] else NURBS_PARTICLE
+        if b[r] >= N:
+            kb = FLAT_WALL
         else:
-            kind[r] = 2
+            kb = SPHERE if st.is_sphere[b[r]] else NURBS_PARTICLE
+        kind[r] = pair_solver(ka, kb, st.point_surface)
     return kind
 
 
@@ -390,10 +388,10 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
     a = list_a[due]
     b = list_b[due]
     kind = _kinds(st, a, b)
-    closed_form_into(rows_f, rows_i, due[kind == 0], list_a, list_b, st.n, pos, R, wall_d,
+    closed_form_into(rows_f, rows_i, due[kind == CLOSED_FORM], list_a, list_b, st.n, pos, R, wall_d,
                      st.body_shape, st.sphere_center, st.sphere_radius, st.wall_origin,
                      st.wall_a, st.wall_b, st.wall_dom)
-    mixed = np.nonzero(kind == 1)[0]
+    mixed = np.nonzero(kind == POINT_SURFACE)[0]
     point_solved = 0
     if mixed.shape[0]:
         rows = due[mixed]
@@ -407,12 +405,12 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
                 rows_i[j] = i[k]
                 point_solved += 1
             else:
-                kind[mixed[k]] = 2
+                kind[mixed[k]] = LCP
                 # a row of the point solver cannot warm-start the LCP (no sphere patch)
                 if rows_i[j, I_STAGE] == STAGE_POINT:
                     rows_i[j, I_VALID] = 0
-    for walls in (False, True):          # NURBS pairs (kind 2), then NURBS–wall pairs (3)
-        part = due[kind == (3 if walls else 2)]
+    for walls in (False, True):          # NURBS pairs (LCP), then NURBS–wall pairs
+        part = due[kind == (WALL_SUPPORT if walls else LCP)]
         if part.shape[0]:
             _solve_retried_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f,
                                 rows_i, part, nt, walls)

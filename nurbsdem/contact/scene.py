@@ -73,7 +73,7 @@ from typing import Sequence
 import numba
 import numpy as np
 
-from ..dynamics.contactset import ContactSet
+from .contactset import ContactSet
 from ..geometry.analytic import exact_sphere
 from .boxes import pack_boxes
 from .broadphase import wall_geometry

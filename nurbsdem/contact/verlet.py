@@ -415,7 +415,7 @@ def near_arrays(rows_f: np.ndarray, a: np.ndarray, b: np.ndarray, near: np.ndarr
 @njit(cache=True)
 def contact_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
                    keys: np.ndarray, budget: np.ndarray, reach: np.ndarray):
-    """The arrays of a :class:`~nurbsdem.dynamics.contactset.ContactSet` from the listed
+    """The arrays of a :class:`~nurbsdem.contact.contactset.ContactSet` from the listed
     pairs' rows (:func:`active_and_near`): per active contact body_a, body_b, point_a,
     point_b (m), normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a,
     patch_b (:func:`active_arrays`); per separated pair near_a, near_b, near_point (midpoint

@@ -3,7 +3,7 @@ energy accounting and time-step control.  See :mod:`nurbsdem.dynamics.system` fo
 from __future__ import annotations
 
 from .analytic_contact import SpherePlaneProvider, sphere_inertia
-from .contactset import ContactSet
+from ..contact.contactset import ContactSet
 from .energy import EnergyLedger, EnergySample
 from .forces import ContactLaw, InterfaceTable
 from .rigid import PrescribedMotion, RigidBodies, Walls, principal_frame

@@ -1,6 +1,6 @@
 """Analytic contact providers (spheres and planes) to verify the dynamics without NURBS.
 
-:class:`SpherePlaneProvider` returns a :class:`~nurbsdem.dynamics.contactset.ContactSet`
+:class:`SpherePlaneProvider` returns a :class:`~nurbsdem.contact.contactset.ContactSet`
 for spheres of given radii (centred on the particle centroids) and half-space walls (a plane
 through ``point`` with unit normal ``normal`` pointing into the domain, translated by the wall's
 prescribed displacement).  Pair convention: sphere–sphere i < j gives body_a = i, body_b = j;
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .contactset import ContactSet
+from ..contact.contactset import ContactSet
 
 
 class SpherePlaneProvider:

@@ -70,13 +70,16 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
 from .forces import add_kick_work, contact_loads, match_history
+from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
 from .monitor import record_row, row_width
 from .rigid import body_poses, omega_world
-from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
+from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
+                          NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
+                          alternation_update, body_speeds, contact_network,
                           critical_step_from_rates, needed_substeps, network_count_stands,
                           network_gershgorin, network_rates_scaled, periodic_recheck)
 
@@ -544,11 +547,13 @@ class DeckSteps:
     def for_system(system) -> "DeckSteps | None":
         """The compiled stepper when the provider is a scene on one rank that has been called
         once (any contact law: the Hertz radii of NURBS contacts come from the curvature
-        kernel the Python path calls, :func:`_hertz_radii`); else None."""
+        kernel the Python path calls, :func:`_hertz_radii`) whose laws are all built in
+        (:func:`~nurbsdem.dynamics.laws.builtin_only`); else None."""
         from ..contact.scene import SceneContacts
         scene = system.provider
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
-                or scene.prev_pose is None or scene.built_pose is None):
+                or scene.prev_pose is None or scene.built_pose is None
+                or not builtin_only(system._table)):    # a law registered at run time
             return None
         return DeckSteps(system, scene)
 
@@ -591,8 +596,6 @@ class DeckSteps:
                           np.ascontiguousarray(cs.degenerated, np.int64))
 
     def _control(self) -> Control:
-        from .system import (FALL_HYSTERESIS, HEAVY_SUBSTEPS, NETWORK_BOUND_SLACK,
-                             NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS)
         s = self.system
         heavy = np.iinfo(np.int64).max if s._warned_heavy else HEAVY_SUBSTEPS
         return Control(s.dt, REFINE_DECAY_STEPS, s.safety, s.dt_apriori,

@@ -1,6 +1,6 @@
 """Penalty contact forces (paper Eq. 16–17) over the K contacts of a ContactSet.
 
-Conventions (DEVNOTES): ``normal`` n is the unit normal from body A towards body B, ``depth``
+Conventions (docs/conventions.md): ``normal`` n is the unit normal from A towards B, ``depth``
 d >= 0 the penetration.  The force acts at the contact point ``p = (point_a + point_b) / 2`` (the
 midpoint of the two surface points: symmetric in A and B, and the points differ by only d·n).
 ``F`` below is the force on **B**; A receives ``-F``.  Torques are about each centroid (Eq. 16
@@ -37,93 +37,28 @@ contact ends with a loaded spring, and adds no error of its own to the energy ba
 History is keyed by ``ContactSet.key``: a new contact starts with s = 0, a contact absent from
 the set drops its history (:func:`match_history`).
 
-Contact laws are per interface: a dense table ``law[mat_a, mat_b] = (εn, cn, εt, ct, μ, model,
-E*, G*, ζ)`` (see :class:`InterfaceTable`; model 0 = this linear law, 1 = Hertz–Mindlin of
-:mod:`nurbsdem.dynamics.hertz`, whose εn..ct columns hold its reference linearisation).
+Contact laws are per interface: a dense table with one row per pair of materials
+(:mod:`nurbsdem.dynamics.laws.table`); the kernel dispatches on the row's law
+(:mod:`nurbsdem.dynamics.laws`: the linear penalty law above, Hertz–Mindlin) for the normal
+force, the stiffnesses and the normal elastic energy, and applies the common tangential part.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
 
-from ..errors import InputError
 from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
+from .laws import law_normal, law_spring_scale
+from .laws.linear_penalty import LinearPenalty
+from .laws.table import MU, InterfaceTable
 
-#: column indices of the interface table
-EN, CN, ET, CT, MU = 0, 1, 2, 3, 4
-#: Hertz–Mindlin columns (:mod:`nurbsdem.dynamics.hertz`): model id, E* (Pa), G* (Pa), ζ (-)
-MODEL, ESTAR, GSTAR, ZETA = 5, 6, 7, 8
-#: values of the MODEL column
-LINEAR, HERTZ = 0, 1
-#: number of columns
-NCOL = 9
+#: the linear penalty law (:class:`~nurbsdem.dynamics.laws.linear_penalty.LinearPenalty`)
+ContactLaw = LinearPenalty
 
-
-@dataclass(frozen=True)
-class ContactLaw:
-    """Penalty law of one interface (paper Eq. 16–17; the example: 1e5, 1e2, 1e4, 0, 0.5).
-
-    en: normal penalty εn (N/m); cn: normal damping (N s/m); et: tangential penalty εt (N/m);
-    ct: tangential damping (N s/m); mu: Coulomb friction coefficient (-).
-    """
-
-    en: float
-    cn: float = 0.0
-    et: float = 0.0
-    ct: float = 0.0
-    mu: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("en", "cn", "et", "ct", "mu"):
-            val = getattr(self, name)
-            if not (math.isfinite(val) and val >= 0):
-                raise InputError(f"contact law: {name} must be finite and >= 0, got {val}")
-        if self.en <= 0:
-            raise InputError(f"contact law: normal penalty en must be > 0, got {self.en}")
-
-    def as_row(self) -> np.ndarray:
-        row = np.zeros(NCOL)
-        row[:5] = self.en, self.cn, self.et, self.ct, self.mu
-        return row
-
-
-class InterfaceTable:
-    """Contact laws per pair of material ids (symmetric), a small dense table ``(M, M, NCOL)``.
-
-    A law is a :class:`ContactLaw` or a :class:`~nurbsdem.dynamics.hertz.HertzMindlinLaw`.
-
-    ``table.set(0, 1, law)`` sets the interface between materials 0 and 1 (both orders);
-    ``table.default`` is used for pairs never set (None: such a pair is an input error).
-    """
-
-    def __init__(self, default: ContactLaw | None = None) -> None:
-        self.default = default
-        self.laws: dict[tuple[int, int], ContactLaw] = {}
-
-    def set(self, mat_a: int, mat_b: int, law: ContactLaw) -> None:
-        self.laws[(min(mat_a, mat_b), max(mat_a, mat_b))] = law
-
-    def get(self, mat_a: int, mat_b: int) -> ContactLaw:
-        key = (min(mat_a, mat_b), max(mat_a, mat_b))
-        if key in self.laws:
-            return self.laws[key]
-        if self.default is None:
-            raise InputError(f"no contact interface defined between materials {mat_a} and {mat_b}")
-        return self.default
-
-    def as_array(self, n_materials: int) -> np.ndarray:
-        """Dense (M, M, NCOL) float table; rows for undefined pairs are NaN (and raise on use)."""
-        tab = np.full((n_materials, n_materials, NCOL), np.nan)
-        for i in range(n_materials):
-            for j in range(n_materials):
-                key = (min(i, j), max(i, j))
-                law = self.laws.get(key, self.default)
-                if law is not None:
-                    tab[i, j] = law.as_row()
-        return tab
+__all__ = ["ContactLaw", "InterfaceTable", "contact_forces", "contact_loads", "match_history",
+           "store_history", "kick_work_terms", "add_kick_work", "wall_loads"]
 
 
 @njit(cache=True)
@@ -180,6 +115,44 @@ def _cross(a0, a1, a2, b0, b1, b2):
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
+@njit(cache=True, inline="always")
+def _contact_start(c, body_a, body_b, point_a, point_b, normal, pos, vel, omg, point):
+    """The kinematics of contact c: its point p (written to point[c]), its normal n and the
+    relative velocity w of B with respect to A at p (module docstring).  Returns (n, w, n·w)
+    as scalars."""
+    a = body_a[c]
+    b = body_b[c]
+    n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
+    p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
+    p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
+    p2 = 0.5 * (point_a[c, 2] + point_b[c, 2])
+    point[c, 0], point[c, 1], point[c, 2] = p0, p1, p2
+    ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
+    rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
+    wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
+    wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
+    w0 = vel[b, 0] + wb0 - vel[a, 0] - wa0
+    w1 = vel[b, 1] + wb1 - vel[a, 1] - wa1
+    w2 = vel[b, 2] + wb2 - vel[a, 2] - wa2
+    wn = w0 * n0 + w1 * n1 + w2 * n2
+    return n0, n1, n2, w0, w1, w2, wn
+
+
+@njit(cache=True, inline="always")
+def _rotated_spring(spring, c, n0, n1, n2):
+    """Step 1 of the tangential force: the stored spring of contact c rotated into the
+    current tangent plane, keeping its length."""
+    s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
+    smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    sn = s0 * n0 + s1 * n1 + s2 * n2
+    s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
+    spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    if spm > 0.0:
+        sc = smag / spm
+        s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
+    return s0, s1, s2
+
+
 @njit(cache=True)
 def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
                         material, table, spring, h, inv_mass, radius, point, f_total, f_damp_n,
@@ -187,94 +160,68 @@ def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, ve
                         slip_out, lo: int, hi: int) -> None:
     """The contact laws of contacts lo .. hi-1 (:func:`contact_forces`): their per-contact
     outputs, springs and slip-work estimates slip_out (J, 0 where they stick).  Reads the
-    bodies, writes those rows only."""
+    bodies, writes those rows only.  Per contact: the kinematics (:func:`_contact_start`), the
+    law of its row (:func:`~nurbsdem.dynamics.laws.law_normal`,
+    :func:`~nurbsdem.dynamics.laws.law_spring_scale`), then the part common to all laws: the
+    clip, the spring, the Coulomb return mapping and the results."""
     for c in range(lo, hi):
         a = body_a[c]
         b = body_b[c]
         ma, mb = material[a], material[b]     # the law table[ma, mb] read in place (no view)
-        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
-        p0 = 0.5 * (point_a[c, 0] + point_b[c, 0])
-        p1 = 0.5 * (point_a[c, 1] + point_b[c, 1])
-        p2 = 0.5 * (point_a[c, 2] + point_b[c, 2])
-        point[c, 0], point[c, 1], point[c, 2] = p0, p1, p2
-        ra0, ra1, ra2 = p0 - pos[a, 0], p1 - pos[a, 1], p2 - pos[a, 2]
-        rb0, rb1, rb2 = p0 - pos[b, 0], p1 - pos[b, 1], p2 - pos[b, 2]
-        wa0, wa1, wa2 = _cross(omg[a, 0], omg[a, 1], omg[a, 2], ra0, ra1, ra2)
-        wb0, wb1, wb2 = _cross(omg[b, 0], omg[b, 1], omg[b, 2], rb0, rb1, rb2)
-        w0 = vel[b, 0] + wb0 - vel[a, 0] - wa0
-        w1 = vel[b, 1] + wb1 - vel[a, 1] - wa1
-        w2 = vel[b, 2] + wb2 - vel[a, 2] - wa2
-        wn = w0 * n0 + w1 * n1 + w2 * n2
+        n0, n1, n2, w0, w1, w2, wn = _contact_start(c, body_a, body_b, point_a, point_b,
+                                                    normal, pos, vel, omg, point)
         d = depth[c]
         ddot = -wn
-        mu = table[ma, mb, MU]
-        aa = 0.0
-        dp = 0.0
-        if table[ma, mb, MODEL] == HERTZ:
-            dp = d if d > 0.0 else 0.0
-            aa = math.sqrt(radius[c] * dp)
-            knt = 2.0 * table[ma, mb, ESTAR] * aa
-            et = 8.0 * table[ma, mb, GSTAR] * aa
-            imass = inv_mass[a] + inv_mass[b]
-            meff = 1.0 / imass if imass > 0.0 else 0.0
-            cn = 2.0 * table[ma, mb, ZETA] * math.sqrt(knt * meff)
-            ct = 2.0 * table[ma, mb, ZETA] * math.sqrt(et * meff)
-            fel = (2.0 / 3.0) * knt * dp          # (4/3) E* √R δ^{3/2}
-            eel_n = 0.4 * fel * dp
-            coeffs[c, 0] = knt
-        else:
-            en, cn = table[ma, mb, EN], table[ma, mb, CN]
-            et, ct = table[ma, mb, ET], table[ma, mb, CT]
-            fel = en * d
-            eel_n = 0.5 * en * d * d
-            coeffs[c, 0] = en
-        coeffs[c, 1], coeffs[c, 2], coeffs[c, 3] = cn, et, ct
+        kn, cn, et, ct, fel, eel_n = law_normal(table, ma, mb, d, radius[c],
+                                                inv_mass[a] + inv_mass[b])
+        coeffs[c, 0], coeffs[c, 1], coeffs[c, 2], coeffs[c, 3] = kn, cn, et, ct
         fn = fel + (dashpot[c] if dashpot_given else cn * ddot)
         if fn < 0.0:
             fn = 0.0
-        fdn = fn - fel
-        s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
-        smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        sn = s0 * n0 + s1 * n1 + s2 * n2
-        s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
-        spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        if spm > 0.0:
-            sc = smag / spm
-            s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
-        if table[ma, mb, MODEL] == HERTZ and ddot > 0.0 and aa > 0.0:
-            # loading: the force so far keeps its value, the increment takes the new stiffness
-            # (k_t,old s = k_t,new s'); unloading keeps s, so the force falls with k_t
-            d_old = dp - h * ddot
-            sc = math.sqrt(radius[c] * d_old) / aa if d_old > 0.0 else 0.0
+        s0, s1, s2 = _rotated_spring(spring, c, n0, n1, n2)
+        scaled, sc = law_spring_scale(table, ma, mb, d, ddot, h, radius[c])
+        if scaled:
             s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
         wt0, wt1, wt2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
         s0, s1, s2 = s0 + h * wt0, s1 + h * wt1, s2 + h * wt2
-        fe0, fe1, fe2 = -et * s0, -et * s1, -et * s2
-        fd0, fd1, fd2 = -ct * wt0, -ct * wt1, -ct * wt2
-        ft0, ft1, ft2 = fe0 + fd0, fe1 + fd1, fe2 + fd2
-        ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
-        flim = mu * fn
-        stick[c] = 1
-        slip = 0.0
-        if ftm > flim:
-            stick[c] = 0
-            alpha = flim / ftm if ftm > 0.0 else 0.0
-            smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-            slip = et * alpha * smag2 * (1.0 - alpha) * smag2
-            s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
-            fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
-            fe0, fe1, fe2 = alpha * fe0, alpha * fe1, alpha * fe2
-            ft0, ft1, ft2 = alpha * ft0, alpha * ft1, alpha * ft2
-        spring[c, 0], spring[c, 1], spring[c, 2] = s0, s1, s2
-        F0, F1, F2 = fn * n0 + ft0, fn * n1 + ft1, fn * n2 + ft2
-        f_total[c, 0], f_total[c, 1], f_total[c, 2] = F0, F1, F2
-        f_damp_n[c, 0], f_damp_n[c, 1], f_damp_n[c, 2] = fdn * n0, fdn * n1, fdn * n2
-        f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
-        f_el_t[c, 0], f_el_t[c, 1], f_el_t[c, 2] = fe0, fe1, fe2
-        fn_out[c] = fn
-        e_el[c, 0] = eel_n
-        e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
-        slip_out[c] = slip
+        _tangential_result(c, table[ma, mb, MU], fn, fn - fel, eel_n, et, ct, n0, n1, n2,
+                           s0, s1, s2, wt0, wt1, wt2, spring, f_total, f_damp_n, f_damp_t,
+                           f_el_t, fn_out, e_el, stick, slip_out)
+
+
+@njit(cache=True, inline="always")
+def _tangential_result(c, mu, fn, fdn, eel_n, et, ct, n0, n1, n2, s0, s1, s2, wt0, wt1, wt2,
+                       spring, f_total, f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick,
+                       slip_out):
+    """Steps 2–3 of the tangential force of contact c (trial force of the incremented spring
+    s and the dashpot, Coulomb return mapping) and its results: the new spring, the total,
+    normal-dissipative, tangential-dissipative and tangential-elastic forces on B, f_n, the
+    elastic energies (the normal one ``eel_n`` from the law), stick and the slip work."""
+    fe0, fe1, fe2 = -et * s0, -et * s1, -et * s2
+    fd0, fd1, fd2 = -ct * wt0, -ct * wt1, -ct * wt2
+    ft0, ft1, ft2 = fe0 + fd0, fe1 + fd1, fe2 + fd2
+    ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
+    flim = mu * fn
+    stick[c] = 1
+    slip = 0.0
+    if ftm > flim:
+        stick[c] = 0
+        alpha = flim / ftm if ftm > 0.0 else 0.0
+        smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        slip = et * alpha * smag2 * (1.0 - alpha) * smag2
+        s0, s1, s2 = alpha * s0, alpha * s1, alpha * s2
+        fd0, fd1, fd2 = alpha * fd0, alpha * fd1, alpha * fd2
+        fe0, fe1, fe2 = alpha * fe0, alpha * fe1, alpha * fe2
+        ft0, ft1, ft2 = alpha * ft0, alpha * ft1, alpha * ft2
+    spring[c, 0], spring[c, 1], spring[c, 2] = s0, s1, s2
+    f_total[c, 0], f_total[c, 1], f_total[c, 2] = fn * n0 + ft0, fn * n1 + ft1, fn * n2 + ft2
+    f_damp_n[c, 0], f_damp_n[c, 1], f_damp_n[c, 2] = fdn * n0, fdn * n1, fdn * n2
+    f_damp_t[c, 0], f_damp_t[c, 1], f_damp_t[c, 2] = fd0, fd1, fd2
+    f_el_t[c, 0], f_el_t[c, 1], f_el_t[c, 2] = fe0, fe1, fe2
+    fn_out[c] = fn
+    e_el[c, 0] = eel_n
+    e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
+    slip_out[c] = slip
 
 
 @njit(cache=True)
@@ -328,14 +275,14 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
                       f_damp_t, f_el_t, fn_out, e_el, stick, coeffs, dashpot_given,
                       dashpot) -> float:
     """Evaluate the contact law of each of K contacts and accumulate loads on the bodies:
-    Eq. 16–17 (module docstring) for linear rows of the table (MODEL 0), Hertz–Mindlin
-    (:mod:`nurbsdem.dynamics.hertz`) for MODEL 1 rows.
+    each row's law (:mod:`nurbsdem.dynamics.laws`: Eq. 16–17 of the module docstring for the
+    linear penalty law, Hertz–Mindlin).
 
     Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
-    angular velocity; material (B,) ids; table (M,M,9); spring (K,3) history from the previous
+    angular velocity; material (B,) ids; table (M,M,NCOL); spring (K,3) history from the previous
     evaluation (updated **in place** to the new spring); h (s) the time since that evaluation
     (0 for the initial evaluation: no spring increment); inv_mass (B,) 1/kg (walls 0) and radius
-    (K,) the equivalent contact radius (m), both used by Hertz rows only.
+    (K,) the equivalent contact radius (m), both used by the laws that need them (Hertz).
 
     Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
     f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts

@@ -61,6 +61,18 @@ ALTERNATION_RATIO = 0.9
 #: that ends it earlier
 LANCZOS_STEPS = 30
 LANCZOS_RTOL = 1e-4
+#: quiet deck steps after which a refinement of the step (period-2 or energy guard) is halved
+REFINE_DECAY_STEPS = 200
+#: from this many sub-steps per deck step on, a warning says what limits the step
+HEAVY_SUBSTEPS = 20
+#: deck steps between exact (Lanczos) network estimates when the Gershgorin bound calls for no
+#: more sub-steps (a fall of the count is noticed at these steps)
+NETWORK_RECHECK_STEPS = 20
+#: the exact estimate is repeated when the Gershgorin bound of the network's critical step has
+#: fallen by more than this fraction since the last exact estimate
+NETWORK_BOUND_SLACK = 0.05
+#: the sub-step count falls only when the need is below this fraction of the current count
+FALL_HYSTERESIS = 0.8
 
 
 def critical_step(k: float, c: float, m: float) -> tuple[float, float, float]:

@@ -77,18 +77,20 @@ from ..geometry.rotation import matrix_to_quat
 from ..jit import launch_threads
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import EnergyLedger, EnergySample, balance_terms, energy_terms
-from .forces import InterfaceTable, add_kick_work, contact_loads, match_history, store_history
-from .hertz import has_hertz
-from .implicit import dashpots_of_evaluation
+from .forces import InterfaceTable, add_kick_work, match_history, store_history
+from .laws import needs_contact_radius
+from .laws.engine import engine_kernels
+from .laws.table import CN, CT, EN, ET
 from .integrator import drift, kick_with_terms, state_is_finite
 from .monitor import MonitorSample, StateSample, contact_output_of, energy_sample
 from .rigid import PrescribedMotion, RigidBodies, Walls, body_poses, omega_world
 from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, REFINE,
                          DeckSteps)
-from .stepcontrol import (ALTERNATION_STEPS, alternation_update, body_speeds, contact_network,
-                          critical_step, critical_step_from_rates, needed_substeps,
-                          network_count_stands, network_gershgorin, network_rates,
-                          periodic_recheck)
+from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
+                          NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
+                          alternation_update, body_speeds, contact_network, critical_step,
+                          critical_step_from_rates, needed_substeps, network_count_stands,
+                          network_gershgorin, network_rates, periodic_recheck)
 
 log = logging.getLogger("nurbsdem")
 
@@ -176,18 +178,6 @@ _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs
 #: in place (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`)
 _LOOP_IN_PLACE = ("wall_work", "alt_count", "alt_prev_v", "alt_prev_L")
 
-#: quiet deck steps after which a refinement of the step (period-2 or energy guard) is halved
-REFINE_DECAY_STEPS = 200
-#: from this many sub-steps per deck step on, a warning says what limits the step
-HEAVY_SUBSTEPS = 20
-#: deck steps between exact (Lanczos) network estimates when the Gershgorin bound calls for no
-#: more sub-steps (a fall of the count is noticed at these steps)
-NETWORK_RECHECK_STEPS = 20
-#: the exact estimate is repeated when the Gershgorin bound of the network's critical step has
-#: fallen by more than this fraction since the last exact estimate
-NETWORK_BOUND_SLACK = 0.05
-#: the sub-step count falls only when the need is below this fraction of the current count
-FALL_HYSTERESIS = 0.8
 
 
 @dataclass(frozen=True)
@@ -396,8 +386,10 @@ class DemSystem:
                 law = self.interfaces.get(ma, mb)
             except InputError:
                 continue          # undefined interface: an error if such a contact ever occurs
-            cn = 0.0 if self.implicit_damping else law.cn
-            for mode, k, c, m in (("normal", law.en, cn, mn), ("tangential", law.et, law.ct, mtn)):
+            row = law.as_row()      # its EN..CT columns: the law's linearisation
+            cn = 0.0 if self.implicit_damping else float(row[CN])
+            for mode, k, c, m in (("normal", float(row[EN]), cn, mn),
+                                  ("tangential", float(row[ET]), float(row[CT]), mtn)):
                 if not math.isfinite(m):
                     continue
                 w, z, dtc = critical_step(k, c, m)
@@ -586,6 +578,8 @@ class DemSystem:
         self._sq_m, self._sq_I = np.sqrt(b.mass), np.sqrt(b.I)
         nm = 1 + int(max(np.max(b.material, initial=0), np.max(self.walls.material, initial=0)))
         self._table = self.interfaces.as_array(nm)
+        #: the force kernels of the table's laws (:func:`~nurbsdem.dynamics.laws.engine.engine_kernels`)
+        self._kernels = engine_kernels(self._table)
         self._mat_all = np.concatenate([b.material, self.walls.material]).astype(np.int64)
         ell = np.where(b.radius > 0, b.radius, np.sqrt(b.I.sum(axis=1) / (2 * b.mass)))
         self._ell = ell
@@ -655,7 +649,7 @@ class DemSystem:
         pos, vel, omg = self._all_kinematics()
         if self.__dict__.get("_inv_mass_all") is None:
             self._inv_mass_all = np.concatenate([self._inv_mass, np.zeros(self.walls.n)])
-        if self.uses_hertz:   # Hertz–Mindlin (nurbsdem.dynamics.hertz): the exact curvature radii
+        if self.uses_hertz:   # a law that needs the contacts' exact curvature radii (Hertz)
             from ..geometry.curvature import contact_radii_for
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:
@@ -664,9 +658,9 @@ class DemSystem:
         dashpot = (self._implicit_dashpots(law, spring, h)
                    if self.implicit_damping and h > 0.0 and K else None)
         (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
-         self.last_slip_work) = contact_loads(*law, spring, h, self._inv_mass_all, self.c_radius,
-                                              b.mass, self.gravity, dashpot is not None,
-                                              np.zeros(0) if dashpot is None else dashpot)
+         self.last_slip_work) = self._kernels.contact_loads(
+             *law, spring, h, self._inv_mass_all, self.c_radius, b.mass, self.gravity,
+             dashpot is not None, np.zeros(0) if dashpot is None else dashpot)
         self.hist_keys, self.hist_springs = store_history(key, spring)
         if self.domain is not None:          # the owners' loads of this rank's ghosts
             self.domain.exchange_loads(force, torque)
@@ -682,7 +676,7 @@ class DemSystem:
         (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`)."""
         b = self.bodies
         t0 = time.perf_counter()
-        f, rounds, iterations = dashpots_of_evaluation(
+        f, rounds, iterations = self._kernels.dashpots_of_evaluation(
             *law, spring, h, self._inv_mass_all, self.c_radius, b.mass, self.gravity, b.q, b.L,
             self._inv_I, b.principal_rotations(), self._sq_m, self._sq_I)
         self.split["implicit dashpots"] += time.perf_counter() - t0
@@ -1046,12 +1040,12 @@ class DemSystem:
 
     @property
     def uses_hertz(self) -> bool:
-        """Whether the interfaces include Hertz–Mindlin laws
-        (:func:`~nurbsdem.dynamics.hertz.has_hertz` of the interface table, fixed once the
-        system is built; taken once)."""
+        """Whether the interfaces include a law that needs each contact's equivalent radius
+        (Hertz–Mindlin: :func:`~nurbsdem.dynamics.laws.needs_contact_radius` of the interface
+        table, fixed once the system is built; taken once)."""
         hertz = self.__dict__.get("_hertz_table")
         if hertz is None:
-            hertz = self._hertz_table = has_hertz(self._table)
+            hertz = self._hertz_table = needs_contact_radius(self._table)
         return hertz
 
     def monitor_sample(self) -> MonitorSample:

@@ -35,9 +35,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
-from ..model import (DAMPING_SCHEMES, PAIR_KINDS, DynamicStep, Interface, Material, Model,
-                     MoveWallStep, Output, ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry,
-                     Step, WallSpec)
+from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep, Output,
+                     ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 
 # ---------------------------------------------------------------------------- schema
 
@@ -660,54 +659,15 @@ class _Builder:
                                material_id=e.get("Material")), f"Wall {e.id}")
 
     def interface(self, e: Entry) -> None:
+        """``Interface``: the one front-end of the laws
+        (:func:`~nurbsdem.dynamics.laws.interface.build_interface`), deck spelling, file:line."""
+        from ..dynamics.laws.interface import COMMON_KEYS, Front, build_interface
         self.unique({i.id: i for i in self.model.interfaces}, e, "interface")
-        model = (e.get("Model") or "LinearPenalty").lower()
-        if model not in ("linearpenalty", "hertzmindlin"):
-            self.fail(f"Interface {e.id}: Model must be LinearPenalty or HertzMindlin, got "
-                      f"{e.get('Model')!r}", e.line)
-        hertz = model == "hertzmindlin"
-        if hertz:
-            self.only(e, {"Model", "Restitution", "Friction", "Between", "Materials"},
-                      "a HertzMindlin interface (its stiffness and damping come from the "
-                      "materials' YoungModulus, PoissonRatio and the Restitution)")
-            self.require(e, "Restitution")
-            rest = e.get("Restitution")
-            if not 0.0 < rest <= 1.0:
-                self.fail(f"Interface {e.id}: Restitution must lie in (0, 1], got {rest:g}", e.line)
-            e.values["NormalPenalty"] = 0.0
-        elif e.has("Restitution"):
-            self.fail(f"Interface {e.id}: Restitution applies to Model HertzMindlin only", e.line)
-        self.require(e, "NormalPenalty")
-        vals = {}
-        for key, attr, strict in (("NormalPenalty", "normal_penalty", True),
-                                  ("TangentialPenalty", "tangential_penalty", False),
-                                  ("NormalDamping", "normal_damping", False),
-                                  ("TangentialDamping", "tangential_damping", False),
-                                  ("Friction", "friction", False)):
-            if e.has(key):
-                vals[attr] = self.positive(e, key, e.get(key), strict and not hertz)
-        between = e.get("Between")
-        if between is not None:
-            low = between.lower()
-            if low not in PAIR_KINDS:
-                self.fail(f"Interface {e.id}: Between must be particle-particle or "
-                          f"particle-wall, got {between!r}", e.line)
-            between = low
-        mats = e.get("Materials")
-        if mats is not None:
-            kind = {2: "particle-particle", 1: "particle-wall"}.get(len(mats))
-            if kind is None:
-                self.fail(f"Interface {e.id}: Materials takes 2 ids (particle-particle) "
-                          f"or 1 (particle-wall), got {len(mats)}", e.line)
-            if between is not None and between != kind:
-                self.fail(f"Interface {e.id}: Materials with {len(mats)} id(s) means "
-                          f"{kind} pairs, but Between says {between}", e.line)
-            between = kind
-        self.model.interfaces.append(Interface(e.id, vals.pop("normal_penalty"), **vals,
-                                               between=between, materials=mats, line=e.line,
-                                               **({"model": "hertz",
-                                                   "restitution": float(e.get("Restitution"))}
-                                                  if hertz else {})))
+        front = Front(f"Interface {e.id}", str, lambda msg: self.fail(msg, e.line))
+        values = {k: v for k, v in e.values.items() if k not in COMMON_KEYS}
+        self.model.interfaces.append(build_interface(
+            e.id, e.get("Model"), values, e.get("Between"), e.get("Materials"), front,
+            line=e.line))
 
     def step(self, e: Entry) -> None:
         steps = self.model.steps
@@ -837,26 +797,12 @@ class _Builder:
         return f" (defined {what}: {', '.join(map(str, sorted(table)))})" if table else f" (no {what} defined)"
 
     def check_interfaces(self) -> None:
-        m = self.model
-        mats = sorted(m.particle_materials())
-        if not mats:
+        """Every pair is covered by an Interface, with the constants its law needs
+        (:func:`~nurbsdem.dynamics.laws.interface.check_coverage`)."""
+        from ..dynamics.laws.interface import check_coverage
+        if not self.model.particle_materials():
             return
-        pairs = [("particle-particle", (a, b)) for i, a in enumerate(mats) for b in mats[i:]]
-        if m.walls:
-            pairs += [("particle-wall", (a,)) for a in mats]
-        for kind, mm in pairs:
-            itf = m.interface(kind, mm)
-            if itf is None:
-                what = " and ".join(map(str, mm))
-                self.fail(f"no contact Interface covers {kind} pairs of "
-                          f"material{'s' if len(mm) > 1 else ''} {what}",
-                          self.first_use(mm[-1]))
-            if itf.model == "hertz":
-                for mid in mm:
-                    if m.materials[mid].young_modulus is None:
-                        self.fail(f"Interface {itf.id} (Model HertzMindlin) covers material "
-                                  f"{mid}, which needs a YoungModulus (Material {mid}, line "
-                                  f"{m.materials[mid].line})", itf.line)
+        check_coverage(self.model, self.fail, self.first_use)
         self.check_wall_materials()
 
     def check_wall_materials(self) -> None:

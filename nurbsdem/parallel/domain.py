@@ -58,7 +58,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..dynamics.contactset import ContactSet
+from ..contact.contactset import ContactSet
 from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, add_kick_work, wall_loads
 
 #: deck steps between re-cuts at the latest; a re-cut also happens when the ghosts have grown

@@ -1,4 +1,5 @@
-"""Hertz–Mindlin contact with the exact local curvature (``Interface ... Model HertzMindlin``).
+"""Hertz–Mindlin contact with the exact local curvature: ``Interface ID Model HertzMindlin
+Restitution e [Friction mu]``.
 
 Normal force (Hertz, elliptical contact)::
 
@@ -46,7 +47,10 @@ Time-step control: the kernel returns per contact (k_n, c_n, k_t, c_t) with the 
 normal stiffness (df/dδ, 1.5× the secant), which the network estimate of
 :class:`~nurbsdem.dynamics.system.DemSystem` uses instead of the table's constants.  For the
 a-priori estimate and the pairs not yet in contact, a Hertz law carries a linearisation at a
-reference impact (:func:`reference_linearisation`).
+reference impact (:func:`reference_linearisation`) in the row's EN..CT columns.
+
+The row: EN..CT that linearisation, MU, MODEL = :data:`CODE`, then E* (Pa), G* (Pa), ζ (-) in
+the law's own columns (:data:`ESTAR`, :data:`GSTAR`, :data:`ZETA`).
 """
 from __future__ import annotations
 
@@ -55,11 +59,17 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
-from ..errors import InputError
-from .forces import CN, CT, EN, ET, ESTAR, GSTAR, HERTZ, MODEL, MU, ZETA
+from ...errors import InputError
+from .keys import LawKey
+from .linear_penalty import FRICTION
+from .table import CN, CT, EN, ET, MODEL, MU, NCOL, P0, P1, P2
 
-#: model ids in the table's MODEL column
+#: the law's code in the table's MODEL column
+CODE = 1
+#: its own columns of the row: E* (Pa), G* (Pa), ζ (-)
+ESTAR, GSTAR, ZETA = P0, P1, P2
 
 
 # ---------------------------------------------------------------------------- material pairs
@@ -145,7 +155,7 @@ def reference_linearisation(e_star: float, g_star: float, zeta: float, radius: f
 
 
 @dataclass(frozen=True)
-class HertzMindlinLaw:
+class HertzMindlin:
     """Hertz–Mindlin law of one interface (module docstring).
 
     e_star, g_star (Pa); restitution (-); mu Coulomb coefficient; ref: the linearisation
@@ -158,6 +168,23 @@ class HertzMindlinLaw:
     mu: float = 0.0
     ref: tuple = field(default=(0.0, 0.0, 0.0, 0.0))
 
+    #: deck name, the Interface's ``model``, the code of its table rows
+    name = "HertzMindlin"
+    model = "hertz"
+    code = CODE
+    #: the kernel needs each contact's equivalent radius (exact curvatures)
+    needs_contact_radius = True
+    #: its from_interface reads the materials (:class:`~nurbsdem.model.MaterialPair`)
+    uses_materials = True
+    #: deck keys
+    keys = (LawKey("Restitution", "restitution", "", 0.0,
+                   "a coefficient of restitution: 0 needs an infinite dashpot, above 1 an "
+                   "impact would gain energy", lo_open=True, hi=1.0, required=True),
+            FRICTION)
+    #: what the law's row depends on besides its keys (for the messages)
+    note = ("its stiffness and damping come from the materials' YoungModulus, PoissonRatio "
+            "and the Restitution")
+
     def __post_init__(self) -> None:
         if not (self.e_star > 0 and math.isfinite(self.e_star)):
             raise InputError(f"Hertz law: effective modulus must be finite and > 0 (a rigid pair "
@@ -168,6 +195,21 @@ class HertzMindlinLaw:
         if not (math.isfinite(self.mu) and self.mu >= 0):
             raise InputError(f"Hertz law: friction must be finite and >= 0, got {self.mu}")
         damping_ratio(self.restitution)
+
+    @classmethod
+    def from_interface(cls, itf, pair) -> "HertzMindlin":
+        """The law of an :class:`~nurbsdem.model.Interface` between the materials of ``pair``
+        (:class:`~nurbsdem.model.MaterialPair`: elastic constants, the lightest particles'
+        reduced mass and radius, a reference speed), with its reference linearisation at an
+        impact of that mass at that speed (none where the pair has no particle mass or
+        radius)."""
+        e_star, g_star = effective_moduli(pair.E_a, pair.nu_a, pair.E_b, pair.nu_b)
+        zeta = damping_ratio(itf.restitution)
+        ref = (0.0, 0.0, 0.0, 0.0)
+        if math.isfinite(pair.m_eff) and pair.radius > 0 and math.isfinite(e_star):
+            ref = reference_linearisation(e_star, g_star, zeta, pair.radius, pair.m_eff,
+                                          pair.speed)
+        return cls(e_star, g_star, float(itf.restitution), float(itf.friction), ref)
 
     @property
     def zeta(self) -> float:
@@ -180,86 +222,42 @@ class HertzMindlinLaw:
     ct = property(lambda self: self.ref[3])
 
     def as_row(self) -> np.ndarray:
-        row = np.zeros(9)
+        row = np.zeros(NCOL)
         row[EN], row[CN], row[ET], row[CT] = self.ref
         row[MU], row[MODEL], row[ESTAR], row[GSTAR], row[ZETA] = (
-            self.mu, HERTZ, self.e_star, self.g_star, self.zeta)
+            self.mu, CODE, self.e_star, self.g_star, self.zeta)
         return row
 
 
-def law_from_deck(model, itf, mat_a: int, mat_b: int | None,
-                  wall_material: int | None = None) -> HertzMindlinLaw:
-    """The Hertz–Mindlin law of deck interface ``itf`` between particle materials mat_a and
-    mat_b (deck ids; mat_b None: a wall of material ``wall_material``, None: rigid), with its
-    reference linearisation from the lightest particles of those materials, their bounding
-    radii and a reference speed: the largest of 1 m/s, the particles' initial speeds and the
-    free-fall speed over the scene's height."""
-    mats = model.materials
-    ma = mats[mat_a]
-    E_a, nu_a = _elastic(model, ma, itf)
-    if mat_b is None:
-        wm = wall_material
-        E_b, nu_b = (math.inf, 0.0) if wm is None else _elastic(model, mats[wm], itf)
-    else:
-        E_b, nu_b = _elastic(model, mats[mat_b], itf)
-    e_star, g_star = effective_moduli(E_a, nu_a, E_b, nu_b)
-    zeta = damping_ratio(itf.restitution)
-    light = _lightest(model)
-    m_a, r_a = light.get(mat_a, (math.inf, 0.0))
-    if mat_b is None:
-        m_eff, r = m_a, r_a
-    else:
-        m_b, r_b = light.get(mat_b, (math.inf, 0.0))
-        m_eff = m_a * m_b / (m_a + m_b) if math.isfinite(m_a + m_b) else min(m_a, m_b)
-        r = r_a * r_b / (r_a + r_b) if r_a + r_b > 0 else 0.0
-    ref = (0.0, 0.0, 0.0, 0.0)
-    if math.isfinite(m_eff) and r > 0 and math.isfinite(e_star):
-        ref = reference_linearisation(e_star, g_star, zeta, r, m_eff, _reference_speed(model))
-    return HertzMindlinLaw(e_star, g_star, float(itf.restitution), float(itf.friction), ref)
+# ---------------------------------------------------------------------------- the kernel parts
+@njit(cache=True, inline="always")
+def normal(table, ma, mb, d, radius, imass):
+    """The normal part of the law for a contact of depth d (m) and equivalent radius ``radius``
+    (m) between materials ma, mb whose bodies' inverse masses sum to imass (1/kg):
+    (k_n the tangent stiffness 2E*a, c_n, k_t = 8G*a, c_t, the elastic force (4/3)E*√R δ^{3/2}
+    (N), the normal elastic energy (2/5) f δ (J)), a = √(R δ)."""
+    dp = d if d > 0.0 else 0.0
+    aa = math.sqrt(radius * dp)
+    knt = 2.0 * table[ma, mb, ESTAR] * aa
+    et = 8.0 * table[ma, mb, GSTAR] * aa
+    meff = 1.0 / imass if imass > 0.0 else 0.0
+    cn = 2.0 * table[ma, mb, ZETA] * math.sqrt(knt * meff)
+    ct = 2.0 * table[ma, mb, ZETA] * math.sqrt(et * meff)
+    fel = (2.0 / 3.0) * knt * dp          # (4/3) E* √R δ^{3/2}
+    eel_n = 0.4 * fel * dp
+    return knt, cn, et, ct, fel, eel_n
 
 
-def _elastic(model, mat, itf) -> tuple[float, float]:
-    E = getattr(mat, "young_modulus", None)
-    if E is None:
-        raise model.error(f"Interface {itf.id} (Model HertzMindlin) needs YoungModulus on "
-                          f"Material {mat.id} (line {mat.line})", itf.line)
-    return float(E), float(getattr(mat, "poisson_ratio", 0.0) or 0.0)
-
-
-def _lightest(model) -> dict[int, tuple[float, float]]:
-    """Per particle material id: (smallest mass kg, the bounding radius of that shape m)."""
-    out: dict[int, tuple[float, float]] = {}
-    pairs = [(s, g.material_id) for g in model.random_groups for s in g.shape_ids]
-    pairs += [(p.shape_id, p.material_id) for p in model.particles]
-    for sid, mid in pairs:
-        if sid not in model.shapes or mid not in model.materials:
-            continue
-        entry = model.shapes[sid]
-        m = entry.mass(model.materials[mid].density)
-        if m < out.get(mid, (math.inf, 0.0))[0]:
-            out[mid] = (m, float(entry.bounding_radius))
-    return out
-
-
-def _reference_speed(model) -> float:
-    v = 1.0
-    for p in model.particles:
-        r = model.shapes[p.shape_id].bounding_radius if p.shape_id in model.shapes else 0.0
-        v = max(v, float(np.linalg.norm(p.velocity)) + float(np.linalg.norm(p.angular_velocity)) * r)
-    g = np.asarray(model.gravity, float)
-    gn = float(np.linalg.norm(g))
-    if gn > 0:
-        pts = [np.asarray(w.center, float) for w in model.walls]
-        pts += [np.asarray(gr.region_lo, float) for gr in model.random_groups]
-        pts += [np.asarray(gr.region_hi, float) for gr in model.random_groups]
-        pts += [np.asarray(p.position, float) for p in model.particles]
-        if len(pts) > 1:
-            h = np.asarray(pts) @ (g / gn)
-            v = max(v, math.sqrt(2.0 * gn * float(h.max() - h.min())))
-    return v
-
-
-# ---------------------------------------------------------------------------- the kernel
-def has_hertz(table: np.ndarray) -> bool:
-    """Whether a dense interface table (M, M, NCOL) holds a Hertz–Mindlin row."""
-    return bool(table.shape[-1] > MODEL and np.any(table[..., MODEL] == HERTZ))
+@njit(cache=True, inline="always")
+def spring_scale(table, ma, mb, d, ddot, h, radius):
+    """The factor on the rotated tangential spring before its increment (Mindlin–Deresiewicz,
+    module docstring): while loading (ḋ > 0) the force so far keeps its value and the increment
+    takes the new stiffness, k_t,old s = k_t,new s', with δ_old = δ − h ḋ (0 where δ_old <= 0);
+    unloading keeps s, so the force falls with k_t.  Returns (whether to scale, the factor)."""
+    dp = d if d > 0.0 else 0.0
+    aa = math.sqrt(radius * dp)
+    if ddot > 0.0 and aa > 0.0:
+        d_old = dp - h * ddot
+        sc = math.sqrt(radius * d_old) / aa if d_old > 0.0 else 0.0
+        return True, sc
+    return False, 1.0

@@ -1,0 +1,46 @@
+"""Geometry kinds of the bodies and the pair solver of each pair of kinds: one place for the
+names (numba reads module-level integers and arrays as compile-time constants, so the names
+cost nothing in the kernels).
+
+Where each kind's pieces live today (docs/extending.md): the exact sphere in
+:mod:`nurbsdem.geometry.analytic` and :mod:`nurbsdem.contact.analytic` (closed forms), the
+NURBS particle in :mod:`nurbsdem.geometry` and :mod:`nurbsdem.contact.detect` (the LCP of
+paper Sec. 3.2) and :mod:`nurbsdem.contact.point_surface` (against a sphere), the flat wall
+in :mod:`nurbsdem.contact.wall` and :mod:`nurbsdem.contact.broadphase`; the dispatch of a
+scene's due pairs is :func:`nurbsdem.contact.listed.solve_due_into`.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: geometry kinds: an exact sphere, a NURBS particle, a flat rectangle wall
+SPHERE, NURBS_PARTICLE, FLAT_WALL = 0, 1, 2
+N_KINDS = 3
+
+#: pair solvers: the closed forms of :mod:`nurbsdem.contact.analytic`, the point-to-surface
+#: problem of :mod:`nurbsdem.contact.point_surface`, the LCP batch of
+#: :mod:`nurbsdem.contact.detect`, the support-mapping kernel of :mod:`nurbsdem.contact.wall`;
+#: NO_SOLVER: the two kinds never meet (two walls)
+CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT = 0, 1, 2, 3
+NO_SOLVER = -1
+
+#: (kind, kind) -> pair solver (symmetric).  A sphere against a NURBS particle takes the LCP
+#: where the scene does not allow the point solver (:func:`pair_solver`).
+PAIR_SOLVER = np.full((N_KINDS, N_KINDS), NO_SOLVER, np.int64)
+for _a, _b, _solver in ((SPHERE, SPHERE, CLOSED_FORM), (SPHERE, FLAT_WALL, CLOSED_FORM),
+                        (SPHERE, NURBS_PARTICLE, POINT_SURFACE),
+                        (NURBS_PARTICLE, NURBS_PARTICLE, LCP),
+                        (NURBS_PARTICLE, FLAT_WALL, WALL_SUPPORT)):
+    PAIR_SOLVER[_a, _b] = PAIR_SOLVER[_b, _a] = _solver
+del _a, _b, _solver
+
+
+@njit(cache=True, inline="always")
+def pair_solver(kind_a: int, kind_b: int, point_surface: bool) -> int:
+    """The pair solver of two kinds; POINT_SURFACE only where the scene allows it
+    (``point_surface``), else the LCP."""
+    solver = PAIR_SOLVER[kind_a, kind_b]
+    if solver == POINT_SURFACE and not point_surface:
+        return LCP
+    return solver
