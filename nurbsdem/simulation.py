@@ -70,6 +70,57 @@ def _strip_location(exc: InputError) -> InputError:
     return exc
 
 
+def _optional_path(value: Any, what: str) -> Any:
+    """``value`` when it is None, a str or a path; else an :class:`InputError`."""
+    if value is None or isinstance(value, (str, Path)):
+        return value
+    import os
+    if isinstance(value, os.PathLike):
+        return value
+    raise InputError(f"{what} must be a folder or file path (str or pathlib.Path) or None, "
+                     f"got {value!r}")
+
+
+def _contact_option_defaults() -> dict[str, Any]:
+    """The keywords :class:`~nurbsdem.contact.scene.SceneContacts` takes from
+    ``contact_options``, with their defaults (its own signature)."""
+    import inspect
+    from .contact.scene import SceneContacts
+    params = inspect.signature(SceneContacts.__init__).parameters
+    return {k: p.default for k, p in params.items()
+            if p.default is not inspect.Parameter.empty and k != "walls"}
+
+
+def _checked_solver_options(options: dict[str, Any]) -> dict[str, Any]:
+    """The solver's keywords checked as a deck checks its values: ``safety`` in the deck's
+    ``Safety`` range, ``contact_options`` a dict of :class:`SceneContacts` keywords (booleans
+    for its switches, finite lengths >= 0 in m for the others); raises :class:`InputError`."""
+    out = dict(options)
+    if out.get("safety") is not None:
+        out["safety"] = Simulation._number("Safety", out["safety"], "safety", positive=True)
+    opts = out.get("contact_options")
+    if opts is None:
+        return out
+    if not isinstance(opts, dict):
+        raise InputError(f"contact_options must be a dict of keywords, got {opts!r}")
+    known = _contact_option_defaults()
+    checked = {}
+    for key, value in opts.items():
+        if key not in known:
+            raise InputError(f"contact_options: unknown keyword {key!r} (known: "
+                             f"{', '.join(sorted(known))})")
+        if isinstance(known[key], bool):
+            if not isinstance(value, (bool, np.bool_)):
+                raise InputError(f"contact_options: {key} must be True or False, got {value!r}")
+            checked[key] = bool(value)
+        elif value is None and known[key] is None:
+            checked[key] = None
+        else:
+            checked[key] = Simulation._number(key, value, "contact_options", nonnegative=True)
+    out["contact_options"] = checked
+    return out
+
+
 class Simulation:
     """A DEM scene and its solution steps, run one at a time (see the module docstring).
 
@@ -92,6 +143,8 @@ class Simulation:
                  contact_options: dict | None = None) -> None:
         self.model = Model(path=PYTHON_SCENE, text="")
         self.model.gravity = self._vector("Gravity", gravity, "gravity")
+        output = _optional_path(output, "output")
+        restart = _optional_path(restart, "restart")
         self._output_dir = Path(output) if output is not None else None
         for key, val in (("Every", vtk_every), ("Every", monitors_every),
                          ("Every", checkpoint_every)) + ((("Every", results_every),)
@@ -109,7 +162,8 @@ class Simulation:
             self.model.output = Output(Path("."), 0.0, int(vtk_resolution), 0.0, 0.0, 0.0)
         self._restart = Path(restart) if restart is not None else None
         self._quiet = quiet
-        self._solver_options = dict(safety=safety, contact_options=contact_options)
+        self._solver_options = _checked_solver_options(dict(safety=safety,
+                                                            contact_options=contact_options))
         self._from_deck = False
         self._shape_ids: dict[Any, int] = {}
         self._boxes: list[tuple[int, np.ndarray, np.ndarray, bool]] = []
@@ -133,7 +187,10 @@ class Simulation:
         from .io.deck import parse_deck
         from .solver import Solver
 
-        model = parse_deck(path)
+        output = _optional_path(output, "output")
+        restart = _optional_path(restart, "restart")
+        solver_options = _checked_solver_options(solver_options)
+        model = parse_deck(_optional_path(path, "path"))
         if not steps:
             model.steps = []
         sim = cls.__new__(cls)
@@ -190,8 +247,12 @@ class Simulation:
 
     @staticmethod
     def _id(value: Any, what: str) -> int:
+        from .io.deck import ID_MAX
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise InputError(f"{what}: id must be an integer >= 1, got {value!r}")
+        if value > ID_MAX:
+            raise InputError(f"{what}: id {value} is too large: ids are at most {ID_MAX:g} "
+                             f"(as in a deck)")
         return int(value)
 
     def _editable(self, what: str) -> None:
@@ -240,6 +301,8 @@ class Simulation:
         (:func:`~nurbsdem.dynamics.laws.interface.build_interface`). Returns the id (default:
         the next free one).
         """
+        from .dynamics.laws import LAWS
+        from .dynamics.laws.interface import Front, build_interface, python_name
         self._editable("add_interface")
         used = {i.id for i in self.model.interfaces}
         iid = self._id(id, "add_interface") if id is not None else max(used, default=0) + 1
@@ -267,8 +330,6 @@ class Simulation:
         self.model.interfaces.append(build_interface(
             iid, str(model), values, between, mats, Front(what, python_name, fail),
             known_materials=self.model.materials))
-        from .dynamics.laws import LAWS
-        from .dynamics.laws.interface import Front, build_interface, python_name
         return iid
 
     def _shape_id(self, shape: Any) -> int:
@@ -384,8 +445,10 @@ class Simulation:
         as for :meth:`add_box`. Returns the name."""
         from .geometry.generators import flat_wall
         self._editable("add_wall")
-        if not isinstance(name, str) or not name or any(c.isspace() for c in name):
-            raise InputError(f"add_wall: name must be a word (no blanks), got {name!r}")
+        from .io.wallname import wall_name_problem
+        problem = wall_name_problem(name)
+        if problem is not None:        # the deck's rule (Wall ... Name), the same message
+            raise InputError(f"add_wall: {problem}")
         what = f"wall {name!r}"
         wmat = self._wall_material(material, what)
         p = self._vector("Point", point, what)

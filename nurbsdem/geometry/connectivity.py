@@ -42,6 +42,7 @@ import numpy as np
 from ..errors import GeometryError
 from ..jit import kernel
 from .nurbs import Patch
+from .support import Support, max_height
 
 #: Edge names by edge index.
 EDGE_NAMES = ("u_min", "u_max", "v_min", "v_max")
@@ -488,24 +489,14 @@ def _patch_samples(p: Patch, tu: np.ndarray, tv: np.ndarray, order: int):
     return d[:, 0], nu, k1, good, np.stack([U.ravel(), V.ravel()], -1)
 
 
-def _max_height(Xa: np.ndarray, Na: np.ndarray, Xb: np.ndarray) -> tuple[float, int, int]:
-    """max over a, b of Na[a] . (Xb[b] - Xa[a]) (m), with the maximising (a, b)."""
-    best, ia, ib = -np.inf, 0, 0
-    for start in range(0, len(Xa), 512):
-        D = np.einsum("rk,rmk->rm", Na[start:start + 512],
-                      Xb[None, :, :] - Xa[start:start + 512, None, :])
-        r, m = np.unravel_index(int(np.argmax(D)), D.shape)
-        if D[r, m] > best:
-            best, ia, ib = float(D[r, m]), start + int(r), int(m)
-    return best, ia, ib
-
-
 def measure_convexity(patches: Sequence[Patch], n_coarse: int = 9, n_fine: int = 17,
                       n_seeds: int = 16, n_local: int = 15, n_refine: int = 4) -> Convexity:
     """Measure how far a closed surface is from convex, as a length (:class:`Convexity`).
 
     1. Coarse: on n_coarse parameters per direction and patch (plus the knots) every point is
-       tested against every tangent plane: height = max_ab n_a . (x_b - x_a) (m).
+       tested against every tangent plane: height = max_ab n_a . (x_b - x_a) (m), found on
+       the samples' convex hull (:mod:`nurbsdem.geometry.support`, N log N, the all-pairs
+       maximum to round-off).
     2. Fine: the largest principal curvature with the outward normal on n_fine parameters
        (plus the knots); > 0 marks a saddle or dent.
     3. Local: around the n_seeds worst outward-curved fine samples (at most one per patch
@@ -544,7 +535,8 @@ def measure_convexity(patches: Sequence[Patch], n_coarse: int = 9, n_fine: int =
         UVf.append(uv)
     Xc, Nc, OWc, UVc = map(np.concatenate, (Xc, Nc, OWc, UVc))
     Kf, OWf, UVf = map(np.concatenate, (Kf, OWf, UVf))
-    h, a, b = _max_height(Xc, Nc, Xc)
+    support = Support(Xc)
+    h, a, b = max_height(Xc, Nc, support)
     plane = (int(OWc[a]), float(UVc[a, 0]), float(UVc[a, 1]))
     above = (int(OWc[b]), float(UVc[b, 0]), float(UVc[b, 1]))
     kk = int(np.argmax(Kf))
@@ -563,7 +555,7 @@ def measure_convexity(patches: Sequence[Patch], n_coarse: int = 9, n_fine: int =
         xa, na, uva = x[good], nu[good], uv[good]
         if not len(xa):
             continue
-        hl, a, b = _max_height(xa, na, np.concatenate([x, Xc]))
+        hl, a, b = max_height(xa, na, support, extra=x)
         pl = (ip, float(uva[a, 0]), float(uva[a, 1]))
         ab = (ip, float(uv[b, 0]), float(uv[b, 1])) if b < len(x) else \
             (int(OWc[b - len(x)]), float(UVc[b - len(x), 0]), float(UVc[b - len(x), 1]))
