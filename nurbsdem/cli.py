@@ -512,7 +512,35 @@ def check(deck: str) -> None:
     from .io.deck import parse_deck
     model = parse_deck(deck)
     click.echo(model.summary())
+    for line in _output_times(model):
+        click.echo(line)
     click.echo(f"{deck}: OK")
+
+
+def _output_times(model) -> list[str]:
+    """When the output is written, per time step of the deck's steps: an interval that is
+    not a whole number of time steps is served by the first time step at or after each of
+    its multiples (:mod:`nurbsdem.io.intervals`)."""
+    from .io import intervals
+    out = model.output
+    settings = (("VTK", out.vtk_every), ("monitors", out.monitors_every),
+                ("results.h5", out.results_interval), ("checkpoints", out.checkpoint_every))
+    by_dt: dict[float, list[int]] = {}
+    for s in model.steps:
+        dt = getattr(s, "time_step", None)
+        if dt:
+            by_dt.setdefault(float(dt), []).append(s.id)
+    lines, inexact = [], False
+    for dt, ids in by_dt.items():
+        parts = [f"{name} {intervals.describe(every, dt)}" for name, every in settings]
+        inexact |= any(every > 0 and not intervals.exact(every, dt) for _, every in settings)
+        which = "step" if len(ids) == 1 else "steps"
+        lines.append(f"output with TimeStep {dt:g} s ({which} {', '.join(map(str, ids))}): "
+                     + "; ".join(parts))
+    if inexact:
+        lines.append("(an output interval that is not a whole number of time steps is served "
+                     "by the first time step at or after each of its multiples)")
+    return lines
 
 
 @main.command()

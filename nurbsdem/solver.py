@@ -9,7 +9,8 @@ Steps (PyBaMM-like: an experiment is a list of steps):
 * ``Dynamic``: integrate ``Duration`` with the deck's ``TimeStep`` (sub-stepped when it
   exceeds the explicit stability limit; the log says what was chosen).
 * ``Replicate``: stack copies of the particles (:func:`~nurbsdem.placement.replicate_step`);
-  the energy the copies bring is booked as external work so the balance stays closed.
+  the energy the copies bring is booked as external work so the balance stays closed (a
+  Replicate before the first energy row books nothing: the copies are the initial state).
 * ``MoveWall … ToContact``: translate a wall until its gap to the nearest particle is ``Gap``.
 * ``MoveWall … Displacement``: a dynamic step in which the wall translates at constant
   velocity; its reaction force and work are monitored.
@@ -41,6 +42,7 @@ from .dynamics.stepcontrol import shape_compliance
 from .dynamics.system import SPLIT_PARTS, InstabilityError
 from .errors import InputError
 from .geometry.rotation import quat_to_matrix
+from .io import intervals
 from .io.checkpoint import save_checkpoint
 from .io.writers import OutputWriters
 from .jit import launch_threads
@@ -56,6 +58,11 @@ MAX_COMPILED_STEPS = 200
 #: the compiled loop keeps in one call: a call ends at the sample that would pass it (10^5
 #: particles with 2.4·10^5 contacts: ~57 MB per sample)
 STATE_BUDGET_BYTES = 256 * 2 ** 20
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) stopped a run at the end of a deck time step, after a checkpoint of
+    that moment (``str()`` says when, and where the checkpoint is)."""
 
 
 @dataclass
@@ -237,6 +244,10 @@ class Solver:
         self.timers = {"global search": 0.0, "LCP": 0.0, "forces + integration": 0.0,
                        "output": 0.0, "setup": 0.0}
         self._carry_hist = None
+        #: SIGINT while the time loop runs sets this; the loop stops at the next deck-step
+        #: boundary (:meth:`_deferring_interrupts`)
+        self._interrupt_requested = False
+        self._loop_active = False
         self._compliances: dict = {}
         self._motion_spec: dict = {}
         self._last_energy: dict = {}
@@ -428,8 +439,8 @@ class Solver:
                 self._write_monitors(writers, s.monitor_sample())
         for st in states:
             self._write_state(writers, st)
-        vtk = force or _due(t, out.vtk_every)
-        results = force or _due(t, out.results_interval)
+        vtk = force or _due(t, out.vtk_every, s.dt)
+        results = force or _due(t, out.results_interval, s.dt)
         if vtk or results:
             self._sync_bodies_from_system()
         if vtk:
@@ -445,10 +456,11 @@ class Solver:
         out = self.model.output
         bodies = replace(self.bodies, position=st.position, quaternion=st.quaternion,
                          velocity=st.velocity, angular_velocity=st.angular_velocity)
-        if _due(st.time, out.vtk_every):
+        dt = self.system.dt
+        if _due(st.time, out.vtk_every, dt):
             writers.paraview.write(st.time, bodies, wall_displacement=st.wall_displacement,
                                    contacts=st.contacts)
-        if _due(st.time, out.results_interval):
+        if _due(st.time, out.results_interval, dt):
             writers.results.append(st.time, bodies)
 
     def _contact_output(self) -> dict | None:
@@ -538,6 +550,26 @@ class Solver:
         sysm.load_compiled()        # numba's cached kernels: set-up, not the time loop
         self.timers["setup"] += time.perf_counter() - t_load
         self.progress.start(f"step {step.id} {step.kind}", duration)
+        self._loop_active = True
+        try:
+            self._time_loop(writers, n_total, step_t0, dt)
+        finally:
+            self._loop_active = False
+        self.progress.update(self.time - step_t0, dt, sysm.substeps, self.scene.last.active, force=True)
+        self.progress.finish()
+        self._sync_bodies_from_system()
+        self.summary.accuracy_repeats += sysm.accuracy_repeats
+        if self.wall_offset.size:
+            self.wall_offset = sysm.wall_displacement.copy()
+        self._snapshot()
+        self._close_system()
+
+    def _time_loop(self, writers: OutputWriters, n_total: int, step_t0: float,
+                   dt: float) -> None:
+        """The deck steps of a dynamic step, in compiled chunks up to the next checkpoint or
+        the step's end; output of each chunk written after it, a Ctrl-C obeyed between them
+        (a checkpoint of that moment first)."""
+        sysm = self.system
         ck_every = self.model.output.checkpoint_every
         while self.step_progress < n_total:
             t_before = time.perf_counter()
@@ -578,18 +610,14 @@ class Solver:
             self.summary.degenerated += tally.degenerated_sum
             self.summary.failed += tally.failed_sum
             self._sample(writers, samples=tally.samples, states=tally.states)
-            if _due(self.time, ck_every) and self.step_progress < n_total:
+            if self.step_progress < n_total and (_due(self.time, ck_every, dt)
+                                                 or self._interrupt_requested):
                 self._sync_bodies_from_system()
                 self._checkpoint(writers)
+                if self._interrupt_requested:
+                    self.progress.finish()
+                    raise self._interrupted(writers)
             self.progress.update(self.time - step_t0, dt, sysm.substeps, cs.active)
-        self.progress.update(self.time - step_t0, dt, sysm.substeps, self.scene.last.active, force=True)
-        self.progress.finish()
-        self._sync_bodies_from_system()
-        self.summary.accuracy_repeats += sysm.accuracy_repeats
-        if self.wall_offset.size:
-            self.wall_offset = sysm.wall_displacement.copy()
-        self._snapshot()
-        self._close_system()
 
     def _steps_to_event(self, left: int,
                         ck_every: float) -> tuple[int, np.ndarray, np.ndarray]:
@@ -619,14 +647,19 @@ class Solver:
         fall due, and the ParaView or results output."""
         sysm, out = self.system, self.model.output
         times = sysm.t0 + (sysm.step_count + np.arange(1, n + 1)) * sysm.dt
-        return (_due_mask(times, out.monitors_every),
-                _due_mask(times, out.vtk_every) | _due_mask(times, out.results_interval))
+        dt = sysm.dt
+        return (_due_mask(times, out.monitors_every, dt),
+                _due_mask(times, out.vtk_every, dt) | _due_mask(times, out.results_interval, dt))
 
     def _run_replicate(self, step: ReplicateStep, writers: OutputWriters) -> None:
         before = self._mechanical_of(self.bodies)
         self.bodies = replicate_step(self.model, self.bodies, step)
         after = self._mechanical_of(self.bodies)
-        self.energy_offset["external_work"] += after - before
+        if self.mech0 is not None:
+            # the ledger has its reference (the first energy row): the copies' energy enters
+            # from outside; before that row the copies are part of the initial state, which
+            # the reference takes in (booking them too would count their energy twice)
+            self.energy_offset["external_work"] += after - before
         self.scene = None
         self._carry_hist = None
         log.info("step %d: replicated into %d layers: %d particles", step.id, step.layers,
@@ -716,6 +749,7 @@ class Solver:
         ended by :meth:`finish` (or :meth:`abort` after an error)."""
         self._wall0 = time.perf_counter()
         self._restored = None
+        self._interrupt_requested = False
         resumed = self._finished_once     # writers closed by finish(): continue their files
         if self.restart_path is not None and not resumed:
             self._restored = self._load_restart()
@@ -744,6 +778,12 @@ class Solver:
         writers = self._writers
         if writers is None:
             raise RuntimeError("Solver.run_step before Solver.start")
+        with self._deferring_interrupts():
+            self._run_step(step, writers)
+        if self._interrupt_requested:    # Ctrl-C in the step's last chunk: after its checkpoint
+            raise self._interrupted(writers)
+
+    def _run_step(self, step, writers: OutputWriters) -> None:
         restored = self._restored
         if isinstance(step, DynamicStep):
             self._motion_spec = {}
@@ -799,6 +839,49 @@ class Solver:
         s.balance_scale = max(abs(row.get("dissipated", 0.0)) + abs(row.get("external_work", 0.0)), 0.0)
         return s
 
+    @contextlib.contextmanager
+    def _deferring_interrupts(self):
+        """While a step runs, Ctrl-C (SIGINT) inside its time loop only sets a flag, obeyed
+        at the next deck-step boundary (:meth:`_time_loop`): a KeyboardInterrupt raised in
+        the middle of the compiled loop's threads or of a background write kills the process
+        or leaves files behind the checkpoint.  Outside the time loop (set-up, compiling) the
+        handler that was there is called.  Installed only where Python allows it (the main
+        thread) and on one rank (several MPI ranks would have to agree on where to stop);
+        the previous handler is put back after the step."""
+        import signal
+        import threading
+        previous = signal.getsignal(signal.SIGINT)
+        if (self.comm is not None or threading.current_thread() is not threading.main_thread()
+                or previous in (None, signal.SIG_IGN)):
+            yield
+            return
+
+        def handler(signum, frame):
+            if self._loop_active:
+                self._interrupt_requested = True
+            elif callable(previous):
+                previous(signum, frame)
+            else:                               # SIG_DFL
+                raise KeyboardInterrupt
+
+        signal.signal(signal.SIGINT, handler)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+    def _interrupted(self, writers: OutputWriters) -> Interrupted:
+        """The exception that ends a run stopped by Ctrl-C, once the checkpoint just queued
+        (and everything before it) is on disk."""
+        self._interrupt_requested = False
+        where = ""
+        if self.write_output and self.rank == 0:
+            writers.paraview.sync()             # the background worker's checkpoint
+            path = self.outdir / CHECKPOINT_NAME
+            where = (f"; its checkpoint is {path} (continue with --restart {path}, or "
+                     f"Simulation.from_deck(..., restart=...))")
+        return Interrupted(f"interrupted at t = {self.time:.9g} s{where}")
+
     def _checkpoint_end_of_step(self, writers: OutputWriters) -> None:
         self._motion_spec = {}
         self._checkpoint(writers)
@@ -849,30 +932,17 @@ def _constant_motion(d: np.ndarray) -> PrescribedMotion:
 
 
 def _steps_to_due(t0: float, count: int, dt: float, every: float, n_max: int) -> int:
-    """The first k in 1..n_max with time t0 + (count + k)·dt on a multiple of ``every`` (the
-    test of :func:`_due`), n_max if none: found from the next multiple, then checked."""
-    t = t0 + count * dt
-    guess = round(((math.floor(t / every * (1 + 1e-12)) + 1) * every - t) / dt)
-    for k in sorted({max(1, int(guess) + d) for d in (-1, 0, 1)}):
-        if k <= n_max and _due(t0 + (count + k) * dt, every):
-            return k
-    if guess > n_max + 1:
-        return n_max
-    for k in range(1, n_max + 1):          # dt not commensurate with ``every``: scan
-        if _due(t0 + (count + k) * dt, every):
-            return k
-    return n_max
+    """The first k in 1..n_max whose deck step (ending at t0 + (count + k)·dt) is due for
+    output at interval ``every`` (:func:`nurbsdem.io.intervals.steps_to_due`), n_max if none."""
+    return intervals.steps_to_due(t0, count, dt, every, n_max)
 
 
-def _due(t: float, every: float) -> bool:
-    """Whether time t (s) is on a multiple of ``every`` (s)."""
-    return bool(_due_mask(np.array([float(t)]), every)[0])
+def _due(t: float, every: float, dt: float) -> bool:
+    """Whether the deck step of ``dt`` s ending at time t (s) is the first at or after a
+    multiple of ``every`` (s) (:mod:`nurbsdem.io.intervals`)."""
+    return intervals.due(t, every, dt)
 
 
-def _due_mask(t: np.ndarray, every: float) -> np.ndarray:
-    """(n,) bool: whether each time t (n,) s is on a multiple of ``every`` (s) (to 1e-9 of
-    the larger of the two; the nearest multiple rounded half to even)."""
-    if every <= 0:
-        return np.zeros(t.shape, bool)
-    k = np.round(t / every)
-    return np.abs(t - k * every) <= 1e-9 * np.maximum(every, np.abs(t))
+def _due_mask(t: np.ndarray, every: float, dt: float) -> np.ndarray:
+    """(n,) bool: :func:`_due` of each time t (n,) s."""
+    return intervals.due_mask(t, every, dt)

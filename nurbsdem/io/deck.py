@@ -622,6 +622,10 @@ class _Builder:
         self._wall_ids[wid] = line
 
     def add_wall(self, w: WallSpec, label: str) -> None:
+        from .wallname import wall_name_problem
+        problem = wall_name_problem(w.name)
+        if problem is not None:
+            self.fail(f"{label}: {problem}", w.line)
         for other in self.model.walls:
             if other.name == w.name:
                 self.fail(f"{label}: duplicate wall name {w.name!r} (first at line "

@@ -48,8 +48,10 @@ from typing import TYPE_CHECKING, Any, Hashable, Mapping, Sequence
 import numpy as np
 
 from ..geometry.rotation import place_points_into
+from . import lock as output_lock
 from .atomic import (atomic_write_bytes, atomic_write_text, ensure_space,
                      remove_stale_temporaries, write_hdf5_atomically)
+from .restartcheck import check_restart_outputs
 from .vtu import Repeated, Reuse, vtu_parts
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -198,13 +200,29 @@ class BackgroundWriter:
     time loop does not wait for them (VTU compression releases the GIL).  The files are the
     same, byte for byte, as when written in the foreground.  An error of a write is raised
     in the caller's thread at the next :meth:`submit`, :meth:`wait` or :meth:`close`; at most
-    ``depth`` writes are queued (a further submit waits for the oldest)."""
+    ``depth`` writes are queued (a further submit waits for the oldest).
+
+    After a write has failed no later job runs (each raises that first error instead): a
+    checkpoint queued behind a failed results or ParaView write must not be saved, or it
+    would claim samples that are not on disk."""
 
     def __init__(self, depth: int = 16) -> None:
         self.depth = int(depth)
         self._pool: ThreadPoolExecutor | None = None
         self._pending: list[Future] = []
         self._held: list | None = None
+        #: the first error of a job (then no later job runs)
+        self._failure: BaseException | None = None
+
+    def _guarded(self, job, args: tuple) -> None:
+        """Run ``job(*args)`` on the worker unless an earlier job failed."""
+        if self._failure is not None:
+            raise self._failure
+        try:
+            job(*args)
+        except BaseException as exc:
+            self._failure = exc
+            raise
 
     @contextmanager
     def held(self):
@@ -230,7 +248,7 @@ class BackgroundWriter:
         self._collect(block=len(self._pending) >= self.depth)
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="nurbsdem-output")
-        self._pending.append(self._pool.submit(job, *args))
+        self._pending.append(self._pool.submit(self._guarded, job, args))
 
     def _collect(self, block: bool) -> None:
         """Drop finished writes from the queue, raising the first error; with ``block``, wait
@@ -686,6 +704,19 @@ class CsvMonitor:
             self._fh.close()
 
 
+def _file_in(folder: Path, name: str) -> Path:
+    """``folder / name``, refused (InputError) unless it is a plain file name of ``folder``:
+    names come from the deck (wall names), and no output goes outside the output folder
+    (the deck and the API check the names first; this is the writer's own guard)."""
+    path = folder / name
+    if Path(name).name != name or name in (".", "..") or \
+            path.resolve().parent != folder.resolve():
+        from ..errors import InputError
+        raise InputError(f"refusing to write {name!r}: it is not a file name inside the "
+                         f"output folder {folder}")
+    return path
+
+
 class MonitorWriter:
     """``monitors/energy.csv``, ``monitors/contacts.csv`` and ``monitors/wall_<name>.csv``.
 
@@ -699,7 +730,8 @@ class MonitorWriter:
         self.dir.mkdir(parents=True, exist_ok=True)
         self.energy_csv = CsvMonitor(self.dir / "energy.csv", ENERGY_COLUMNS, restart_time)
         self.contacts_csv = CsvMonitor(self.dir / "contacts.csv", CONTACT_COLUMNS, restart_time)
-        self.wall_csv = {name: CsvMonitor(self.dir / f"wall_{name}.csv", WALL_COLUMNS, restart_time)
+        self.wall_csv = {name: CsvMonitor(_file_in(self.dir, f"wall_{name}.csv"), WALL_COLUMNS,
+                                          restart_time)
                          for name in wall_names}
         self.hertz_csv: CsvMonitor | None = None       # made by the first hertz() row
         self._restart_time = restart_time
@@ -1028,11 +1060,16 @@ def _remove(path: Path) -> None:
 
 def clean_output_directory(directory: str | Path) -> None:
     """What a start does first: temporaries of killed writers are removed, and results a
-    fresh run had set aside are put back if that run never completed a sample."""
+    fresh run had set aside are put back if that run never completed a sample.  Done under
+    the folder's lock (:mod:`nurbsdem.io.lock`): a run still writing there refuses it."""
     directory = Path(directory)
-    restore_previous_run(directory)
-    for folder in (directory, directory / VTK_DIR, directory / MONITOR_DIR):
-        remove_stale_temporaries(folder)
+    key = output_lock.acquire(directory)
+    try:
+        restore_previous_run(directory)
+        for folder in (directory, directory / VTK_DIR, directory / MONITOR_DIR):
+            remove_stale_temporaries(folder)
+    finally:
+        output_lock.release(key)
 
 
 class OutputWriters:
@@ -1056,7 +1093,15 @@ class OutputWriters:
         if self.directory.exists() and not self.directory.is_dir():
             raise OSError(errno.ENOTDIR, "the output directory is a file", str(self.directory))
         self.directory.mkdir(parents=True, exist_ok=True)
-        clean_output_directory(self.directory)
+        self._lock = output_lock.acquire(self.directory)      # before touching anything
+        self._committed = True
+        try:
+            clean_output_directory(self.directory)
+            if restart_time is not None:
+                check_restart_outputs(self.directory, model, restart_time)
+        except BaseException:
+            self._release()
+            raise
         self._committed = restart_time is not None
         if restart_time is None:
             set_previous_run_aside(self.directory)
@@ -1071,7 +1116,12 @@ class OutputWriters:
                                          background=self.paraview.background)
         except BaseException:
             self._restore()
+            self._release()
             raise
+
+    def _release(self) -> None:
+        lock, self._lock = getattr(self, "_lock", None), None
+        output_lock.release(lock)
 
     @property
     def committed(self) -> bool:
@@ -1137,15 +1187,21 @@ class OutputWriters:
             except OSError:
                 pass
             self._aborted = True
+            self._release()             # nothing more is written (close() does nothing)
 
     def close(self) -> None:
-        """Flush and close (after :meth:`abort`: nothing more is written)."""
+        """Flush and close (after :meth:`abort`: nothing more is written); the folder's lock
+        is given back either way."""
         if getattr(self, "_aborted", False):
+            self._release()
             return
-        self.results.close()            # its last samples are a job of the worker too
-        self.paraview.close()
-        self.monitors.close()
-        self._commit()
+        try:
+            self.results.close()            # its last samples are a job of the worker too
+            self.paraview.close()
+            self.monitors.close()
+            self._commit()
+        finally:
+            self._release()
 
 
 def is_multiple(t: float, every: float, tol: float = 1e-9) -> bool:

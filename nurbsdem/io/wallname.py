@@ -1,0 +1,45 @@
+"""The rule for wall names, shared by the deck (``Wall … Name``) and the Python API
+(:meth:`nurbsdem.simulation.Simulation.add_wall`).
+
+A wall's name is part of a file name (``monitors/wall_<name>.csv``) and a word of the deck
+(``Name <name>``, ``MoveWall <name>``) that :attr:`Simulation.deck_text` and ``results.h5``
+store, so it must be both a safe file name and a deck word that reads back as itself:
+letters, digits, ``_``, ``-`` and ``.``, not starting with ``.`` (no ``/``, no ``..``, no
+``#`` that starts a comment, no quotes), and not a keyword of the deck (``Duration``, ...,
+in any case: the deck's keywords are case-insensitive).
+"""
+from __future__ import annotations
+
+import re
+
+#: what a wall name may be made of
+_NAME_RE = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*\Z")
+#: the longest name (a file name component is at most 255 bytes; ``wall_`` + ``.csv`` +
+#: a temporary's prefix and suffix take the rest)
+NAME_MAX = 200
+RULE = ("letters, digits, '_', '-' and '.', not starting with '.', at most "
+        f"{NAME_MAX} characters, and not a deck keyword")
+
+
+def _keywords() -> set[str]:
+    """The deck's words (blocks, entries and their keys), lower case."""
+    from .deck import SCHEMA
+    words = set()
+    for block, entries in SCHEMA.items():
+        words.add(block.lower())
+        for entry, spec in entries.items():
+            words.add(entry.lower())
+            words.update(k.lower() for k in spec.keys)
+    return words
+
+
+def wall_name_problem(name: object) -> str | None:
+    """None when ``name`` is a valid wall name, else what is wrong with it (one line, the
+    same text for the deck and the API)."""
+    if not isinstance(name, str):
+        return f"a wall name must be text, got {type(name).__name__}"
+    if not _NAME_RE.match(name) or len(name) > NAME_MAX:
+        return f"bad wall name {name!r}: a name is {RULE}"
+    if name.lower() in _keywords():
+        return f"bad wall name {name!r}: it is a deck keyword (a name is {RULE})"
+    return None
