@@ -35,6 +35,92 @@ if TYPE_CHECKING:  # pragma: no cover
 OVERLAP_TOLERANCE = 1e-6
 #: Centroids closer than this fraction of the smaller bounding radius: coincident bodies.
 COINCIDENT_FRACTION = 1e-3
+#: An overlap up to this many static overlaps (:func:`static_overlap`, the depth at which the
+#: contact carries the heavier body's weight) is a state the contact law holds at rest (a
+#: settled pack's lowest contacts carry the weight of the column above them), so a settled
+#: state written back into a deck runs; capped by :data:`MAX_RESTING_FRACTION`.
+RESTING_LOADS = 20.0
+#: Largest overlap accepted, as a fraction of the smaller bounding radius, whatever the load.
+MAX_RESTING_FRACTION = 0.05
+#: Accepted overlaps deeper than this fraction of the smaller bounding radius are reported
+#: with a warning (the contact starts with a large force).
+WARN_OVERLAP_FRACTION = 0.01
+#: A contact whose static overlap under one particle's weight exceeds this fraction of the
+#: particle's bounding radius is too soft for the load: the particle sinks into what carries
+#: it by a tenth of its size, and a few stacked on it push it through.
+SOFT_FRACTION = 0.1
+
+
+# ---------------------------------------------------------------------------- resting overlaps
+
+
+def static_overlap(model: "Model", kind: str, materials: tuple[int, ...], mass: float,
+                   radius: float, wall_material: int | None = None) -> float:
+    """Overlap (m) at which the contact law of a pair carries the weight m |g| at rest.
+
+    kind, materials: the pair (:meth:`Model.interface`); mass (kg): the body it carries;
+    radius (m): the pair's reduced bounding radius (Hertz: the radius of curvature).
+    Linear penalty: m g / NormalPenalty; Hertz: (3 m g / (4 E* sqrt(R)))^(2/3) (the Hertz
+    force 4/3 E* sqrt(R) d^(3/2) equal to the weight). 0 without gravity, without an
+    interface for the pair, or for a law whose stiffness is not known here.
+    """
+    g = float(np.linalg.norm(model.gravity)) if model.gravity is not None else 0.0
+    itf = model.interface(kind, tuple(materials))
+    if g == 0 or itf is None or not mass > 0:
+        return 0.0
+    if itf.model == "linear":
+        return mass * g / itf.normal_penalty if itf.normal_penalty > 0 else math.inf
+    if itf.model != "hertz" or not radius > 0:
+        return 0.0
+    e_star = _hertz_modulus(model, materials, wall_material)
+    if not e_star > 0 or not math.isfinite(e_star):
+        return 0.0
+    return (3.0 * mass * g / (4.0 * e_star * math.sqrt(radius))) ** (2.0 / 3.0)
+
+
+def _hertz_modulus(model: "Model", materials: tuple[int, ...], wall_material: int | None) -> float:
+    """E* (Pa) of a pair's materials (a wall without material: rigid); 0 where a
+    material lacks YoungModulus (the interface check says so)."""
+    from .dynamics.laws.hertz_mindlin import effective_moduli
+    mats = list(materials) + ([wall_material] if len(materials) == 1 else [])
+    consts = []
+    for mid in mats:
+        if mid is None:
+            consts.append((math.inf, 0.0))
+            continue
+        mat = model.materials.get(mid)
+        if mat is None or mat.young_modulus is None:
+            return 0.0
+        consts.append((float(mat.young_modulus), float(mat.poisson_ratio or 0.0)))
+    return effective_moduli(*consts[0], *consts[1])[0]
+
+
+def _body_mass(model: "Model", bodies: "Bodies", i: int) -> float:
+    entry = model.shapes[int(bodies.shape_id[i])]
+    mat = model.materials.get(int(bodies.material_id[i]))
+    return entry.mass(mat.density) if mat is not None else 0.0
+
+
+def allowed_overlap(radius: float, resting: float) -> float:
+    """The deepest overlap (m) accepted for a contact of smaller bounding radius ``radius``
+    whose static overlap is ``resting`` (m): round-off, or up to :data:`RESTING_LOADS`
+    static overlaps but at most :data:`MAX_RESTING_FRACTION` of the radius."""
+    return max(OVERLAP_TOLERANCE * radius,
+               min(RESTING_LOADS * resting, MAX_RESTING_FRACTION * radius))
+
+
+def _warn_deep(model: "Model", line: int | None, text: str, depth: float, radius: float,
+               resting: float) -> None:
+    """One warning on the ``nurbsdem`` logger for an accepted overlap deeper than
+    :data:`WARN_OVERLAP_FRACTION` of the radius."""
+    if depth <= WARN_OVERLAP_FRACTION * radius:
+        return
+    import logging
+    loc = f"{model.path}:{line}: " if model.path and line else ""
+    load = f"; {depth / resting:.3g} x the overlap that carries its weight" if resting > 0 else ""
+    logging.getLogger("nurbsdem").warning(
+        f"{loc}{text} by {depth:.3g} m ({100 * depth / radius:.2g} % of its size{load}): "
+        f"accepted, it starts with a large contact force")
 
 
 # ---------------------------------------------------------------------------- body pairs
@@ -92,12 +178,21 @@ def check_body_overlaps(model: "Model", bodies: "Bodies", index: Sequence[int] |
     R = bodies.rotation_matrices()[idx]
     for a, b in close_pairs(pos, radii):
         depth = pair_penetration(shapes[a], pos[a], R[a], shapes[b], pos[b], R[b])
-        tol = OVERLAP_TOLERANCE * min(radii[a], radii[b])
+        r = min(radii[a], radii[b])
+        if depth <= OVERLAP_TOLERANCE * r:
+            continue
+        i, j = int(idx[a]), int(idx[b])
+        if bodies.line[i] < bodies.line[j]:
+            i, j = j, i
+        resting = 0.0 if math.isinf(depth) else static_overlap(
+            model, "particle-particle", (int(bodies.material_id[i]), int(bodies.material_id[j])),
+            max(_body_mass(model, bodies, i), _body_mass(model, bodies, j)),
+            radii[a] * radii[b] / (radii[a] + radii[b]))
+        tol = allowed_overlap(r, resting)
         if depth > tol:
-            i, j = int(idx[a]), int(idx[b])
-            if bodies.line[i] < bodies.line[j]:
-                i, j = j, i
             raise model.error(_overlap_text(bodies, i, j, depth, tol), int(bodies.line[i]))
+        _warn_deep(model, int(bodies.line[i]), f"particle {bodies.id[i]} overlaps particle "
+                   f"{bodies.id[j]}", depth, r, resting)
 
 
 def _overlap_text(bodies: "Bodies", i: int, j: int, depth: float, tol: float) -> str:
@@ -106,8 +201,13 @@ def _overlap_text(bodies: "Bodies", i: int, j: int, depth: float, tol: float) ->
     if math.isinf(depth):
         return (f"particle {bodies.id[i]} {what} particle {bodies.id[j]} (their centroids "
                 f"coincide)")
-    return (f"particle {bodies.id[i]} {what} {bodies.id[j]} by {depth:.3g} m (tolerance "
-            f"{tol:.3g} m)")
+    return (f"particle {bodies.id[i]} {what} {bodies.id[j]} by {depth:.3g} m; at most "
+            f"{tol:.3g} m is accepted ({_allowed_rule()})")
+
+
+def _allowed_rule() -> str:
+    return (f"{RESTING_LOADS:g} x the overlap at which the contact carries the heavier "
+            f"body's weight, at most {MAX_RESTING_FRACTION:g} of the bounding radius")
 
 
 # ---------------------------------------------------------------------------- walls
@@ -206,18 +306,25 @@ def check_bodies_against_walls(model: "Model", bodies: "Bodies",
         near = np.nonzero(under & (h >= 0) & (h < radii))[0]
         for k in near:
             sd = plane_support_distance(shapes[k], pos[k], R[k], o, n)
-            tol = OVERLAP_TOLERANCE * radii[k]
+            if sd >= -OVERLAP_TOLERANCE * radii[k]:
+                continue
+            i = int(idx[k])
+            resting = static_overlap(model, "particle-wall", (int(bodies.material_id[i]),),
+                                     _body_mass(model, bodies, i), radii[k], w.material_id)
+            tol = allowed_overlap(radii[k], resting)
             if sd < -tol and reference is not None:
                 j = int(reference[k])
                 tol -= min(0.0, plane_support_distance(
                     model.shapes[int(bodies.shape_id[j])].shape, bodies.position[j],
                     bodies.rotation_matrices()[j], o, n))
+            at = int(bodies.line[i]) if line is None else line
             if sd < -tol:
-                i = int(idx[k])
                 raise model.error(
                     f"{label}particle {bodies.id[i]} penetrates wall {w.name!r} by "
-                    f"{-sd:.3g} m (tolerance {tol:.3g} m); move it at least {-sd:.3g} m along "
-                    f"the wall's normal {_vec(n)}", int(bodies.line[i]) if line is None else line)
+                    f"{-sd:.3g} m; at most {tol:.3g} m is accepted ({_allowed_rule()}); move "
+                    f"it at least {-sd - tol:.3g} m along the wall's normal {_vec(n)}", at)
+            _warn_deep(model, at, f"{label}particle {bodies.id[i]} penetrates wall {w.name!r}",
+                       -sd, radii[k], resting)
 
 
 def _vec(v) -> str:
@@ -399,6 +506,48 @@ def check_impacts(model: "Model") -> None:
                 f"{m * v * v / (r * r):.3g} N/m", p.line)
 
 
+def check_soft_contacts(model: "Model") -> None:
+    """Refuse a contact too soft to carry a particle's weight: a static overlap
+    (:func:`static_overlap`, the particle resting on a wall or on a particle of its own
+    material) beyond :data:`SOFT_FRACTION` of its bounding radius, which would sink it
+    through what carries it before the run stops as unstable. Raised at the Interface's
+    line with the numbers and the stiffness that would carry the load."""
+    if model.gravity is None or not float(np.linalg.norm(model.gravity)) > 0:
+        return
+    uses = {(p.material_id, p.shape_id) for p in model.particles}
+    uses |= {(g.material_id, s) for g in model.random_groups for s in g.shape_ids}
+    wall_mats = {w.material_id for w in model.walls}
+    for mid, sid in sorted(uses, key=lambda u: (u[0], u[1])):
+        if mid not in model.materials or sid not in model.shapes:
+            continue
+        entry = model.shapes[sid]
+        m, r = entry.mass(model.materials[mid].density), float(entry.bounding_radius)
+        cases = [("particle-wall", (mid,), r, wm) for wm in sorted(wall_mats, key=str)]
+        if model.particle_count > 1:
+            cases.append(("particle-particle", (mid, mid), 0.5 * r, None))
+        for kind, mats, radius, wm in cases:
+            d = static_overlap(model, kind, mats, m, radius, wm)
+            if d > SOFT_FRACTION * r:
+                raise model.error(_soft_text(model, kind, mats, m, r, d),
+                                  model.interface(kind, mats).line)
+
+
+def _soft_text(model: "Model", kind: str, mats: tuple[int, ...], m: float, r: float,
+               d: float) -> str:
+    itf = model.interface(kind, mats)
+    g = float(np.linalg.norm(model.gravity))
+    if itf.model == "linear":
+        law = (f"m g / NormalPenalty = {m:.3g} kg x {g:.3g} m/s^2 / {itf.normal_penalty:g} N/m; "
+               f"raise NormalPenalty above {m * g / (SOFT_FRACTION * r):.3g} N/m")
+    else:
+        law = ("the Hertz overlap under that weight; raise the materials' YoungModulus "
+               f"about {(d / (SOFT_FRACTION * r)) ** 1.5:.3g} times")
+    return (f"Interface {itf.id}: the contact is too soft for the load: a particle of material "
+            f"{mats[0]} ({m:.3g} kg) resting on {'a wall' if kind == 'particle-wall' else 'another'} "
+            f"sinks {d:.3g} m into it under gravity, more than {SOFT_FRACTION:g} of its bounding "
+            f"radius {r:.3g} m ({law})")
+
+
 def check_replicate_spacing(model: "Model") -> None:
     """A Replicate step whose layer spacing Height / (Layers - 1) is below the smallest
     vertical extent a particle can have, V / (pi R^2) (volume over the largest projected
@@ -499,7 +648,8 @@ def check_scale(model: "Model") -> None:
 
 def check_model(model: "Model") -> None:
     """Everything that can be judged before placing particles: something to solve, time
-    steps, memory, explicit stability, impacts, Replicate spacing, scale."""
+    steps, memory, explicit stability, contacts too soft for the weight, impacts, Replicate
+    spacing, scale."""
     check_nothing_to_solve(model)
     check_time_steps(model)
     check_memory(model)
@@ -509,6 +659,7 @@ def check_model(model: "Model") -> None:
     check_wall_moves(model)
     check_wall_strokes(model)
     check_step_count(model)
+    check_soft_contacts(model)
     check_impacts(model)
     check_replicate_spacing(model)
 
@@ -529,6 +680,8 @@ def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     check_bodies_against_walls(model, bodies)
 
 
-__all__ = ["OVERLAP_TOLERANCE", "COINCIDENT_FRACTION", "pair_penetration", "close_pairs",
+__all__ = ["OVERLAP_TOLERANCE", "COINCIDENT_FRACTION", "RESTING_LOADS", "MAX_RESTING_FRACTION",
+           "SOFT_FRACTION", "static_overlap", "allowed_overlap", "check_soft_contacts",
+           "pair_penetration", "close_pairs",
            "check_body_overlaps", "check_walls", "check_bodies_against_walls",
            "plane_support_distance", "validate_scene", "check_model", "wall_plane", "InputError"]
