@@ -280,6 +280,6 @@ def test_steps_to_the_next_output_equal_a_scan():
         t0 = float(rng.choice([0.0, 0.25, 1.0 / 3]))
         count = int(rng.integers(0, 5000))
         n_max = int(rng.integers(1, 300))
-        scan = next((k for k in range(1, n_max + 1) if _due(t0 + (count + k) * dt, every)),
+        scan = next((k for k in range(1, n_max + 1) if _due(t0 + (count + k) * dt, every, dt)),
                     n_max)
         assert _steps_to_due(t0, count, dt, every, n_max) == scan, (dt, every, t0, count, n_max)
