@@ -19,7 +19,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from .deck import SCHEMA, Arg, EntrySpec
+from .deck import RANGES, SCHEMA, Arg, EntrySpec
 
 #: The key under which a setting's own values (``Gravity gx gy gz``) are documented.
 HEAD = "(values)"
@@ -234,7 +234,9 @@ CASE.inp` validates a deck without running it; every mistake is reported as one 
 `file:line: what is wrong`.
 
 Below, each entry's first line lists every key the parser accepts, in any order after the
-keyword (and its ID); its table says which are required and what the others default to.
+keyword (and its ID); its table says which are required, what the others default to, and the
+magnitudes the parser accepts (|x| at most the upper bound; positive values at least the lower
+one; `nurbsdem check` names the reason for each bound).
 """
 
 
@@ -278,6 +280,23 @@ def values_text(arg: Arg) -> str:
     return word if arg.count == 1 else f"{arg.count} {word}s"
 
 
+def _number(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else (str(x) if abs(x) < 10 ** 15 else f"{x:.0e}")
+
+
+def range_text(block: str, entry: str, key: str) -> str:
+    """The magnitudes the parser accepts for a key (:data:`nurbsdem.io.deck.RANGES`; a
+    setting's own values under its keyword), '' where it checks none: 'at most 1e+06' for
+    |x| <= hi, '1e-09 … 1e+06' where positive values must also reach lo."""
+    rng = RANGES.get(entry if key == HEAD else key)
+    if rng is None:
+        return ""
+    unit = f" {rng.unit}" if rng.unit else ""
+    if not rng.lo:
+        return f"at most {_number(rng.hi)}{unit}"
+    return f"{_number(rng.lo)} … {_number(rng.hi)}{unit}"
+
+
 def _synopsis(name: str, spec: EntrySpec) -> str:
     parts = [name] + (["ID"] if spec.numbered else [])
     if spec.head is not None:
@@ -305,13 +324,15 @@ def render(schema: dict[str, dict[str, EntrySpec]] = SCHEMA, keys: dict = KEYS,
             out.append(f"### {name}\n")
             out.append(f"`{_synopsis(name, spec)}`\n")
             out.append(entries[(block, name)] + "\n")
-            rows = ["| key | values | units | default | meaning |", "|---|---|---|---|---|"]
+            rows = ["| key | values | units | default | accepted range | meaning |",
+                    "|---|---|---|---|---|---|"]
             args = ([(HEAD, spec.head)] if spec.head is not None else []) + list(spec.keys.items())
             for key, arg in args:
                 d = keys[(block, name, key)]
                 label = "(after the keyword)" if key == HEAD else f"`{key}`"
                 rows.append(f"| {label} | {values_text(arg)} | {_cell(d.units) or '-'} | "
-                            f"{_cell(d.default)} | {_cell(d.meaning)} |")
+                            f"{_cell(d.default)} | {range_text(block, name, key) or '-'} | "
+                            f"{_cell(d.meaning)} |")
             out.append("\n".join(rows) + "\n")
     return "\n".join(out)
 
