@@ -347,8 +347,10 @@ class Simulation:
             return self._shape_ids[key]
         sid = len(self.model.shapes) + 1
         if key[0] == "file":
-            if not file.is_file():
-                raise InputError(f"add_particle: shape file {shape}: no such file")
+            from .io.shapefile import not_a_file
+            why = not_a_file(file)
+            if why is not None:
+                raise InputError(f"add_particle: shape file {shape}: {why}")
             from .io.shapefile import load_shape
             entry = ShapeEntry(sid, "file", load_shape(file), source=str(file), file=file)
         else:

@@ -221,6 +221,12 @@ def wall_plane(wall: "WallSpec") -> tuple[np.ndarray, np.ndarray, np.ndarray, np
         raise ValueError("its corners are not finite numbers")
     o = cp[0, 0]
     a, b = cp[-1, 0] - o, cp[0, -1] - o
+    from .io.deck import RANGES
+    shortest = RANGES["Size"].lo
+    la, lb = _length(a), _length(b)
+    if min(la, lb) < shortest:
+        raise ValueError(f"its sides are {la:.3g} m and {lb:.3g} m long: each must be at "
+                         f"least {shortest:g} m ({RANGES['Size'].reason})")
     scale = max(float(np.abs(a).max()), float(np.abs(b).max()), 1e-300)
     n = np.cross(a / scale, b / scale)
     norm = float(np.linalg.norm(n))
@@ -229,13 +235,20 @@ def wall_plane(wall: "WallSpec") -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     return o, a, b, n / norm
 
 
+def _length(v: np.ndarray) -> float:
+    """|v| without underflow for subnormal components (m)."""
+    big = float(np.abs(v).max())
+    return big * float(np.linalg.norm(v / big)) if big > 0 else 0.0
+
+
 def check_walls(model: "Model") -> None:
     """Every wall has finite corners and a finite, non-zero normal."""
     for w in model.walls:
         try:
             wall_plane(w)
         except ValueError as exc:
-            raise model.error(f"wall {w.name!r}: {exc}", w.line) from None
+            of = " of the Box" if w.kind == "box" else ""
+            raise model.error(f"wall {w.name!r}{of}: {exc}", w.line) from None
 
 
 def _inside_rectangle(p: np.ndarray, o: np.ndarray, a: np.ndarray, b: np.ndarray,

@@ -98,7 +98,10 @@ def _record_lines():
 @pytest.mark.parametrize("edit, line, msg", [
     (lambda L: L.__setitem__(3, "UDIM 9"), 4, "expected 'UDim', got 'UDIM'"),
     (lambda L: L.__setitem__(4, "UOrder two"), 5, "UOrder (the degree) must be an integer"),
-    (lambda L: L.__setitem__(4, "UOrder 0"), 4, "UOrder (the degree) must be >= 1"),
+    (lambda L: L.__setitem__(4, "UOrder 0"), 5,
+     "UOrder (the degree) 0 is not supported: it must be from 1 to 9"),
+    (lambda L: L.__setitem__(4, "UOrder 50"), 5,
+     "UOrder (the degree) 50 is not supported: it must be from 1 to 9, the highest degree"),
     (lambda L: L.__setitem__(5, "UKnotVector 0 0 0 0.25 0.25 0.5 0.5 0.75 0.75 1 1 x"), 6,
      "UKnotVector (UDim + UOrder + 1) needs 12 numbers, got 'x' at number 12"),
     (lambda L: L.__setitem__(5, "UKnotVector 0 0 0 0.25 0.75 0.5 0.5 0.75 0.75 1 1 1"), 1,

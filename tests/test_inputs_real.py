@@ -184,3 +184,85 @@ def test_api_contact_too_soft_is_refused_before_the_run():
     sim.add_particle(nurbsdem.shapes.sphere(R), 1, (0.1, 0.1, 0.1))
     with pytest.raises(InputError, match="too soft for the load"):
         sim.run_dynamic(duration=1e-3, time_step=1e-4)
+
+
+# ---------------------------------------------------------------------------- messages
+
+
+def _shape_deck(tmp_path: Path, shape_line: str, box_max_x: str = "0.2") -> Path:
+    from nurbsdem.io.shapefile import save_shape
+    save_shape(tmp_path / "s.yaml", nurbsdem.shapes.sphere(0.01))
+    text = _deck(tmp_path, _particle(1, 0.1)).read_text()
+    text = text.replace(f"Shape 1 Sphere Radius {R!r}", shape_line)
+    text = text.replace("Max 0.2 0.2 0.3", f"Max {box_max_x} 0.2 0.3")
+    (tmp_path / "case.inp").write_text(text)
+    return tmp_path / "case.inp"
+
+
+def test_a_folder_given_as_a_shape_file_says_so(tmp_path):
+    (tmp_path / "shapes").mkdir()
+    deck = _shape_deck(tmp_path, "Shape 1 File shapes")
+    with pytest.raises(InputError, match=r"case\.inp:6: shape file shapes: is a folder, not a "
+                                         r"file$"):
+        parse_deck(deck)
+    sim = Simulation()
+    sim.add_material(1, 2000)
+    with pytest.raises(InputError, match="add_particle: shape file .*: is a folder, not a file"):
+        sim.add_particle(tmp_path / "shapes", 1, (0, 0, 0))
+    from nurbsdem.io.shapefile import load_shape
+    with pytest.raises(InputError, match="cannot read file: it is a folder, not a file"):
+        load_shape(tmp_path / "shapes")
+
+
+def test_a_box_too_thin_names_its_sides(tmp_path):
+    deck = _shape_deck(tmp_path, "Shape 1 File s.yaml", box_max_x="1e-320")
+    with pytest.raises(InputError, match=r"case\.inp:10: wall 'bottom' of the Box: its sides are "
+                                         r"1e-320 m and 0.2 m long: each must be at least 1e-09 m"):
+        parse_deck(deck)
+
+
+@pytest.mark.parametrize("tol", ["1e300", "0.5"])
+def test_convexity_tolerance_has_a_range_in_the_deck(tmp_path, tol):
+    deck = _shape_deck(tmp_path, f"Shape 1 File s.yaml ConvexityTolerance {tol}")
+    with pytest.raises(InputError, match=r"case\.inp:6: Shape 1: ConvexityTolerance .* is out "
+                                         r"of range: it must be at most 0.1"):
+        parse_deck(deck)
+
+
+@pytest.mark.parametrize("tol", [float("inf"), float("nan"), 1e300, -1.0])
+def test_convexity_tolerance_has_a_range_in_the_api_and_cli(tmp_path, tol):
+    """A 27 % dent passed with ConvexityTolerance 1e300: now no tolerance accepts it."""
+    from nurbsdem.geometry import generators as gen
+    from nurbsdem.geometry.nurbs import Patch
+    from nurbsdem.io.shapefile import load_shape, save_shape
+    patches = gen.sphere_patches(1.0)
+    p = patches[2]
+    cp = p.control_points.copy()
+    cp[2, 2] *= 1.0 - 1.5
+    patches[2] = Patch(4, 4, p.knots_u, p.knots_v, cp, p.weights)
+    f = tmp_path / "dent.yaml"
+    save_shape(f, patches)
+    with pytest.raises(InputError, match="convexity tolerance .* is out of range: it must be "
+                                         "from 0 to 0.1"):
+        load_shape(f, convexity_tol=tol)
+    from click.testing import CliRunner
+    from nurbsdem.cli import main
+    r = CliRunner().invoke(main, ["info", str(f), "--convexity-tol", repr(tol)])
+    assert r.exit_code == 2 and ("out of range" in r.output or "Invalid value" in r.output)
+
+
+def test_nan_vertex_in_a_ply_is_refused(tmp_path):
+    import trimesh
+    from nurbsdem.geometry.fit import read_input
+    m = trimesh.creation.icosphere(2, 0.01)
+    v = m.vertices.copy()
+    v[5] = np.nan
+    trimesh.Trimesh(v, m.faces, process=False).export(tmp_path / "nan.ply")
+    with pytest.raises(InputError, match=r"nan\.ply: vertex 5 \(counted from 0\) has non-finite "
+                                         r"coordinates nan nan nan"):
+        read_input(tmp_path / "nan.ply")
+    trimesh.PointCloud(np.vstack([m.vertices, [[np.inf, 0, 0]]])).export(tmp_path / "pc.ply")
+    with pytest.raises(InputError, match="vertex 162 .* non-finite coordinates inf 0 0"):
+        read_input(tmp_path / "pc.ply")
+    m.export(tmp_path / "ok.ply")
+    assert len(read_input(tmp_path / "ok.ply").points) == len(m.vertices)

@@ -653,6 +653,26 @@ def _seeds(patches, K, owner, UV, size: float, n_fine: int, n_seeds: int):
     return out
 
 
+def checked_convexity_tol(tol, source: str | None = None) -> float:
+    """The convexity tolerance (None: :data:`DEFAULT_CONVEXITY_TOL`) held to the deck's
+    ``ConvexityTolerance`` range (:data:`nurbsdem.io.deck.RANGES`); a NaN, an infinity or a
+    value out of range is a :class:`GeometryError` (a tolerance of 1e300 would accept any
+    dent)."""
+    if tol is None:
+        return DEFAULT_CONVEXITY_TOL
+    from ..io.deck import RANGES
+    rng = RANGES["ConvexityTolerance"]
+    try:
+        x = float(tol)
+    except (TypeError, ValueError):
+        raise GeometryError(f"the convexity tolerance must be a number, got {tol!r}",
+                            path=source) from None
+    if not (0.0 <= x <= rng.hi):
+        raise GeometryError(f"convexity tolerance {tol!r} is out of range: it must be from 0 "
+                            f"to {rng.hi:g} of the particle size ({rng.reason})", path=source)
+    return x
+
+
 def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9,
                 convexity_tol: float | None = None) -> Convexity:
     """Reject a shape that is not a closed, outward-oriented, convex surface.
@@ -686,8 +706,7 @@ def check_shape(shape, source: str | None = None, rel_tol: float = 1e-9,
     """
     if source is None:
         source = getattr(shape, "source", None)
-    if convexity_tol is None:
-        convexity_tol = DEFAULT_CONVEXITY_TOL
+    convexity_tol = checked_convexity_tol(convexity_tol, source)
     patches = shape.patches
     conn = getattr(shape, "connectivity", None)
     if conn is None:

@@ -100,8 +100,11 @@ def read_text_points(path: str | Path) -> np.ndarray:
 def read_input(path: str | Path) -> FitInput:
     """Read a mesh (STL, PLY, OBJ, OFF) or point cloud (PLY without faces, or XYZ text)."""
     path = str(path)
-    if not Path(path).is_file():
-        raise InputError("cannot read file: No such file or directory", path=path)
+    from ..io.shapefile import not_a_file
+    why = not_a_file(path)
+    if why is not None:
+        raise InputError(f"cannot read file: it {why}" if why.startswith("is ")
+                         else "cannot read file: No such file or directory", path=path)
     suffix = Path(path).suffix.lower()
     if suffix in TEXT_SUFFIXES:
         pts = read_text_points(path)
@@ -110,8 +113,8 @@ def read_input(path: str | Path) -> FitInput:
         raise InputError(f"unknown file type {suffix!r}: expected a mesh (.stl, .ply, .obj, "
                          f".off) or a point cloud (.ply, .xyz text)", path=path)
     import trimesh
-    try:
-        obj = trimesh.load(path, force=None, process=True)
+    try:   # unprocessed: trimesh's processing drops non-finite vertices without a word
+        obj = trimesh.load(path, force=None, process=False)
     except Exception as exc:  # trimesh raises many types for bad files
         raise InputError(f"not a readable {suffix[1:].upper()} file ({type(exc).__name__}: "
                          f"{' '.join(str(exc).split())[:120]})", path=path) from None
@@ -120,10 +123,22 @@ def read_input(path: str | Path) -> FitInput:
         if not geoms:
             raise InputError("the file holds no geometry", path=path)
         obj = trimesh.util.concatenate(geoms) if len(geoms) > 1 else geoms[0]
+    _check_finite_vertices(np.asarray(getattr(obj, "vertices", np.zeros((0, 3))), float), path)
     if isinstance(obj, trimesh.Trimesh) and len(obj.faces):
+        obj = trimesh.Trimesh(obj.vertices, obj.faces, process=True)
         return FitInput(_check_points(np.asarray(obj.vertices, float), path), obj, path)
     pts = np.asarray(getattr(obj, "vertices", np.zeros((0, 3))), float)
     return FitInput(_check_points(pts, path), None, path)
+
+
+def _check_finite_vertices(pts: np.ndarray, path: str) -> None:
+    """Refuse a file with a vertex that is not a finite number (NaN, inf), naming it."""
+    bad = np.flatnonzero(~np.isfinite(pts).all(axis=1)) if pts.size else []
+    if len(bad):
+        k = int(bad[0])
+        raise InputError(f"vertex {k} (counted from 0) has non-finite coordinates "
+                         f"{' '.join(f'{x:g}' for x in pts[k])} ({len(bad)} such vertices)",
+                         path=path)
 
 
 def _check_points(pts: np.ndarray, path: str) -> np.ndarray:

@@ -148,6 +148,9 @@ RANGES: dict[str, Range] = {
     "NormalDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
     "TangentialDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
     "Friction": Range(0.0, 100.0, "", "Coulomb coefficients of real materials are below ~2"),
+    "ConvexityTolerance": Range(0.0, 0.1, "", "a surface further than a tenth of its size from "
+                                "convex is not a convex particle: the contact search finds one "
+                                "contact point per pair"),
     "Accuracy": Range(1e-12, 0.1, "", "a relative energy error per deck step beyond 0.1 "
                       "controls nothing; below 1e-12 it is round-off"),
     "Safety": Range(0.01, 0.95, "", "a fraction of the stability limit: at 1 the explicit "
@@ -550,8 +553,10 @@ class _Builder:
         key = (file.resolve(), convexity_tol)
         if key in self._shape_cache:
             return self._shape_cache[key]
-        if not file.is_file():
-            self.fail(f"shape file {source}: no such file", line)
+        from .shapefile import not_a_file
+        why = not_a_file(file)
+        if why is not None:
+            self.fail(f"shape file {source}: {why}", line)
         try:
             shape = load_shape(file, convexity_tol=convexity_tol)
         except InputError as exc:

@@ -197,11 +197,12 @@ def read_giraffe(path: str | Path, warnings: list[str] | None = None) -> list[Gi
         for d in ("U", "V"):
             ln = tk.keyword(f"{d}Dim")
             n = tk.integer(f"{d}Dim", 1, MAX_DIM)
-            tk.keyword(f"{d}Order")
-            p = tk.integer(f"{d}Order (the degree)", -2 ** 31, MAX_DEGREE)
-            if p < 1:
-                raise InputError(f"{d}Order (the degree) must be >= 1, got {p}", path=path,
-                                 line=ln)
+            ln_order = tk.keyword(f"{d}Order")
+            p = tk.integer(f"{d}Order (the degree)")
+            if not 1 <= p <= MAX_DEGREE:
+                raise InputError(f"{d}Order (the degree) {p} is not supported: it must be "
+                                 f"from 1 to {MAX_DEGREE}, the highest degree nurbsdem "
+                                 f"evaluates", path=path, line=ln_order)
             if n < p + 1:
                 raise InputError(f"{d}Dim = {n} control points is fewer than degree + 1 = {p + 1}",
                                  path=path, line=ln)

@@ -99,10 +99,28 @@ def _compose_node(self, parent, index):
 StrictLoader.compose_node = _compose_node  # type: ignore[method-assign]
 
 
+def not_a_file(path: str | Path) -> str | None:
+    """Why ``path`` cannot be read as a file ("no such file", "is a folder, not a file",
+    ...), or None when it is a regular file (or a link to one)."""
+    p = Path(path)
+    if p.is_file():
+        return None
+    if p.is_dir():
+        return "is a folder, not a file"
+    if p.exists():
+        return "is not a regular file"
+    if p.is_symlink():
+        return "is a broken link"
+    return "no such file"
+
+
 def read_text_file(path: str | Path) -> str:
     """The text of a UTF-8 file (a byte-order mark is allowed); :class:`InputError` when it
     cannot be read or is not UTF-8 text."""
     path = str(path)
+    why = not_a_file(path)
+    if why is not None and why.startswith("is "):
+        raise InputError(f"cannot read file: it {why}", path=path)
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
