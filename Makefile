@@ -13,7 +13,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test,cad,plot,mpi]"
 	touch $(STAMP)
 
+# compiles the solver's kernels into numba's cache, so that the first run starts at once
 install: $(STAMP)
+	$(BIN)/nurbsdem warmup
 
 run: $(STAMP)
 	$(BIN)/nurbsdem solve inputs/paper/compaction_quick.inp

@@ -564,10 +564,32 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
         clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries
     if restart is not None and not Path(restart).is_file():
         fail(f"{restart}: no such checkpoint file")
-    summary = _stopping_all_ranks(sim.run)   # the Python API's code path: Simulation -> Solver
+    from .warmup import reporting_compiles
+    with reporting_compiles(not quiet and rank == 0):      # names each kernel it compiles
+        summary = _stopping_all_ranks(sim.run)   # the Python API's code path: Simulation -> Solver
     if not quiet and rank == 0:
         click.echo(summary.text())
         click.echo(f"results in {sim.solver.outdir}")
+
+
+@main.command()
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Stages compiled at the same time, each in its own process "
+                   "(default: the usable cores).")
+def warmup(jobs: int | None) -> None:
+    """Compile the solver's kernels into numba's cache now, so that the first run starts at
+    once (after an install, an upgrade or an edit of the kernels' sources)."""
+    from .warmup import STAGES, warm_up
+    total = sum(s.weight for s in STAGES)
+    with click.progressbar(length=1000, label="compiling the kernels", show_eta=False,
+                           file=sys.stderr) as bar:
+        def done(name: str, seconds: float) -> None:
+            bar.label = f"compiled {name} ({seconds:.0f} s)"
+            weight = next(s.weight for s in STAGES if s.name == name)
+            bar.update(round(1000 * weight / total))
+        times = warm_up(jobs, on_done=done)
+    click.echo(f"kernels compiled in {len(times)} stages: "
+               + ", ".join(f"{name} {seconds:.0f} s" for name, seconds in times.items()))
 
 
 def _tell_first_compilation() -> None:
@@ -577,8 +599,9 @@ def _tell_first_compilation() -> None:
     from .cachecheck import compiles_first
     if compiles_first():
         logging.getLogger("nurbsdem").info(
-            "compiling the kernels for this machine first (once after an install or upgrade: "
-            "about 4 min on 2 cores; later runs load them in about a second)")
+            "compiling the kernels for this machine first (once after an install, an upgrade "
+            "or an edit of their sources; `nurbsdem warmup` compiles them ahead; later runs "
+            "load them from the cache)")
 
 
 def _launched_rank() -> int:

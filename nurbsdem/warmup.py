@@ -1,0 +1,221 @@
+"""Compiling the kernels ahead of a run (``nurbsdem warmup``) and telling what is compiled.
+
+numba compiles each kernel at its first call and keeps the machine code in its on-disk cache
+(:mod:`nurbsdem.cachecheck`); the first run after an install, an upgrade or an edit of a
+kernel's sources compiles before it starts.  :func:`warm_up` compiles them ahead by running
+small scenes of the kinds a deck builds, in stages (:data:`STAGES`): the stages without
+kernels in common run at the same time in separate processes (numba compiles in one thread
+per process, under a lock), each writing its kernels into the shared cache; the compiled
+time loop, which calls nearly all of them, comes last and loads theirs from the cache.
+
+:class:`CompileReport` tells the user, one line per kernel that starts compiling at the top
+(a kernel called by another compiles within its caller), which one it is and how many of the
+run's entry kernels (:data:`ENTRY_KERNELS`) are compiled or cached so far.
+
+Units: SI; the small scenes' sizes in metres.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, TextIO
+
+#: the kernels a run calls from Python (the entry points), each with the words the user reads
+#: while it compiles: every other kernel compiles within one of them
+ENTRY_KERNELS = {
+    "listed.solve_due": "contact detection (closed forms, point-to-surface, LCP batches)",
+    "listed.scene_list": "the neighbour list (bounding spheres, patch boxes)",
+    "deck_steps.run_deck_steps": "the compiled time loop (forces, time-step control)",
+    "deflate._blocks": "compressed ParaView output",
+}
+
+
+def _deck(folder: Path, output: bool) -> Path:
+    """A small deck in ``folder``: two of the paper's particles, an exact sphere and a box of
+    flat walls, one lid (the kinds of pair a deck has: NURBS-NURBS, NURBS-wall, sphere-NURBS,
+    sphere-wall), ``Damping Implicit`` with ``Accuracy`` as the paper example; VTU output
+    when ``output``."""
+    from .io.shapefile import save_shape
+    from .shapes import paper_particle
+    for kind in "AB":
+        save_shape(folder / f"{kind}.yaml", paper_particle(kind), name=kind)
+    text = f"""Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 File A.yaml
+  Shape 2 File B.yaml
+  Shape 3 Sphere Radius 0.02
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.06 0.06 0.05
+  Particle 2 Shape 2 Material 1 Position 0.06 0.06 0.115
+  Particle 3 Shape 3 Material 1 Position 0.17 0.17 0.03
+Walls
+  Box 1 Min 0 0 0 Max 0.25 0.25 0.40
+  Wall 6 Name lid Point 0.125 0.125 0.40 Normal 0 0 -1 Size 0.25 0.25
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.004 TimeStep 1e-3 Damping Implicit Accuracy 3e-5 Safety 0.7
+Output
+  Directory {folder / 'results'}
+  VTK Every {0.002 if output else 1.0} Resolution 4
+  Monitors Every 0.001
+"""
+    (folder / "warmup.inp").write_text(text)
+    return folder / "warmup.inp"
+
+
+def _run_deck(compiled_steps: bool, output: bool) -> None:
+    """Solve the small deck (:func:`_deck`) in a temporary folder."""
+    from .simulation import Simulation
+    with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
+        deck = _deck(Path(tmp), output)
+        sim = Simulation.from_deck(deck, quiet=True)
+        sim.solver.compiled_steps = compiled_steps
+        if not output:
+            sim.solver.write_output = False
+        sim.run()
+
+
+def _contacts() -> None:
+    """The contact kernels as the Python path calls them (its steps, no output): the LCP
+    batches, walls, spheres, the neighbour list, the contact laws."""
+    _run_deck(compiled_steps=False, output=False)
+
+
+def _loop() -> None:
+    """The compiled time loop with its output: loads the kernels the other stages cached."""
+    _run_deck(compiled_steps=True, output=True)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One part of :func:`warm_up`: ``run()`` compiles its kernels; ``after``: the stages
+    whose kernels it calls (run before it, in any process); ``weight``: its share of the
+    compile work, for the progress bar."""
+    name: str
+    run: Callable[[], None]
+    weight: float
+    after: tuple[str, ...] = ()
+
+
+#: the stages of :func:`warm_up` (weights: their shares of a cold compilation, rounded)
+STAGES = (
+    Stage("contact detection", _contacts, 0.55),
+    Stage("time loop and output", _loop, 0.45, after=("contact detection",)),
+)
+
+
+def _run_stage(run: Callable[[], None]) -> float:
+    """``run()`` (in a worker process); returns its seconds."""
+    t0 = time.perf_counter()
+    run()
+    return time.perf_counter() - t0
+
+
+def warm_up(jobs: int | None = None, on_done: Callable[[str, float], None] | None = None,
+            stages: tuple[Stage, ...] = STAGES) -> dict[str, float]:
+    """Compile the kernels of ``stages`` into numba's cache, each stage in a fresh process
+    once the stages it comes ``after`` are done, up to ``jobs`` at a time (default: the
+    usable cores).  ``on_done(name, seconds)`` after each stage.  Returns stage name ->
+    seconds, in the order they finished."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, wait
+    names = {s.name for s in stages}
+    for s in stages:
+        if not set(s.after) <= names:
+            raise ValueError(f"stage {s.name!r} comes after unknown stages {s.after}")
+    done: dict[str, float] = {}
+    pending = list(stages)
+    ctx = multiprocessing.get_context("spawn")     # numba's threads do not survive a fork
+    with ProcessPoolExecutor(max_workers=max(1, jobs or _usable_cores()), mp_context=ctx,
+                             max_tasks_per_child=1) as pool:
+        running = {}
+        while pending or running:
+            for stage in [s for s in pending if all(a in done for a in s.after)]:
+                pending.remove(stage)
+                running[pool.submit(_run_stage, stage.run)] = stage.name
+            if not running:
+                raise ValueError("the stages' order has a cycle: "
+                                 + ", ".join(s.name for s in pending))
+            finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
+            for future in finished:
+                name = running.pop(future)
+                done[name] = future.result()
+                if on_done is not None:
+                    on_done(name, done[name])
+    return done
+
+
+def _usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:          # not Linux
+        return os.cpu_count() or 1
+
+
+class CompileReport:
+    """While installed (a context manager): one line to ``stream`` when a kernel starts
+    compiling at the top of the call stack, naming it and counting the entry kernels
+    (:data:`ENTRY_KERNELS`) done so far; nothing when everything loads from the cache."""
+
+    def __init__(self, stream: TextIO | None = None) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.depth = 0
+        self.started = 0.0
+        self.seen: set[str] = set()
+
+    def on_start(self, event) -> None:
+        if self.depth == 0:
+            name = _short_name(event.data["dispatcher"].py_func)
+            if name in ENTRY_KERNELS and name not in self.seen:
+                self.seen.add(name)
+                if not self.started:
+                    self.started = time.perf_counter()
+                left = len(ENTRY_KERNELS) - len(self.seen)
+                self.stream.write(f"nurbsdem: compiling {ENTRY_KERNELS[name]} ({name}; "
+                                  f"{left} of {len(ENTRY_KERNELS)} parts left after it, "
+                                  f"{time.perf_counter() - self.started:.0f} s so far)\n")
+                self.stream.flush()
+        self.depth += 1
+
+    def on_end(self, event) -> None:
+        self.depth -= 1
+
+    def __enter__(self) -> "CompileReport":
+        from numba.core import event
+        listener = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev):
+                listener.on_start(ev)
+
+            def on_end(self, ev):
+                listener.on_end(ev)
+
+        self._listener = _Listener()
+        event.register("numba:compile", self._listener)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        from numba.core import event
+        event.unregister("numba:compile", self._listener)
+
+
+def _short_name(func) -> str:
+    """``module.function`` of a kernel (the last part of its module's name)."""
+    return f"{func.__module__.rsplit('.', 1)[-1]}.{func.__qualname__}"
+
+
+def reporting_compiles(enabled: bool = True, stream: TextIO | None = None):
+    """A :class:`CompileReport` on ``stream`` (default stderr) where ``enabled``, else a
+    context that does nothing."""
+    import contextlib
+    return CompileReport(stream) if enabled else contextlib.nullcontext()

@@ -1,0 +1,119 @@
+"""``nurbsdem warmup`` compiles the kernels ahead (nurbsdem.warmup): its stages run in worker
+processes in their order, the small deck it solves is a valid deck, and a solve names the
+kernels it compiles."""
+from __future__ import annotations
+
+import functools
+import io
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from numba import njit
+
+from nurbsdem import warmup
+
+
+def _note(path: str, name: str, pause: float = 0.0) -> None:
+    """A stage's work: append ``name start`` and ``name end`` to ``path`` (another process)."""
+    with open(path, "a") as f:
+        f.write(f"{name} start {os.getpid()}\n")
+    time.sleep(pause)
+    with open(path, "a") as f:
+        f.write(f"{name} end {os.getpid()}\n")
+
+
+def test_stages_run_in_their_order_in_worker_processes(tmp_path):
+    log = str(tmp_path / "log")
+    stages = (warmup.Stage("loop", functools.partial(_note, log, "loop"), 1.0,
+                           after=("a", "b")),
+              warmup.Stage("a", functools.partial(_note, log, "a", 0.5), 1.0),
+              warmup.Stage("b", functools.partial(_note, log, "b", 0.5), 1.0))
+    seen = []
+    times = warmup.warm_up(jobs=2, on_done=lambda name, s: seen.append(name), stages=stages)
+    lines = Path(log).read_text().split("\n")[:-1]
+    events = [line.rsplit(" ", 1)[0] for line in lines]
+    assert events.index("loop start") > max(events.index("a end"), events.index("b end"))
+    assert max(events.index("a start"), events.index("b start")) < min(
+        events.index("a end"), events.index("b end"))            # a and b at the same time
+    assert {int(line.rsplit(" ", 1)[1]) for line in lines}.isdisjoint({os.getpid()})
+    assert seen[-1] == "loop" and sorted(seen) == ["a", "b", "loop"] == sorted(times)
+    assert all(t >= 0.0 for t in times.values())
+
+
+def test_stages_in_a_cycle_or_after_unknown_ones_are_refused():
+    run = functools.partial(time.sleep, 0)
+    with pytest.raises(ValueError, match="unknown"):
+        warmup.warm_up(stages=(warmup.Stage("a", run, 1.0, after=("z",)),))
+    with pytest.raises(ValueError, match="cycle"):
+        warmup.warm_up(stages=(warmup.Stage("a", run, 1.0, after=("b",)),
+                               warmup.Stage("b", run, 1.0, after=("a",))))
+
+
+def test_the_warmup_deck_is_valid(tmp_path):
+    """The small deck parses and passes the checks of ``nurbsdem check`` (its particles,
+    sphere and walls apart), with and without ParaView output."""
+    from nurbsdem.simulation import Simulation
+    for output in (False, True):
+        folder = tmp_path / str(output)
+        folder.mkdir()
+        sim = Simulation.from_deck(warmup._deck(folder, output), quiet=True)
+        kinds = {type(s).__name__ for s in sim.solver.model.steps}
+        assert kinds == {"DynamicStep"}
+    out = subprocess.run([sys.executable, "-m", "nurbsdem", "check", str(folder / "warmup.inp")],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+
+
+@njit
+def _callee(x):
+    return x + 1.0
+
+
+@njit
+def _entry(x):
+    return _callee(x) * 2.0
+
+
+@njit
+def _other(x):
+    return x - 1.0
+
+
+def test_a_solve_names_the_kernels_it_compiles(monkeypatch):
+    """One line per entry kernel compiled at the top, none for its callees, for kernels
+    outside the list or for a kernel already compiled."""
+    monkeypatch.setattr(warmup, "ENTRY_KERNELS",
+                        {"test_warmup._entry": "the test's entry", "test_warmup._x": "another"})
+    stream = io.StringIO()
+    with warmup.reporting_compiles(True, stream):
+        assert _entry(1.0) == 4.0
+        assert _other(1.0) == 0.0
+        assert _entry(2.0) == 6.0
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("nurbsdem: compiling the test's entry (test_warmup._entry; "
+                               "1 of 2 parts left")
+    stream = io.StringIO()
+    with warmup.reporting_compiles(False, stream):
+        _entry(1)                                       # an int: compiled again, not told
+    assert stream.getvalue() == ""
+
+
+@pytest.mark.slow
+def test_warmup_fills_an_empty_cache(tmp_path):
+    """``nurbsdem warmup`` with an empty cache: afterwards the compiled loop is cached and
+    a solve of the small deck compiles no entry kernel (minutes: it compiles them all)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    run = subprocess.run([sys.executable, "-m", "nurbsdem", "warmup"], env=env,
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "kernels compiled in" in run.stdout
+    deck = warmup._deck(tmp_path, output=True)
+    solve = subprocess.run([sys.executable, "-m", "nurbsdem", "solve", str(deck)], env=env,
+                           capture_output=True, text=True)
+    assert solve.returncode == 0, solve.stderr
+    assert "nurbsdem: compiling" not in solve.stderr
