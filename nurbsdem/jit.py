@@ -3,26 +3,25 @@
 numba counts references to every array it handles (its runtime, NRT): each view a kernel
 takes of a workspace row (``wf[_PA]``) or a shape table (``tab[6]``) is an atomic increment
 and decrement, also inside a kernel called from a loop.  In the contact problem those atomic
-operations took about a third of a warm LCP's time on one thread (``perf`` on a batch of the
-paper example's compaction; the batch 1.5 x faster without them, same bits), and two threads
-share the shape tables' counters.  A kernel that creates no array needs no counts:
+operations take a large share of a warm LCP's time (the same bits without them), and two
+threads share the shape tables' counters.  A kernel that creates no array needs no counts:
 :func:`kernel` compiles it without the runtime.  A kernel that allocates (``np.zeros`` …)
 keeps plain ``njit`` (numba refuses to compile an allocation here: the error names it).
 
-Compile time (the first run after an install or upgrade compiles every kernel; the test
-suite from an empty cache too).  numba finalises the machine code of every compiled function
-with all the functions it calls linked in and optimised once more: each layer between the
-LCP and an entry point (the compiled loop, the Python path's ``solve_due``) compiled the whole
-contact problem again.  Layers that only pass arrays on and are called from compiled code
-only are therefore ``njit(inline="always")`` (numba inlines their IR: no machine code of their
-own), e.g. ``listed._solve_into``, ``detect.solve_rows``, ``wall._wall_chunks``,
-``deck_steps._search``; the loop's other helpers (``_evaluate``, ``_step_control``) stay
-separate: inlined too, they made the loop's one function so large that optimising it cost what
-the copies saved (measured).  A literal argument (``0``, ``False``, a module constant, also a
-counter's ``n = 0`` before the loop raises it) gives the callee a second specialisation, i.e. a
-second compilation of everything it calls: counters start as ``np.int64(0)``, flags go in as
-``np.bool_(False)``.  Both keep the arithmetic, so the same bits; the quick paper deck compiled
-in 226 s instead of 270 s (docs/DEVNOTES.md).
+Compile time (the first run after an install, an upgrade or an edit of a kernel's sources
+compiles the kernels it calls; ``nurbsdem warmup`` does it ahead, :mod:`nurbsdem.warmup`).
+numba finalises the machine code of every compiled function with all the functions it calls
+linked in and optimised once more: each layer between the LCP and an entry point (the
+compiled loop, the Python path's ``solve_due``) compiles the whole contact problem again.
+Layers that only pass arrays on and are called from compiled code only are therefore
+``njit(inline="always")`` (numba inlines their IR: no machine code of their own), e.g.
+``listed._solve_into``, ``detect.solve_rows``, ``wall._wall_chunks``, ``deck_steps._search``;
+the loop's other helpers (``_evaluate``, ``_step_control``) stay separate: inlined too, they
+make the loop's one function so large that optimising it costs what the copies save.  A
+literal argument (``0``, ``False``, a module constant, also a counter's ``n = 0`` before the
+loop raises it) gives the callee a second specialisation, i.e. a second compilation of
+everything it calls: counters start as ``np.int64(0)``, flags go in as ``np.bool_(False)``.
+Both keep the arithmetic, so the same bits (docs/design-notes.md).
 """
 from __future__ import annotations
 
@@ -41,14 +40,13 @@ from numba.extending import intrinsic
 #: per-row passes (over bodies, contacts or listed pairs) of at least this many rows run on
 #: numba's threads (``prange`` over chunks of :data:`ROW_CHUNK` rows:
 #: :func:`nurbsdem.dynamics.integrator.drift`, the contact laws, the contact arrays ...);
-#: shorter ones run on the calling thread, where a parallel launch (~1.5 us with the omp layer
-#: on the 2-core VM, measured) would cost more than the pass.  A pass is written once, as a
-#: loop over a range of rows (``lo``, ``hi``) that writes only those rows' outputs: one call on
-#: the calling thread or one per chunk on the threads (a function per row instead made the
-#: paper deck's contact loads 2-5 x slower: the call with its ~30 array arguments, and numba's
-#: reference counts where the arrays pass through; docs/DEVNOTES.md, stop 38).  Sums over rows
-#: stay in row order on one thread, so the bits depend neither on this number nor on the
-#: thread count.
+#: shorter ones run on the calling thread, where a parallel launch would cost more than the
+#: pass.  A pass is written once, as a loop over a range of rows (``lo``, ``hi``) that writes
+#: only those rows' outputs: one call on the calling thread or one per chunk on the threads (a
+#: function per row instead makes the contact loads several times slower: the call with its
+#: ~30 array arguments, and numba's reference counts where the arrays pass through;
+#: docs/design-notes.md).  Sums over rows stay in row order on one thread, so the bits depend
+#: neither on this number nor on the thread count.
 THREADED_ROWS = 4096
 #: rows per chunk of a threaded pass
 ROW_CHUNK = 1024
