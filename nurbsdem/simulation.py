@@ -447,8 +447,9 @@ class Simulation:
         as for :meth:`add_box`. Returns the name."""
         from .geometry.generators import flat_wall
         self._editable("add_wall")
+        from .io.deck import SCHEMA
         from .io.wallname import wall_name_problem
-        problem = wall_name_problem(name)
+        problem = wall_name_problem(name, SCHEMA)
         if problem is not None:        # the deck's rule (Wall ... Name), the same message
             raise InputError(f"add_wall: {problem}")
         what = f"wall {name!r}"

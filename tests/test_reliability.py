@@ -255,7 +255,7 @@ def test_restart_of_a_complete_folder_goes_on(finished_run):
 
 # ---------------------------------------------------------------- wall names
 
-BAD_NAMES = ["../../../../precious", "a/b", ".hidden", "lid#1", 'li"d', "Duration", "step",
+BAD_NAMES = ["../../../../precious", "a/b", ".hidden", "lid#1", 'li"d', "Duration", "movewall",
              "", "two words", "x" * 201]
 
 
@@ -294,11 +294,12 @@ def test_api_wall_names_round_trip_through_deck_text(names):
     """Every name add_wall takes comes back from Simulation.deck_text (what results.h5 and
     the checkpoint store) as the same wall."""
     from nurbsdem import Simulation
+    from nurbsdem.io.deck import SCHEMA
     from nurbsdem.io.wallname import wall_name_problem
     sim = Simulation()
     taken = []
     for k, name in enumerate(names):
-        if wall_name_problem(name) is not None:
+        if wall_name_problem(name, SCHEMA) is not None:
             with pytest.raises(InputError, match="bad wall name"):
                 sim.add_wall(name, [0, 0, k], [0, 0, 1], [1, 1])
             continue

@@ -628,7 +628,7 @@ class _Builder:
 
     def add_wall(self, w: WallSpec, label: str) -> None:
         from .wallname import wall_name_problem
-        problem = wall_name_problem(w.name)
+        problem = wall_name_problem(w.name, SCHEMA)
         if problem is not None:
             self.fail(f"{label}: {problem}", w.line)
         for other in self.model.walls:

@@ -14,16 +14,13 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator
+from typing import Iterable
 
 from ..errors import InputError
 from .intervals import REL_TOL, last_multiple
 
-if TYPE_CHECKING:  # pragma: no cover
-    from ..model import Model
 
-
-def _csv_last_time(path: Path, n_columns: int) -> float:
+def csv_last_time(path: Path, n_columns: int) -> float:
     """The time of the last complete, well-formed row of a monitor CSV (-inf if none)."""
     last = -math.inf
     with open(path, encoding="utf-8", errors="replace") as fh:
@@ -41,7 +38,7 @@ def _csv_last_time(path: Path, n_columns: int) -> float:
     return last
 
 
-def _results_last_time(path: Path) -> float | None:
+def results_last_time(path: Path) -> float | None:
     """The last sample time of a results.h5 (-inf if none; None if it cannot be read: the
     results writer reports that itself)."""
     import h5py
@@ -53,44 +50,14 @@ def _results_last_time(path: Path) -> float | None:
     return float(t.max()) if t.size else -math.inf
 
 
-def _pvd_last_time(path: Path) -> float | None:
-    from .writers import read_pvd
-    try:
-        entries = read_pvd(path)
-    except InputError:
-        return None                     # the series reports it when it reads the file
-    return max((t for t, _ in entries), default=-math.inf)
-
-
-def _series(directory: Path, model: "Model") -> Iterator[tuple[Path, float | None, str, float]]:
-    """(file, its last time or None, the deck setting, its interval) of each output series
-    in ``directory`` (files that exist only)."""
-    from .writers import (CONTACT_COLUMNS, ENERGY_COLUMNS, HERTZ_COLUMNS, MONITOR_DIR,
-                          RESULTS_NAME, SERIES, WALL_COLUMNS)
-    out = model.output
-    results = directory / RESULTS_NAME
-    if results.is_file():
-        yield results, _results_last_time(results), "Results Every", out.results_interval
-    mon = directory / MONITOR_DIR
-    csvs = [("energy.csv", ENERGY_COLUMNS), ("contacts.csv", CONTACT_COLUMNS),
-            ("hertz.csv", HERTZ_COLUMNS)]
-    csvs += [(f"wall_{name}.csv", WALL_COLUMNS) for name in model.wall_names]
-    for name, columns in csvs:
-        path = mon / name
-        if path.is_file():
-            yield path, _csv_last_time(path, len(columns)), "Monitors Every", out.monitors_every
-    for name in SERIES:
-        path = directory / f"{name}.pvd"
-        if path.is_file():
-            yield path, _pvd_last_time(path), "VTK Every", out.vtk_every
-
-
-def check_restart_outputs(directory: str | Path, model: "Model", time: float) -> None:
+def check_restart_outputs(series: Iterable[tuple[Path, float | None, str, float]],
+                          time: float) -> None:
     """Refuse (:class:`~nurbsdem.errors.InputError`, naming the file) to continue an output
     folder one of whose files ends before the last output time at or before the
-    checkpoint's ``time`` (s): the module docstring says why that is a hole."""
-    directory = Path(directory)
-    for path, last, setting, every in _series(directory, model):
+    checkpoint's ``time`` (s): the module docstring says why that is a hole.  ``series``:
+    (file, the time of its last sample or None when unreadable, the deck setting that
+    paces it, its interval in s) of each file of the folder."""
+    for path, last, setting, every in series:
         if last is None or every <= 0:
             continue
         need = last_multiple(time, every)
@@ -100,6 +67,6 @@ def check_restart_outputs(directory: str | Path, model: "Model", time: float) ->
             have = "has no samples" if last == -math.inf else f"ends at t = {last:.9g} s"
             raise InputError(
                 f"{have}, but the checkpoint is at t = {time:.9g} s ({setting} {every:g} s: "
-                f"the sample at or just after t = {need:.9g} s is missing): the folder does not match the "
-                f"checkpoint; put back the files written with it, or move this one away to "
+                f"the sample at or just after t = {need:.9g} s is missing): the folder does "
+                f"not match the checkpoint; put back the files written with it, or move this one away to "
                 f"start it anew at the checkpoint's time", path=str(path))

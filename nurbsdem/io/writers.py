@@ -51,7 +51,7 @@ from ..geometry.rotation import place_points_into
 from . import lock as output_lock
 from .atomic import (atomic_write_bytes, atomic_write_text, ensure_space,
                      remove_stale_temporaries, write_hdf5_atomically)
-from .restartcheck import check_restart_outputs
+from . import restartcheck
 from .vtu import Repeated, Reuse, vtu_parts
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -1072,6 +1072,34 @@ def clean_output_directory(directory: str | Path) -> None:
         output_lock.release(key)
 
 
+def _output_series(directory: Path, model: "Model"):
+    """(file, the time of its last sample or None if unreadable, the deck setting that paces
+    it, its interval in s) of each output file in ``directory``, for
+    :func:`~nurbsdem.io.restartcheck.check_restart_outputs`."""
+    out = model.output
+    results = directory / RESULTS_NAME
+    if results.is_file():
+        yield (results, restartcheck.results_last_time(results), "Results Every",
+               out.results_interval)
+    csvs = [("energy.csv", ENERGY_COLUMNS), ("contacts.csv", CONTACT_COLUMNS),
+            ("hertz.csv", HERTZ_COLUMNS)]
+    csvs += [(f"wall_{name}.csv", WALL_COLUMNS) for name in model.wall_names]
+    for name, columns in csvs:
+        path = directory / MONITOR_DIR / name
+        if path.is_file():
+            yield (path, restartcheck.csv_last_time(path, len(columns)), "Monitors Every",
+                   out.monitors_every)
+    for name in SERIES:
+        path = directory / f"{name}.pvd"
+        if path.is_file():
+            from ..errors import InputError
+            try:
+                last = max((t for t, _ in read_pvd(path)), default=-math.inf)
+            except InputError:
+                last = None                 # the series reports it when it reads the file
+            yield path, last, "VTK Every", out.vtk_every
+
+
 class OutputWriters:
     """All writers of a run, from the model's ``Output`` block.
 
@@ -1098,7 +1126,8 @@ class OutputWriters:
         try:
             clean_output_directory(self.directory)
             if restart_time is not None:
-                check_restart_outputs(self.directory, model, restart_time)
+                restartcheck.check_restart_outputs(_output_series(self.directory, model),
+                                                   restart_time)
         except BaseException:
             self._release()
             raise
