@@ -558,7 +558,12 @@ class Simulation:
 
     def run(self):
         """Run the steps not run yet (a deck's steps), then close the files; returns the
-        :class:`~nurbsdem.solver.RunSummary`. This is what ``nurbsdem solve`` does."""
+        :class:`~nurbsdem.solver.RunSummary`. This is what ``nurbsdem solve`` does.
+
+        An interrupt (Ctrl-C, a notebook's stop button) ends it at the end of a deck time
+        step with a checkpoint of that moment: :class:`~nurbsdem.solver.Interrupted` (a
+        KeyboardInterrupt) reaches the caller, :attr:`time` and the bodies are the
+        checkpoint's, and a new Simulation continues from it with ``restart=``."""
         self._usable()
         if self.solver is None:
             raise InputError("nothing to run: a scene built in Python runs its steps as they "

@@ -17,7 +17,11 @@ Steps (PyBaMM-like: an experiment is a list of steps):
 
 Energies written to ``monitors/energy.csv`` are cumulative over the whole run.
 Checkpoints (``checkpoint.h5``) are written every ``Checkpoint Every`` seconds of simulated
-time and at the end of each step; ``--restart`` continues bit-for-bit.
+time and at the end of each step; ``--restart`` continues bit-for-bit.  Each output interval
+is served by the first deck time step at or after each of its multiples
+(:mod:`nurbsdem.io.intervals`).  Ctrl-C (SIGINT) during the time loop stops the run at the
+end of a deck time step, after a checkpoint of that moment (:class:`Interrupted`, a
+KeyboardInterrupt; ``nurbsdem solve`` exits with status 130).
 """
 from __future__ import annotations
 

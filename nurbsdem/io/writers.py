@@ -1061,9 +1061,15 @@ def _remove(path: Path) -> None:
 def clean_output_directory(directory: str | Path) -> None:
     """What a start does first: temporaries of killed writers are removed, and results a
     fresh run had set aside are put back if that run never completed a sample.  Done under
-    the folder's lock (:mod:`nurbsdem.io.lock`): a run still writing there refuses it."""
+    the folder's lock (:mod:`nurbsdem.io.lock`); while another process holds it (a run still
+    writing there, or rank 0 of this MPI run) nothing is touched: that run's temporaries are
+    not stale, and a run that goes on to write there is refused when it opens its writers."""
+    from ..errors import InputError
     directory = Path(directory)
-    key = output_lock.acquire(directory)
+    try:
+        key = output_lock.acquire(directory)
+    except InputError:
+        return
     try:
         restore_previous_run(directory)
         for folder in (directory, directory / VTK_DIR, directory / MONITOR_DIR):
