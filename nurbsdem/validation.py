@@ -3,14 +3,16 @@
 :func:`validate_scene` checks a placed model (``model.bodies``) and raises
 :class:`~nurbsdem.errors.InputError` at the deck line of the first problem:
 
-* **bodies against each other**: any overlap deeper than :data:`OVERLAP_TOLERANCE` times the
-  smaller bounding radius, found by bounding spheres then the exact LCP
-  (:func:`nurbsdem.contact.detect`); two bodies whose centroids are closer than
+* **bodies against each other**: an overlap deeper than the contact law carries at rest
+  (:func:`allowed_overlap`: :data:`RESTING_LOADS` static overlaps of the pair's contact under
+  the heavier body's weight, at most :data:`MAX_RESTING_FRACTION` of the smaller bounding
+  radius, and at least :data:`OVERLAP_TOLERANCE` of it), found by bounding spheres then the
+  exact LCP (:func:`nurbsdem.contact.detect`); two bodies whose centroids are closer than
   :data:`COINCIDENT_FRACTION` of the smaller radius overlap outright (a convex body contains
   its centroid, and the LCP of two identical poses is degenerate);
 * **bodies against walls**: a body behind a wall (on the side its normal points away from;
-  for a ``Box`` that means outside the box) or penetrating one deeper than the tolerance
-  (exact support point along the wall's normal, paper Eq. 8);
+  for a ``Box`` that means outside the box) or penetrating one deeper than the same rule
+  allows (exact support point along the wall's normal, paper Eq. 8);
 * **walls**: finite control points and a finite, non-zero normal.
 
 Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
