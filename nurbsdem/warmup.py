@@ -90,6 +90,57 @@ def _contacts() -> None:
     _run_deck(compiled_steps=False, output=False)
 
 
+def _pairs() -> tuple:
+    """A contact table of the paper's particles A and B and :data:`N_PAIRS` poses of the pair
+    (B above A), for the batch kernels (the poses matter to the results, not to the code)."""
+    import numpy as np
+    from .contact.detect import ContactTable
+    from .shapes import paper_particle_shape
+    table = ContactTable([paper_particle_shape("A"), paper_particle_shape("B")])
+    pos = np.zeros((N_PAIRS, 3))
+    pos[:, 2] = np.linspace(0.05, 0.08, N_PAIRS)
+    rot = np.tile(np.eye(3), (N_PAIRS, 1, 1))
+    return table, pos, rot
+
+
+#: pairs of the batches: enough for the parallel batch kernel
+#: (:data:`nurbsdem.contact.detect.PARALLEL_MIN_PAIRS`)
+N_PAIRS = 40
+
+
+def _lcp_batches() -> None:
+    """The parallel LCP batch kernel and the kernels it calls, with arguments of the types
+    the scene's dispatch passes (:func:`nurbsdem.contact.detect.solve_rows`)."""
+    import numba
+    import numpy as np
+    from .contact.detect import _batch_kernel
+    from .contact.lcp import NF, NI
+    t, pos, rot = _pairs()
+    k = np.arange(N_PAIRS, dtype=np.int64)
+    no_mask = np.zeros((N_PAIRS, 0), np.bool_)
+    _batch_kernel(t.tab, t.info, t.centroid, t.radius, t.seeds, t.nonconvexity,
+                  np.concatenate((np.zeros(N_PAIRS, np.int64), np.ones(N_PAIRS, np.int64))),
+                  np.concatenate((np.zeros((N_PAIRS, 3)), pos)), np.concatenate((rot, rot)),
+                  k, N_PAIRS + k, k, no_mask, no_mask, np.zeros((N_PAIRS, NF)),
+                  np.zeros((N_PAIRS, NI), np.int64), numba.get_num_threads())
+
+
+def _wall_batches() -> None:
+    """The parallel body-against-flat-wall kernel and the kernels it calls, with arguments of
+    the types the scene's dispatch passes (:func:`nurbsdem.contact.wall.solve_wall_rows`)."""
+    import numba
+    import numpy as np
+    from .contact.lcp import NF, NI
+    from .contact.wall import _wall_batch_kernel
+    t, pos, rot = _pairs()
+    k = np.arange(N_PAIRS, dtype=np.int64)
+    rows = lambda *row: np.tile(np.array(row, float), (N_PAIRS, 1))   # noqa: E731
+    _wall_batch_kernel(t.tab, t.info, t.centroid, t.radius, t.seeds, np.zeros(N_PAIRS, np.int64),
+                       pos, rot, k, k, 0, k, rows(-0.2, -0.2, 0.0), rows(0.4, 0.0, 0.0),
+                       rows(0.0, 0.4, 0.0), rows(0.0, 1.0, 0.0, 1.0), np.zeros((N_PAIRS, NF)),
+                       np.zeros((N_PAIRS, NI), np.int64), numba.get_num_threads())
+
+
 def _output() -> None:
     """The compressed ParaView output's kernels (:func:`nurbsdem.io.deflate.encode_repeated`:
     its arguments have the same types for any data)."""
@@ -116,9 +167,11 @@ class Stage:
 
 #: the stages of :func:`warm_up` (weights: their shares of a cold compilation, rounded)
 STAGES = (
-    Stage("contact detection", _contacts, 0.55),
+    Stage("LCP batches", _lcp_batches, 0.18),
+    Stage("wall contacts", _wall_batches, 0.08),
     Stage("ParaView output", _output, 0.03),
-    Stage("time loop", _loop, 0.42, after=("contact detection", "ParaView output")),
+    Stage("contact detection", _contacts, 0.33, after=("LCP batches", "wall contacts")),
+    Stage("time loop", _loop, 0.38, after=("contact detection", "ParaView output")),
 )
 
 
