@@ -451,8 +451,8 @@ def import_3dm_cmd(cad_file: str, output: str, name: str | None, scale: float,
 @_warnings_to_stderr
 def fit_cmd(mesh_file: str, output: str, n_cp: int, degree: int, scale: float,
             name: str | None, convexity_tol: float | None) -> None:
-    """Fit a closed six-patch NURBS particle (cube-sphere) to the convex hull of a mesh or
-    point cloud (STL, PLY, OBJ, OFF, or XYZ text) by least squares."""
+    """Fit a closed six-patch NURBS particle (cube-sphere) by least squares to the convex hull
+    of a mesh, or to the points of a cloud (STL, PLY, OBJ, OFF, or XYZ text)."""
     from .geometry.fit import fit_particle, read_input
     from .io.shapefile import save_shape
 
