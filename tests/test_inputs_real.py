@@ -312,3 +312,18 @@ def test_fit_is_scale_invariant_down_to_a_micrometre():
     from nurbsdem.io.shapefile import load_shape
     shipped = load_shape(scan.parent / "grain.yaml")
     assert small.shape.volume == pytest.approx(shipped.volume * 1e-12, rel=1e-9)
+
+
+def test_shell_points_keep_the_noise_band_and_drop_the_interior():
+    from nurbsdem.geometry.fit import shell_points
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    shell = d * (1.0 + 0.01 * rng.normal(size=(3000, 1)))
+    inner = 0.5 * d[:300]
+    keep, band = shell_points(np.concatenate([shell, inner]))
+    assert keep[:3000].mean() > 0.99 and not keep[3000:].any()
+    assert 0.01 / 2 / math.sqrt(3) < band < 0.1
+    clean = d[:500]                            # noise-free: every point is on the hull
+    keep, band = shell_points(clean)
+    assert keep.all() and band < 1e-8

@@ -555,7 +555,7 @@ def _fit_data(data: FitInput, hull, notes: list[str]) -> tuple[np.ndarray, np.nd
     the least squares average the noise instead of enveloping it."""
     V = np.asarray(hull.vertices, float)
     if data.mesh is None:
-        keep, band = shell_points(data.points, hull)
+        keep, band = shell_points(data.points)
         X = data.points[keep]
         n_out = len(data.points) - len(X)
         notes.append(f"input: {len(data.points)} points (point cloud); fitted: the {len(X)} "
@@ -580,7 +580,7 @@ def _fit_data(data: FitInput, hull, notes: list[str]) -> tuple[np.ndarray, np.nd
     return X, W / W.sum(), len(V)
 
 
-def shell_points(points: np.ndarray, hull) -> tuple[np.ndarray, float]:
+def shell_points(points: np.ndarray) -> tuple[np.ndarray, float]:
     """(mask, band): the points whose depth below the convex hull (distance to its nearest
     facet plane, inside) is within the noise band, and the band relative to the size.
 
