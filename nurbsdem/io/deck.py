@@ -124,6 +124,8 @@ class Range:
     hi: float
     unit: str
     reason: str
+    #: negative values are wrong whatever their size: left to the entry's ">= 0" rule
+    nonnegative: bool = False
 
 
 #: Supported magnitudes by key (or ``Keyword`` for a setting's own values).
@@ -150,7 +152,7 @@ RANGES: dict[str, Range] = {
     "Friction": Range(0.0, 100.0, "", "Coulomb coefficients of real materials are below ~2"),
     "ConvexityTolerance": Range(0.0, 0.1, "", "a surface further than a tenth of its size from "
                                 "convex is not a convex particle: the contact search finds one "
-                                "contact point per pair"),
+                                "contact point per pair", nonnegative=True),
     "Accuracy": Range(1e-12, 0.1, "", "a relative energy error per deck step beyond 0.1 "
                       "controls nothing; below 1e-12 it is round-off"),
     "Safety": Range(0.01, 0.95, "", "a fraction of the stability limit: at 1 the explicit "
@@ -181,6 +183,8 @@ def check_range(key: str, value: Any, label: str) -> None:
         return
     unit = f" {rng.unit}" if rng.unit else ""
     for x in np.ravel(np.asarray(value, dtype=object)):
+        if rng.nonnegative and x < 0:
+            continue
         if abs(x) > rng.hi or (0 < x < rng.lo):
             span = (f"at most {_fmt_num(rng.hi)}{unit}" if not rng.lo
                     else f"between {_fmt_num(rng.lo)} and {_fmt_num(rng.hi)}{unit}")
