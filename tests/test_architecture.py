@@ -16,9 +16,10 @@ import pytest
 PACKAGE = Path(__file__).resolve().parent.parent / "nurbsdem"
 ROOT = "nurbsdem"
 
-#: the readers of file formats (YAML shapes, Giraffe, Rhino, meshes) and what they may not use
+#: the modules of file formats (YAML shapes, Giraffe, Rhino, mesh files; VTU) and what they may
+#: not use
 READERS = ("nurbsdem.io.shapefile", "nurbsdem.io.giraffe", "nurbsdem.io.rhino",
-           "nurbsdem.io.vtu")
+           "nurbsdem.io.meshfile", "nurbsdem.io.vtu")
 SOLVER_PARTS = ("nurbsdem.contact", "nurbsdem.dynamics")
 
 
