@@ -27,7 +27,7 @@ def _length(key: str, value: Any, what: str) -> float:
         raise InputError(f"{what}: {key} must be a number, got {value!r}")
     try:
         x = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"{what}: {key} must be a number, got {value!r}") from None
     if not (math.isfinite(x) and x > 0):
         raise InputError(f"{what}: {key} must be a finite number > 0 (m), got {value!r}")

@@ -70,6 +70,12 @@ def _strip_location(exc: InputError) -> InputError:
     return exc
 
 
+def _shown(value: Any, limit: int = 60) -> str:
+    """repr(value), cut to ``limit`` characters (a message stays one short line)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def _optional_path(value: Any, what: str) -> Any:
     """``value`` when it is None, a str or a path; else an :class:`InputError`."""
     if value is None or isinstance(value, (str, Path)):
@@ -213,8 +219,8 @@ class Simulation:
                 nonnegative: bool = False) -> float:
         try:
             x = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"{what}: {key} must be a number, got {value!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{what}: {key} must be a number, got {_shown(value)}") from None
         if not math.isfinite(x):
             raise InputError(f"{what}: {key} must be a finite number, got {value!r}")
         if positive and not x > 0:
@@ -236,10 +242,10 @@ class Simulation:
     def _vector(key: str, value: Any, what: str, n: int = 3) -> np.ndarray:
         try:
             v = np.array(value, dtype=float)
-        except (TypeError, ValueError):
-            raise InputError(f"{what}: {key} must be {n} numbers, got {value!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{what}: {key} must be {n} numbers, got {_shown(value)}") from None
         if v.shape != (n,):
-            raise InputError(f"{what}: {key} must be {n} numbers, got {value!r}")
+            raise InputError(f"{what}: {key} must be {n} numbers, got {_shown(value)}")
         if not np.isfinite(v).all():
             raise InputError(f"{what}: {key} must be finite numbers, got {value!r}")
         Simulation._range(key, v, what)
@@ -249,9 +255,9 @@ class Simulation:
     def _id(value: Any, what: str) -> int:
         from .io.deck import ID_MAX
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise InputError(f"{what}: id must be an integer >= 1, got {value!r}")
+            raise InputError(f"{what}: id must be an integer >= 1, got {_shown(value)}")
         if value > ID_MAX:
-            raise InputError(f"{what}: id {value} is too large: ids are at most {ID_MAX:g} "
+            raise InputError(f"{what}: id {_shown(value)} is too large: ids are at most {ID_MAX:g} "
                              f"(as in a deck)")
         return int(value)
 

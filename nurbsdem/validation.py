@@ -80,7 +80,8 @@ def static_overlap(model: "Model", kind: str, materials: tuple[int, ...], mass: 
     return (3.0 * mass * g / (4.0 * e_star * math.sqrt(radius))) ** (2.0 / 3.0)
 
 
-def _hertz_modulus(model: "Model", materials: tuple[int, ...], wall_material: int | None) -> float:
+def _hertz_modulus(model: "Model", materials: tuple[int, ...],
+                   wall_material: int | None) -> float:
     """E* (Pa) of a pair's materials (a wall without material: rigid); 0 where a
     material lacks YoungModulus (the interface check says so)."""
     from .dynamics.laws.hertz_mindlin import effective_moduli
@@ -557,8 +558,9 @@ def _soft_text(model: "Model", kind: str, mats: tuple[int, ...], m: float, r: fl
     else:
         law = ("the Hertz overlap under that weight; raise the materials' YoungModulus "
                f"about {(d / (SOFT_FRACTION * r)) ** 1.5:.3g} times")
+    on = "a wall" if kind == "particle-wall" else "another"
     return (f"Interface {itf.id}: the contact is too soft for the load: a particle of material "
-            f"{mats[0]} ({m:.3g} kg) resting on {'a wall' if kind == 'particle-wall' else 'another'} "
+            f"{mats[0]} ({m:.3g} kg) resting on {on} "
             f"sinks {d:.3g} m into it under gravity, more than {SOFT_FRACTION:g} of its bounding "
             f"radius {r:.3g} m ({law})")
 

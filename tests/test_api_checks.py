@@ -25,10 +25,20 @@ PROPS = settings(max_examples=80, deadline=None, derandomize=True, database=None
 
 #: anything a user might pass where a number or a path is expected
 ANYTHING = st.one_of(
-    st.none(), st.booleans(), st.integers(min_value=-10 ** 40, max_value=10 ** 40),
+    st.none(), st.booleans(), st.integers(min_value=-10 ** 400, max_value=10 ** 400),
     st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8),
     st.lists(st.floats(-10, 10), max_size=4), st.dictionaries(st.text(max_size=4),
                                                               st.integers(), max_size=2))
+
+
+def _as_float(value) -> float | None:
+    """The number a value stands for, or None (not a number, or beyond float)."""
+    if isinstance(value, (bool, str, list, dict)) or value is None:
+        return None
+    try:
+        return float(value)
+    except OverflowError:
+        return None
 
 
 def _in_range(key: str, x: float) -> bool:
@@ -113,9 +123,8 @@ def test_safety_property(value):
         sim = Simulation(safety=value)
     except InputError as exc:
         _one_line(exc)
-        ok = (not isinstance(value, (bool, str, list, dict)) and value is not None
-              and _in_range("Safety", float(value)) and float(value) > 0)
-        assert not ok, value
+        x = _as_float(value)
+        assert x is None or not (_in_range("Safety", x) and x > 0), value
         return
     if value is not None:
         assert _in_range("Safety", float(value)) and float(value) > 0
@@ -186,3 +195,33 @@ def test_output_property(output, restart):
         return
     for v in (output, restart):
         assert v is None or isinstance(v, str)
+
+
+VECTORS = st.one_of(ANYTHING, st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                                                 st.integers(-10 ** 400, 10 ** 400)),
+                                       min_size=3, max_size=3))
+
+
+@PROPS
+@given(VECTORS, st.one_of(st.none(), VECTORS), st.one_of(st.none(), VECTORS), VECTORS)
+def test_add_particle_and_gravity_property(position, velocity, angular_velocity, gravity):
+    """Vectors: three finite numbers in the deck's range of their key, else InputError."""
+    try:
+        sim = Simulation(gravity=gravity)
+    except InputError as exc:
+        _one_line(exc)
+    else:
+        g = np.asarray(sim.model.gravity)
+        assert g.shape == (3,) and all(_in_range("Gravity", float(x)) for x in g)
+    sim = Simulation()
+    sim.add_material(1, 2000.0)
+    try:
+        pid = sim.add_particle(_SPHERE, 1, position, velocity=velocity,
+                               angular_velocity=angular_velocity)
+    except InputError as exc:
+        _one_line(exc)
+        return
+    p = sim.model.particles[pid - 1]
+    assert all(_in_range("Position", float(x)) for x in p.position)
+    assert all(_in_range("Velocity", float(x)) for x in p.velocity)
+    assert all(_in_range("AngularVelocity", float(x)) for x in p.angular_velocity)

@@ -91,13 +91,14 @@ class Support:
 
     def _walk(self, N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Hull vertex maximising each direction's value, and the value: from the vertex in
-        the direction nearest the query's, move to the best neighbour while it is strictly better."""
+        the direction nearest the query's, move to the best neighbour while it is strictly
+        better."""
         r = np.linalg.norm(N, axis=1, keepdims=True)
         cur = np.asarray(self.directions.query(N / np.where(r > 0, r, 1.0))[1], np.int64)
         val = np.einsum("kj,kj->k", self.V[cur], N)
         active = np.arange(len(N))
         while len(active):
-            nb = self.neighbours[cur[active]]                         # (k, deg)
+            nb = self.neighbours[cur[active]]                    # (k, deg)
             vals = np.einsum("kdj,kj->kd", self.V[nb], N[active])
             j = np.argmax(vals, axis=1)
             best = vals[np.arange(len(active)), j]
