@@ -195,6 +195,13 @@ class Simulation:
 
         output = _optional_path(output, "output")
         restart = _optional_path(restart, "restart")
+        import inspect
+        known = set(inspect.signature(Solver.__init__).parameters) - {"self", "model", "output",
+                                                                      "restart", "quiet"}
+        for key in solver_options:
+            if key not in known:
+                raise InputError(f"from_deck: unknown keyword {key!r} (solver options: "
+                                 f"{', '.join(sorted(known))})")
         solver_options = _checked_solver_options(solver_options)
         model = parse_deck(_optional_path(path, "path"))
         if not steps:

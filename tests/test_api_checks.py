@@ -87,6 +87,8 @@ def test_from_deck_checks_the_solver_options(tmp_path):
         Simulation.from_deck(tmp_path / "none.inp", safety=2)
     with pytest.raises(InputError, match="output must be"):
         Simulation.from_deck(tmp_path / "none.inp", output=7)
+    with pytest.raises(InputError, match="from_deck: unknown keyword 'saftey'"):
+        Simulation.from_deck(tmp_path / "none.inp", saftey=0.5)
 
 
 def test_huge_ids_are_refused_at_the_call():
