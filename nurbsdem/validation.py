@@ -224,7 +224,7 @@ def wall_plane(wall: "WallSpec") -> tuple[np.ndarray, np.ndarray, np.ndarray, np
         raise ValueError("its corners are not finite numbers")
     o = cp[0, 0]
     a, b = cp[-1, 0] - o, cp[0, -1] - o
-    from .io.deck import RANGES
+    from .ranges import RANGES
     shortest = RANGES["Size"].lo
     la, lb = _length(a), _length(b)
     if min(la, lb) < shortest:

@@ -655,12 +655,12 @@ def _seeds(patches, K, owner, UV, size: float, n_fine: int, n_seeds: int):
 
 def checked_convexity_tol(tol, source: str | None = None) -> float:
     """The convexity tolerance (None: :data:`DEFAULT_CONVEXITY_TOL`) held to the deck's
-    ``ConvexityTolerance`` range (:data:`nurbsdem.io.deck.RANGES`); a NaN, an infinity or a
+    ``ConvexityTolerance`` range (:data:`nurbsdem.ranges.RANGES`); a NaN, an infinity or a
     value out of range is a :class:`GeometryError` (a tolerance of 1e300 would accept any
     dent)."""
     if tol is None:
         return DEFAULT_CONVEXITY_TOL
-    from ..io.deck import RANGES
+    from ..ranges import RANGES
     rng = RANGES["ConvexityTolerance"]
     try:
         x = float(tol)

@@ -37,6 +37,9 @@ import numpy as np
 from ..errors import InputError
 from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep, Output,
                      ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
+# the supported magnitudes of the values (below the solver: the geometry and scene checks read
+# them too)
+from ..ranges import ASPECT_MAX, ID_MAX, RANGES, Range  # noqa: F401
 
 # ---------------------------------------------------------------------------- schema
 
@@ -102,75 +105,6 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
 }
 
 _BLOCKS = {b.lower(): b for b in SCHEMA}
-
-#: Largest ratio of an ellipsoid's longest to shortest semi-axis.
-ASPECT_MAX = 1e3
-
-#: Largest id of a numbered entry (ids are stored as 64-bit integers and a Replicate step
-#: numbers its copies after the largest id).
-ID_MAX = 10 ** 9
-
-_COORD = "float64 positions this far out cannot resolve contacts at particle scale"
-_SIZE = "the geometric tolerances of the contact search assume sizes in this range"
-_MATERIAL = "outside any real material; masses and critical time steps leave floating-point range"
-
-
-@dataclass(frozen=True)
-class Range:
-    """The supported magnitudes of a value: ``|x| <= hi`` and, for ``x > 0``, ``x >= lo``
-    (zero and negative values are judged by the entry's own rules), with the reason."""
-
-    lo: float
-    hi: float
-    unit: str
-    reason: str
-    #: negative values are wrong whatever their size: left to the entry's ">= 0" rule
-    nonnegative: bool = False
-
-
-#: Supported magnitudes by key (or ``Keyword`` for a setting's own values).
-RANGES: dict[str, Range] = {
-    **{k: Range(0.0, 1e6, "m", _COORD) for k in ("Position", "Region", "Min", "Max", "Point",
-                                                  "Displacement", "Height", "Gap")},
-    **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size")},
-    **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
-       for k in ("Normal", "Axis", "Direction")},
-    "Gravity": Range(0.0, 1e6, "m/s^2", "a million times the Earth's gravity is beyond any "
-                     "granular flow"),
-    "Velocity": Range(0.0, 1e4, "m/s", "beyond any granular flow; contacts cannot be resolved"),
-    "AngularVelocity": Range(0.0, 1e6, "rad/s", "beyond any granular flow; contacts cannot be "
-                             "resolved"),
-    "Density": Range(1e-3, 1e6, "kg/m^3", _MATERIAL),
-    "YoungModulus": Range(1.0, 1e13, "Pa", "beyond the stiffest solids (diamond: 1.2e12 Pa) "
-                          "and softer than any gel"),
-    "Volume": Range(1e-27, 1e18, "m^3", _SIZE),
-    "Inertia": Range(0.0, 1e30, "kg m^2", _MATERIAL),
-    "NormalPenalty": Range(0.0, 1e15, "N/m", _MATERIAL),
-    "TangentialPenalty": Range(0.0, 1e15, "N/m", _MATERIAL),
-    "NormalDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
-    "TangentialDamping": Range(0.0, 1e12, "N s/m", _MATERIAL),
-    "Friction": Range(0.0, 100.0, "", "Coulomb coefficients of real materials are below ~2"),
-    "ConvexityTolerance": Range(0.0, 0.1, "", "a surface further than a tenth of its size from "
-                                "convex is not a convex particle: the contact search finds one "
-                                "contact point per pair", nonnegative=True),
-    "Accuracy": Range(1e-12, 0.1, "", "a relative energy error per deck step beyond 0.1 "
-                      "controls nothing; below 1e-12 it is round-off"),
-    "Safety": Range(0.01, 0.95, "", "a fraction of the stability limit: at 1 the explicit "
-                    "step is unstable, and 0.95 leaves no margin for the linearisation; below "
-                    "0.01 a smaller TimeStep says the same"),
-    "Duration": Range(0.0, 1e7, "s", "a simulated time of months is beyond a DEM run"),
-    "TimeStep": Range(1e-15, 1e7, "s", "below a femtosecond nothing granular happens"),
-    "Every": Range(1e-12, 1e7, "s", "output intervals beyond this range are meaningless"),
-    "MaxAttempts": Range(1, 10 ** 7, "", "more attempts take hours without placing the particle"),
-    "Seed": Range(0, 2 ** 63 - 1, "", "seeds are 64-bit integers"),
-    "Resolution": Range(1, 10 ** 4, "", "finer tessellations than this do not fit in memory"),
-    "Counts": Range(0, 10 ** 8, "", "more particles do not fit in memory"),
-    "Shapes": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
-    "Shape": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
-    "Material": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
-    "Materials": Range(0, ID_MAX, "", f"ids are at most {ID_MAX:g}"),
-}
-
 
 def _fmt_num(x: float) -> str:
     return f"{x:g}" if isinstance(x, float) else (str(x) if abs(x) < 10 ** 15 else f"{float(x):g}")
