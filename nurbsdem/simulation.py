@@ -848,6 +848,7 @@ class Simulation:
         """The deck of this scene and of the steps run so far (what ``results.h5`` and the
         checkpoint store). Shapes given as Python objects that are not exact generator
         spheres appear as ``File "<python object ...>"`` with a hash of their geometry."""
+        from .dynamics.laws.interface import interface_text
         m = self.model
         if self._from_deck:
             return m.text
@@ -893,14 +894,7 @@ class Simulation:
                            f"Size {_v(size)}{axis}{mat}")
         out.append("Contact")
         for i in m.interfaces:
-            if getattr(i, "model", "linear") == "hertz":
-                line = (f"  Interface {i.id} Model HertzMindlin Restitution "
-                        f"{_f(i.restitution)} Friction {_f(i.friction)}")
-            else:
-                line = (f"  Interface {i.id} NormalPenalty {_f(i.normal_penalty)} "
-                        f"TangentialPenalty {_f(i.tangential_penalty)} NormalDamping "
-                        f"{_f(i.normal_damping)} TangentialDamping "
-                        f"{_f(i.tangential_damping)} Friction {_f(i.friction)}")
+            line = "  " + interface_text(i, _f)
             if i.materials:
                 line += " Materials " + " ".join(map(str, i.materials))
             elif i.between:

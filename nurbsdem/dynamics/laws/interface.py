@@ -16,6 +16,8 @@ from . import LAWS, law_named
 
 #: the keys common to every law besides the law's own: which pairs the interface covers
 COMMON_KEYS = ("Model", "Between", "Materials")
+#: the law of an Interface entry without ``Model``
+DEFAULT_LAW = "LinearPenalty"
 #: Interface fields a law key may fill (the others go to ``Interface.params``)
 _FIELDS = {f.name for f in fields(Interface)}
 
@@ -52,7 +54,7 @@ def build_interface(iid: int, model: str | None, values: dict[str, float], betwe
     id: particle-wall).  Checks: the law exists, every key is the law's, its required keys are
     given, each value lies in its key's range (:class:`~.keys.LawKey`), Between and Materials
     agree, and (``known_materials`` given) the materials exist."""
-    law = law_named(model if model is not None else "LinearPenalty")
+    law = law_named(model if model is not None else DEFAULT_LAW)
     if law is None:
         front.fail(f"{front.label}: {front.spell('Model')} must be "
                    f"{' or '.join(LAWS)}, got {model!r}")
@@ -82,6 +84,18 @@ def build_interface(iid: int, model: str | None, values: dict[str, float], betwe
     normal_penalty = own.pop("normal_penalty", 0.0)
     return Interface(iid, normal_penalty, **own, between=between, materials=mats, line=line,
                      model=law.model, params=params)
+
+
+def interface_text(itf: Interface, number: Callable[[float], str] = repr) -> str:
+    """The deck words of an Interface's law: ``Interface ID [Model NAME] KEY value ...`` with
+    the law's keys in its order (``Model`` left out for :data:`DEFAULT_LAW`); ``number``
+    writes a value.  Between and Materials are the caller's."""
+    law = law_named(itf.model)
+    words = [f"Interface {itf.id}"] + ([] if law.name == DEFAULT_LAW else [f"Model {law.name}"])
+    for k in law.keys:
+        value = itf.params[k.attr] if k.attr in itf.params else getattr(itf, k.attr)
+        words.append(f"{k.deck} {number(value)}")
+    return " ".join(words)
 
 
 def _coverage(between, materials, front: Front, known_materials):
