@@ -19,7 +19,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from .deck import RANGES, SCHEMA, Arg, EntrySpec
+from ..ranges import RANGES
+from .deck import SCHEMA, Arg, EntrySpec
 
 #: The key under which a setting's own values (``Gravity gx gy gz``) are documented.
 HEAD = "(values)"
@@ -285,7 +286,7 @@ def _number(x: float) -> str:
 
 
 def range_text(block: str, entry: str, key: str) -> str:
-    """The magnitudes the parser accepts for a key (:data:`nurbsdem.io.deck.RANGES`; a
+    """The magnitudes the parser accepts for a key (:data:`nurbsdem.ranges.RANGES`; a
     setting's own values under its keyword), '' where it checks none: 'at most 1e+06' for
     |x| <= hi, '1e-09 … 1e+06' where positive values must also reach lo."""
     rng = RANGES.get(entry if key == HEAD else key)
