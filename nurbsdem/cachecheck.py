@@ -129,7 +129,12 @@ def module_hashes(package: Path = PACKAGE) -> dict[Path, str]:
     own: dict[Path, str] = {}
     deps: dict[Path, set[Path]] = {}
     for path in _sources(package):
-        tree = ast.parse(path.read_bytes())
+        source = path.read_bytes()
+        try:
+            tree = ast.parse(source)
+        except (SyntaxError, ValueError):   # a file being edited: its bytes stand for it
+            deps[path], own[path] = set(), "bytes " + hashlib.sha1(source).hexdigest()
+            continue
         deps[path] = imported_modules(path, tree, package)   # before the docstrings go
         own[path] = _tree_hash(tree)
     hashes = {}
@@ -252,5 +257,5 @@ def check_caches(package: Path = PACKAGE) -> int:
             modules = {p.stem: hashes[p] for p in by_dir[source_dir]}
             dropped += drop_stale(folder, digest, modules)
         return dropped
-    except (OSError, SyntaxError, ValueError):
+    except OSError:
         return 0

@@ -88,6 +88,19 @@ def test_an_edit_of_comments_or_docstrings_keeps_the_kernels(tmp_path, monkeypat
     assert after.splitlines()[0] != before.splitlines()[0]      # new sources: parsed once
 
 
+def test_a_module_that_does_not_parse_drops_its_importers(tmp_path, monkeypatch):
+    """A source being edited (a syntax error) stands for itself by its bytes: the kernels of
+    the modules importing it go, the others stay."""
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    pkg = _package(tmp_path)
+    cachecheck.check_caches(pkg)
+    for module in pkg.rglob("*.py"):
+        _compile(module)
+    (pkg / "sub" / "c.py").write_text("Y = (\n")
+    assert cachecheck.check_caches(pkg) == 6
+    assert _cached(pkg) == ["d"]
+
+
 def test_the_imports_found_are_the_package_modules(tmp_path):
     """Relative and absolute imports, ``from p import module`` and ``from p import name``
     (the package's ``__init__``), imports inside functions; other packages' are not."""
