@@ -31,10 +31,11 @@ def _other_pid(fd: int) -> str:
     return text if text.isdigit() else "unknown"
 
 
-def acquire(folder: str | Path) -> str:
+def acquire(folder: str | Path) -> str | None:
     """Take the lock of ``folder`` (created if missing) for this process; returns the key for
     :func:`release`.  Raises :class:`~nurbsdem.errors.InputError` when another process holds
-    it.  Where the file system has no locks (``flock`` not supported) the run goes on."""
+    it.  Where the file system has no locks (``flock`` not supported) or the lock file cannot
+    be made (a read-only folder: None) the run goes on unlocked."""
     import fcntl
     folder = Path(folder)
     key = str(folder.resolve())
@@ -42,7 +43,10 @@ def acquire(folder: str | Path) -> str:
         if key in _held:
             _held[key][1] += 1
             return key
-        fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:                  # a read-only folder: the run's own writes say so
+            return None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
