@@ -119,7 +119,8 @@ def test_registered_law_runs_its_own_kernel(spring_law):
 def test_registered_law_goes_through_the_interface_front_end(spring_law):
     """The one front-end accepts the registered law's name and keys, checks its range with
     the reason, and the law reads its key back from the Interface."""
-    from nurbsdem.dynamics.laws.interface import Front, build_interface, python_name
+    from nurbsdem.dynamics.laws.interface import (Front, build_interface, interface_text,
+                                                  python_name)
     from nurbsdem.errors import InputError
 
     def fail(message):
@@ -128,6 +129,8 @@ def test_registered_law_goes_through_the_interface_front_end(spring_law):
     itf = build_interface(1, "UndampedSpring", {"Stiffness": 2e5}, None, None, front)
     assert itf.model == "undampedspring" and itf.params == {"stiffness": 2e5}
     assert laws.law_named(itf.model).from_interface(itf, None).k == 2e5
+    text = interface_text(itf, "{:g}".format)
+    assert text == "Interface 1 Model UndampedSpring Stiffness 200000"
     with pytest.raises(InputError, match=r"stiffness must be > 0, got -1 \(a spring needs"):
         build_interface(1, "UndampedSpring", {"Stiffness": -1.0}, None, None, front)
     with pytest.raises(InputError, match="normal_penalty does not apply to a UndampedSpring"):
