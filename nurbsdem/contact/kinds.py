@@ -14,15 +14,23 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-#: geometry kinds: an exact sphere, a NURBS particle, a flat rectangle wall
-SPHERE, NURBS_PARTICLE, FLAT_WALL = 0, 1, 2
-N_KINDS = 3
+#: geometry kinds: an exact sphere, a NURBS particle, a flat rectangle wall, a triangle-mesh
+#: wall (:mod:`nurbsdem.contact.mesh_wall`), an open NURBS surface wall
+#: (:mod:`nurbsdem.contact.surface_wall`)
+SPHERE, NURBS_PARTICLE, FLAT_WALL, MESH_WALL, SURFACE_WALL = 0, 1, 2, 3, 4
+N_KINDS = 5
 
 #: pair solvers: the closed forms of :mod:`nurbsdem.contact.analytic`, the point-to-surface
 #: problem of :mod:`nurbsdem.contact.point_surface`, the LCP batch of
 #: :mod:`nurbsdem.contact.detect`, the support-mapping kernel of :mod:`nurbsdem.contact.wall`;
-#: NO_SOLVER: the two kinds never meet (two walls)
+#: NO_SOLVER: the two kinds never meet (two walls; a NURBS particle and a mesh or surface
+#: wall, not built yet)
 CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT = 0, 1, 2, 3
+#: a sphere against a mesh wall: per triangle in closed form, one contact per flat or convex
+#: region (:func:`~nurbsdem.contact.mesh_wall.sphere_mesh_rows`); against a surface wall: its
+#: closest point by projected Newton (:func:`~nurbsdem.contact.surface_wall.sphere_surface_row`);
+#: both run by :class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`
+MESH_ROWS, SURFACE_POINT = 4, 5
 NO_SOLVER = -1
 
 #: (kind, kind) -> pair solver (symmetric).  A sphere against a NURBS particle takes the LCP
@@ -31,7 +39,8 @@ PAIR_SOLVER = np.full((N_KINDS, N_KINDS), NO_SOLVER, np.int64)
 for _a, _b, _solver in ((SPHERE, SPHERE, CLOSED_FORM), (SPHERE, FLAT_WALL, CLOSED_FORM),
                         (SPHERE, NURBS_PARTICLE, POINT_SURFACE),
                         (NURBS_PARTICLE, NURBS_PARTICLE, LCP),
-                        (NURBS_PARTICLE, FLAT_WALL, WALL_SUPPORT)):
+                        (NURBS_PARTICLE, FLAT_WALL, WALL_SUPPORT),
+                        (SPHERE, MESH_WALL, MESH_ROWS), (SPHERE, SURFACE_WALL, SURFACE_POINT)):
     PAIR_SOLVER[_a, _b] = PAIR_SOLVER[_b, _a] = _solver
 del _a, _b, _solver
 

@@ -1,0 +1,218 @@
+"""Mesh and NURBS-surface walls in the step: a contact provider that adds the contacts of exact
+spheres with triangle-mesh walls (:mod:`nurbsdem.contact.mesh_wall`) and open NURBS surface
+walls (:mod:`nurbsdem.contact.surface_wall`) to those of another provider (the scene of the
+particles and the flat walls, :class:`~nurbsdem.contact.scene.SceneContacts`).
+
+Each curved wall is a body of the system (global index ``N + first_wall + w``) held in its own
+frame and placed by a pose ``x_world = R(t) x_wall + t(t)`` (:class:`WallPose`: fixed, or a
+rotation at a constant angular velocity about a centre); the kernels bring the sphere's centre
+into the wall frame, so the wall's own broad-phase grid stays valid as it moves.
+
+Per evaluation and wall: the world box of the wall's points at its pose is tested against
+each sphere's bounding box (centre ± radius); a sphere that overlaps it is handed to the
+wall's kernel (the mesh's triangle grid, or the surface's nearest samples and projected
+Newton).  The pair solver of each (sphere, wall kind) comes from
+:data:`nurbsdem.contact.kinds.PAIR_SOLVER`; only exact spheres meet these walls.
+
+**Keys (tangential history).**  A sphere has one contact with a wall across a flat or convex
+region (the mesh kernel's rule), so the contact is keyed by the pair (body, wall), not by the
+triangle: a sphere sliding from one triangle to the next of a flat region keeps its spring.
+Where it has several (a concave fold: one per face) the k-th (in triangle order) takes its
+own key.  The keys lie above ``(N+W)^2``, clear of the ``a·(N+W) + b`` keys of the other
+provider.
+
+Units: metres, seconds, radians.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from .contactset import ContactSet
+from .kinds import MESH_ROWS, SPHERE, SURFACE_POINT, pair_solver
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
+from .mesh_wall import MeshWall, make_workspace, sphere_mesh_rows
+from .surface_wall import SurfaceWall, sphere_surface_row
+
+#: most contacts one sphere keeps with one mesh wall per evaluation (faces of a concave fold)
+MAX_PER_WALL = 8
+
+
+@dataclass(frozen=True)
+class WallPose:
+    """A wall's pose in time: at rest (``omega`` = 0) or turning at the constant angular
+    velocity ``omega`` (3,) rad/s about the point ``center`` (3,) m from time ``t0`` (s) on,
+    with the rest pose ``R0`` (3,3), ``t0_shift`` (3,) m at ``t0``."""
+
+    omega: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    t0: float = 0.0
+    R0: np.ndarray = field(default_factory=lambda: np.eye(3))
+    shift0: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(R (3,3), t (3,) m): ``x_world = R x_wall + t`` at time t (s): the rest pose turned
+        by the rotation vector ω (t − t0) about the centre (Rodrigues, by scipy)."""
+        from scipy.spatial.transform import Rotation
+        rot = Rotation.from_rotvec(np.asarray(self.omega, float)
+                                   * max(float(t) - self.t0, 0.0)).as_matrix()
+        c = np.asarray(self.center, float)
+        R = rot @ self.R0
+        return R, rot @ (self.shift0 - c) + c
+
+
+@dataclass
+class CurvedWall:
+    """One mesh or surface wall: its kind (:data:`~nurbsdem.contact.kinds.MESH_WALL` or
+    ``SURFACE_WALL``), geometry (:class:`MeshWall` or :class:`SurfaceWall`) and pose."""
+
+    kind: int
+    geometry: MeshWall | SurfaceWall
+    pose: WallPose = field(default_factory=WallPose)
+    corners: np.ndarray = field(init=False)
+    work: tuple = field(init=False, default=())
+
+    def __post_init__(self) -> None:
+        g = self.geometry
+        pts = g.vertices if isinstance(g, MeshWall) else g.seed_x
+        pad = 0.0 if isinstance(g, MeshWall) else g.spacing
+        lo, hi = pts.min(axis=0) - pad, pts.max(axis=0) + pad
+        self.corners = np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]]
+                                 for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        if isinstance(g, MeshWall):
+            self.work = make_workspace(g)
+
+    def world_box(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The world box (lo, hi) of the wall's bounding box at pose (R, t)."""
+        w = self.corners @ R.T + t
+        return w.min(axis=0), w.max(axis=0)
+
+
+@njit(cache=True)
+def _mesh_rows_of(idx, x, r, R, t, vertices, faces, normals, two_sided, size, grid_origin,
+                  grid_cell, grid_dims, cell_start, cell_tris, stamp, mark0, tris, cand_q,
+                  cand_d, cand_f, rows_f, rows_i, owner, rank):
+    """The contact rows of spheres ``idx`` (centres x, radii r) with one mesh wall at (R, t)
+    into rows_f / rows_i from row 0, each row's sphere in ``owner`` and its rank among that
+    sphere's contacts with the wall in ``rank``; returns the count (at most
+    ``MAX_PER_WALL`` per sphere)."""
+    n = 0
+    one_f = np.zeros((MAX_PER_WALL, NF))
+    one_i = np.zeros((MAX_PER_WALL, NI), np.int64)
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        k = sphere_mesh_rows(x[i], r[i], R, t, vertices, faces, normals, two_sided, size,
+                             grid_origin, grid_cell, grid_dims, cell_start, cell_tris, stamp,
+                             mark0 + m, tris, cand_q, cand_d, cand_f, one_f, one_i)
+        for j in range(min(k, MAX_PER_WALL)):
+            rows_f[n, :] = one_f[j, :]
+            rows_i[n, :] = one_i[j, :]
+            owner[n] = i
+            rank[n] = j
+            n += 1
+    return n
+
+
+class CurvedWallContacts:
+    """A contact provider: ``base``'s contacts (None: none) and those of the spheres (radii
+    (N,) m, centred on the centroids; ``spheres`` (N,) bool: which particles are exact spheres)
+    with ``walls`` (:class:`CurvedWall`), the walls being bodies ``N + first_wall + w``."""
+
+    def __init__(self, base, radii, spheres, walls: list[CurvedWall], first_wall: int) -> None:
+        self.base = base
+        self.radii = np.ascontiguousarray(radii, float)
+        self.spheres = np.asarray(spheres, bool)
+        self.walls = list(walls)
+        self.first_wall = int(first_wall)
+        self._mark = 0
+        for w in self.walls:
+            if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
+                raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
+
+    def __getattr__(self, name):               # the base scene's counters, timers and state
+        base = self.__dict__.get("base")
+        if base is None:
+            raise AttributeError(name)
+        return getattr(base, name)
+
+    def _candidates(self, x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        r = self.radii[:, None]
+        near = np.all((x + r >= lo) & (x - r <= hi), axis=1) & self.spheres
+        return np.flatnonzero(near).astype(np.int64)
+
+    def _wall_rows(self, w: CurvedWall, x: np.ndarray, t: float):
+        """(rows_f, rows_i, owner, rank) of the spheres' contacts with wall w at time t."""
+        R, tv = w.pose.at(t)
+        idx = self._candidates(x, *w.world_box(R, tv))
+        g = w.geometry
+        if isinstance(g, MeshWall):
+            cap = MAX_PER_WALL * len(idx)
+            rf, ri = np.zeros((cap, NF)), np.zeros((cap, NI), np.int64)
+            owner, rank = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+            n = _mesh_rows_of(idx, x, self.radii, R, tv, g.vertices, g.faces, g.normals,
+                              g.two_sided, g.size, g.grid_origin, g.grid_cell, g.grid_dims,
+                              g.cell_start, g.cell_tris, w.work[0], self._mark, *w.work[1:],
+                              rf, ri, owner, rank)
+            self._mark += len(idx)
+            keep = rf[:n, F_SD] < 0.0
+            return rf[:n][keep], owner[:n][keep], rank[:n][keep]
+        rows, owners = [], []
+        ev = np.zeros((6, 3))
+        for i in idx.tolist():
+            f, ii = np.zeros(NF), np.zeros(NI, np.int64)
+            ok = sphere_surface_row(x[i], self.radii[i], R, tv, g.deg, g.ncp, g.koff, g.knots,
+                                    g.pw, g.poff, g.dom, g.periodic, g.seed_x, g.seed_p,
+                                    g.seed_uv, g.spacing, g.size, ev, f, ii)
+            if ok and ii[I_ACTIVE]:
+                rows.append(f)
+                owners.append(i)
+        rf = np.array(rows).reshape(-1, NF)
+        owner = np.array(owners, np.int64)
+        return rf, owner, np.zeros(len(owner), np.int64)
+
+    def __call__(self, kin) -> ContactSet:
+        cs = self.base(kin) if self.base is not None else None
+        cs = ContactSet.empty() if cs is None else cs
+        x = np.ascontiguousarray(kin.x, float)
+        N, nb = kin.n_particles, kin.n_bodies
+        parts = []
+        for w_i, w in enumerate(self.walls):
+            rf, owner, rank = self._wall_rows(w, x, kin.t)
+            if len(owner) == 0:
+                continue
+            body = N + self.first_wall + w_i
+            key = nb * nb + ((owner * len(self.walls) + w_i) * MAX_PER_WALL + rank)
+            parts.append((owner, np.full(len(owner), body, np.int64), rf, key))
+        if not parts:
+            return cs
+        return _merged(cs, parts)
+
+
+def _merged(cs: ContactSet, parts: list) -> ContactSet:
+    """``cs`` with the contact rows of ``parts`` [(a, b, rows_f, key)] appended (patch −1:
+    closed forms, no surface parameters)."""
+    a = np.concatenate([cs.body_a] + [p[0] for p in parts]).astype(np.int64)
+    b = np.concatenate([cs.body_b] + [p[1] for p in parts]).astype(np.int64)
+    rf = np.concatenate([p[2] for p in parts])
+    k_new = len(rf)
+    pa = np.concatenate([np.asarray(cs.point_a, float).reshape(-1, 3), rf[:, F_PA:F_PA + 3]])
+    pb = np.concatenate([np.asarray(cs.point_b, float).reshape(-1, 3), rf[:, F_PB:F_PB + 3]])
+    nrm = np.concatenate([np.asarray(cs.normal, float).reshape(-1, 3), rf[:, F_N:F_N + 3]])
+    dep = np.concatenate([np.asarray(cs.depth, float), -rf[:, F_SD]])
+    key = np.concatenate([np.asarray(cs.key, np.int64)] + [p[3] for p in parts])
+    deg = np.concatenate([np.asarray(cs.degenerated, np.int64), np.zeros(k_new, np.int64)])
+    out = ContactSet(a, b, pa, pb, nrm, dep, key, deg, monitored=cs.monitored + k_new,
+                     active=cs.active + k_new, degenerated_count=cs.degenerated_count,
+                     failed=cs.failed, reused=cs.reused, dropped=cs.dropped,
+                     dropped_keys=cs.dropped_keys, near_a=cs.near_a, near_b=cs.near_b,
+                     near_point=cs.near_point, near_normal=cs.near_normal, near_gap=cs.near_gap)
+    if len(cs.params) == len(cs.body_a):
+        out.params = np.concatenate([np.asarray(cs.params, float).reshape(-1, 4),
+                                     np.zeros((k_new, 4))])
+        out.patch_a = np.concatenate([np.asarray(cs.patch_a, np.int64),
+                                      np.full(k_new, -1, np.int64)])
+        out.patch_b = np.concatenate([np.asarray(cs.patch_b, np.int64),
+                                      np.full(k_new, -1, np.int64)])
+    return out
