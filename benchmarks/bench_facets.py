@@ -5,7 +5,7 @@ scaled by 0.8), both exact 6-patch NURBS ellipsoids, in random relative poses (r
 orientations, random direction of B from A) with B's distance chosen so that the exact
 penetration is 0.1–5 % of the size (log-uniform). Size L = 2 × 32.4 mm (A's long axis).
 
-Exact reference: the support-function formula (``/work/shared/reference/README.md``),
+Exact reference: the support-function formula,
 depth = min_{|d|=1} hA(d) + hB(−d) with h(d) = c·d + sqrt(dᵀ M d), dense start + SciPy
 refine (:func:`nurbsdem.contact.reference.ellipsoid_pair`); B's distance is found by
 ``brentq`` on it.

@@ -1,4 +1,4 @@
-"""Hertz–Mindlin with the exact local curvature (issue 12): what the exact curvature changes,
+"""Hertz–Mindlin with the exact local curvature: what the exact curvature changes,
 what it costs, and the benchmark impacts.
 
     .venv/bin/python benchmarks/bench_hertz.py [--quick]
@@ -16,7 +16,7 @@ what it costs, and the benchmark impacts.
 4. The same impact on a glass anvil (MFIX's DEM-05 verification case, Kharaz et al.'s
    experiment): e_t against MFIX's published curve and the measurements.
 5. A pack of paper particles deposited under Hertz–Mindlin (E 1e8 Pa): the compiled deck
-   steps against the Python path that drove such scenes before stop 39 (``compiled_steps``
+   steps against the Python path, their reference (``compiled_steps``
    off), wall time of each and whether every result is the same bit for bit.
 """
 from __future__ import annotations

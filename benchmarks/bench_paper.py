@@ -5,13 +5,12 @@ particles, ~1.2 MB each) and the same deck with ``VTK Every 0.5`` (14 samples, a
 many of ``results.h5``, which follows the VTK interval in this deck; monitors and checkpoints
 as shipped), run alternately ``--rounds`` times each, every run in a
 fresh output folder: the difference is what writing the samples costs the run on this
-machine.  Runs on this 2-core VM move by 10-30 % from one to the next; compare only runs of
+machine.  Runs on a shared machine move by tens of per cent from one to the next; compare runs of
 the same invocation.
 
 Printed per run: wall time, the solver's time split (global search, LCP, forces +
 integration, output on the main thread, set-up; of forces + integration: the integration, the
-contact forces, the implicit dashpots and the time-step control), the time outside the LCP over the LCP time (issue 10's measure,
-target at most 0.5), internal steps, LCPs solved, failed LCPs
+contact forces, the implicit dashpots and the time-step control), the time outside the LCP over the LCP time, internal steps, LCPs solved, failed LCPs
 and the energy-balance error (J; the integration's error: the accuracy figure beside the
 speed); then the best and the median wall time of each variant.
 

@@ -166,7 +166,7 @@ def main(argv: list[str]) -> dict:
         warm = work / "warmup.inp"
         warm.write_text(nurbsdem_deck(pos, rad, 0.02))
         nds, yds = [], []
-        for k in range(ROUNDS):             # alternated: this VM's speed drifts
+        for k in range(ROUNDS):             # alternated: a machine's speed drifts
             nds.append(run_nurbsdem(deck, work / "out", warm if k == 0 else None))
             yds.append(run_yade(pos, rad, T, work))
     nd = min(nds, key=lambda r: r["loop"])

@@ -16,7 +16,7 @@ convex polyhedra is computed by
   Collision Detection*, 5.1.5);
 * **EPA** (expanding polytope algorithm) for overlapping bodies — the distance from the origin
   to the CSO boundary, i.e. the maximum penetration depth ``min_{|d|=1} hA(d) + hB(−d)`` (the
-  same quantity as the NURBS contact, see ``/work/shared/reference/README.md``). The polytope
+  same quantity as the NURBS contact). The polytope
   is expanded by a flood fill of the faces visible from the new support point, starting at the
   face being refined, so the horizon is one closed loop (checked; on a broken horizon the
   best face so far is returned and the status says so).

@@ -1,4 +1,4 @@
-"""Convexity with a tolerance (issue 13).
+"""Convexity with a tolerance.
 
 * The non-convexity figure is a length: 0 for exact convex shapes (sphere, ellipsoid, the
   paper particles); for a dent, about the dent's depth (checked against the control-point
@@ -299,7 +299,7 @@ SWEEP_SEEDS = tuple(range(100, 112))
 
 @pytest.mark.parametrize("regime", ["normal", "grazing", "deep"])
 def test_lcp_sweep_near_convex_all_seeds(sweep_table, regime):
-    """The full hard-case sweep of issue 13 (4 800 solves per regime, and 2 400 of the
+    """The full hard-case sweep (4 800 solves per regime, and 2 400 of the
     perturbed poses that give the warm starts): no failure, cold, warm or perturbed, and the
     signed distance within the non-convexity height of the reference (the probe touching the
     feature point); the contact points agree with the depth. Seed 110 used to fail in the

@@ -1,4 +1,4 @@
-"""Hertz–Mindlin contact with the exact local curvature (issue 12): curvature, impacts against
+"""Hertz–Mindlin contact with the exact local curvature: curvature, impacts against
 Hertz theory, restitution, oblique impacts (Chung & Ooi 2011, test 4), an ellipsoid at rest on
 each of its axes against elliptical Hertz, and the time-step control's per-contact stiffness."""
 from __future__ import annotations

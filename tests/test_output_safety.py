@@ -1,4 +1,4 @@
-"""Nothing already written is lost (issue 11): a new run keeps the previous results until it
+"""Nothing already written is lost: a new run keeps the previous results until it
 has a complete sample of its own, a full disk or a file-size limit ends in one clean line
 with the last good checkpoint intact, and temporaries of killed writers are removed on the
 next start."""

@@ -160,7 +160,7 @@ def test_compiled_steps_are_used_for_spheres(runs, monkeypatch):
 def test_samples_kept_by_the_loop_or_taken_live_give_the_same_files(runs, tmp_path,
                                                                     monkeypatch):
     """With a state budget of one byte the compiled loop stops at every ParaView/results
-    sample and the solver takes it live (as before stop 31): every file the same as the
+    sample and the solver takes it live: every file the same as the
     run whose loop kept the samples' states, in fewer calls."""
     import nurbsdem.solver as solver_module
     deck, out = runs

@@ -122,7 +122,7 @@ def test_one_pair_gives_the_pair_formula_and_off_centre_contacts_their_effective
     assert w2 == pytest.approx(2e5 / m, rel=1e-12) and gam == pytest.approx(2e2 / m, rel=1e-12)
     dt = critical_step_from_rates(w2, gam)
     assert dt == pytest.approx(critical_step(1e5, 1e2, m / 2)[2], rel=1e-12)
-    assert dt == pytest.approx(4.7e-4, rel=0.01)             # the digest's C–C value
+    assert dt == pytest.approx(4.7e-4, rel=0.01)             # the paper's C–C pair
     # a box-like body on a wall, touching 3 cm off its centre: 1/m* = 1/m + d²/I_y
     I_box = np.array([[1e-5, 2e-5, 2.5e-5]])
     d = 0.03

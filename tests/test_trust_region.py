@@ -97,6 +97,6 @@ def test_sym2_eig_against_numpy_and_the_angle():
         np.testing.assert_allclose(B @ q1, l1 * q1, atol=1e-14 * scale)
         np.testing.assert_allclose(B @ q2, l2 * q2, atol=1e-14 * scale)
         half = 0.5 * (b11 - b22)
-        if np.sqrt(half * half + b12 * b12) > 0.0:     # else any basis: (1, 0), as before
+        if np.sqrt(half * half + b12 * b12) > 0.0:     # else any basis: sym2_eig's (1, 0)
             th = 0.5 * np.arctan2(b12, half)
             assert abs(c - np.cos(th)) <= 1e-15 and abs(s - np.sin(th)) <= 1e-15

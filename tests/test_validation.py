@@ -1,4 +1,4 @@
-"""Every bad input gets one clear answer (issue 11): whole-scene validation at check time,
+"""Every bad input gets one clear answer: whole-scene validation at check time,
 numbers in range with the reason, files that are not what they claim, the error path of
 the command line, restart checks, and the regression corpus of defect-finding inputs."""
 from __future__ import annotations

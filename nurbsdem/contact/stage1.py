@@ -13,7 +13,7 @@ with the exact derivatives from the compiled kernel's first and second surface d
     ∇²f1 = JᵀJ + diag-blocks( g·ΓA,ζζ  g·ΓA,ζθ  g·ΓA,θθ ;  −g·ΓB,ζζ  −g·ΓB,ζθ  −g·ΓB,θθ ).
 
 **Trust-region Newton** (as in the authors' Giraffe code, Δ0 = 0.1, Δmax = 1e4, η = 0.15, at
-most 50 iterations; see ``/work/shared/reference/README.md``). The variables are scaled by
+most 50 iterations). The variables are scaled by
 each patch's parameter width, so the radius is in patch widths. The step is the exact
 trust-region step (:func:`.trust_region.tr_step_eig`, shared with the support mapping and
 the direction search) in the eigenbasis of the (reduced) Hessian (4×4 cyclic Jacobi): the

@@ -3,7 +3,7 @@
 Why
 ---
 The explicit scheme (:mod:`nurbsdem.dynamics.integrator`) evaluates the dashpot of Eq. 16,
-``fn = εn g + cn ġn``, with the half-step velocities.  Its stability limit is the digest's
+``fn = εn g + cn ġn``, with the half-step velocities.  Its stability limit is the damped spring's
 Δt_cr = (2/ω)(√(1+ζ²) − ζ) (:mod:`nurbsdem.dynamics.stepcontrol`, Eq. 1): strong damping
 shortens the step.  In the paper's dense pack the network's damping rate γ ≈ 8400 1/s against
 ω ≈ 3000 rad/s (ζ ≈ 1.4) makes the limit 3.2× shorter than the undamped 2/ω.  The paper's

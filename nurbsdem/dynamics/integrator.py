@@ -28,7 +28,7 @@ Why this scheme
   energy and in |L|.)
 * Velocity-dependent (damping) forces are evaluated with the half-step velocities v(n+1/2),
   ω from L(n+1/2) at the new positions — the usual DEM choice (LAMMPS/LIGGGHTS).  Its stability
-  limit for a spring–dashpot is the digest's Δt_cr = (2/ω)(√(1+ζ²) − ζ), used by the time-step
+  limit for a spring–dashpot is Δt_cr = (2/ω)(√(1+ζ²) − ζ), used by the time-step
   control in :mod:`nurbsdem.dynamics.system`.
 
 All kernels are numba functions over (N,·) arrays, deterministic: the per-body and per-contact

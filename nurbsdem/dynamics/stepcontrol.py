@@ -7,7 +7,7 @@ satisfies, for every mode of the linearised contact network,
 
     h < Δt_cr = 2 / (γ/2 + √(ω² + γ²/4))  =  (2/ω)(√(1+ζ²) − ζ),   ζ = γ / (2ω)        (1)
 
-(the digest's formula written with the damping rate γ = 2ζω, which makes plain that Δt_cr falls
+(the damped spring's limit with the damping rate γ = 2ζω, which makes plain that Δt_cr falls
 when either ω² or γ grows).  For one pair, ω² = k/m* and γ = c/m*.  A body with n contacts has a
 stiffer mode than any of its pairs (in a face-centred cubic block of spheres ω² reaches about
 8× the pair value), so a step chosen from the stiffest pair can be unstable in a dense pack.

@@ -2,7 +2,7 @@
 
 The paper gives, for each particle, only: 6 bicubic patches of 6 × 6 control points, each
 parameter in [0, 2], density 2700 kg/m^3, the volume and the inertia tensor about the
-centroid (Table 1; see ``/work/shared/reference/README.md``). The geometry itself is not
+centroid (the paper's Table 1). The geometry itself is not
 published, so this module *constructs* a convex body with exactly that structure and those
 mass properties:
 

@@ -4,10 +4,10 @@ Why
 ---
 The particles' ParaView samples hold per-point arrays that are constant over each body (its
 velocity and angular velocity: 600 equal rows per body in the paper example).  zlib finds
-those repeats by hashing and comparing every byte: 1.5 ms per 0.8 MB array, on the output
-worker that competes with the LCP threads for the two cores, plus the copy that spells the
-rows out.  Here the repeats are known beforehand, so the compressed stream is written
-directly: in each block, the first row's bytes of a run as literals, then copies of the bytes
+those repeats by hashing and comparing every byte, on the output worker that competes with
+the LCP threads for the cores, after a copy that writes the rows out.  Here the repeats are
+known beforehand, so the compressed stream is written directly: in each block, the first
+row's bytes of a run as literals, then copies of the bytes
 one row back (length ≤ 258, distance = row size), in deflate's fixed Huffman code; the
 Adler-32 checksum is summed per run in closed form.  The work is per run and per 258 bytes,
 not per byte.  Any inflater reads the result (zlib, VTK, ParaView, meshio: tests); the bytes

@@ -8,7 +8,7 @@ first time step at or after it (:mod:`nurbsdem.io.intervals`), which is at or be
 because t is itself the end of a time step.  A file that ends earlier was cut short (a full
 disk, a copy of an older folder, a file put back by hand): continuing it would leave a hole
 from its end to t, so the restart is refused with one line naming the file and both times.
-A missing file is started anew at the checkpoint's time (no hole inside it), as before.
+A missing file is started anew at the checkpoint's time (no hole inside it).
 """
 from __future__ import annotations
 
