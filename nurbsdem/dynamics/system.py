@@ -114,8 +114,8 @@ class Kinematics:
     """What a contact provider is given (SI units, world frame).
 
     t (s); x (N,3) centroids; R (N,3,3) file->world rotations; position (N,3) pose positions
-    (x − R c, DEVNOTES); v (N,3) and omega (N,3) velocities (the half-step values of the
-    integrator); wall_displacement, wall_velocity (W,3); n_particles N, n_bodies N+W.
+    (x − R c, docs/conventions.md); v (N,3) and omega (N,3) velocities (the half-step values
+    of the integrator); wall_displacement, wall_velocity (W,3); n_particles N, n_bodies N+W.
     """
 
     t: float
@@ -131,7 +131,7 @@ class Kinematics:
 
 
 class ContactProvider(Protocol):
-    def __call__(self, kin: Kinematics) -> Any:  # returns a ContactSet (DEVNOTES) or None
+    def __call__(self, kin: Kinematics) -> Any:  # a ContactSet (docs/conventions.md) or None
         ...
 
 
@@ -1186,7 +1186,8 @@ class _Unstable(Exception):
 
 
 def _unpack(cs: Any, n_bodies: int):
-    """Contiguous typed arrays from a ContactSet (duck-typed, DEVNOTES); None or K=0 -> empty."""
+    """Contiguous typed arrays from a ContactSet (duck-typed, docs/conventions.md); None or
+    K=0 -> empty."""
     if cs is None or len(np.asarray(cs.body_a)) == 0:
         e3 = np.zeros((0, 3))
         ei = np.zeros(0, dtype=np.int64)
