@@ -50,7 +50,7 @@ def _one_line(exc: InputError) -> None:
     assert "\n" not in str(exc) and str(exc)
 
 
-# ---------------------------------------------------------------------------- the cases of issue 46
+# ---------------------------------------------------------------------------- solver arguments
 
 
 def test_output_of_the_wrong_type_is_an_input_error():

@@ -1,4 +1,4 @@
-"""The convexity measure's height on the samples' convex hull (issue 46).
+"""The convexity measure's height on the samples' convex hull.
 
 :func:`nurbsdem.geometry.connectivity.measure_convexity` finds max_ab n_a . (x_b - x_a) with
 the support function of the samples (:mod:`nurbsdem.geometry.support`: Qhull, then a walk

@@ -1,4 +1,4 @@
-"""Inputs users really write (issue 46, part B): resting overlaps, contacts too soft for the
+"""Inputs users really write: resting overlaps, contacts too soft for the
 load, and the messages of shape files and Giraffe imports.
 
 * A particle at its resting overlap m g / k on a floor, two stacked spheres, and a pack

@@ -1,4 +1,4 @@
-"""Nothing lost on the output side (issue 46): a full disk never leaves the checkpoint ahead
+"""Nothing lost on the output side: a full disk never leaves the checkpoint ahead
 of the results, a restart refuses a folder cut short before its checkpoint, wall names stay
 inside the output folder and read back from the deck, output intervals that are not whole
 numbers of time steps are kept (not thinned), a Replicate first step keeps the energy ledger
