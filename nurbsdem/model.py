@@ -201,6 +201,33 @@ class WallSpec:
 
 
 @dataclass
+class CurvedWallSpec:
+    """A wall of triangles or of NURBS patches, placed in the world, for exact spheres.
+
+    Made by ``Mesh ID Name n File f.stl [Scale s] [Position x y z] [Rotation rx ry rz]
+    [Material m] [OneSided yes|no]`` (kind ``"mesh"``: an STL, OBJ or PLY surface, read by
+    :func:`nurbsdem.io.meshfile.read_wall_mesh`; two-sided unless ``one_sided``) or
+    ``Surface ID Name n File f.yaml [Position ..] [Rotation ..] [Material m]`` (kind
+    ``"surface"``: the open patches of a shape file, their front S_u x S_v facing the
+    particles).  ``x_world = R(rotation) (scale x_file) + position``; scale (-), position
+    (m), rotation: a rotation vector (rad); file as written in the deck, resolved against
+    the deck's folder (``path``).
+    """
+
+    id: int
+    name: str
+    kind: str
+    file: str
+    path: Path | None = None
+    scale: float = 1.0
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rotation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    material_id: int | None = None
+    one_sided: bool = False
+    line: int = 0
+
+
+@dataclass
 class Interface:
     """``Interface ID [Model LinearPenalty] NormalPenalty en [TangentialPenalty et]
     [NormalDamping cn] [TangentialDamping ct] [Friction mu] [Between particle-particle|particle-wall]
@@ -517,6 +544,8 @@ class Model:
     materials, shapes: dicts id -> entry.
     random_groups, particles: particle definitions (ids do not overlap).
     walls: list of :class:`WallSpec` in id order.
+    curved_walls: list of :class:`CurvedWallSpec` (mesh and surface walls) in deck order;
+        they are the walls after the flat ones (wall indices len(walls) ...).
     interfaces: contact interfaces in deck order (later ones override earlier ones).
     steps: solution steps in deck order.
     output: :class:`Output`.
@@ -532,6 +561,7 @@ class Model:
     random_groups: list[RandomGroup] = field(default_factory=list)
     particles: list[ParticleSpec] = field(default_factory=list)
     walls: list[WallSpec] = field(default_factory=list)
+    curved_walls: list[CurvedWallSpec] = field(default_factory=list)
     interfaces: list[Interface] = field(default_factory=list)
     steps: list[Step] = field(default_factory=list)
     output: Output | None = None
@@ -556,8 +586,8 @@ class Model:
 
     @property
     def wall_names(self) -> list[str]:
-        """Wall names in id order."""
-        return [w.name for w in self.walls]
+        """Wall names: the flat walls in id order, then the mesh and surface walls."""
+        return [w.name for w in self.walls] + [w.name for w in self.curved_walls]
 
     @property
     def particle_count(self) -> int:
@@ -637,9 +667,12 @@ def summary_text(model: Model) -> str:
         masses = [model.shapes[int(s)].mass(model.materials[int(mm)].density)
                   for s, mm in zip(model.bodies.shape_id, model.bodies.material_id)]
         out.append(f"  placed {len(model.bodies)} bodies, total mass {sum(masses):.6g} kg")
-    out.append(f"Walls: {len(model.walls)}")
+    out.append(f"Walls: {len(model.walls) + len(model.curved_walls)}")
     for w in model.walls:
         out.append(f"  {w.id}: {w.name} at {_vec(w.center)} m, normal {_vec(w.normal)}")
+    for c in model.curved_walls:
+        out.append(f"  {c.id}: {c.name}: {c.kind} {c.file}, position {_vec(c.position)} m, "
+                   f"rotation {_vec(c.rotation)} rad")
     out.append("Contact interfaces:")
     for i in model.interfaces:
         scope = i.between or "all pairs"

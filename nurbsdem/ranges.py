@@ -39,6 +39,8 @@ RANGES: dict[str, Range] = {
     **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size")},
     **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
        for k in ("Normal", "Axis", "Direction")},
+    "Scale": Range(1e-9, 1e9, "", "a mesh drawn in micrometres or kilometres is read with a "
+                   "scale within 1e-9 .. 1e9; beyond, the file's units are not lengths"),
     "Gravity": Range(0.0, 1e6, "m/s^2", "a million times the Earth's gravity is beyond any "
                      "granular flow"),
     "Velocity": Range(0.0, 1e4, "m/s", "beyond any granular flow; contacts cannot be resolved"),

@@ -40,6 +40,7 @@ has done are skipped, the interrupted one continues where the checkpoint left it
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 from pathlib import Path
 from typing import Any, Sequence
@@ -47,8 +48,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import InputError
-from .model import (DAMPING_SCHEMES, Bodies, DynamicStep, Material, Model, MoveWallStep, Output,
-                    ParticleSpec, ReplicateStep, ShapeEntry, Step, WallSpec)
+from .model import (DAMPING_SCHEMES, Bodies, CurvedWallSpec, DynamicStep, Material, Model,
+                    MoveWallStep, Output, ParticleSpec, ReplicateStep, ShapeEntry, Step,
+                    WallSpec)
 
 #: ``Model.path`` of a scene built in Python (its errors carry no file location).
 PYTHON_SCENE = "<python>"
@@ -61,6 +63,18 @@ def _f(x: float) -> str:
 
 def _v(x) -> str:
     return " ".join(_f(c) for c in np.ravel(x))
+
+
+def _curved_line(w: CurvedWallSpec) -> str:
+    """The deck line of a mesh or surface wall (its file by its absolute path)."""
+    head = "Mesh" if w.kind == "mesh" else "Surface"
+    text = f'  {head} {w.id} Name {w.name} File "{w.file}"'
+    if w.kind == "mesh":
+        text += f" Scale {_f(w.scale)}"
+    text += f" Position {_v(w.position)} Rotation {_v(w.rotation)}"
+    if w.material_id is not None:
+        text += f" Material {w.material_id}"
+    return text + (" OneSided yes" if w.one_sided else "")
 
 
 def _strip_location(exc: InputError) -> InputError:
@@ -416,7 +430,7 @@ class Simulation:
         return pid
 
     def _next_wall_id(self) -> int:
-        return max((w.id for w in self.model.walls), default=0) + 1
+        return max((w.id for w in self.model.walls + self.model.curved_walls), default=0) + 1
 
     def _add_wall_spec(self, w: WallSpec, what: str) -> None:
         if w.name in self.model.wall_names:
@@ -483,6 +497,49 @@ class Simulation:
         self._add_wall_spec(WallSpec(self._next_wall_id(), name, flat_wall(p, n, size, ax),
                                      kind="wall", material_id=wmat), "add_wall")
         self._wall_args[name] = (p, n, size, ax)
+        return name
+
+    def add_mesh_wall(self, name: str, file, scale: float = 1.0, position=(0.0, 0.0, 0.0),
+                      rotation=(0.0, 0.0, 0.0), material: int | None = None,
+                      one_sided: bool = False) -> str:
+        """``Mesh``: a wall of the triangles of an STL, OBJ or PLY ``file``, placed at
+        ``x = R(rotation) (scale x_file) + position`` (m; rotation vector, rad); two-sided
+        unless ``one_sided``; for exact-sphere particles. Returns the name."""
+        return self._add_curved("mesh", name, file, scale, position, rotation, material,
+                                one_sided)
+
+    def add_surface_wall(self, name: str, file, position=(0.0, 0.0, 0.0),
+                         rotation=(0.0, 0.0, 0.0), material: int | None = None) -> str:
+        """``Surface``: a wall of the open NURBS patches of a shape ``file`` (their front
+        towards the particles; ``nurbsdem shape cylinder|cone|plane`` writes them), placed
+        at ``x = R(rotation) x_file + position``; for exact-sphere particles."""
+        return self._add_curved("surface", name, file, 1.0, position, rotation, material,
+                                False)
+
+    def _add_curved(self, kind, name, file, scale, position, rotation, material,
+                    one_sided) -> str:
+        from .io.deck import SCHEMA
+        from .io.deck_curved import _read_check
+        from .io.wallname import wall_name_problem
+        what = f"add_{kind}_wall"
+        self._editable(what)
+        problem = wall_name_problem(name, SCHEMA)
+        if problem is not None:
+            raise InputError(f"{what}: {problem}")
+        if name in self.model.wall_names:
+            raise InputError(f"{what}: a wall named {name!r} exists already")
+        if not (np.isfinite(scale) and scale > 0):
+            raise InputError(f"{what}: scale must be positive, got {scale!r}")
+        self._range("Scale", float(scale), what)
+        spec = CurvedWallSpec(self._next_wall_id(), name, kind, str(Path(file).resolve()),
+                              path=Path(file).resolve(), scale=float(scale),
+                              position=self._vector("Position", position, what),
+                              rotation=self._vector("Rotation", rotation, what),
+                              material_id=self._wall_material(material, what),
+                              one_sided=bool(one_sided), line=None)
+        for warning in _read_check(spec, f"{what} {name!r}"):
+            logging.getLogger("nurbsdem").warning("%s", warning)
+        self.model.curved_walls.append(spec)
         return name
 
     # ------------------------------------------------------------------ steps
@@ -835,7 +892,8 @@ class Simulation:
             c = dict(body_a=np.zeros(0, np.int64), body_b=np.zeros(0, np.int64), point=z3,
                      normal=z3, depth=np.zeros(0), force_normal=z3, force_tangential=z3)
         pairs = np.stack([c["body_a"], c["body_b"]], axis=1).reshape(-1, 2)
-        ids_all = np.concatenate([self.bodies.id, np.zeros(len(self.model.walls), np.int64)])
+        ids_all = np.concatenate([self.bodies.id,
+                                  np.zeros(len(self.model.wall_names), np.int64)])
         return dict(pairs=pairs, ids=ids_all[pairs] if len(pairs) else pairs.copy(),
                     point=c["point"].copy(), normal=c["normal"].copy(), depth=c["depth"].copy(),
                     force_normal=c["force_normal"].copy(),
@@ -892,6 +950,7 @@ class Simulation:
                        if getattr(w, "material_id", None) is not None else "")
                 out.append(f"  Wall {w.id} Name {w.name} Point {_v(p)} Normal {_v(n)} "
                            f"Size {_v(size)}{axis}{mat}")
+        out += [_curved_line(w) for w in m.curved_walls]
         out.append("Contact")
         for i in m.interfaces:
             line = "  " + interface_text(i, _f)

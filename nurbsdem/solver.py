@@ -226,7 +226,7 @@ class Solver:
         # walls' materials (None, rigid walls, first)
         mats = sorted(model.materials)
         self.mat_index = {m: i for i, m in enumerate(mats)}
-        wall_mats = sorted({w.material_id for w in model.walls},
+        wall_mats = sorted({w.material_id for w in model.walls + model.curved_walls},
                            key=lambda m: (m is not None, m if m is not None else 0))
         self.wall_index = {wm: len(mats) + k for k, wm in enumerate(wall_mats)}
         self.shape_ids = sorted(model.shapes)
@@ -327,17 +327,37 @@ class Solver:
         sysm.add_particles(particles)
         for k, w in enumerate(model.walls):
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
+        for w in model.curved_walls:               # mesh and surface walls: after the flat ones
+            sysm.add_wall(None, material=self.wall_index[w.material_id], name=w.name)
         body_shape = np.array([self.shape_index[int(s)] for s in b.shape_id], np.int64)
         if self.scene is None or self.scene.n != len(b):
             self.scene = SceneContacts(self.shapes, body_shape, self._wall_patches(),
                                        **self.contact_options)
-        sysm.set_contact_provider(self.scene)
+        sysm.set_contact_provider(self._curved_walls(self.scene) if model.curved_walls
+                                  else self.scene)
         if self.comm is not None:
             self._decompose(sysm)
         if self._carry_hist is not None:
             sysm.initial_history = self._carry_hist
         self.timers["setup"] += time.perf_counter() - t0
         return sysm
+
+    def _curved_walls(self, scene: SceneContacts):
+        """The scene with the model's mesh and surface walls (exact spheres only; the
+        Python path of the deck steps: :mod:`nurbsdem.contact.curved_walls`)."""
+        from .contact.curved_walls import CurvedWall, CurvedWallContacts
+        from .io.deck_curved import curved_wall_geometry, refuse_nurbs_particles, sphere_radii
+        model = self.model
+        shape_ids = self.bodies.shape_id
+        refuse_nurbs_particles(model, shape_ids)
+        if self.comm is not None:
+            raise InputError("mesh and surface walls run on one MPI rank only")
+        if getattr(self, "_curved_geometry", None) is None:
+            self._curved_geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
+                                     for w in model.curved_walls]
+        radius, spheres = sphere_radii(model, shape_ids)
+        walls = [CurvedWall(kind, geom) for kind, geom in self._curved_geometry]
+        return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls))
 
     def _decompose(self, sysm: DemSystem) -> None:
         """Decompose the system over the ranks (a scene carried over from the previous step
@@ -423,7 +443,7 @@ class Solver:
             writers.monitors.contacts(t, smp.monitored, smp.active, smp.degenerated, smp.failed)
             if smp.hertz is not None:          # Hertz–Mindlin interfaces (not linear laws)
                 writers.monitors.hertz(t, *smp.hertz)
-        if self.model.walls:
+        if self.model.wall_names:
             writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction)
 
     def _sample(self, writers: OutputWriters, force: bool = False,

@@ -86,6 +86,10 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
         "Box": EntrySpec(True, {"Min": F3, "Max": F3, "Top": B1, "Material": I1}),
         "Wall": EntrySpec(True, {"Name": S1, "Point": F3, "Normal": F3, "Size": F2, "Axis": F3,
                                  "Material": I1}),
+        "Mesh": EntrySpec(True, {"Name": S1, "File": S1, "Scale": F1, "Position": F3,
+                                 "Rotation": F3, "Material": I1, "OneSided": B1}),
+        "Surface": EntrySpec(True, {"Name": S1, "File": S1, "Position": F3, "Rotation": F3,
+                                    "Material": I1}),
     },
     "Contact": {"Interface": EntrySpec(True, {
         "NormalPenalty": F1, "TangentialPenalty": F1, "NormalDamping": F1,
@@ -569,12 +573,20 @@ class _Builder:
         problem = wall_name_problem(w.name, SCHEMA)
         if problem is not None:
             self.fail(f"{label}: {problem}", w.line)
-        for other in self.model.walls:
+        for other in self.model.walls + self.model.curved_walls:
             if other.name == w.name:
                 self.fail(f"{label}: duplicate wall name {w.name!r} (first at line "
                           f"{other.line})", w.line)
         self.claim_wall_id(w.id, label, w.line)
-        self.model.walls.append(w)
+        if isinstance(w, WallSpec):
+            self.model.walls.append(w)
+        else:
+            self.model.curved_walls.append(w)
+
+    def add_curved_wall(self, w, label: str) -> None:
+        """A Mesh or Surface wall (:mod:`nurbsdem.io.deck_curved`), with the flat walls'
+        name and id rules."""
+        self.add_wall(w, label)
 
     def box(self, e: Entry) -> None:
         from ..geometry.generators import box_walls
@@ -737,6 +749,7 @@ class _Builder:
             if isinstance(s, MoveWallStep) and s.wall not in names:
                 known = f" (walls: {', '.join(names)})" if names else " (no walls defined)"
                 self.fail(f"Step {s.id}: no wall named {s.wall!r}{known}", s.line)
+        check_curved_walls(self, m)
         self.check_interfaces()
 
     @staticmethod
@@ -756,7 +769,7 @@ class _Builder:
         """Box/Wall ``Material m``: defined, with a YoungModulus (a wall's material matters only
         to Hertz–Mindlin interfaces; walls without one are rigid)."""
         m = self.model
-        named = [w for w in m.walls if w.material_id is not None]
+        named = [w for w in m.walls + m.curved_walls if w.material_id is not None]
         for w in named:
             if w.material_id not in m.materials:
                 self.fail(f"wall {w.name}: unknown material {w.material_id}"
@@ -772,6 +785,8 @@ class _Builder:
         return min(lines)
 
 
+from .deck_curved import check_curved_walls, curved_entry  # noqa: E402  (it needs the model's classes only)
+
 _HANDLERS: dict[tuple[str, str], Callable[[_Builder, Entry], None]] = {
     ("Environment", "Gravity"): _Builder.environment,
     ("Materials", "Material"): _Builder.material,
@@ -780,6 +795,8 @@ _HANDLERS: dict[tuple[str, str], Callable[[_Builder, Entry], None]] = {
     ("Particles", "Particle"): _Builder.particle,
     ("Walls", "Box"): _Builder.box,
     ("Walls", "Wall"): _Builder.wall,
+    ("Walls", "Mesh"): lambda b, e: curved_entry(b, e, "mesh"),
+    ("Walls", "Surface"): lambda b, e: curved_entry(b, e, "surface"),
     ("Contact", "Interface"): _Builder.interface,
     ("Steps", "Step"): _Builder.step,
 }

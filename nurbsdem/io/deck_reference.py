@@ -55,6 +55,13 @@ ENTRIES: dict[tuple[str, str], str] = {
     ("Walls", "Wall"): (
         "A flat one-sided rectangular wall; the particles must lie on the side its "
         "`Normal` points to."),
+    ("Walls", "Mesh"): (
+        "A wall of triangles from an STL, OBJ or PLY file (open or closed, convex or not; a "
+        "thin two-sided shell unless `OneSided yes`). Exact spheres only: one contact per "
+        "flat or convex region, one per face in a concave fold."),
+    ("Walls", "Surface"): (
+        "A wall of open NURBS patches from a shape file (`nurbsdem shape cylinder|cone|plane` "
+        "writes them); their front S_u x S_v faces the particles. Exact spheres only."),
     ("Contact", "Interface"): (
         "A contact law. The last interface that applies to a pair (by `Between` and "
         "`Materials`) is the one used; a pair no interface covers does not interact."),
@@ -134,6 +141,31 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
     ("Walls", "Box", "Top"): KeyDoc("", "no", "`yes`: also a top wall (named top)."),
     ("Walls", "Box", "Material"): KeyDoc(
         "", "none (rigid)", "Material id of the box's walls, for `HertzMindlin` interfaces."),
+
+    ("Walls", "Mesh", "Name"): KeyDoc(
+        "", "wallID", "The name `MoveWall` steps and `monitors/wall_NAME.csv` use."),
+    ("Walls", "Mesh", "File"): KeyDoc(
+        "", "required", "The mesh file (.stl, .obj, .ply), relative to the deck."),
+    ("Walls", "Mesh", "Scale"): KeyDoc(
+        "-", "1", "Factor on the file's coordinates (0.001 reads millimetres as metres)."),
+    ("Walls", "Mesh", "Position"): KeyDoc(
+        "m", "0 0 0", "Translation after scaling and rotating: x = R (s x_file) + Position."),
+    ("Walls", "Mesh", "Rotation"): KeyDoc(
+        "rad", "0 0 0", "Rotation vector applied to the scaled file coordinates."),
+    ("Walls", "Mesh", "Material"): KeyDoc(
+        "", "none (rigid)", "Material id of the wall, for `HertzMindlin` interfaces."),
+    ("Walls", "Mesh", "OneSided"): KeyDoc(
+        "", "no", "`yes`: only the front of each triangle (its vertex order's normal) acts."),
+    ("Walls", "Surface", "Name"): KeyDoc(
+        "", "wallID", "The name `MoveWall` steps and `monitors/wall_NAME.csv` use."),
+    ("Walls", "Surface", "File"): KeyDoc(
+        "", "required", "The shape file (YAML) of the open patches, relative to the deck."),
+    ("Walls", "Surface", "Position"): KeyDoc(
+        "m", "0 0 0", "Translation after rotating: x = R x_file + Position."),
+    ("Walls", "Surface", "Rotation"): KeyDoc(
+        "rad", "0 0 0", "Rotation vector applied to the file's coordinates."),
+    ("Walls", "Surface", "Material"): KeyDoc(
+        "", "none (rigid)", "Material id of the wall, for `HertzMindlin` interfaces."),
 
     ("Walls", "Wall", "Name"): KeyDoc(
         "", "wallID", "The name `MoveWall` steps and `monitors/wall_NAME.csv` use."),

@@ -25,7 +25,7 @@ RULE = ("letters, digits, '_', '-' and '.', not starting with '.', at most "
 
 #: the deck entries whose lines hold a wall name as a value (``Wall … Name n``,
 #: ``Step … MoveWall n``): a name equal to one of their keys reads back as that key
-NAME_ENTRIES = (("Walls", "Wall"), ("Steps", "Step"))
+NAME_ENTRIES = (("Walls", "Wall"), ("Walls", "Mesh"), ("Walls", "Surface"), ("Steps", "Step"))
 
 
 def keywords(schema: Mapping[str, Mapping[str, Any]]) -> set[str]:

@@ -1,0 +1,138 @@
+"""The deck's mesh and surface walls (``Walls`` block, ``Mesh`` and ``Surface`` entries) and
+their geometry for the solver.
+
+``Mesh ID Name n File f.stl [Scale s] [Position x y z] [Rotation rx ry rz] [Material m]
+[OneSided yes|no]`` and ``Surface ID Name n File f.yaml [Position x y z] [Rotation rx ry rz]
+[Material m]`` make a :class:`~nurbsdem.model.CurvedWallSpec`; the file is read at parse time
+(so that a missing or broken file is reported at its deck line) and again by the solver
+(:func:`curved_wall_geometry`).  Placement: ``x_world = R(rotation) (scale x_file) +
+position``, rotation a rotation vector (rad).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..model import CurvedWallSpec
+
+
+def _resolve(base: Path, source: str) -> Path:
+    return Path(source) if Path(source).is_absolute() else base / source
+
+
+def surface_patches(spec: CurvedWallSpec, where: str) -> list:
+    """The placed patches of a ``Surface`` wall's shape file (InputError naming ``where``)."""
+    from .meshfile import _rotation_matrix
+    from .shapefile import read_patches
+    path = spec.path
+    if path is None or not path.is_file():
+        raise InputError(f"{where}: no such surface file: {path}")
+    try:
+        patches, _ = read_patches(path)
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    if not patches:
+        raise InputError(f"{where}: {path.name} holds no patches")
+    R = _rotation_matrix(spec.rotation)
+    return [p.transformed(R, np.asarray(spec.position, float)) for p in patches]
+
+
+def mesh_triangles(spec: CurvedWallSpec, where: str):
+    """The placed :class:`~nurbsdem.io.meshfile.WallMesh` of a ``Mesh`` wall."""
+    from .meshfile import read_wall_mesh
+    return read_wall_mesh(spec.path, spec.scale, spec.position, spec.rotation, where=where)
+
+
+def curved_wall_geometry(spec: CurvedWallSpec, where: str):
+    """(kind, geometry) of a wall for :class:`~nurbsdem.contact.curved_walls.CurvedWall`:
+    the mesh's triangle grid or the surface's patch tables, in the world at rest."""
+    from ..contact.kinds import MESH_WALL, SURFACE_WALL
+    if spec.kind == "mesh":
+        from ..contact.mesh_wall import build_mesh_wall
+        mesh = mesh_triangles(spec, where)
+        return MESH_WALL, build_mesh_wall(mesh.vertices, mesh.faces, not spec.one_sided,
+                                          source=where)
+    from ..contact.surface_wall import build_surface_wall
+    return SURFACE_WALL, build_surface_wall(surface_patches(spec, where))
+
+
+def curved_entry(builder, e, kind: str) -> None:
+    """A ``Mesh`` (kind ``"mesh"``) or ``Surface`` (``"surface"``) entry of the Walls block."""
+    label = f"{e.keyword} {e.id}"
+    keys = {"Name", "File", "Position", "Rotation", "Material"}
+    if kind == "mesh":
+        keys |= {"Scale", "OneSided"}
+    builder.only(e, keys, f"a {e.keyword} wall")
+    builder.require(e, "File")
+    scale = float(e.get("Scale", 1.0))
+    builder.positive(e, "Scale", scale)
+    spec = CurvedWallSpec(e.id, e.get("Name", f"wall{e.id}"), kind, e.get("File"),
+                          path=_resolve(builder.base, e.get("File")), scale=scale,
+                          position=np.asarray(e.get("Position", np.zeros(3)), float),
+                          rotation=np.asarray(e.get("Rotation", np.zeros(3)), float),
+                          material_id=e.get("Material"), one_sided=bool(e.get("OneSided", False)),
+                          line=e.line)
+    try:
+        for warning in _read_check(spec, label):
+            import logging
+            logging.getLogger("nurbsdem").warning("%s:%d: %s", builder.model.path, e.line,
+                                                  warning)
+    except InputError as exc:
+        builder.fail(str(exc), e.line)
+    builder.add_curved_wall(spec, label)
+
+
+def _read_check(spec: CurvedWallSpec, label: str) -> list[str]:
+    """Read the wall's file once (errors at the deck line); the mesh's warnings."""
+    if spec.kind == "mesh":
+        return list(mesh_triangles(spec, label).warnings)
+    surface_patches(spec, label)
+    return []
+
+
+def sphere_radii(model, shape_ids) -> tuple[np.ndarray, np.ndarray]:
+    """(radius (N,) m, is an exact sphere centred on its centroid (N,) bool) of particles of
+    the shapes ``shape_ids``, from :func:`~nurbsdem.geometry.analytic.exact_sphere`."""
+    from ..geometry.analytic import exact_sphere
+    table = {}
+    for sid in set(int(s) for s in shape_ids):
+        entry = model.shapes[sid]
+        found = exact_sphere(entry.shape)
+        ok = found is not None and np.allclose(found[0], entry.centroid, rtol=0,
+                                               atol=1e-9 * found[1])
+        table[sid] = (found[1] if found is not None else 0.0, ok)
+    radius = np.array([table[int(s)][0] for s in shape_ids], float)
+    spheres = np.array([table[int(s)][1] for s in shape_ids], bool)
+    return radius, spheres
+
+
+def refuse_nurbs_particles(model, shape_ids) -> None:
+    """InputError at the first mesh or surface wall's line when a particle is not an exact
+    sphere: a NURBS particle against these walls is not built yet."""
+    if not model.curved_walls or len(shape_ids) == 0:
+        return
+    _, spheres = sphere_radii(model, shape_ids)
+    if not spheres.all():
+        w = model.curved_walls[0]
+        sid = int(np.asarray(shape_ids)[~spheres][0])
+        raise model.error(f"{w.kind.capitalize()} wall {w.name!r}: shape {sid} is not an "
+                          f"exact sphere; only exact spheres contact mesh and surface walls "
+                          f"(NURBS particles against them are not built yet)", w.line)
+
+
+def check_curved_walls(builder, model) -> None:
+    """Cross-checks of a deck's mesh and surface walls: only exact spheres meet them, and
+    ``MoveWall`` translations move flat walls."""
+    if not model.curved_walls:
+        return
+    from ..model import MoveWallStep
+    curved = {w.name for w in model.curved_walls}
+    for s in model.steps:
+        if isinstance(s, MoveWallStep) and s.wall in curved:
+            builder.fail(f"Step {s.id}: MoveWall {s.wall}: ToContact and Displacement move "
+                         f"flat walls; mesh and surface walls stay fixed", s.line)
+    shape_ids = [sid for g in model.random_groups for sid in g.shape_ids]
+    shape_ids += [p.shape_id for p in model.particles]
+    refuse_nurbs_particles(model, [sid for sid in shape_ids if sid in model.shapes])

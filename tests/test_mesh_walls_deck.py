@@ -1,0 +1,126 @@
+"""Mesh and surface walls in the deck (``Mesh`` / ``Surface`` in the Walls block), the Python
+API (``add_mesh_wall`` / ``add_surface_wall``, ``deck_text``) and a short solve."""
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from nurbsdem import Simulation
+from nurbsdem.errors import InputError
+from nurbsdem.geometry.surfaces import cylinder_patch
+from nurbsdem.io.deck import build_model
+from nurbsdem.io.shapefile import save_shape
+
+HEAD = """Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2500 YoungModulus 1e9 PoissonRatio 0.3
+Shapes
+  Shape 1 {shape}
+Particles
+  Particle 1 Shape 1 Material 1 Position 0 0 {z}
+Walls
+{walls}
+Contact
+  Interface 1 NormalPenalty 1e5 NormalDamping 5 TangentialPenalty 1e5 Friction 0.3
+Steps
+  Step 1 Dynamic Duration {duration} TimeStep 1e-3
+{extra}"""
+
+
+@pytest.fixture
+def files(tmp_path):
+    import trimesh
+    trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+                    [[0, 1, 2], [0, 2, 3]]).export(tmp_path / "floor.stl")
+    save_shape(tmp_path / "drum.yaml", [cylinder_patch(0.1, 0.2, axis=(1, 0, 0))])
+    return tmp_path
+
+
+def _deck(path, walls, shape="Sphere Radius 0.01", z=0.0105, duration=0.01, extra=""):
+    deck = path / "case.inp"
+    deck.write_text(HEAD.format(shape=shape, z=z, walls=walls, duration=duration, extra=extra))
+    return deck
+
+
+def test_deck_reads_mesh_and_surface_walls(files):
+    deck = _deck(files, "  Mesh 7 Name floor File floor.stl Scale 2 Position 0 0 -0.5 "
+                        "Rotation 0 0 0.1 Material 1 OneSided yes\n"
+                        "  Surface 8 Name drum File drum.yaml Position 0 0 1")
+    m = build_model(deck.read_text(), str(deck))
+    floor, drum = m.curved_walls
+    assert (floor.kind, floor.name, floor.scale, floor.material_id, floor.one_sided) == (
+        "mesh", "floor", 2.0, 1, True)
+    np.testing.assert_array_equal(floor.position, [0, 0, -0.5])
+    assert floor.path == files / "floor.stl"
+    assert (drum.kind, drum.name, drum.one_sided) == ("surface", "drum", False)
+    assert m.wall_names == ["floor", "drum"]
+
+
+@pytest.mark.parametrize("walls, message", [
+    ("  Mesh 7 Name floor File nothere.stl", "no such mesh file"),
+    ("  Mesh 7 Name floor File floor.stl Scale -1", "Scale must be > 0"),
+    ("  Surface 8 Name drum File drum.yaml Scale 2", "unknown keyword 'Scale'"),
+    ("  Surface 8 Name drum File nothere.yaml", "no such surface file"),
+    ("  Mesh 7 Name floor", "missing File"),
+    ("  Mesh 7 Name floor File floor.stl\n  Surface 8 Name floor File drum.yaml",
+     "duplicate wall name"),
+])
+def test_bad_wall_entries_are_one_line_errors_at_their_line(files, walls, message):
+    deck = _deck(files, walls)
+    with pytest.raises(InputError) as err:
+        build_model(deck.read_text(), str(deck))
+    text = str(err.value)
+    assert message in text and "\n" not in text
+    assert text.startswith(f"{deck}:1") or text.startswith(f"{deck}:")
+    assert err.value.line in (10, 11)
+
+
+def test_nurbs_particles_against_mesh_walls_are_refused(files):
+    deck = _deck(files, "  Mesh 7 Name floor File floor.stl",
+                 shape="Ellipsoid SemiAxes 0.01 0.01 0.02", z=0.03)
+    with pytest.raises(InputError, match=r"case.inp:10: .*not an exact sphere.*not built yet"):
+        build_model(deck.read_text(), str(deck))
+
+
+def test_move_wall_translation_of_a_mesh_wall_is_refused(files):
+    deck = _deck(files, "  Mesh 7 Name floor File floor.stl",
+                 extra="  Step 2 MoveWall floor Displacement 0 0 0.1 Duration 0.1 TimeStep 1e-3")
+    with pytest.raises(InputError, match=r"case.inp:15: .*stay fixed"):
+        build_model(deck.read_text(), str(deck))
+
+
+def test_api_deck_text_round_trip(files):
+    import nurbsdem.shapes
+    sim = Simulation(gravity=(0, 0, -9.81))
+    sim.add_material(1, density=2500)
+    sim.add_interface(normal_penalty=1e5)
+    sim.add_particle(nurbsdem.shapes.sphere(0.01), 1, (0, 0, 0.0105))
+    sim.add_mesh_wall("floor", files / "floor.stl", scale=1.0, position=(0, 0, 0.0),
+                      one_sided=True)
+    sim.add_surface_wall("drum", files / "drum.yaml", position=(0, 0, 0.3))
+    with pytest.raises(InputError, match="exists already"):
+        sim.add_mesh_wall("drum", files / "floor.stl")
+    with pytest.raises(InputError, match="no such mesh file"):
+        sim.add_mesh_wall("other", files / "nothere.stl")
+    text = sim.deck_text
+    assert 'Mesh 1 Name floor File "' in text and "OneSided yes" in text
+    m = build_model(text, str(files / "again.inp"))
+    floor, drum = m.curved_walls
+    assert floor.path == (files / "floor.stl").resolve() and floor.one_sided
+    np.testing.assert_array_equal(drum.position, [0, 0, 0.3])
+
+
+def test_sphere_on_mesh_floor_deck_reports_its_weight(files):
+    """A sphere settling on an STL floor: the floor's monitored reaction is its weight."""
+    deck = _deck(files, "  Mesh 7 Name floor File floor.stl", z=0.0101, duration=0.1)
+    with open(deck, "a") as fh:
+        fh.write("Output\n  Monitors Every 0.01\n")
+    Simulation.from_deck(deck).run()
+    rows = list(csv.DictReader(open(files / "results" / "monitors" / "wall_floor.csv")))
+    weight = 2500 * 4 / 3 * np.pi * 0.01 ** 3 * 9.81
+    last = rows[-1]
+    fz = [float(v) for k, v in last.items() if k.lower().startswith(("reaction_z", "fz", "force_z"))]
+    assert fz and abs(abs(fz[0]) - weight) < 1e-3 * weight
