@@ -30,6 +30,8 @@ from typing import Callable, TextIO
 ENTRY_KERNELS = {
     "listed.solve_due": "contact detection (closed forms, point-to-surface, LCP batches)",
     "listed.scene_list": "the neighbour list (bounding spheres, patch boxes)",
+    "verlet.contact_arrays": "the contacts' arrays",
+    "forces.contact_loads": "the contact forces",
     "deck_steps.run_deck_steps": "the compiled time loop (forces, time-step control)",
     "deflate._blocks": "compressed ParaView output",
 }
