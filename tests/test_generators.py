@@ -4,6 +4,7 @@ import pytest
 
 import nurbsdem
 from nurbsdem import shapes
+from nurbsdem.errors import InputError
 
 
 @pytest.mark.parametrize("radius", [1e-3, 0.02, 1.0, 37.0])
@@ -44,7 +45,8 @@ def test_box_walls_face_inwards():
 
 
 def test_bad_generator_arguments_raise():
-    with pytest.raises(ValueError):
+    """The API's generators raise the one-line InputError of bad input (no raw ValueError)."""
+    with pytest.raises(InputError, match="sphere: Radius must be a finite number > 0"):
         shapes.sphere(0.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError, match="ellipsoid"):
         shapes.ellipsoid(1.0, -1.0, 1.0)
