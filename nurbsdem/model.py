@@ -435,6 +435,12 @@ class MoveWallStep(Step):
     damping: str = "explicit"
     accuracy: float | None = None
     safety: float | None = None
+    #: ``Rotate AngularVelocity wx wy wz Center cx cy cz Duration T TimeStep DT``: a mesh or
+    #: surface wall turns at the constant angular velocity (rad/s, world frame) about the
+    #: centre (m) for T seconds, then stays where it turned to
+    rotate: bool = False
+    angular_velocity: np.ndarray | None = None
+    center: np.ndarray | None = None
     kind = "movewall"
 
 

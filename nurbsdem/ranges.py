@@ -35,7 +35,7 @@ class Range:
 #: Supported magnitudes by key (or ``Keyword`` for a setting's own values).
 RANGES: dict[str, Range] = {
     **{k: Range(0.0, 1e6, "m", _COORD) for k in ("Position", "Region", "Min", "Max", "Point",
-                                                  "Displacement", "Height", "Gap")},
+                                                  "Displacement", "Height", "Gap", "Center")},
     **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size")},
     **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
        for k in ("Normal", "Axis", "Direction")},

@@ -570,17 +570,39 @@ class Simulation:
                   duration: float | None = None, time_step: float | None = None, *,
                   to_contact: bool = False, gap: float = 0.0,
                   direction: Sequence[float] | None = None, damping: str = "explicit",
-                  accuracy: float | None = None, safety: float | None = None) -> None:
+                  accuracy: float | None = None, safety: float | None = None,
+                  angular_velocity: Sequence[float] | None = None,
+                  center: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
-        particle is ``gap`` m away (no time passes).  ``damping``, ``accuracy``, ``safety``: as
-        for :meth:`run_dynamic`."""
+        particle is ``gap`` m away (no time passes), or ``angular_velocity`` (rad/s): a mesh
+        or surface wall turns about ``center`` (m) over ``duration`` s (``Rotate``).
+        ``damping``, ``accuracy``, ``safety``: as for :meth:`run_dynamic`."""
         sid = self._next_step_id()
         what = f"Step {sid}"
         if not isinstance(name, str) or name not in self.model.wall_names:
             names = ", ".join(self.model.wall_names) or "no walls defined"
             raise InputError(f"{what}: no wall named {name!r} (walls: {names})")
+        if angular_velocity is not None:
+            if name not in {w.name for w in self.model.curved_walls}:
+                raise InputError(f"{what}: only mesh and surface walls turn (angular_velocity)")
+            if displacement is not None or to_contact or duration is None or time_step is None:
+                raise InputError(f"{what}: angular_velocity takes center, duration and "
+                                 f"time_step, not displacement or to_contact")
+            omega = self._vector("AngularVelocity", angular_velocity, what)
+            if not np.linalg.norm(omega) > 0:
+                raise InputError(f"{what}: angular_velocity must not be zero")
+            dur, dt = self._timing(sid, duration, time_step)
+            self._run(MoveWallStep(sid, 0, wall=name, rotate=True, angular_velocity=omega,
+                                   center=self._vector("Center", center, what), duration=dur,
+                                   time_step=dt, damping=self._damping(sid, damping),
+                                   accuracy=self._optional_positive("Accuracy", sid, accuracy),
+                                   safety=self._optional_positive("Safety", sid, safety)))
+            return
+        if name in {w.name for w in self.model.curved_walls}:
+            raise InputError(f"{what}: mesh and surface walls turn (angular_velocity); "
+                             f"displacement and to_contact move flat walls")
         if to_contact:
             if displacement is not None or duration is not None or time_step is not None:
                 raise InputError(f"{what}: to_contact=True takes gap and direction, not "
@@ -999,6 +1021,10 @@ def _step_line(s: Step) -> str:
     if s.to_contact:
         d = f" Direction {_v(s.direction)}" if s.direction is not None else ""
         return f"  Step {s.id} MoveWall {s.wall} ToContact Gap {_f(s.gap)}{d}"
+    if s.rotate:
+        return (f"  Step {s.id} MoveWall {s.wall} Rotate AngularVelocity "
+                f"{_v(s.angular_velocity)} Center {_v(s.center)} Duration {_f(s.duration)} "
+                f"TimeStep {_f(s.time_step)}{damping}")
     return (f"  Step {s.id} MoveWall {s.wall} Displacement {_v(s.displacement)} Duration "
             f"{_f(s.duration)} TimeStep {_f(s.time_step)}{damping}")
 

@@ -335,6 +335,8 @@ class Solver:
                                        **self.contact_options)
         sysm.set_contact_provider(self._curved_walls(self.scene) if model.curved_walls
                                   else self.scene)
+        if model.curved_walls:
+            sysm.wall_spin = self._wall_spin(sysm.walls.n)
         if self.comm is not None:
             self._decompose(sysm)
         if self._carry_hist is not None:
@@ -356,8 +358,29 @@ class Solver:
             self._curved_geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
                                      for w in model.curved_walls]
         radius, spheres = sphere_radii(model, shape_ids)
-        walls = [CurvedWall(kind, geom) for kind, geom in self._curved_geometry]
+        walls = [CurvedWall(kind, geom, self._curved_pose(k))
+                 for k, (kind, geom) in enumerate(self._curved_geometry)]
         return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls))
+
+    def _curved_pose(self, k: int):
+        """The pose in time of mesh or surface wall k: where earlier Rotate steps left it,
+        turning now when the current step rotates it (:attr:`_rotation`)."""
+        from .contact.curved_walls import WallPose
+        poses = self.__dict__.setdefault("_curved_rest", {})
+        R0, shift0 = poses.get(k, (np.eye(3), np.zeros(3)))
+        rot = getattr(self, "_rotation", None)
+        if rot is None or rot[0] != k:
+            return WallPose(R0=R0, shift0=shift0)
+        return WallPose(omega=rot[1], center=rot[2], t0=rot[3], R0=R0, shift0=shift0)
+
+    def _wall_spin(self, n_walls: int) -> np.ndarray:
+        """(W,6) angular velocity and centre of each wall of the system (the one a Rotate
+        step turns; 0 for the others)."""
+        spin = np.zeros((n_walls, 6))
+        rot = getattr(self, "_rotation", None)
+        if rot is not None:
+            spin[len(self.model.walls) + rot[0]] = np.concatenate([rot[1], rot[2]])
+        return spin
 
     def _decompose(self, sysm: DemSystem) -> None:
         """Decompose the system over the ranks (a scene carried over from the previous step
@@ -509,6 +532,9 @@ class Solver:
             "carry_hist": ({"keys": self._carry_hist[0], "springs": self._carry_hist[1]}
                            if self._carry_hist is not None else {}),
             "motion": self._motion_spec,
+            # where Rotate steps left the mesh and surface walls: R (9,) then t (3,) each
+            "curved_rest": {str(k): np.concatenate([R.ravel(), t]) for k, (R, t)
+                            in self.__dict__.get("_curved_rest", {}).items()},
         }
         if self.rank == 0:          # written by the output worker: a copy of the state
             writers.checkpoint(save_checkpoint, self.outdir / CHECKPOINT_NAME,
@@ -533,6 +559,9 @@ class Solver:
             self.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
             ch = st.get("carry_hist") or {}
             self._carry_hist = (ch["keys"], ch["springs"]) if ch else None
+            self._curved_rest = {int(k): (np.asarray(v, float)[:9].reshape(3, 3),
+                                          np.asarray(v, float)[9:12])
+                                 for k, v in dict(st.get("curved_rest") or {}).items()}
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise InputError(f"the checkpoint is incomplete or corrupted ({type(exc).__name__}: "
                              f"{exc})", path=str(self.restart_path)) from None
@@ -583,8 +612,8 @@ class Solver:
         self.progress.finish()
         self._sync_bodies_from_system()
         self.summary.accuracy_repeats += sysm.accuracy_repeats
-        if self.wall_offset.size:
-            self.wall_offset = sysm.wall_displacement.copy()
+        if self.wall_offset.size:        # the flat walls' (mesh and surface walls follow)
+            self.wall_offset = sysm.wall_displacement[:len(self.model.walls)].copy()
         self._snapshot()
         self._close_system()
 
@@ -807,6 +836,21 @@ class Solver:
         if self._interrupt_requested:    # Ctrl-C in the step's last chunk: after its checkpoint
             raise self._interrupted(writers)
 
+    def _run_rotation(self, step: MoveWallStep, writers: OutputWriters, restored) -> None:
+        """``MoveWall NAME Rotate``: a dynamic step in which mesh or surface wall NAME turns
+        at the step's angular velocity about its centre; it stays where it turned to."""
+        k = self._wall_index(step.wall) - len(self.model.walls)
+        self._motion_spec = {}
+        t_start = self.time - self.step_progress * float(step.time_step)
+        self._rotation = (k, np.asarray(step.angular_velocity, float),
+                          np.asarray(step.center, float), t_start)
+        try:
+            self._run_dynamic(step, writers, self._fixed_motions(), restored)
+            end = self._curved_pose(k).at(self.time)
+        finally:
+            self._rotation = None
+        self.__dict__.setdefault("_curved_rest", {})[k] = end
+
     def _run_step(self, step, writers: OutputWriters) -> None:
         restored = self._restored
         if isinstance(step, DynamicStep):
@@ -816,6 +860,8 @@ class Solver:
             self._run_replicate(step, writers)
         elif isinstance(step, MoveWallStep) and step.to_contact:
             self._to_contact(step)
+        elif isinstance(step, MoveWallStep) and step.rotate:
+            self._run_rotation(step, writers, restored)
         elif isinstance(step, MoveWallStep):
             k = self._wall_index(step.wall)
             spec = restored.get("motion") if restored else None

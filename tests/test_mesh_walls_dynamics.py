@@ -129,3 +129,40 @@ def test_friction_history_carries_across_triangles():
     assert np.max(np.abs(runs[1][0] - runs[0][0])) <= 1e-12
     np.testing.assert_allclose(runs[1][1], runs[0][1], rtol=0, atol=1e-10)
     assert np.max(np.abs(runs[0][2])) > 0.0            # a spring was carried: the test bites
+
+
+@pytest.mark.parametrize("mu", [0.5, 0.0])
+def test_sphere_in_a_turning_drum(mu):
+    """A sphere on the floor of an exact NURBS drum (axis x, radius 0.1 m) turning at
+    Ω = 0.5 rad/s: with friction its contact point moves with the drum (v_p = Ω × p, no
+    slip: the sphere rolls on the drum, swinging about the bottom as a rolling pendulum);
+    frictionless, the drum slides under it and it neither spins nor moves.  The drum's work on the sphere is booked (energy balance).  (A sphere carried up
+    by the drum frame, at rest in it with v = Ω × r, needs rolling resistance or neighbours:
+    the drum deck of inputs/drum.)"""
+    from nurbsdem.contact.curved_walls import WallPose
+    Rc, omega = 0.1, 0.5
+    surf = build_surface_wall([cylinder_patch(Rc, 0.2, base=(-0.1, 0, 0), axis=(1, 0, 0))])
+    law = ContactLaw(en=K, cn=20.0, et=K, ct=10.0, mu=mu)
+    z_rest = -(Rc - R) - M * G / K
+    s = _system(law, z_rest, dt=1e-3)
+    pose = WallPose(omega=np.array([omega, 0, 0]), center=np.zeros(3))
+    wall = CurvedWall(SURFACE_WALL, surf, pose)
+    s.set_contact_provider(CurvedWallContacts(None, [R], [True], [wall], first_wall=0))
+    s.wall_spin = np.array([[omega, 0, 0, 0, 0, 0]])
+    for _ in range(1000):
+        s.step()
+    spin = s.bodies.omega()[0]
+    x = s.bodies.x[0]
+    p = s.last_contacts.point_a[0]
+    v_point = s.bodies.v[0] + np.cross(spin, p - x)
+    v_drum = np.cross([omega, 0, 0], p)
+    if mu > 0:
+        # to the overlap's order δ/r = m g/(k r) = 5e-4: which point of the overlap the
+        # lever arms reach
+        np.testing.assert_allclose(v_point, v_drum, rtol=0, atol=1e-3 * omega * Rc)
+        assert spin[0] > 0.5 * omega * Rc / R          # it spins with the drum
+    else:
+        assert np.max(np.abs(spin)) < 1e-12 and np.max(np.abs(s.bodies.v[0])) < 1e-9
+    e = s.energy()
+    assert abs(e.mechanical - s.ledger.initial_mechanical - e.external_work
+               + e.dissipated) <= 1e-3 * max(e.kinetic, M * G * R)

@@ -25,7 +25,7 @@ Units: metres, seconds, radians.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
@@ -137,6 +137,15 @@ class CurvedWallContacts:
             raise AttributeError(name)
         return getattr(base, name)
 
+    def _base_kinematics(self, kin):
+        """``kin`` as the base provider knows the scene: the walls before the curved ones."""
+        if len(self.walls) == 0:
+            return kin
+        first = self.first_wall
+        return replace(kin, wall_displacement=kin.wall_displacement[:first],
+                       wall_velocity=kin.wall_velocity[:first],
+                       n_bodies=kin.n_particles + first)
+
     def _candidates(self, x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         r = self.radii[:, None]
         near = np.all((x + r >= lo) & (x - r <= hi), axis=1) & self.spheres
@@ -173,7 +182,7 @@ class CurvedWallContacts:
         return rf, owner, np.zeros(len(owner), np.int64)
 
     def __call__(self, kin) -> ContactSet:
-        cs = self.base(kin) if self.base is not None else None
+        cs = self.base(self._base_kinematics(kin)) if self.base is not None else None
         cs = ContactSet.empty() if cs is None else cs
         x = np.ascontiguousarray(kin.x, float)
         N, nb = kin.n_particles, kin.n_bodies

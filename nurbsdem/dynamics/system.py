@@ -294,6 +294,9 @@ class DemSystem:
         #: run scenes in compiled deck steps (:meth:`steps`)
         self.compiled_steps = True
         self._deck_steps = None
+        #: (W,6) per wall: the angular velocity (rad/s) and the centre (m) it turns about (a
+        #: mesh or surface wall, :mod:`nurbsdem.contact.curved_walls`); None: no wall turns
+        self.wall_spin: np.ndarray | None = None
         self.last_steps = StepTally()
         #: (keys, springs) of tangential springs to start from (set before initialize()).
         self.initial_history: tuple[np.ndarray, np.ndarray] | None = None
@@ -628,7 +631,28 @@ class DemSystem:
         pos = np.concatenate([b.x, self.wall_d])
         vel = np.concatenate([b.v, self.wall_u])
         omg = np.concatenate([omega_world(b.q, b.L, self._inv_I), np.zeros((self.walls.n, 3))])
+        if self.wall_spin is not None:       # a turning wall: its points move at u + ω × (p − c)
+            pos[b.n:] += self.wall_spin[:, 3:]
+            omg[b.n:] = self.wall_spin[:, :3]
         return pos, vel, omg
+
+    def _spun_contacts(self, wall_u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(body_b, wall_d, wall_u) for the kick's work terms when walls turn: each contact
+        with a turning wall gets a wall of its own (index W + j) that moves at that wall's
+        point velocity u + ω × (p − c) (m/s) at the contact point p."""
+        n, W = self.bodies.n, self.walls.n
+        w = self.c_b - n
+        idx = np.flatnonzero(w >= 0)
+        idx = idx[np.any(self.wall_spin[w[idx], :3] != 0.0, axis=1)]
+        if idx.size == 0:
+            return self.c_b, self.wall_d, wall_u
+        ws = w[idx]
+        arm = self.c_point[idx] - self.wall_spin[ws, 3:] - self.wall_d[ws]
+        u_point = wall_u[ws] + np.cross(self.wall_spin[ws, :3], arm)
+        body_b = self.c_b.copy()
+        body_b[idx] = n + W + np.arange(idx.size)
+        return (body_b, np.concatenate([self.wall_d, self.wall_d[ws]]),
+                np.ascontiguousarray(np.concatenate([wall_u, u_point])))
 
     def _evaluate(self, t: float, h: float) -> None:
         """Walls to time t, contact detection by the provider, Eq. 16–17, loads incl. gravity."""
@@ -702,8 +726,11 @@ class DemSystem:
         so that the external work adds up to force × the walls' exact displacement (trapezoidal
         in the force, no error at kinks of a piecewise-linear motion)."""
         b = self.bodies
+        body_b, wall_d = self.c_b, self.wall_d
+        if self.wall_spin is not None and self.c_a.shape[0]:
+            body_b, wall_d, wall_u = self._spun_contacts(wall_u)
         terms = kick_with_terms(b.v, b.L, b.x, b.q, self._inv_I, self._inv_mass, self.force,
-                                self.torque, hk, self.c_a, self.c_b, self.c_point, self.wall_d,
+                                self.torque, hk, self.c_a, body_b, self.c_point, wall_d,
                                 wall_u, self.c_ftot, self.c_fdn, self.c_fdt, self.c_fet)
         if self.domain is not None:          # added at the deck end, in the serial order
             self.domain.log_kick(self.c_a, self.c_b, self.c_key, terms)

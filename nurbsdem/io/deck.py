@@ -98,7 +98,8 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Steps": {"Step": EntrySpec(True, {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
-        "Displacement": F3, "Damping": S1, "Accuracy": F1, "Safety": F1})},
+        "Displacement": F3, "Damping": S1, "Accuracy": F1, "Safety": F1, "Rotate": FLAG,
+        "AngularVelocity": F3, "Center": F3})},
     "Output": {
         "Directory": EntrySpec(False, head=S1),
         "VTK": EntrySpec(False, {"Every": F1, "Resolution": I1}),
@@ -664,11 +665,13 @@ class _Builder:
         return dur, dt
 
     def move_wall(self, e: Entry) -> MoveWallStep:
-        modes = [k for k in ("ToContact", "Displacement") if e.has(k)]
+        modes = [k for k in ("ToContact", "Displacement", "Rotate") if e.has(k)]
         if len(modes) != 1:
-            self.fail(f"Step {e.id}: MoveWall needs exactly one of ToContact, Displacement",
-                      e.line)
+            self.fail(f"Step {e.id}: MoveWall needs exactly one of ToContact, Displacement, "
+                      f"Rotate", e.line)
         name = e.get("MoveWall")
+        if modes[0] == "Rotate":
+            return rotate_step(self, e, name)
         if modes[0] == "ToContact":
             self.only(e, {"MoveWall", "ToContact", "Gap", "Direction"}, "MoveWall ToContact")
             gap = self.positive(e, "Gap", e.get("Gap", 0.0), strict=False)
@@ -785,7 +788,7 @@ class _Builder:
         return min(lines)
 
 
-from .deck_curved import check_curved_walls, curved_entry  # noqa: E402  (it needs the model's classes only)
+from .deck_curved import check_curved_walls, curved_entry, rotate_step  # noqa: E402  (it needs the model's classes only)
 
 _HANDLERS: dict[tuple[str, str], Callable[[_Builder, Entry], None]] = {
     ("Environment", "Gravity"): _Builder.environment,

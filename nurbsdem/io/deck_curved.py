@@ -125,14 +125,39 @@ def refuse_nurbs_particles(model, shape_ids) -> None:
 def check_curved_walls(builder, model) -> None:
     """Cross-checks of a deck's mesh and surface walls: only exact spheres meet them, and
     ``MoveWall`` translations move flat walls."""
-    if not model.curved_walls:
-        return
     from ..model import MoveWallStep
     curved = {w.name for w in model.curved_walls}
     for s in model.steps:
-        if isinstance(s, MoveWallStep) and s.wall in curved:
+        if isinstance(s, MoveWallStep) and s.rotate and s.wall not in curved:
+            builder.fail(f"Step {s.id}: MoveWall {s.wall} Rotate: only mesh and surface walls "
+                         f"turn (flat walls translate: Displacement)", s.line)
+    if not model.curved_walls:
+        return
+    for s in model.steps:
+        if isinstance(s, MoveWallStep) and s.wall in curved and not s.rotate:
             builder.fail(f"Step {s.id}: MoveWall {s.wall}: ToContact and Displacement move "
-                         f"flat walls; mesh and surface walls stay fixed", s.line)
+                         f"flat walls; mesh and surface walls turn (Rotate)", s.line)
     shape_ids = [sid for g in model.random_groups for sid in g.shape_ids]
     shape_ids += [p.shape_id for p in model.particles]
     refuse_nurbs_particles(model, [sid for sid in shape_ids if sid in model.shapes])
+
+
+def rotate_step(builder, e, name: str):
+    """``Step ID MoveWall NAME Rotate AngularVelocity wx wy wz Center cx cy cz Duration T
+    TimeStep DT [Damping ..] [Accuracy ..] [Safety ..]``: a :class:`~nurbsdem.model.MoveWallStep`
+    that turns a mesh or surface wall at a constant angular velocity (rad/s) about a point (m)."""
+    from ..model import MoveWallStep
+    builder.only(e, {"MoveWall", "Rotate", "AngularVelocity", "Center", "Duration", "TimeStep",
+                     "Damping", "Accuracy", "Safety"}, "MoveWall Rotate")
+    builder.require(e, "AngularVelocity", "Duration", "TimeStep")
+    dur, dt = builder.timing(e)
+    if not np.linalg.norm(e.get("AngularVelocity")) > 0:
+        builder.fail(f"Step {e.id}: AngularVelocity must not be zero", e.line)
+    damping = builder.damping(e)
+    accuracy = builder.optional_positive(e, "Accuracy")
+    safety = builder.optional_positive(e, "Safety")
+    return MoveWallStep(e.id, e.line, wall=name, rotate=True,
+                        angular_velocity=np.asarray(e.get("AngularVelocity"), float),
+                        center=np.asarray(e.get("Center", np.zeros(3)), float),
+                        duration=dur, time_step=dt, damping=damping, accuracy=accuracy,
+                        safety=safety)

@@ -67,7 +67,8 @@ ENTRIES: dict[tuple[str, str], str] = {
         "`Materials`) is the one used; a pair no interface covers does not interact."),
     ("Steps", "Step"): (
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
-        "with `ToContact` (instantaneous) or `Displacement` (timed). A timed step is split "
+        "with `ToContact` (instantaneous), `Displacement` (timed) or `Rotate` (timed; mesh "
+        "and surface walls). A timed step is split "
         "into internal sub-steps below the contact network's stability limit."),
     ("Output", "Directory"): "The results folder, relative to the deck.",
     ("Output", "VTK"): "ParaView series of particles, walls and contact points.",
@@ -208,6 +209,14 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
     ("Steps", "Step", "Replicate"): KeyDoc(
         "", "-", "Instantaneous: the particles become layer 0 and `Layers` - 1 copies are added, "
         "shifted up by `Height` / (`Layers` - 1) each; all velocities are set to zero."),
+    ("Steps", "Step", "Rotate"): KeyDoc(
+        "", "no", "With `MoveWall NAME`: the mesh or surface wall turns at `AngularVelocity` "
+        "about `Center` for `Duration`, then stays where it turned to."),
+    ("Steps", "Step", "AngularVelocity"): KeyDoc(
+        "rad/s", "required with Rotate", "The wall's angular velocity, world frame."),
+    ("Steps", "Step", "Center"): KeyDoc(
+        "m", "0 0 0", "A point of the rotation axis (the wall's torque in its monitor is "
+        "about it)."),
     ("Steps", "Step", "MoveWall"): KeyDoc(
         "", "-", "The name of the wall to move (with `ToContact` or `Displacement`)."),
     ("Steps", "Step", "Duration"): KeyDoc(
