@@ -373,6 +373,12 @@ class Solver:
             return WallPose(R0=R0, shift0=shift0)
         return WallPose(omega=rot[1], center=rot[2], t0=rot[3], R0=R0, shift0=shift0)
 
+    def _curved_poses(self, t: float) -> list | None:
+        """(R, t) of each mesh or surface wall at time t (s), for walls.pvd; None: none."""
+        if not self.model.curved_walls:
+            return None
+        return [self._curved_pose(k).at(t) for k in range(len(self.model.curved_walls))]
+
     def _wall_spin(self, n_walls: int) -> np.ndarray:
         """(W,6) angular velocity and centre of each wall of the system (the one a Rotate
         step turns; 0 for the others)."""
@@ -492,7 +498,8 @@ class Solver:
             self._sync_bodies_from_system()
         if vtk:
             writers.paraview.write(t, self.bodies, wall_displacement=s.wall_displacement,
-                                   contacts=self._contact_output())
+                                   contacts=self._contact_output(),
+                                   curved_poses=self._curved_poses(t))
         if results:
             writers.results.append(t, self.bodies)
         self.timers["output"] += time.perf_counter() - t0
@@ -506,7 +513,7 @@ class Solver:
         dt = self.system.dt
         if _due(st.time, out.vtk_every, dt):
             writers.paraview.write(st.time, bodies, wall_displacement=st.wall_displacement,
-                                   contacts=st.contacts)
+                                   contacts=st.contacts, curved_poses=self._curved_poses(st.time))
         if _due(st.time, out.results_interval, dt):
             writers.results.append(st.time, bodies)
 

@@ -198,3 +198,29 @@ def test_restart_after_a_rotate_step_is_bit_for_bit(files, monkeypatch):
     with h5py.File(ref / "results.h5") as f:
         v = f["velocity"][-1]
     assert v[1] < -1e-3                      # it rolls down the tilted floor (towards -y)
+
+
+def test_walls_pvd_draws_the_turning_mesh_and_the_surface(files):
+    """walls.pvd holds the mesh's triangles and the surface's tessellation after the flat
+    walls' quads; a mesh turned by a Rotate step (1 rad/s about x for 0.03 s) is drawn at
+    its turned place: its rest vertices rotated by 0.03 rad."""
+    import meshio
+    from scipy.spatial.transform import Rotation
+    from nurbsdem.io.meshfile import read_wall_mesh
+    deck = _deck(files, "  Mesh 7 Name floor File floor.stl\n"
+                        "  Surface 8 Name drum File drum.yaml Position -0.1 0 0.5\n"
+                        "  Wall 9 Name lid Point 0 0 0.3 Normal 0 0 -1 Size 1 1",
+                 z=0.0099995, duration=0.01,
+                 extra="  Step 2 MoveWall floor Rotate AngularVelocity 1 0 0 Center 0 0 0 "
+                       "Duration 0.03 TimeStep 1e-3\nOutput\n  VTK Every 0.01\n")
+    Simulation.from_deck(deck, output=files / "out").run()
+    vtus = sorted((files / "out" / "vtk").glob("walls_*.vtu"))
+    grid = meshio.read(vtus[-1])
+    kinds = [c.type for c in grid.cells]
+    assert kinds == ["quad", "triangle"]
+    wall_id = grid.point_data["wall_id"]
+    rest = read_wall_mesh(files / "floor.stl").vertices
+    turned = rest @ Rotation.from_rotvec([0.03, 0, 0]).as_matrix().T
+    np.testing.assert_allclose(grid.points[wall_id == 7], turned, rtol=0, atol=1e-7)  # Float32
+    drum = grid.points[wall_id == 8]
+    np.testing.assert_allclose(np.hypot(drum[:, 1], drum[:, 2] - 0.5), 0.1, rtol=1e-6)

@@ -6,10 +6,12 @@ their geometry for the solver.
 [Material m]`` make a :class:`~nurbsdem.model.CurvedWallSpec`; the file is read at parse time
 (so that a missing or broken file is reported at its deck line) and again by the solver
 (:func:`curved_wall_geometry`).  Placement: ``x_world = R(rotation) (scale x_file) +
-position``, rotation a rotation vector (rad).
+position``, rotation a rotation vector (rad).  ``MoveWall NAME Rotate`` steps
+(:func:`rotate_step`) turn them; :func:`curved_tessellation` draws them in ``walls.pvd``.
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +78,6 @@ def curved_entry(builder, e, kind: str) -> None:
                           line=e.line)
     try:
         for warning in _read_check(spec, label):
-            import logging
             logging.getLogger("nurbsdem").warning("%s:%d: %s", builder.model.path, e.line,
                                                   warning)
     except InputError as exc:
@@ -161,3 +162,26 @@ def rotate_step(builder, e, name: str):
                         center=np.asarray(e.get("Center", np.zeros(3)), float),
                         duration=dur, time_step=dt, damping=damping, accuracy=accuracy,
                         safety=safety)
+
+
+def curved_tessellation(model, resolution: int = 16) -> list:
+    """[(wall id, points (P,3) m, triangles (T,3))] of the model's mesh and surface walls at
+    rest, for ``walls.pvd``: a mesh's own triangles; a surface's patches tessellated
+    (``resolution`` quads per direction, each cut into two triangles)."""
+    from .writers import tessellate
+    out = []
+    for w in model.curved_walls:
+        where = f"{model.path}:{w.line}" if w.line else w.name
+        if w.kind == "mesh":
+            mesh = mesh_triangles(w, where)
+            out.append((w.id, mesh.vertices, mesh.faces))
+            continue
+        pts, tris, off = [], [], 0
+        for patch in surface_patches(w, where):
+            p, quads = tessellate(patch, resolution)
+            q = np.asarray(quads, np.int64) + off
+            pts.append(np.asarray(p, float))
+            tris += [q[:, [0, 1, 2]], q[:, [0, 2, 3]]]
+            off += len(p)
+        out.append((w.id, np.concatenate(pts), np.concatenate(tris)))
+    return out

@@ -165,9 +165,10 @@ def vtu_parts(points: np.ndarray, cells: Sequence[tuple[str, np.ndarray]],
     appended = _Appended()
     cell_arrays: dict[str, np.ndarray] = {}
 
-    def tag(name: str, make: Callable[[], np.ndarray], data=None) -> str:
+    def tag(name: str, make: Callable[[], np.ndarray], data=None, section: str = "") -> str:
+        # cached per section: a point array and a cell array may share a name (wall_id)
         if reuse is not None and name in reuse.names:
-            return appended.tag(name, reuse.encoded(key, name, make))
+            return appended.tag(name, reuse.encoded(key, section + name, make))
         if isinstance(data, Repeated):
             return appended.tag(name, data.encoded())
         return appended.tag(name, _encoded(make()))
@@ -195,7 +196,7 @@ def vtu_parts(points: np.ndarray, cells: Sequence[tuple[str, np.ndarray]],
         out.append("<CellData>\n")
         for name, blocks in cell_data.items():
             out.append(tag(name, lambda blocks=blocks: _normalised(
-                np.concatenate([np.asarray(b) for b in blocks]))))
+                np.concatenate([np.asarray(b) for b in blocks])), section="cell:"))
         out.append("</CellData>\n")
     out.append("</Piece>\n</UnstructuredGrid>\n")
     return ["".join(out).encode(), *appended.section(), b"</VTKFile>\n"]

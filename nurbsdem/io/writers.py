@@ -349,6 +349,9 @@ class ParaViewWriter:
             self._shape_mesh[int(sid)] = (pts - np.asarray(shape.centroid, float), quads, pid)
         self.walls = list(walls)
         self._wall_mesh = self._mesh_walls()
+        #: mesh and surface walls: (wall id, points (P,3) m at rest, triangles (T,3)), drawn at
+        #: the poses :meth:`write_walls` is given (:meth:`add_curved_walls`)
+        self.curved: list[tuple[int, np.ndarray, np.ndarray]] = []
         #: the particles' grid arrays of the last body set (:meth:`_particle_cells`; used by
         #: the one thread that writes the series)
         self._cells_key: tuple | None = None
@@ -425,16 +428,45 @@ class ParaViewWriter:
         return pts, [("quad", quads)], pd, cd
 
     # -- walls -------------------------------------------------------------------
-    def write_walls(self, time: float, displacement: np.ndarray | None = None) -> Path:
-        """One sample of ``walls.pvd``; displacement (W, 3) m of each wall from its deck
-        position (walls translate only), in ``walls`` order."""
+    def add_curved_walls(self, items) -> None:
+        """Draw mesh and surface walls too: items [(wall id, points (P,3) m, triangles
+        (T,3))] in the world at rest (:func:`nurbsdem.io.deck_curved.curved_tessellation`)."""
+        self.curved = [(int(i), np.asarray(p, float), np.asarray(t, np.int64))
+                       for i, p, t in items]
+
+    def write_walls(self, time: float, displacement: np.ndarray | None = None,
+                    poses=None) -> Path:
+        """One sample of ``walls.pvd``; displacement (W, 3) m of each flat wall from its deck
+        position (flat walls translate only), in ``walls`` order; poses [(R (3,3), t (3,))]:
+        where each mesh or surface wall is (``x = R x_rest + t``; None: at rest)."""
         pts, quads, wid, pw = self._wall_mesh
         disp = np.zeros((len(self.walls), 3)) if displacement is None else np.asarray(displacement, float).reshape(-1, 3)
         d = disp[pw] if len(pw) else np.zeros((0, 3))
         ids = np.array([w.id for w in self.walls], np.int64)
         pd = {"wall_id": ids[pw] if len(pw) else np.zeros(0, np.int64), "displacement": d}
+        if self.curved:
+            return self._write_with_curved(time, pts + d, quads, wid, pd, poses)
         return self.series["walls"].write(time, pts + d, [("quad", quads)], pd, {"wall_id": [wid]},
                                           key=0)       # the walls never change their mesh
+
+    def _write_with_curved(self, time, pts, quads, wid, pd, poses) -> Path:
+        """:meth:`write_walls` with the triangles of the mesh and surface walls after the
+        flat walls' quads (their displacement: the move of each point from its rest)."""
+        P, T, cid, pid, disp = [pts], [], [], [pd["wall_id"]], [pd["displacement"]]
+        off = len(pts)
+        for k, (w_id, rest, tris) in enumerate(self.curved):
+            R, t = poses[k] if poses is not None else (np.eye(3), np.zeros(3))
+            moved = rest @ np.asarray(R, float).T + np.asarray(t, float)
+            P.append(moved)
+            T.append(tris + off)
+            cid.append(np.full(len(tris), w_id, np.int64))
+            pid.append(np.full(len(rest), w_id, np.int64))
+            disp.append(moved - rest)
+            off += len(rest)
+        cells = [("quad", quads), ("triangle", np.concatenate(T))]
+        point_data = {"wall_id": np.concatenate(pid), "displacement": np.concatenate(disp)}
+        return self.series["walls"].write(time, np.concatenate(P), cells, point_data,
+                                          {"wall_id": [wid, np.concatenate(cid)]}, key=0)
 
     # -- contacts ----------------------------------------------------------------
     def write_contacts(self, time: float, contacts: Mapping[str, np.ndarray] | None) -> Path:
@@ -468,11 +500,12 @@ class ParaViewWriter:
         return self.series["contacts"].write(time, pts, cells, pd)
 
     def write(self, time: float, bodies: "Bodies", wall_displacement: np.ndarray | None = None,
-              contacts: Mapping[str, np.ndarray] | None = None) -> None:
-        """One sample of all three series (in the background: one job of the worker)."""
+              contacts: Mapping[str, np.ndarray] | None = None, curved_poses=None) -> None:
+        """One sample of all three series (in the background: one job of the worker);
+        curved_poses: those of :meth:`write_walls`."""
         with self.background.held() if self.background is not None else nullcontext():
             self.write_particles(time, bodies)
-            self.write_walls(time, wall_displacement)
+            self.write_walls(time, wall_displacement, curved_poses)
             self.write_contacts(time, contacts if self.background is None else _copied(contacts))
 
     def write_index(self) -> None:
@@ -1054,6 +1087,9 @@ class OutputWriters:
             self.paraview = ParaViewWriter(self.directory, shapes, model.walls,
                                            model.output.vtk_resolution, restart_time,
                                            background)
+            if getattr(model, "curved_walls", None):
+                from .deck_curved import curved_tessellation
+                self.paraview.add_curved_walls(curved_tessellation(model))
             self.monitors = MonitorWriter(self.directory, model.wall_names, restart_time)
             self.results = ResultsWriter(self.directory / RESULTS_NAME, model.text, model.path,
                                          restart_time, flush_every, after_append=self._commit,
