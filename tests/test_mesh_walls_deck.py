@@ -218,6 +218,9 @@ def test_walls_pvd_draws_the_turning_mesh_and_the_surface(files):
     grid = meshio.read(vtus[-1])
     kinds = [c.type for c in grid.cells]
     assert kinds == ["quad", "triangle"]
+    quad_ids, tri_ids = grid.cell_data["wall_id"]
+    assert quad_ids.tolist() == [9] and sorted(set(tri_ids.tolist())) == [7, 8]
+    assert (tri_ids == 7).sum() == 2                       # the floor's two triangles
     wall_id = grid.point_data["wall_id"]
     rest = read_wall_mesh(files / "floor.stl").vertices
     turned = rest @ Rotation.from_rotvec([0.03, 0, 0]).as_matrix().T
