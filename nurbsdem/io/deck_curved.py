@@ -168,7 +168,7 @@ def curved_tessellation(model, resolution: int = 16) -> list:
     """[(wall id, points (P,3) m, triangles (T,3))] of the model's mesh and surface walls at
     rest, for ``walls.pvd``: a mesh's own triangles; a surface's patches tessellated
     (``resolution`` quads per direction, each cut into two triangles)."""
-    from .writers import tessellate
+    from ..geometry.tessellate import tessellate_patch
     out = []
     for w in model.curved_walls:
         where = f"{model.path}:{w.line}" if w.line else w.name
@@ -178,7 +178,7 @@ def curved_tessellation(model, resolution: int = 16) -> list:
             continue
         pts, tris, off = [], [], 0
         for patch in surface_patches(w, where):
-            p, quads = tessellate(patch, resolution)
+            p, quads = tessellate_patch(patch, resolution)
             q = np.asarray(quads, np.int64) + off
             pts.append(np.asarray(p, float))
             tris += [q[:, [0, 1, 2]], q[:, [0, 2, 3]]]
