@@ -67,13 +67,14 @@ def test_a_full_inlet_waits_and_resumes_when_there_is_room():
 
 
 def test_the_mix_follows_its_fractions():
+    n = 1500
     inlet = make_inlet(region=InsertionRegion(lo=np.zeros(3), hi=np.full(3, 10.0)),
-                       count=6000, rate=6000)
+                       count=n, rate=n)
     new = inlet.insert(1.0, np.zeros((0, 3)), np.zeros(0))
-    assert len(new.shapes) == 6000
+    assert len(new.shapes) == n
     counts = np.array([np.sum(new.shapes == s) for s in (1, 2, 3)])
-    sigma = np.sqrt(6000 * inlet.fractions * (1 - inlet.fractions))
-    assert np.all(np.abs(counts - 6000 * inlet.fractions) < 4 * sigma)
+    sigma = np.sqrt(n * inlet.fractions * (1 - inlet.fractions))
+    assert np.all(np.abs(counts - n * inlet.fractions) < 4 * sigma)
 
 
 def test_a_disc_region_places_inside_the_disc():
