@@ -375,15 +375,18 @@ def _contact_row(xm, r, R, t, q, d, face_normal, corner, tri, rows_f, rows_i, j)
         s = 1.0 if h > 0.0 else -1.0
         n0, n1, n2 = -s * face_normal[0], -s * face_normal[1], -s * face_normal[2]
         d = abs(h)
-        q = np.array([xm[0] - h * face_normal[0], xm[1] - h * face_normal[1],
-                      xm[2] - h * face_normal[2]])
-    elif d > 0.0:
-        n0, n1, n2 = (q[0] - xm[0]) / d, (q[1] - xm[1]) / d, (q[2] - xm[2]) / d
+        q0 = xm[0] - h * face_normal[0]
+        q1 = xm[1] - h * face_normal[1]
+        q2 = xm[2] - h * face_normal[2]
     else:
-        n0, n1, n2 = -face_normal[0], -face_normal[1], -face_normal[2]
+        q0, q1, q2 = q[0], q[1], q[2]
+        if d > 0.0:
+            n0, n1, n2 = (q0 - xm[0]) / d, (q1 - xm[1]) / d, (q2 - xm[2]) / d
+        else:
+            n0, n1, n2 = -face_normal[0], -face_normal[1], -face_normal[2]
     for k in range(3):
         rows_f[j, F_N + k] = R[k, 0] * n0 + R[k, 1] * n1 + R[k, 2] * n2
-        rows_f[j, F_PB + k] = R[k, 0] * q[0] + R[k, 1] * q[1] + R[k, 2] * q[2] + t[k]
+        rows_f[j, F_PB + k] = R[k, 0] * q0 + R[k, 1] * q1 + R[k, 2] * q2 + t[k]
         rows_f[j, F_PA + k] = (R[k, 0] * xm[0] + R[k, 1] * xm[1] + R[k, 2] * xm[2] + t[k]
                                + r * rows_f[j, F_N + k])
     rows_f[j, F_SD] = d - r

@@ -48,30 +48,23 @@ def _rotation_matrix(rotvec) -> np.ndarray:
 
 
 def _load(path: Path, where: str):
+    """The file's mesh, read once: its raw vertices checked finite (trimesh's processing
+    drops a NaN vertex of a PLY silently), then processed (duplicate vertices merged)."""
     import trimesh
 
     try:
-        obj = trimesh.load(str(path), force="mesh", process=True)
+        obj = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise InputError(f"{where}: cannot read the mesh {path.name}: {exc}") from None
     if not isinstance(obj, trimesh.Trimesh) or len(obj.faces) == 0:
         raise InputError(f"{where}: {path.name} holds no triangles")
-    return obj
-
-
-def _raw_vertices_finite(path: Path, where: str) -> None:
-    """Refuse a file with a non-finite vertex before trimesh drops it unnoticed."""
-    import trimesh
-
-    try:
-        raw = trimesh.load(str(path), force="mesh", process=False)
-    except Exception:
-        return                                   # _load reports the unreadable file
-    verts = np.asarray(getattr(raw, "vertices", np.zeros((0, 3))), float)
-    bad = np.flatnonzero(~np.isfinite(verts).all(axis=1)) if len(verts) else []
+    verts = np.asarray(obj.vertices, float)
+    bad = np.flatnonzero(~np.isfinite(verts).all(axis=1))
     if len(bad):
         raise InputError(f"{where}: {path.name}: vertex {int(bad[0])} is not finite "
                          f"({verts[bad[0]].tolist()}); {len(bad)} such vertices")
+    obj.process()
+    return obj
 
 
 def _topology_warnings(faces: np.ndarray, name: str) -> list[str]:
@@ -106,7 +99,6 @@ def read_wall_mesh(path: str | Path, scale: float = 1.0, position=(0.0, 0.0, 0.0
         raise InputError(f"{where}: no such mesh file: {path}")
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"{where}: Scale must be positive, got {scale!r}")
-    _raw_vertices_finite(path, where)
     mesh = _load(path, where)
     vertices = np.asarray(mesh.vertices, float) * float(scale)
     faces = np.asarray(mesh.faces, np.int64)
