@@ -31,7 +31,8 @@ ENTRY_KERNELS = {
     "listed.solve_due": "contact detection (closed forms, point-to-surface, LCP batches)",
     "listed.scene_list": "the neighbour list (bounding spheres, patch boxes)",
     "verlet.contact_arrays": "the contacts' arrays",
-    "forces.contact_loads": "the contact forces",
+    "step.step_start": "the integration (half kicks, drift)",
+    "step.contact_part": "the contact forces",
     "deck_steps.run_deck_steps": "the compiled time loop (forces, time-step control)",
     "deflate._blocks": "compressed ParaView output",
 }

@@ -7,7 +7,8 @@ from ..contact.contactset import ContactSet
 from .energy import EnergyLedger, EnergySample
 from .forces import ContactLaw, InterfaceTable
 from .rigid import PrescribedMotion, RigidBodies, Walls, principal_frame
-from .system import DemSystem, InstabilityError, Kinematics, critical_step
+from .stepcontrol import critical_step
+from .system import DemSystem, InstabilityError, Kinematics
 
 __all__ = ["DemSystem", "InstabilityError", "Kinematics", "critical_step", "ContactLaw",
            "InterfaceTable", "PrescribedMotion", "RigidBodies", "Walls", "principal_frame",

@@ -1,30 +1,20 @@
-"""Compiled deck steps: the internal step of :class:`~nurbsdem.dynamics.system.DemSystem`
-with a :class:`~nurbsdem.contact.scene.SceneContacts` provider, in one compiled loop.
+"""Compiled deck steps: the internal steps of :class:`~nurbsdem.dynamics.system.DemSystem`
+with a :class:`~nurbsdem.contact.scene.SceneContacts` provider on one rank, in one compiled
+loop over many deck steps.
 
-In Python the bookkeeping around the contact kernels costs more than the kernels in many
-scenes (about 0.6 ms per internal step for 112 exact spheres, which need no LCP; 0.7 ms of
-1.8 ms for the paper example's 112 NURBS particles).  Here the whole internal step runs in one
-compiled loop over many deck steps:
-
-1. half kick with its exact discrete work (:func:`~nurbsdem.dynamics.integrator.kick_with_terms`),
-2. the period-2 watch (:func:`~nurbsdem.dynamics.stepcontrol.alternation_update`),
-3. drift (:func:`~nurbsdem.dynamics.integrator.drift`),
-4. the contact search of the scene: odometers, the neighbour list with its skin and the
-   candidate patches (:func:`~nurbsdem.contact.listed.scene_list`), certificates
-   (:mod:`nurbsdem.contact.verlet`), the rows of the pairs not certified apart
-   (:func:`~nurbsdem.contact.listed.solve_due_into`: closed forms, point-to-surface, LCP
-   batches, in place),
-5. contact forces (paper Eq. 16–17, or Hertz–Mindlin with the contacts' exact equivalent
-   radii from :func:`~nurbsdem.geometry.curvature.scene_contact_radii` — scenes of exact
-   spheres only; :func:`~nurbsdem.dynamics.forces.contact_forces`) with the tangential
-   histories, gravity, and with ``Damping Implicit`` the implicit normal dashpots
-   (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`),
-6. the second half kick;
-
-and after each deck step the guards (finite state, energy) and the Gershgorin gate of the
-time-step control.  It calls the same kernels as the Python path in the same order, so the
-trajectory is the same to the bit (tested); the energies used by the guard are summed in a
-different order (round-off only).  The time of the search and of the contact rows is taken
+Each internal step is the engine's one internal step (:mod:`nurbsdem.dynamics.step`): its
+start (half kick with its work, the period-2 watch, drift), the scene's compiled contact
+search (odometers, the neighbour list with its skin and the candidate patches,
+:func:`~nurbsdem.contact.listed.scene_list`; certificates, :mod:`nurbsdem.contact.verlet`; the
+rows of the pairs not certified apart, :func:`~nurbsdem.contact.listed.solve_due_into`: closed
+forms, point-to-surface, LCP batches, in place), the Hertz radii of the contacts where a law
+needs them (:func:`~nurbsdem.geometry.curvature.scene_contact_radii`), its contact part
+(forces, histories, implicit dashpots, gravity) and its second half kick.  The driver in
+Python (:mod:`nurbsdem.dynamics.internal_step`) calls the same parts around a provider call, so
+the trajectory is the same to the bit whichever drives it (tested).  After each deck step
+the loop runs the guards (finite state, energy) and the Gershgorin gate of the
+time-step control; the energies used by the guard are summed in a different order from the
+Python driver's (round-off only).  The time of the search and of the contact rows is taken
 with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time split.
 
 The loop returns to Python
@@ -69,17 +59,15 @@ from ..contact.verlet import (active_arrays, active_rows, advance_odometers, car
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import cycles, seconds_per_cycle
-from .forces import add_kick_work, contact_loads, match_history
 from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
-from .implicit import dashpots_of_evaluation
-from .integrator import drift, kick_from
 from .monitor import record_row, row_width
+from .step import all_kinematics, contact_part, interfaces_defined, kick_part, step_start
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
-                          alternation_update, body_speeds, contact_network,
+                          body_speeds, contact_network,
                           critical_step_from_rates, needed_substeps, network_count_stands,
                           network_gershgorin, network_rates_scaled, periodic_recheck)
 
@@ -97,9 +85,6 @@ SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates 
 #: previous poses
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
                       "built_R built_wall built_pos prev_pos prev_R prev_wall prev_x")
-#: constants of the bodies and the contact laws
-BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
-                       "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
 #: the last force evaluation: per-contact arrays (``depth`` (K,) m and ``deg`` (K,) the
 #: contacts' penetrations and degeneration flags, for the ParaView samples), histories and
 #: loads; the separated pairs (``near_*``) of the last internal step of a deck step only
@@ -188,14 +173,6 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
 
 # --------------------------------------------------------------------------- forces
 @njit(cache=True)
-def _interfaces_defined(bc, a: np.ndarray, b: np.ndarray) -> bool:
-    for c in range(a.shape[0]):
-        if np.isnan(bc.table[bc.material[a[c]], bc.material[b[c]], 0]):
-            return False
-    return True
-
-
-@njit(cache=True)
 def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
     """Equivalent Hertz radii (K,) of the active contacts and the number of fallbacks
     (:func:`~nurbsdem.geometry.curvature.scene_contact_radii`, as the Python path calls it;
@@ -232,53 +209,26 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     else:
         near, gap = np.empty(0, np.int64), np.empty(0)
     near_a, near_b, near_point, near_normal, gap = near_arrays(pl.rows_f, pl.a, pl.b, near, gap)
-    if not _interfaces_defined(bc, a, b):
+    if not interfaces_defined(bc, a, b):
         return False, ev
     radius, n_fall = _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R)
-    spring = match_history(ev.hist_keys, ev.hist_springs, key)
-    W = wall_d.shape[0]
-    pos_all = np.concatenate((x, wall_d))
-    vel_all = np.concatenate((v, wall_u))
-    omg_all = np.concatenate((omega, np.zeros((W, 3))))
-    given = cc.implicit and h > 0.0 and a.shape[0] > 0
-    dashpot = np.zeros(0)
-    if given:
-        c0 = cycles()
-        dashpot, rounds, iterations = dashpots_of_evaluation(
-            a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
-            bc.inv_mass_all, radius, bc.mass, bc.gravity, q, L, bc.inv_I, quats_to_matrices(q),
-            bc.sq_m, bc.sq_I)
-        counters[DASHPOT_CYCLES] += cycles() - c0
-        counters[DASHPOT_SOLVES] += 1
-        counters[DASHPOT_SOLVES + 1] += rounds
-        counters[DASHPOT_SOLVES + 2] += iterations
-    force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
-        a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
-        bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)
+    pos_all, vel_all, omg_all = all_kinematics(x, v, omega, wall_d, wall_u)
+    solves = np.zeros(4, np.int64)
+    (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
+     hist_springs, _) = contact_part(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                     ev.hist_keys, ev.hist_springs, pos_all, vel_all, omg_all, q,
+                                     L, h, solves)
+    counters[DASHPOT_SOLVES] += solves[0]
+    counters[DASHPOT_SOLVES + 1] += solves[1]
+    counters[DASHPOT_SOLVES + 2] += solves[2]
+    counters[DASHPOT_CYCLES] += solves[3]
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
-                            radius, n_fall, key.copy(), spring.copy(), force, torque, slip,
+                            radius, n_fall, hist_keys, hist_springs, force, torque, slip,
                             near_a, near_b, near_point, near_normal, gap, reach, due.shape[0],
                             np.count_nonzero(deg), dep, deg)
 
 
 # --------------------------------------------------------------------------- integration
-@njit(cache=True)
-def _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, hk, ledger, wall_work) -> np.ndarray:
-    """DemSystem._kick: half kick from angular velocities omega (N,3) rad/s and its exact
-    work booked in the ledger (J); returns the angular velocities after it."""
-    acc = np.zeros(4)
-    terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, ev.force,
-                                   ev.torque, hk, ev.a, ev.b, ev.point, wall_d, u_mean,
-                                   ev.ftot, ev.fdn, ev.fdt, ev.fet)
-    add_kick_work(terms, ev.a, ev.b, x.shape[0], acc, wall_work)
-    if ev.a.shape[0]:
-        ledger[0] += acc[0]       # dissipated, normal
-        ledger[1] += acc[1]       # dissipated, tangential
-        ledger[3] += acc[2]       # external work
-        ledger[2] += acc[3]       # work on the tangential springs
-    return omega_after
-
-
 @njit(cache=True)
 def _all_finite(arr: np.ndarray) -> bool:
     """Whether every entry of the 2-D array is finite (a loop: ``np.isfinite(a).all()``
@@ -436,7 +386,6 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     """
     n_run = substeps * counters[ACC_REFINE]
     h = cc.dt / n_run
-    inv_h = 1.0 / h
     omega = omega_world(q, L, bc.inv_I)      # of the present state, kept up to date below
     accuracy = cc.accuracy > 0.0
     # the balance error at the start of the deck step (then carried from its end)
@@ -451,14 +400,12 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
-            omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
-            if cc.watch_period2 and x.shape[0]:
-                worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count,
-                                           bc.alt_floor_x, bc.alt_floor_L, inv_h)
-                if worst >= 0 and alt_count[worst] >= ALTERNATION_STEPS:
-                    return GUARD, j, pl, ev, wall_d, wall_u, states
-            drift(x, v, q, L, bc.inv_I, h)
-            omega = omega_world(q, L, bc.inv_I)
+            omega, _, worst, run = step_start(
+                bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force, ev.torque,
+                x, v, q, L, omega, ev.b, wall_d, u_mean, h, ledger, wall_work, alt_prev_v,
+                alt_prev_L, alt_count, cc.watch_period2, True)
+            if worst >= 0 and run >= ALTERNATION_STEPS:
+                return GUARD, j, pl, ev, wall_d, wall_u, states
             wall_d, wall_u = d_new.copy(), u_new.copy()
             c1 = cycles()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
@@ -474,7 +421,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             c4 = cycles()
-            omega = _kick(bc, ev, x, v, q, L, omega, wall_d, u_mean, 0.5 * h, ledger, wall_work)
+            omega, _ = kick_part(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
+                                 ev.force, ev.torque, x, v, q, L, omega, ev.b, wall_d, u_mean,
+                                 0.5 * h, ledger, wall_work, True)
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -532,16 +481,14 @@ class DeckSteps:
     def __init__(self, system, scene) -> None:
         import numba
         self.system, self.scene = system, scene
-        s, b = system, system.bodies
+        s = system
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
                              scene.certificates, s.uses_hertz, scene.table.tab[:7],
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
                              np.ones(scene.n, np.bool_), numba.get_num_threads(),
                              bool(scene.is_sphere.all()))
-        self.bc = BodyConst(b.mass, s._inv_mass, s._inv_I, b.P, b.centroid_file, s._ell,
-                            s._inv_mass_all, s._mat_all, s._table, s.gravity, s._g_norm,
-                            s._alt_floor_x, s._alt_floor_L, s._sq_m, s._sq_I)
+        self.bc = s._bc
 
     @staticmethod
     def for_system(system) -> "DeckSteps | None":

@@ -59,7 +59,9 @@ from typing import Any, Callable
 import numpy as np
 
 from ..contact.contactset import ContactSet
-from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, add_kick_work, wall_loads
+from ..dynamics.energy import EnergyLedger
+from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, wall_loads
+from ..dynamics.step import book_kick
 
 #: deck steps between re-cuts at the latest; a re-cut also happens when the ghosts have grown
 #: by GHOST_GROWTH since the last cut
@@ -339,9 +341,9 @@ class Domain:
 
     def _replay(self, logs: list[list[tuple]]) -> None:
         """The serial ledger updates from all ranks' logs: each event's rows merged in key
-        order and added as :meth:`DemSystem._kick` and ``_book_dropped`` add them."""
+        order and booked as one rank books them (:func:`~nurbsdem.dynamics.step.book_kick`,
+        ``DemSystem._book_dropped``)."""
         s = self.system
-        lg = s.ledger
         for k, (kind, *_) in enumerate(logs[0]):
             rows = merge_by_key([log[k][1] for log in logs], "key")
             if kind == "kick":
@@ -350,15 +352,11 @@ class Domain:
                 terms[:, :T_WALL_A] = rows["t"].reshape(-1, T_WALL_A)
                 walls = merge_by_key([log[k][2] for log in logs], "key")
                 terms[np.searchsorted(key, walls["key"]), T_WALL_B] = walls["w"]
-                acc = np.zeros(4)
-                add_kick_work(terms, key // self.nb, key % self.nb, self.n, acc, s.wall_work)
-                if rows["key"].shape[0]:
-                    lg.dissipated_normal += acc[0]
-                    lg.dissipated_tangential += acc[1]
-                    lg.external_work += acc[2]
-                    lg.tangential_spring_work += acc[3]
+                ledger = s.ledger.to_array()
+                book_kick(terms, key // self.nb, key % self.nb, self.n, ledger, s.wall_work)
+                s.ledger = EnergyLedger.from_array(ledger)
             elif rows["key"].shape[0]:
-                lg.dissipated_normal += float(rows["e"].sum())
+                s.ledger.dissipated_normal += float(rows["e"].sum())
 
     # ------------------------------------------------------------------ deck ends
     @_timed("gathers")

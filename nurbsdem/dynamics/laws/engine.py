@@ -9,7 +9,7 @@ import types
 import numpy as np
 from numba import njit
 
-from .. import forces, implicit
+from .. import forces, implicit, step
 from . import KERNELS_BY_CODE, builtin_only, linear_penalty
 from .table import MODEL
 
@@ -19,12 +19,14 @@ _ENGINES: dict[tuple, types.SimpleNamespace] = {}
 
 def engine_kernels(table: np.ndarray) -> types.SimpleNamespace:
     """The force kernels for a table: ``contact_loads`` (:func:`nurbsdem.dynamics.forces.
-    contact_loads`) and ``dashpots_of_evaluation`` (:func:`nurbsdem.dynamics.implicit.
-    dashpots_of_evaluation`).  For the built-in laws the cached ones; with a registered law,
+    contact_loads`), ``dashpots_of_evaluation`` (:func:`nurbsdem.dynamics.implicit.
+    dashpots_of_evaluation`) and the internal step's ``contact_part``
+    (:func:`nurbsdem.dynamics.step.contact_part`).  For the built-in laws the cached ones; with a registered law,
     copies of them whose dispatch includes it (compiled once per set of laws)."""
     if builtin_only(table):
         return types.SimpleNamespace(contact_loads=forces.contact_loads,
-                                     dashpots_of_evaluation=implicit.dashpots_of_evaluation)
+                                     dashpots_of_evaluation=implicit.dashpots_of_evaluation,
+                                     contact_part=step.contact_part)
     laws = tuple(sorted((c, id(k.normal), id(k.spring_scale)) for c, k in KERNELS_BY_CODE.items()))
     if laws not in _ENGINES:
         _ENGINES[laws] = _rebuilt_kernels()
@@ -58,8 +60,10 @@ def _rebuilt_kernels() -> types.SimpleNamespace:
                  "contact_loads"):
         names[name] = _copy(getattr(forces, name), names)
     dashpots = _copy(implicit.dashpots_of_evaluation, {"contact_loads": names["contact_loads"]})
+    part = _copy(step.contact_part, {"contact_loads": names["contact_loads"],
+                                     "dashpots_of_evaluation": dashpots})
     return types.SimpleNamespace(contact_loads=names["contact_loads"],
-                                 dashpots_of_evaluation=dashpots)
+                                 dashpots_of_evaluation=dashpots, contact_part=part)
 
 
 def _copy(kernel, rebind: dict):

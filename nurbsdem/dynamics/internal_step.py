@@ -1,0 +1,261 @@
+"""The Python driver of the internal step: the compiled parts of :mod:`nurbsdem.dynamics.step`
+around one contact-provider call per internal step.
+
+The compiled deck steps (:mod:`nurbsdem.dynamics.deck_steps`) drive the same parts for a scene
+on one rank; this driver runs the rest: several MPI ranks (the ghosts' loads exchanged after
+the contact part, the kicks' work logged for the deck end's replay, the guards reduced over
+the ranks), walls that turn (each contact with a turning wall kicks against that wall's point
+velocity), contact providers other than a scene, contact laws registered at run time, and
+each deck step the compiled loop hands back.  Units: SI; global body indices particles
+0..N-1, walls N..N+W-1.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..errors import InputError
+from ..jit import seconds_per_cycle
+from .energy import EnergyLedger, EnergySample
+from .integrator import state_is_finite
+from .rigid import body_poses, omega_world
+from .step import interfaces_defined, kick_part, step_start
+from .stepcontrol import ALTERNATION_STEPS
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """What a contact provider is given (SI units, world frame).
+
+    t (s); x (N,3) centroids; R (N,3,3) file->world rotations; position (N,3) pose positions
+    (x − R c, docs/conventions.md); v (N,3) and omega (N,3) velocities (the half-step values
+    of the integrator); wall_displacement, wall_velocity (W,3); n_particles N, n_bodies N+W.
+    """
+
+    t: float
+    x: np.ndarray
+    R: np.ndarray
+    position: np.ndarray
+    v: np.ndarray
+    omega: np.ndarray
+    wall_displacement: np.ndarray
+    wall_velocity: np.ndarray
+    n_particles: int
+    n_bodies: int
+
+
+class ContactProvider(Protocol):
+    def __call__(self, kin: Kinematics) -> Any:  # a ContactSet (docs/conventions.md) or None
+        ...
+
+
+class _Unstable(Exception):
+    pass
+
+
+def _unpack(cs: Any, n_bodies: int):
+    """Contiguous typed arrays from a ContactSet (duck-typed, docs/conventions.md); None or
+    K=0 -> empty."""
+    if cs is None or len(np.asarray(cs.body_a)) == 0:
+        e3 = np.zeros((0, 3))
+        ei = np.zeros(0, dtype=np.int64)
+        return ei, ei.copy(), e3, e3.copy(), e3.copy(), np.zeros(0), ei.copy()
+    a = np.ascontiguousarray(cs.body_a, dtype=np.int64)
+    b = np.ascontiguousarray(cs.body_b, dtype=np.int64)
+    key = getattr(cs, "key", None)
+    key = a * n_bodies + b if key is None else np.ascontiguousarray(key, dtype=np.int64)
+    return (a, b, np.ascontiguousarray(cs.point_a, dtype=float),
+            np.ascontiguousarray(cs.point_b, dtype=float),
+            np.ascontiguousarray(cs.normal, dtype=float),
+            np.ascontiguousarray(cs.depth, dtype=float), key)
+
+
+class InternalSteps:
+    """The internal steps of one deck step driven from Python, one provider call each (a base
+    class of :class:`~nurbsdem.dynamics.system.DemSystem`): what runs on several MPI ranks,
+    with curved or turning walls, contact laws registered at run time and the deck steps the
+    compiled loop hands back (:mod:`nurbsdem.dynamics.deck_steps`): the step's start (half
+    kick with its exact work, the period-2 watch, drift), the provider's contacts, the contact
+    part (paper Eq. 16–17) and the second half kick, the compiled loop's parts in its order."""
+
+    def _kinematics(self, t: float) -> Kinematics:
+        b = self.bodies
+        R, position = body_poses(b.q, b.P, b.x, b.centroid_file)
+        return Kinematics(t=t, x=b.x.copy(), R=R, position=position, v=b.v.copy(),
+                          omega=omega_world(b.q, b.L, self._inv_I),
+                          wall_displacement=self.wall_d.copy(), wall_velocity=self.wall_u.copy(),
+                          n_particles=b.n, n_bodies=self.n_bodies)
+
+    def _all_kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and angular velocities (B,3) of particles then walls."""
+        b = self.bodies
+        pos = np.concatenate([b.x, self.wall_d])
+        vel = np.concatenate([b.v, self.wall_u])
+        omg = np.concatenate([omega_world(b.q, b.L, self._inv_I), np.zeros((self.walls.n, 3))])
+        if self.wall_spin is not None:       # a turning wall: its points move at u + ω × (p − c)
+            pos[b.n:] += self.wall_spin[:, 3:]
+            omg[b.n:] = self.wall_spin[:, :3]
+        return pos, vel, omg
+
+    def _spun_contacts(self, wall_u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(body_b, wall_d, wall_u) for the kick's work terms when walls turn: each contact
+        with a turning wall gets a wall of its own (index W + j) that moves at that wall's
+        point velocity u + ω × (p − c) (m/s) at the contact point p."""
+        n, W = self.bodies.n, self.walls.n
+        w = self.c_b - n
+        idx = np.flatnonzero(w >= 0)
+        idx = idx[np.any(self.wall_spin[w[idx], :3] != 0.0, axis=1)]
+        if idx.size == 0:
+            return self.c_b, self.wall_d, wall_u
+        ws = w[idx]
+        arm = self.c_point[idx] - self.wall_spin[ws, 3:] - self.wall_d[ws]
+        u_point = wall_u[ws] + np.cross(self.wall_spin[ws, :3], arm)
+        body_b = self.c_b.copy()
+        body_b[idx] = n + W + np.arange(idx.size)
+        return (body_b, np.concatenate([self.wall_d, self.wall_d[ws]]),
+                np.ascontiguousarray(np.concatenate([wall_u, u_point])))
+
+    def _evaluate(self, t: float, h: float) -> None:
+        """Walls to time t, contact detection by the provider, then the internal step's contact
+        part (:func:`~nurbsdem.dynamics.step.contact_part`: Eq. 16–17 or Hertz–Mindlin, the
+        implicit dashpots, gravity); with MPI the owners' loads of this rank's ghosts."""
+        b = self.bodies
+        t0 = time.perf_counter()
+        self.wall_d, self.wall_u = self.walls.kinematics(t)
+        kinematics = self._kinematics(t)
+        t1 = time.perf_counter()
+        cs = self.provider(kinematics)          # the search and the LCPs (the scene's timers)
+        t2 = time.perf_counter()
+        self.last_contacts = cs
+        self._book_dropped(cs)
+        a, bb, pa, pb, nrm, dep, key = _unpack(cs, self.n_bodies)
+        K = a.shape[0]
+        if K and not interfaces_defined(self._bc, a, bb):
+            raise InputError("a contact occurred between materials with no contact interface")
+        pos, vel, omg = self._all_kinematics()
+        if self.uses_hertz:   # a law that needs the contacts' exact curvature radii (Hertz)
+            from ..geometry.curvature import contact_radii_for
+            self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
+        else:
+            self.c_radius = np.zeros(K)
+        solves = np.zeros(4, np.int64)
+        (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
+         self.last_slip_work, keys, springs, repeated) = self._kernels.contact_part(
+             self._bc, self.implicit_damping, a, bb, pa, pb, nrm, dep, key, self.c_radius,
+             self.hist_keys, self.hist_springs, pos, vel, omg, b.q, b.L, h, solves)
+        if repeated:
+            raise ValueError("ContactSet has duplicate keys: one contact per body pair expected")
+        self.hist_keys, self.hist_springs = keys, springs
+        dashpots = float(solves[3]) * seconds_per_cycle()
+        self.dashpot_solves += solves[:3]
+        self.split["implicit dashpots"] += dashpots
+        if self.domain is not None:          # the owners' loads of this rank's ghosts
+            self.domain.exchange_loads(force, torque)
+        self.force, self.torque = force, torque
+        self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
+        self.c_fet = fet
+        self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
+        self.split["contact forces"] += (t1 - t0) + (time.perf_counter() - t2) - dashpots
+
+    def _book_dropped(self, cs: Any) -> None:
+        """A pair the provider left out after a failed contact problem takes its normal elastic
+        energy with it: book it as dissipated (normal), so the energy balance stays closed."""
+        dropped = getattr(cs, "dropped_keys", None)
+        gone = (np.isin(self.c_key, dropped) if dropped is not None and len(dropped)
+                else np.zeros(self.c_key.shape[0], bool))
+        if self.domain is not None:          # booked at the deck end, in the serial order
+            self.domain.log_dropped(self.c_a[gone], self.c_key[gone], self.c_eel[gone, 0])
+            return
+        if gone.any():
+            self.ledger.dissipated_normal += float(self.c_eel[gone, 0].sum())
+
+    def _kick_walls(self, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(body_b, wall_d, wall_u) of the stored contacts for a half kick's work terms: the
+        walls' mean velocity over the internal step, u_mean (W,3) = (d(t+h) − d(t))/h, so
+        that the external work adds up to force × the walls' exact displacement (trapezoidal
+        in the force, no error at kinks of a piecewise-linear motion); a turning wall's
+        contacts at its point velocities (:meth:`_spun_contacts`)."""
+        if self.wall_spin is not None and self.c_a.shape[0]:
+            return self._spun_contacts(np.ascontiguousarray(u_mean))
+        return self.c_b, self.wall_d, np.ascontiguousarray(u_mean)
+
+    def _kick_arguments(self) -> tuple:
+        """The stored contacts' arrays and loads as the step's parts take them."""
+        return (self._bc, self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_fdn, self.c_fdt,
+                self.c_fet, self.force, self.torque)
+
+    def _booked(self, ledger: np.ndarray, terms: np.ndarray) -> None:
+        """After a half kick: the ledger array back into :attr:`ledger` (one rank), or the
+        terms logged for the deck end's replay in the serial order (several ranks)."""
+        if self.domain is not None:
+            self.domain.log_kick(self.c_a, self.c_b, self.c_key, terms)
+        else:
+            self.ledger = EnergyLedger.from_array(ledger)
+
+    def _internal_step(self, t_new: float, h: float) -> None:
+        """One internal step of length h (s) ending at t_new (s): the parts of
+        :mod:`nurbsdem.dynamics.step` around the provider's contact search."""
+        b = self.bodies
+        d_new, _ = self.walls.kinematics(t_new)
+        u_mean = (d_new - self.wall_d) / h
+        t0 = time.perf_counter()
+        ledger = self.ledger.to_array()
+        _, terms, worst, run = step_start(
+            *self._kick_arguments(), b.x, b.v, b.q, b.L, omega_world(b.q, b.L, self._inv_I),
+            *self._kick_walls(u_mean), h, ledger, self.wall_work, self.alt_prev_v,
+            self.alt_prev_L, self.alt_count, self.watch_period2, self.domain is None)
+        self._booked(ledger, terms)
+        self._watch_alternation(int(worst), int(run), h)
+        t1 = time.perf_counter()
+        self._evaluate(t_new, h)
+        t2 = time.perf_counter()
+        ledger = self.ledger.to_array()
+        _, terms = kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
+                             omega_world(b.q, b.L, self._inv_I),   # ghosts may be re-synced
+                             *self._kick_walls(u_mean), 0.5 * h, ledger, self.wall_work,
+                             self.domain is None)
+        self._booked(ledger, terms)
+        self.split["integration"] += (t1 - t0) + (time.perf_counter() - t2)
+
+    def _watch_alternation(self, worst: int, run: int, h: float) -> None:
+        """The period-2 guard (:mod:`nurbsdem.dynamics.system`) on the watch of the step's start:
+        the particle ``worst`` with the longest run of reversals (−1: none), over all ranks."""
+        b = self.bodies
+        if b.n == 0 or not self.watch_period2:
+            return
+        amp = float(np.linalg.norm(b.v[worst])) * h if worst >= 0 else 0.0
+        if self.domain is not None:
+            worst, run, amp = self.domain.worst_alternation(worst, run, amp)
+        if worst >= 0 and run >= ALTERNATION_STEPS:
+            raise _Unstable(f"period-2 motion of particle {worst}: its motion reversed at each "
+                            f"of the last {run} internal steps (displacement "
+                            f"{amp:.3g} m per step), a mode beyond the stability limit")
+
+    def _try_step(self) -> EnergySample:
+        """The internal steps of one deck step and the guards; raises _Unstable."""
+        t_start = self.time
+        n = self.substeps * self.acc_refine
+        h = self.dt / n
+        self.failed_in_step = 0
+        if self.domain is not None:
+            self.domain.begin_deck_step()
+        for k in range(1, n + 1):
+            t_new = t_start + self.dt * k / n
+            with np.errstate(all="ignore"):
+                self._internal_step(t_new, h)
+            self.failed_in_step += int(getattr(self.last_contacts, "failed", 0) or 0)
+            b = self.bodies
+            finite = state_is_finite(b.x, b.v, b.q, b.L) and bool(np.isfinite(self.force).all())
+            if self.domain is not None:
+                finite = self.domain.all(finite)
+            if not finite:
+                raise _Unstable(f"non-finite state at t = {t_new:.6g} s")
+        self.step_count += 1
+        if self.domain is not None:
+            self.domain.end_of_deck_step()     # every rank: the serial state
+        e = self.energy()
+        self._check_energy(e)
+        return e

@@ -1,0 +1,168 @@
+"""The internal step of the DEM engine, compiled, in the parts both of its drivers call.
+
+One internal step of length h (s) (velocity Verlet on the bodies' centroids and angular
+momenta, paper §2.3; the rotation is the exact free rotation of
+:mod:`nurbsdem.dynamics.integrator`):
+
+1. :func:`step_start`: the half kick from the stored loads with the exact discrete work of its
+   contact impulses (booked in the energy ledger), the period-2 watch of the half-step
+   velocities (:func:`~nurbsdem.dynamics.stepcontrol.alternation_update`) and the drift;
+2. the contact search at the new poses: the scene's compiled search inside the compiled deck
+   steps (:mod:`nurbsdem.dynamics.deck_steps`), or a contact provider called from Python
+   (:mod:`nurbsdem.dynamics.internal_step`: several MPI ranks, turning walls, other providers);
+3. :func:`contact_part`: the contact forces of the active contacts (paper Eq. 16–17 or
+   Hertz–Mindlin, :mod:`nurbsdem.dynamics.laws`) with their tangential histories, the implicit
+   normal dashpots with ``Damping Implicit`` (:mod:`nurbsdem.dynamics.implicit`), and gravity;
+4. :func:`kick_part`: the second half kick, with its work.
+
+Both drivers call these parts with the same arrays, so a run gives the same bits whichever
+drives it (tested).  Units: SI; global body indices particles 0..N-1, walls N..N+W-1; the
+energy ledger is the array of :meth:`~nurbsdem.dynamics.energy.EnergyLedger.to_array`.
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from ..geometry.rotation import quats_to_matrices
+from ..jit import cycles
+from .forces import add_kick_work, contact_loads, match_history
+from .implicit import dashpots_of_evaluation
+from .integrator import drift, kick_from
+from .rigid import omega_world
+from .stepcontrol import alternation_update
+
+#: constants of the bodies and the contact laws: masses (N,) kg and their inverses, 1/I (N,3)
+#: principal, the pose data (P, centroid in the file frame), the particles' sizes ell (N,) m,
+#: 1/m of every body (walls 0), materials (B,), the interface table, gravity (3,) m/s² and its
+#: norm, the period-2 watch's floors, √m and √I
+BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass_all material "
+                       "table gravity g_norm alt_floor_x alt_floor_L sq_m sq_I")
+
+#: entries of the ledger array (J)
+L_DISS_N, L_DISS_T, L_SPRING, L_EXTERNAL, L_INITIAL = range(5)
+
+
+@njit(cache=True)
+def book_kick(terms, a, b, n_particles, ledger, wall_work) -> None:
+    """Book a half kick's work terms (K, N_TERMS) in the ledger (5,) J and the walls' work (W,)
+    J (:func:`~nurbsdem.dynamics.forces.add_kick_work`)."""
+    acc = np.zeros(4)
+    add_kick_work(terms, a, b, n_particles, acc, wall_work)
+    if a.shape[0]:
+        ledger[L_DISS_N] += acc[0]
+        ledger[L_DISS_T] += acc[1]
+        ledger[L_EXTERNAL] += acc[2]
+        ledger[L_SPRING] += acc[3]
+
+
+@njit(cache=True)
+def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
+              wall_d, u_mean, hk, ledger, wall_work, book):
+    """Half kick of length hk (s) from the loads force, torque (B,3) of the contacts a, b
+    (their per-contact arrays: point, total, damping and tangential elastic forces (K,3)),
+    from the angular velocities omega (N,3) rad/s of the state before it.  body_b (K,): the
+    body B of each contact as the work terms see it (a turning wall's contacts each have a
+    wall index of their own, moving at wall_d, u_mean (m, m/s) of that index).  With ``book``
+    the work is booked in ledger and wall_work (one MPI rank; several ranks log the terms and
+    book them at the deck step's end, in the serial order).  Returns (the angular velocities
+    after the kick, the terms)."""
+    terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, force, torque, hk,
+                                   a, body_b, point, wall_d, u_mean, ftot, fdn, fdt, fet)
+    if book:
+        book_kick(terms, a, b, x.shape[0], ledger, wall_work)
+    return omega_after, terms
+
+
+@njit(cache=True)
+def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
+               wall_d, u_mean, h, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, watch,
+               book):
+    """Parts 1 of the internal step (module docstring): the half kick (:func:`kick_part`), the
+    period-2 watch (with ``watch``) and the drift by h (s).  Returns (the angular velocities
+    after the drift, the kick's terms, the particle with the longest run of reversals or −1,
+    and that run's length: the caller's guard fires at
+    :data:`~nurbsdem.dynamics.stepcontrol.ALTERNATION_STEPS`)."""
+    omega, terms = kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L,
+                             omega, body_b, wall_d, u_mean, 0.5 * h, ledger, wall_work, book)
+    worst, run = -1, 0
+    if watch and x.shape[0]:
+        worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count, bc.alt_floor_x,
+                                   bc.alt_floor_L, 1.0 / h)
+        if worst >= 0:
+            run = alt_count[worst]
+    drift(x, v, q, L, bc.inv_I, h)
+    return omega_world(q, L, bc.inv_I), terms, worst, run
+
+
+@njit(cache=True)
+def interfaces_defined(bc, a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether every contact's pair of materials has a contact interface."""
+    for c in range(a.shape[0]):
+        if np.isnan(bc.table[bc.material[a[c]], bc.material[b[c]], 0]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def all_kinematics(x, v, omega, wall_d, wall_u):
+    """Positions, velocities and angular velocities (B,3) of the particles then the walls
+    (walls that do not turn)."""
+    W = wall_d.shape[0]
+    return (np.concatenate((x, wall_d)), np.concatenate((v, wall_u)),
+            np.concatenate((omega, np.zeros((W, 3)))))
+
+
+@njit(cache=True)
+def stored_history(key: np.ndarray, spring: np.ndarray):
+    """The tangential springs (K,3) of the contacts by ascending key: (keys, springs, whether
+    a key repeats).  Keys already ascending (a scene's) are copied as they are."""
+    ascending, repeated = True, False
+    for c in range(1, key.shape[0]):
+        if key[c] < key[c - 1]:
+            ascending = False
+        elif key[c] == key[c - 1]:
+            repeated = True
+    if ascending:
+        return key.copy(), spring.copy(), repeated
+    order = np.argsort(key, kind="mergesort")
+    k = key[order]
+    for c in range(1, k.shape[0]):
+        if k[c] == k[c - 1]:
+            repeated = True
+    return k, spring[order], repeated
+
+
+@njit(cache=True)
+def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, hist_springs,
+                 pos_all, vel_all, omg_all, q, L, h, solves):
+    """Part 3 of the internal step (module docstring) for the active contacts a, b (their
+    surface points pa, pb, normals, depths and keys; Hertz–Mindlin radii, zeros for linear
+    laws), from the stored springs (hist_keys ascending, hist_springs) and the kinematics of
+    all bodies (:func:`all_kinematics`).  With ``implicit`` and h > 0 the normal dashpots are
+    solved implicitly first; their solves, active-set rounds, CG iterations and cycles are
+    added to ``solves`` (4,) int64.  Returns (force, torque (B,3), point, f_total, f_damp_n,
+    f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip work J,
+    the stored springs' keys and springs, whether a key repeats)."""
+    spring = match_history(hist_keys, hist_springs, key)
+    given = implicit and h > 0.0 and a.shape[0] > 0
+    dashpot = np.zeros(0)
+    if given:
+        c0 = cycles()
+        dashpot, rounds, iterations = dashpots_of_evaluation(
+            a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
+            bc.inv_mass_all, radius, bc.mass, bc.gravity, q, L, bc.inv_I,
+            quats_to_matrices(q), bc.sq_m, bc.sq_I)
+        solves[0] += 1
+        solves[1] += rounds
+        solves[2] += iterations
+        solves[3] += cycles() - c0
+    force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip = contact_loads(
+        a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
+        bc.inv_mass_all, radius, bc.mass, bc.gravity, given, dashpot)
+    keys, springs, repeated = stored_history(key, spring)
+    return (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, keys,
+            springs, repeated)
+

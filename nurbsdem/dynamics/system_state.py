@@ -1,0 +1,159 @@
+"""What a DEM system gives its writers and checkpoints: samples of its state.
+
+Positions are centroids (m), orientations file->world quaternions (w, x, y, z), velocities
+m/s and rad/s, forces N, energies J, world frame.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from ..geometry.rotation import matrix_to_quat
+from .energy import EnergyLedger
+from .monitor import MonitorSample, StateSample, contact_output_of
+from .rigid import body_poses, omega_world
+
+_STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
+               "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
+               "c_eel", "c_stick", "c_key", "wall_d", "wall_u", "wall_work", "ledger",
+               "alt_count", "alt_prev_v", "alt_prev_L", "c_coeffs", "c_radius")
+
+
+class SystemState:
+    """What a :class:`~nurbsdem.dynamics.system.DemSystem` gives its writers and checkpoints
+    (a base class of it): monitor samples, the particles' state in the file frame, the
+    contacts for ParaView, the walls' loads, and the complete dynamic state as arrays
+    (:meth:`get_state`, :meth:`set_state`: a restart continues bit for bit)."""
+
+    def monitor_sample(self) -> MonitorSample:
+        """The monitors' sample of the present state (:mod:`nurbsdem.dynamics.monitor`)."""
+        cs = self.last_contacts
+        hertz = None
+        if self.uses_hertz:
+            hertz = (int(self.c_a.shape[0]), int(getattr(self, "hertz_fallback", 0)),
+                     np.asarray(self.c_radius, float), np.asarray(self.c_coeffs[:, 0], float))
+        return MonitorSample(self.time, self.energy(), int(getattr(cs, "monitored", 0) or 0),
+                             int(getattr(cs, "active", 0) or 0),
+                             int(getattr(cs, "degenerated_count", 0) or 0),
+                             int(getattr(cs, "failed", 0) or 0), self.wall_displacement,
+                             self.wall_reaction, hertz)
+
+    def body_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The particles' state as the model and the writers hold it (copies): centroids
+        (N,3) m, file->world quaternions (N,4) (w, x, y, z), velocities (N,3) m/s and angular
+        velocities (N,3) rad/s, world frame."""
+        b = self.bodies
+        return self._body_state_of(b.x.copy(), b.q, b.v.copy(), b.L)
+
+    def _body_state_of(self, x: np.ndarray, q: np.ndarray, v: np.ndarray,
+                       L: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`body_state` of the centroids x, principal quaternions q, velocities v and
+        angular momenta L (N,·) given (x and v are returned as they are)."""
+        b = self.bodies
+        R, _ = body_poses(q, b.P, x, b.centroid_file)
+        return x, matrix_to_quat(R).reshape(-1, 4), v, omega_world(q, L, self._inv_I)
+
+    def contact_output(self) -> dict | None:
+        """The last evaluation's contacts as the ParaView writer takes them
+        (:func:`~nurbsdem.dynamics.monitor.contact_output_of`; None without any)."""
+        cs = self.last_contacts
+        active = int(getattr(cs, "active", 0) or 0)
+        if active == 0 or self.c_a.shape[0] != active:
+            return None
+        return self._contacts_for_output(cs.body_a, cs.body_b, self.c_point, self.c_ftot,
+                                         self.c_fn, cs.normal, cs.depth, cs.degenerated,
+                                         self.c_coeffs, self.c_radius)
+
+    def _contacts_for_output(self, a, b, point, ftot, fn, normal, depth, deg, coeffs,
+                             radius) -> dict | None:
+        """:func:`~nurbsdem.dynamics.monitor.contact_output_of` of the contacts a, b (None
+        without any), with the Hertz–Mindlin columns (coeffs, radius) only under those laws."""
+        active = a.shape[0]
+        if active == 0:
+            return None
+        hertz = self.uses_hertz and coeffs.shape[0] == active
+        return contact_output_of(a, b, point, ftot, fn, normal, depth, deg,
+                                 coeffs if hertz else None, radius if hertz else None)
+
+    def state_sample(self) -> StateSample:
+        """The present state for the ParaView and results output (copies)."""
+        return StateSample(self.time, *self.body_state(), self.wall_displacement,
+                           self.contact_output())
+
+    def _state_of_loop(self, time: float, kept: tuple) -> StateSample:
+        """The StateSample of a state the compiled loop kept at a deck step's end
+        (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`): the same arrays
+        :meth:`state_sample` takes live."""
+        _, x, q, v, L, wall_d, *contacts = kept
+        return StateSample(time, *self._body_state_of(x, q, v, L), wall_d,
+                           self._contacts_for_output(*contacts))
+
+    def state_sample_bytes(self, contacts: int | None = None) -> int:
+        """Bytes of one state the compiled loop keeps for the output (at most; the particles'
+        state, the walls' displacements and the contacts' arrays of
+        :func:`~nurbsdem.dynamics.deck_steps._kept`, 8 bytes a number), with ``contacts``
+        contacts (default: the last evaluation's): what the solver budgets the states kept in
+        one call by (tested against the arrays' nbytes)."""
+        k = int(self.c_a.shape[0]) if contacts is None else int(contacts)
+        return 8 * (16 * self.n_particles + 24 * k + 3 * self.walls.n)
+
+    @property
+    def wall_contact_force(self) -> np.ndarray:
+        """(W,3) sum of the contact forces the particles exert on each wall (N), last evaluation."""
+        return self.force[self.n_particles:].copy()
+
+    @property
+    def wall_reaction(self) -> np.ndarray:
+        """(W,3) force that holds each wall on its prescribed path (N) = −wall_contact_force."""
+        return -self.wall_contact_force
+
+    @property
+    def wall_displacement(self) -> np.ndarray:
+        """(W,3) current wall displacements (m)."""
+        return self.wall_d.copy()
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """Complete dynamic state as a dict of numpy arrays (copies; np.savez-friendly): body
+        state, last loads, tangential histories, last contact data, energy ledger, counters.
+        Restoring it into a system built the same way continues bit-for-bit."""
+        self.initialize()
+        st = {k: np.array(getattr(self, k), copy=True) for k in _STATE_KEYS
+              if k not in ("x", "q", "v", "L", "ledger")}
+        b = self.bodies
+        st.update(x=b.x.copy(), q=b.q.copy(), v=b.v.copy(), L=b.L.copy(),
+                  ledger=self.ledger.to_array(),
+                  counters=np.array([self.step_count, self.substeps, self.refine,
+                                     self.calm_steps, self.acc_refine, self.acc_calm],
+                                    dtype=np.int64),
+                  scalars=np.array([self.t0, self.dt, self._peak, self.dt_bound,
+                                    self.dt_network, self.dt_critical, self.acc_last_growth]))
+        return st
+
+    def set_state(self, st: dict[str, np.ndarray]) -> None:
+        """Restore a state from :meth:`get_state` (the system must have the same bodies/walls)."""
+        self.initialize()
+        b = self.bodies
+        if st["x"].shape != b.x.shape or st["wall_d"].shape != (self.walls.n, 3):
+            raise InputError("checkpoint does not match the system's bodies and walls")
+        b.x, b.q, b.v, b.L = (np.array(st[k], dtype=float, copy=True) for k in ("x", "q", "v", "L"))
+        for k in _STATE_KEYS:
+            if k in ("x", "q", "v", "L", "ledger") or k not in st:
+                continue
+            setattr(self, k, np.array(st[k], copy=True))
+        self.ledger = EnergyLedger.from_array(st["ledger"])
+        self.step_count = int(st["counters"][0])
+        if st["counters"].shape[0] >= 4:
+            self.substeps, self.refine, self.calm_steps = (int(c) for c in st["counters"][1:4])
+            self.dt_internal = self.dt / self.substeps
+        acc = st["counters"][4:6] if st["counters"].shape[0] >= 6 else (1, 0)
+        self.acc_refine, self.acc_calm = int(acc[0]), int(acc[1])
+        self.t0 = float(st["scalars"][0])
+        if float(st["scalars"][1]) != self.dt:
+            raise InputError("checkpoint was written with a different deck time step")
+        self._peak = float(st["scalars"][2])
+        if st["scalars"].shape[0] >= 6:
+            self.dt_bound, self.dt_network, self.dt_critical = (float(v) for v in st["scalars"][3:6])
+        self.acc_last_growth = (float(st["scalars"][6]) if st["scalars"].shape[0] >= 7
+                                else math.inf)
