@@ -217,7 +217,7 @@ def pack_paths(n: int = 60, duration: float = 0.3) -> dict:
     ``hertz.csv``) are equal bit for bit."""
     import tempfile
     from nurbsdem.io.deck import parse_deck
-    from nurbsdem.io.writers import read_results_sample, read_results_times
+    from nurbsdem.io.results import read_results_sample, read_results_times
     from nurbsdem.solver import Solver
     out = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -115,7 +115,7 @@ def settled_checkpoint(n: int, settle: float, measure: int, cache: Path, ranks: 
 def _same_results(a: Path, b: Path) -> bool:
     import numpy as np
 
-    from nurbsdem.io.writers import read_results_sample, read_results_times
+    from nurbsdem.io.results import read_results_sample, read_results_times
     ta, tb = read_results_times(a), read_results_times(b)
     if not np.array_equal(ta, tb):
         return False

@@ -1,7 +1,7 @@
 """Custom post-processing of ``results.h5``: the kinetic energy of every sample, from the
 stored body states alone.
 
-``results.h5`` (see ``nurbsdem.io.writers.ResultsWriter``) holds, for every sample, each
+``results.h5`` (see ``nurbsdem.io.results.ResultsWriter``) holds, for every sample, each
 particle's id, shape id, centroid, quaternion, velocity and angular velocity. Together with
 the masses and inertia tensors (from the shapes and densities) that is enough to compute
 anything about the motion; here the kinetic energy
@@ -24,7 +24,7 @@ import numpy as np
 
 import nurbsdem
 from nurbsdem.geometry.rotation import quat_to_matrix
-from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.io.results import read_results_sample, read_results_times
 
 DENSITY = 2000.0
 

@@ -5,7 +5,7 @@ Usage::
 
     python postproc/plot_monitors.py RESULTS_DIR [--out FOLDER]
 
-Reads ``RESULTS_DIR/monitors/*.csv`` (written by :mod:`nurbsdem.io.writers`) and writes,
+Reads ``RESULTS_DIR/monitors/*.csv`` (written by :mod:`nurbsdem.io.monitors`) and writes,
 into ``--out`` (default RESULTS_DIR):
 
 * ``energy.png`` — kinetic, potential, elastic, mechanical energy, dissipated energy,

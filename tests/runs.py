@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nurbsdem.io.deck import parse_deck
-from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.solver import Solver
 
 STATE_KEYS = ("position", "quaternion", "velocity", "angular_velocity")

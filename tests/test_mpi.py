@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from nurbsdem.io.checkpoint import load_checkpoint
-from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.parallel import decompose
 from nurbsdem.parallel.domain import merge_by_key
 

@@ -227,7 +227,8 @@ def test_checkpoints_are_saved_by_the_worker_after_what_they_refer_to(model, mon
     import threading
 
     import nurbsdem.solver as solver_module
-    from nurbsdem.io.writers import read_pvd, read_results_times
+    from nurbsdem.io.paraview import read_pvd
+    from nurbsdem.io.results import read_results_times
     from nurbsdem.solver import Solver
 
     seen = []

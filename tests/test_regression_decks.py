@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nurbsdem.io.deck import parse_deck
-from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.solver import Solver
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -28,7 +28,10 @@ from nurbsdem.errors import InputError
 from nurbsdem.io import intervals
 from nurbsdem.io.checkpoint import load_checkpoint
 from nurbsdem.io.deck import build_model, parse_deck
-from nurbsdem.io.writers import BackgroundWriter, MonitorWriter, read_pvd, read_results_times
+from nurbsdem.io.background import BackgroundWriter
+from nurbsdem.io.monitors import MonitorWriter
+from nurbsdem.io.paraview import read_pvd
+from nurbsdem.io.results import read_results_times
 
 DECK = """Environment
   Gravity 0 0 -9.81

@@ -12,7 +12,7 @@ import pytest
 import nurbsdem
 from nurbsdem.errors import InputError
 from nurbsdem.io.deck import build_model
-from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.model import DynamicStep, MoveWallStep, ReplicateStep, model_differences
 from nurbsdem.simulation import Simulation
 from nurbsdem.solver import Solver

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 import nurbsdem
 from nurbsdem.cli import main
 from nurbsdem.io.deck import parse_deck
-from nurbsdem.io.writers import read_pvd
+from nurbsdem.io.paraview import read_pvd
 from nurbsdem.solver import Solver
 from runs import assert_same_final_state, killed_and_restarted
 
@@ -222,7 +222,7 @@ def test_background_output_writes_the_same_files(lid_run, tmp_path):
 
 
 def test_background_write_errors_reach_the_caller():
-    from nurbsdem.io.writers import BackgroundWriter
+    from nurbsdem.io.background import BackgroundWriter
     done = []
     w = BackgroundWriter(depth=2)
 
@@ -243,7 +243,7 @@ def test_held_writes_run_as_one_job_in_order():
     (none before), run in their order; an error among them reaches the caller."""
     import threading
 
-    from nurbsdem.io.writers import BackgroundWriter
+    from nurbsdem.io.background import BackgroundWriter
     done = []
     gate = threading.Event()
     w = BackgroundWriter()

@@ -9,7 +9,7 @@ import pytest
 
 from nurbsdem.dynamics import system as system_module
 from nurbsdem.io.deck import parse_deck
-from nurbsdem.io.writers import read_results_sample, read_results_times
+from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.solver import Solver
 from runs import STATE_KEYS, assert_same_final_state, killed_and_restarted, spread_points
 

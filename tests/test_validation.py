@@ -331,7 +331,7 @@ def test_bad_checkpoint_is_one_input_error(tmp_path, kind):
         save_checkpoint(ck, _state(model))
         ck.write_bytes(ck.read_bytes()[:700])
     elif kind == "results":
-        from nurbsdem.io.writers import ResultsWriter
+        from nurbsdem.io.results import ResultsWriter
         ResultsWriter(ck, deck_text=model.text)
     else:
         with h5py.File(ck, "w"):

@@ -21,9 +21,10 @@ from nurbsdem import shapes
 from nurbsdem.geometry.generators import box_walls, flat_wall
 from nurbsdem.errors import InputError
 from nurbsdem.io.checkpoint import load_checkpoint, save_checkpoint
-from nurbsdem.io.writers import (CONTACT_COLUMNS, ENERGY_COLUMNS, WALL_COLUMNS, MonitorWriter,
-                                 OutputWriters, ParaViewWriter, ResultsWriter, read_pvd,
-                                 read_results_sample, read_results_times)
+from nurbsdem.io.monitors import CONTACT_COLUMNS, ENERGY_COLUMNS, WALL_COLUMNS, MonitorWriter
+from nurbsdem.io.paraview import ParaViewWriter, read_pvd
+from nurbsdem.io.results import ResultsWriter, read_results_sample, read_results_times
+from nurbsdem.io.writers import OutputWriters
 from nurbsdem.geometry.rotation import quat_from_rotvec, quat_to_matrix
 from nurbsdem.model import Bodies, WallSpec
 

@@ -1,5 +1,6 @@
 """The output worker: one thread that writes files in the order they are submitted, while
-the time loop goes on (:class:`BackgroundWriter`, used by :mod:`nurbsdem.io.writers`)."""
+the time loop goes on (:class:`BackgroundWriter`, used by :mod:`nurbsdem.io.paraview` and
+:mod:`nurbsdem.io.results`)."""
 from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
