@@ -38,7 +38,6 @@ same scene and call the same steps (e.g. run the same script again): the steps t
 has done are skipped, the interrupted one continues where the checkpoint left it, bit for bit.
 """
 from __future__ import annotations
-from __future__ import annotations
 
 import hashlib
 from pathlib import Path
