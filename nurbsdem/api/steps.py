@@ -1,0 +1,127 @@
+"""The steps of :class:`~nurbsdem.simulation.Simulation` from its methods' arguments: each
+argument checked as the deck checks the same key of a ``Step`` line, the step object the
+same as the deck's (:class:`~nurbsdem.model.DynamicStep`,
+:class:`~nurbsdem.model.ReplicateStep`, :class:`~nurbsdem.model.MoveWallStep`). Messages
+start with ``Step N:``, N the id the step gets."""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from ..model import DAMPING_SCHEMES, DynamicStep, Model, MoveWallStep, ReplicateStep
+from .checks import number, vector
+
+
+def next_step_id(model: Model) -> int:
+    """The id of the next step (1, 2, ... in the order the steps run)."""
+    return max((s.id for s in model.steps), default=0) + 1
+
+
+def damping(sid: int, value: Any) -> str:
+    """The damping scheme, "explicit" or "implicit" (the deck's ``Damping``)."""
+    if not isinstance(value, str) or value.lower() not in DAMPING_SCHEMES:
+        raise InputError(f"Step {sid}: damping must be 'explicit' or 'implicit', got "
+                         f"{value!r}")
+    return value.lower()
+
+
+def optional_positive(key: str, sid: int, value: Any) -> float | None:
+    """A step's optional positive number (``Accuracy``, ``Safety``; None: not given)."""
+    return None if value is None else number(key, value, f"Step {sid}", positive=True)
+
+
+def timing(sid: int, duration: Any, time_step: Any) -> tuple[float, float]:
+    """(duration, time step) in s, both > 0, the time step not longer than the duration."""
+    dur = number("Duration", duration, f"Step {sid}", positive=True)
+    dt = number("TimeStep", time_step, f"Step {sid}", positive=True)
+    if dt > dur:
+        raise InputError(f"Step {sid}: time_step {dt:g} s exceeds duration {dur:g} s")
+    return dur, dt
+
+
+def dynamic_step(sid: int, duration: Any, time_step: Any, damping_scheme: Any, accuracy: Any,
+                 safety: Any) -> DynamicStep:
+    """``Dynamic`` (see :meth:`~nurbsdem.simulation.Simulation.run_dynamic`)."""
+    dur, dt = timing(sid, duration, time_step)
+    return DynamicStep(sid, 0, dur, dt, damping=damping(sid, damping_scheme),
+                       accuracy=optional_positive("Accuracy", sid, accuracy),
+                       safety=optional_positive("Safety", sid, safety))
+
+
+def replicate_step(sid: int, layers: Any, height: Any) -> ReplicateStep:
+    """``Replicate`` (see :meth:`~nurbsdem.simulation.Simulation.replicate`)."""
+    if isinstance(layers, bool) or not isinstance(layers, (int, np.integer)) or layers < 1:
+        raise InputError(f"Step {sid}: layers must be an integer >= 1, got {layers!r}")
+    h = number("Height", height, f"Step {sid}", positive=True)
+    return ReplicateStep(sid, 0, int(layers), h)
+
+
+def move_wall_step(model: Model, sid: int, name: Any,
+                   displacement: Sequence[float] | None, duration: Any, time_step: Any, *,
+                   to_contact: bool, gap: Any, direction: Sequence[float] | None,
+                   damping_scheme: Any, accuracy: Any, safety: Any,
+                   angular_velocity: Sequence[float] | None,
+                   center: Sequence[float]) -> MoveWallStep:
+    """``MoveWall`` (see :meth:`~nurbsdem.simulation.Simulation.move_wall`): a turn of a
+    mesh or surface wall, a flat wall moved to contact, or a flat wall's displacement."""
+    what = f"Step {sid}"
+    if not isinstance(name, str) or name not in model.wall_names:
+        names = ", ".join(model.wall_names) or "no walls defined"
+        raise InputError(f"{what}: no wall named {name!r} (walls: {names})")
+    curved = name in {w.name for w in model.curved_walls}
+    if angular_velocity is not None:
+        if not curved:
+            raise InputError(f"{what}: only mesh and surface walls turn (angular_velocity)")
+        if displacement is not None or to_contact or duration is None or time_step is None:
+            raise InputError(f"{what}: angular_velocity takes center, duration and "
+                             f"time_step, not displacement or to_contact")
+        return _turn(sid, name, angular_velocity, center, duration, time_step, damping_scheme,
+                     accuracy, safety)
+    if curved:
+        raise InputError(f"{what}: mesh and surface walls turn (angular_velocity); "
+                         f"displacement and to_contact move flat walls")
+    if to_contact:
+        if displacement is not None or duration is not None or time_step is not None:
+            raise InputError(f"{what}: to_contact=True takes gap and direction, not "
+                             f"displacement, duration or time_step")
+        return _to_contact(sid, name, gap, direction)
+    if displacement is None or duration is None or time_step is None:
+        raise InputError(f"{what}: move_wall needs displacement, duration and time_step "
+                         f"(or to_contact=True)")
+    disp = vector("Displacement", displacement, what)
+    dur, dt = timing(sid, duration, time_step)
+    return MoveWallStep(sid, 0, wall=name, displacement=disp, duration=dur, time_step=dt,
+                        damping=damping(sid, damping_scheme),
+                        accuracy=optional_positive("Accuracy", sid, accuracy),
+                        safety=optional_positive("Safety", sid, safety))
+
+
+def _turn(sid: int, name: str, angular_velocity: Any, center: Any, duration: Any,
+          time_step: Any, damping_scheme: Any, accuracy: Any, safety: Any) -> MoveWallStep:
+    """``MoveWall NAME Rotate``: a turn at ``angular_velocity`` (rad/s) about ``center`` (m)."""
+    what = f"Step {sid}"
+    omega = vector("AngularVelocity", angular_velocity, what)
+    if not np.linalg.norm(omega) > 0:
+        raise InputError(f"{what}: angular_velocity must not be zero")
+    dur, dt = timing(sid, duration, time_step)
+    return MoveWallStep(sid, 0, wall=name, rotate=True, angular_velocity=omega,
+                        center=vector("Center", center, what), duration=dur,
+                        time_step=dt, damping=damping(sid, damping_scheme),
+                        accuracy=optional_positive("Accuracy", sid, accuracy),
+                        safety=optional_positive("Safety", sid, safety))
+
+
+def _to_contact(sid: int, name: str, gap: Any, direction: Any) -> MoveWallStep:
+    """``MoveWall NAME ToContact``: along ``direction`` (made unit; None: the wall's normal)
+    until the nearest particle is ``gap`` m away."""
+    what = f"Step {sid}"
+    g = number("Gap", gap, what, nonnegative=True)
+    d = None
+    if direction is not None:
+        d = vector("Direction", direction, what)
+        if not np.linalg.norm(d) > 0:
+            raise InputError(f"{what}: direction must not be zero")
+        d = d / np.linalg.norm(d)
+    return MoveWallStep(sid, 0, wall=name, to_contact=True, gap=g, direction=d)
