@@ -18,6 +18,7 @@ from nurbsdem.geometry.surfaces import cylinder_patch
 from nurbsdem.io import deck_format
 from nurbsdem.io.deck import build_model, read_deck_text
 from nurbsdem.io.deck_format import format_model, unit_preimage
+from nurbsdem.io.deck_schema import SCHEMA
 from nurbsdem.io.shapefile import save_shape
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,7 +43,7 @@ Particles
 Walls
   Box 1 Min -0.013 0.007 0 Max 0.2 0.2 0.41 Top no Material 1
   Wall 6 Name lid Point 0.1 0.1 0.37 Normal 0.01 0.02 -1 Size 0.23 0.21 Axis 1 0.3 0
-  Wall 7 Name shelf Point 0.1 0.1 -0.05 Normal 0 0 1 Size 0.3 0.3
+  Wall 7 Name shelf Point 0.1 0.1 -0.05 Normal 0 0 1 Size 0.3 0.3 Material 2
 Contact
   Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 Friction 0.5
   Interface 2 Model HertzMindlin Restitution 0.6 Friction 0.2 Materials 1 2
@@ -72,7 +73,7 @@ Particles
   Particle 1 Shape 1 Material 1 Position 0 0 0.0105
 Walls
   Mesh 7 Name floor File floor.stl Scale 2 Position 0 0 -0.5 Rotation 0 0 0.1 Material 1 OneSided yes
-  Surface 8 Name drum File drum.yaml Position 0 0 1 Rotation 0 1.5707963267948966 0
+  Surface 8 Name drum File drum.yaml Position 0 0 1 Rotation 0 1.5707963267948966 0 Material 1
   Mesh 9 File floor.stl
   Box 10 Min -1 -1 -1 Max 1.3 1.7 1.1 Top yes
 Contact
@@ -165,6 +166,21 @@ def test_every_entry_and_key_reads_back(fixture, request):
     assert format_model(again) == formatted
 
 
+def test_the_two_decks_write_every_key_of_the_schema(nurbs_deck, curved_deck):
+    """Every key the parser accepts is on a formatted line of its entry (a key added to the
+    schema needs its place in the formatter and in these decks)."""
+    written = set()
+    for path in (nurbs_deck, curved_deck):
+        for line in round_trip(path.read_text(), path)[1].splitlines():
+            words = line.split("#")[0].split()
+            written |= {(words[0], w) for w in words[1:]} | {(words[0], None)}
+    for block, specs in SCHEMA.items():
+        for keyword, spec in specs.items():
+            assert (keyword, None) in written, keyword
+            for key in spec.keys:
+                assert (keyword, key) in written, f"{keyword} {key}"
+
+
 def test_the_formatted_deck_holds_what_the_deck_says(nurbs_deck):
     _, formatted, _ = round_trip(nurbs_deck.read_text(), nurbs_deck)
     lines = formatted.splitlines()
@@ -172,7 +188,7 @@ def test_the_formatted_deck_holds_what_the_deck_says(nurbs_deck):
     assert "  Material 3 Density 1150.5 PoissonRatio 0.25" in lines
     assert "  Material 2 Density 7800.0 YoungModulus 200000000000.0 PoissonRatio 0.0" in lines
     assert "  Box 1 Min -0.013 0.007 0.0 Max 0.2 0.2 0.41 Top no Material 1" in lines
-    assert "  Wall 7 Name shelf Point 0.1 0.1 -0.05 Normal 0.0 0.0 1.0 Size 0.3 0.3" in lines
+    assert "  Wall 7 Name shelf Point 0.1 0.1 -0.05 Normal 0.0 0.0 1.0 Size 0.3 0.3 Material 2" in lines
     assert "  Interface 2 Model HertzMindlin Restitution 0.6 Friction 0.2 Materials 1 2" in lines
     assert f'  Directory "{nurbs_deck.parent / "out dir" / "run 1"}"' in lines
 
@@ -201,6 +217,15 @@ def test_a_dropped_entry_is_caught(nurbs_deck):
         except InputError:
             continue
         assert model_signature(other) != model_signature(model), lines[i]
+
+
+def test_a_formatter_that_drops_an_entry_is_caught(monkeypatch):
+    real = deck_format.particle_entries
+    monkeypatch.setattr(deck_format, "particle_entries", lambda model: real(model)[:-1])
+    deck = ROOT / "inputs" / "regression" / "lid_press.inp"
+    model, _, again = round_trip(read_deck_text(deck), deck)
+    assert len(again.particles) == 2
+    assert model_signature(again) != model_signature(model)
 
 
 def test_a_dropped_key_or_a_rounded_number_is_caught(nurbs_deck, monkeypatch):

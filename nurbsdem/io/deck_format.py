@@ -11,7 +11,7 @@ A model keeps its flat walls as patches, not as the ``Box`` and ``Wall`` entries
 them: :func:`flat_wall_entries` finds the entries that make exactly those patches again (the
 shortest decimals first), and a caller that knows the entries (a scene built in Python) passes
 them instead.  A shape given as a Python object has no deck spelling; the caller says how to
-write it (``shape_entry``).
+write it (``shape``).
 """
 from __future__ import annotations
 
@@ -43,10 +43,11 @@ def word(text: str, quote: bool = False) -> str:
     """A text value as one deck token: quoted when ``quote`` or when the lexer would not
     read it back as one token; ValueError when no token reads back as ``text``."""
     text = str(text)
-    out = f'"{text}"' if quote or split_tokens(strip_comment(text)) != [text] else text
-    if '"' in text or "\n" in text or split_tokens(strip_comment(out)) != [text]:
-        raise ValueError(f"{text!r} cannot be written as one deck value")
-    return out
+    if '"' not in text and "\n" not in text:
+        out = f'"{text}"' if quote or split_tokens(strip_comment(text)) != [text] else text
+        if split_tokens(strip_comment(out)) == [text]:
+            return out
+    raise ValueError(f"{text!r} cannot be written as one deck value")
 
 
 def format_value(arg: Arg, value: Any, key: str = "") -> str:
