@@ -153,7 +153,7 @@ def wall_entry(wid: int, name: str, point, normal, size, axis, material: int | N
     return _entry("Walls", "Wall", wid, **values)
 
 
-def curved_entry(w: CurvedWallSpec) -> Entry:
+def curved_wall_entry(w: CurvedWallSpec) -> Entry:
     """A ``Mesh`` or ``Surface`` entry (its file as written)."""
     values: dict[str, Any] = {"Name": w.name, "File": w.file}
     if w.kind == "mesh":
@@ -351,7 +351,7 @@ def model_entries(model: Model, walls: list[Entry] | None = None,
                    ("sphere", "ellipsoid", "file") else shape_entry(e))
     out += particle_entries(model)
     out += flat_wall_entries(model.walls) if walls is None else list(walls)
-    out += [curved_entry(w) for w in model.curved_walls]
+    out += [curved_wall_entry(w) for w in model.curved_walls]
     out += [interface_entry(i) for i in model.interfaces]
     out += [step_entry(s) for s in model.steps]
     return out + output_entries(model)
