@@ -485,72 +485,31 @@ class Simulation:
         """The deck of this scene and of the steps run so far (what ``results.h5`` and the
         checkpoint store). Shapes given as Python objects that are not exact generator
         spheres appear as ``File "<python object ...>"`` with a hash of their geometry."""
-        from .dynamics.laws.interface import interface_text
+        import copy
+        from dataclasses import replace
+        from .io.deck_format import box_entry, format_model, wall_entry
+        from .io.deck_schema import Entry
         m = self.model
         if self._from_deck:
             return m.text
-        out = ["# scene built in Python (nurbsdem.Simulation)", "Environment",
-               f"  Gravity {_v(m.gravity)}", "Materials"]
-        for k, mat in sorted(m.materials.items()):
-            E = getattr(mat, "young_modulus", None)
-            out.append(f"  Material {k} Density {_f(mat.density)}" + (
-                f" YoungModulus {_f(E)} PoissonRatio {_f(mat.poisson_ratio)}" if E is not None
-                else ""))
-        out.append("Shapes")
-        for sid, e in sorted(m.shapes.items()):
-            if e.kind == "sphere":
-                out.append(f"  Shape {sid} Sphere Radius {_f(e.params[0])}")
-            elif e.kind == "file":
-                out.append(f'  Shape {sid} File "{e.file}"')
-            else:
-                if sid not in self._geometry_hash:
-                    self._geometry_hash[sid] = _geometry_hash(e.shape)
-                label = "".join(c for c in str(e.shape.name or "shape") if c not in '"#\n')
-                out.append(f'  Shape {sid} File "<python object {label}>"  # geometry '
-                           f'sha256 {self._geometry_hash[sid]}')
-        out.append("Particles")
-        for p in m.particles:
-            out.append(f"  Particle {p.id} Shape {p.shape_id} Material {p.material_id} Position "
-                       f"{_v(p.position)} Rotation {_v(p.rotation)} Velocity {_v(p.velocity)} "
-                       f"AngularVelocity {_v(p.angular_velocity)}")
-        out.append("Walls")
         boxes = {b[0]: b for b in self._boxes}
-        args = self._wall_args
-        for w in m.walls:
-            if w.id in boxes:
-                bid, lo, hi, top, wmat = boxes[w.id]
-                mat = f" Material {wmat}" if wmat is not None else ""
-                out.append(f"  Box {bid} Min {_v(lo)} Max {_v(hi)} Top {'yes' if top else 'no'}"
-                           f"{mat}")
-            elif w.kind == "wall":
-                p, n, size, ax = args[w.name]
-                axis = f" Axis {_v(ax)}" if ax is not None else ""
-                mat = (f" Material {w.material_id}"
-                       if getattr(w, "material_id", None) is not None else "")
-                out.append(f"  Wall {w.id} Name {w.name} Point {_v(p)} Normal {_v(n)} "
-                           f"Size {_v(size)}{axis}{mat}")
-        out += [_curved_line(w) for w in m.curved_walls]
-        out.append("Contact")
-        for i in m.interfaces:
-            line = "  " + interface_text(i, _f)
-            if i.materials:
-                line += " Materials " + " ".join(map(str, i.materials))
-            elif i.between:
-                line += f" Between {i.between}"
-            out.append(line)
-        out.append("Steps")
-        for s in m.steps:
-            out.append(_step_line(s))
-        o = m.output
-        out.append("Output")
-        if self._output_dir is not None and o is not None:
-            out.append(f'  Directory "{Path(o.directory).resolve()}"')
-            out.append(f"  VTK Every {_f(o.vtk_every)} Resolution {o.vtk_resolution}")
-            out.append(f"  Monitors Every {_f(o.monitors_every)}")
-            if o.results_every is not None:
-                out.append(f"  Results Every {_f(o.results_every)}")
-            out.append(f"  Checkpoint Every {_f(o.checkpoint_every)}")
-        return "\n".join(out) + "\n"
+        walls = [box_entry(*boxes[w.id]) if w.id in boxes
+                 else wall_entry(w.id, w.name, *self._wall_args[w.name], w.material_id)
+                 for w in m.walls if w.id in boxes or w.kind == "wall"]
+
+        def python_object(e: ShapeEntry) -> Entry:
+            if e.id not in self._geometry_hash:
+                self._geometry_hash[e.id] = _geometry_hash(e.shape)
+            label = "".join(c for c in str(e.shape.name or "shape") if c not in '"#\n')
+            return Entry("Shapes", "Shape", 0, e.id, values={"File": f"<python object {label}>"},
+                         comment=f"geometry sha256 {self._geometry_hash[e.id]}")
+        scene = copy.copy(m)          # materials and shapes by id; Output only with output=
+        scene.materials, scene.shapes = dict(sorted(m.materials.items())), dict(
+            sorted(m.shapes.items()))
+        scene.output = (replace(m.output, directory=Path(m.output.directory).resolve())
+                        if self._output_dir is not None and m.output is not None else None)
+        return format_model(scene, "scene built in Python (nurbsdem.Simulation)", walls,
+                            python_object)
 
     def write_deck(self, path: str | Path) -> Path:
         """Write :attr:`deck_text` (``nurbsdem solve`` runs it when every shape is a file or

@@ -1,4 +1,4 @@
-"""docs/deck-reference.md is generated from the parser's schema (nurbsdem.io.deck.SCHEMA) and
+"""docs/deck-reference.md is generated from the parser's schema (nurbsdem.io.deck_schema.SCHEMA) and
 the descriptions of nurbsdem.io.deck_reference: every key the parser accepts is documented,
 no description names a key the parser lacks, and the file in docs/ is the rendered text."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ import copy
 import pytest
 
 from nurbsdem.io import deck_reference as ref
-from nurbsdem.io.deck import F1, SCHEMA, EntrySpec
+from nurbsdem.io.deck_schema import F1, SCHEMA, EntrySpec
 
 
 def test_every_schema_key_has_a_description():

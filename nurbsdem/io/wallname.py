@@ -30,7 +30,7 @@ NAME_ENTRIES = (("Walls", "Wall"), ("Walls", "Mesh"), ("Walls", "Surface"), ("St
 
 def keywords(schema: Mapping[str, Mapping[str, Any]]) -> set[str]:
     """The keys of the entries of :data:`NAME_ENTRIES` in a deck schema
-    (:data:`nurbsdem.io.deck.SCHEMA`), lower case (the deck's keywords are case-insensitive)."""
+    (:data:`nurbsdem.io.deck_schema.SCHEMA`), lower case (the deck's keywords are case-insensitive)."""
     return {k.lower() for block, entry in NAME_ENTRIES for k in schema[block][entry].keys}
 
 
