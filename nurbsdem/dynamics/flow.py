@@ -153,13 +153,13 @@ class Inlet:
                                      axis=1)) if len(centers) else np.zeros(0, np.int64)
         tree = cKDTree(centers[near]) if len(near) else None
         r_near = radii[near]
-        placed_x, placed_r, taken = [], [], []
+        placed_x, placed_r, taken = np.empty((n, 3)), np.empty(n), []
         for k in range(n):
-            x = self._place_one(r_new[k], tree, r_near, placed_x, placed_r, reach)
+            x = self._place_one(r_new[k], tree, r_near, placed_x[:k], placed_r[:k], reach)
             if x is None:
                 break                      # the region is full: the rest waits, in order
-            placed_x.append(x)
-            placed_r.append(r_new[k])
+            placed_x[k] = x
+            placed_r[k] = r_new[k]
             taken.append(kinds[k])
         m = len(taken)
         self._queue = self._queue[m:]
@@ -167,20 +167,21 @@ class Inlet:
         self.inserted_mass += float(self.masses[np.asarray(taken, np.int64)].sum()) if m else 0.0
         self.waiting = n - m
         return NewParticles(self.shapes[np.asarray(taken, np.int64)],
-                            np.array(placed_x).reshape(m, 3),
+                            placed_x[:m].copy(),
                             random_quaternions(self._rng, m),
                             np.repeat(np.asarray(self.velocity, float)[None], m, axis=0))
 
     def _place_one(self, r, tree, r_near, placed_x, placed_r, reach):
         """A position for a particle of bounding radius r clear of the present particles and
-        of those placed in this call, or None after ``max_attempts`` draws."""
+        of those placed in this call (placed_x (k,3), placed_r (k,) m), or None after
+        ``max_attempts`` draws."""
         for _ in range(self.max_attempts):
             x = self.region.sample(self._rng, 1, np.array([r]))[0]
             if tree is not None:
                 idx = tree.query_ball_point(x, r + reach)
                 if any(np.linalg.norm(tree.data[i] - x) < r + r_near[i] for i in idx):
                     continue
-            if any(np.linalg.norm(p - x) < r + q for p, q in zip(placed_x, placed_r)):
+            if len(placed_r) and np.any(np.linalg.norm(placed_x - x, axis=1) < r + placed_r):
                 continue
             return x
         return None
