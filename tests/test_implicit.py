@@ -17,7 +17,6 @@ from nurbsdem.dynamics import (ContactLaw, DemSystem, InstabilityError, Interfac
 from nurbsdem.dynamics.implicit import lever_arms, normal_rows, solve_dashpots
 from nurbsdem.dynamics.integrator import _relative_point_velocities
 from nurbsdem.dynamics.rigid import omega_world
-from nurbsdem.errors import InputError
 
 from test_dynamics_system import MASS, assert_restart_bit_for_bit, paper_box
 
@@ -223,13 +222,6 @@ def test_energy_balance_and_restart_with_implicit_dashpots(tmp_path):
     assert abs(e.balance_error) < 0.05 * e.dissipated
     assert ref.dashpot_solves[0] > 0
     assert_restart_bit_for_bit(lambda: _box(True, law=law), 250, tmp_path)
-
-
-def test_implicit_damping_refuses_a_domain_decomposition():
-    s = _box(True)
-    s.domain = object()
-    with pytest.raises(InputError, match="one MPI rank"):
-        s.initialize()
 
 
 # --------------------------------------------------------------------------- deck and API

@@ -163,6 +163,38 @@ def test_hertz_mindlin_on_two_ranks(tmp_path):
     assert_same_run(tmp_path / "out", tmp_path / "ref")
 
 
+@pytest.fixture(scope="module")
+def implicit_run(tmp_path_factory) -> tuple[Path, Path]:
+    """The MPI deck with ``Damping Implicit`` in every dynamic step (``Accuracy`` in the first,
+    as the paper deck), shortened, and its serial run: (deck, output folder)."""
+    text = DECK.read_text().replace("../../../inputs", str(HERE.parent / "inputs"))
+    text = text.replace("Step 1 Dynamic Duration 0.25 TimeStep 1e-3",
+                        "Step 1 Dynamic Duration 0.12 TimeStep 1e-3 Damping Implicit "
+                        "Accuracy 3e-5")
+    text = text.replace("Step 3 Dynamic Duration 0.15 TimeStep 1e-3",
+                        "Step 3 Dynamic Duration 0.05 TimeStep 1e-3 Damping Implicit")
+    text = text.replace("Duration 0.04 TimeStep 1e-3", "Duration 0.02 TimeStep 1e-3 "
+                        "Damping Implicit")
+    assert text.count("Damping Implicit") == 4
+    folder = tmp_path_factory.mktemp("implicit")
+    deck = folder / "implicit.inp"
+    deck.write_text(text)
+    if _mpi_missing() is None:
+        _run([BIN / "nurbsdem", "solve", deck, "--output", folder / "ref"])
+    return deck, folder / "ref"
+
+
+@needs_mpi
+@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
+def test_implicit_damping_with_accuracy_on_several_ranks(implicit_run, tmp_path, ranks):
+    """``Damping Implicit`` with ``Accuracy`` on 2 and 3 ranks: the dashpots solved over the
+    whole network (the ranks' contacts merged in key order, every particle's state from its
+    owner) give the serial results bit for bit."""
+    deck, ref = implicit_run
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "out"], ranks)
+    assert_same_run(tmp_path / "out", ref)
+
+
 @needs_mpi
 def test_three_ranks_through_the_python_api(serial, tmp_path):
     """The Python API under mpiexec (Simulation -> Solver picks up the MPI world), on a

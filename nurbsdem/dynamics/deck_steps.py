@@ -217,7 +217,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
      hist_springs, _) = contact_part(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
                                      ev.hist_keys, ev.hist_springs, pos_all, vel_all, omg_all, q,
-                                     L, h, solves)
+                                     L, h, solves, np.zeros(0))
     counters[DASHPOT_SOLVES] += solves[0]
     counters[DASHPOT_SOLVES + 1] += solves[1]
     counters[DASHPOT_SOLVES + 2] += solves[2]

@@ -142,10 +142,14 @@ class InternalSteps:
         else:
             self.c_radius = np.zeros(K)
         solves = np.zeros(4, np.int64)
+        dashpot = np.zeros(0)
+        if self.implicit_damping and h > 0.0 and self.domain is not None:
+            dashpot = self.domain.implicit_dashpots(a, bb, pa, pb, nrm, dep, key, self.c_radius,
+                                                    h, solves)
         (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
          self.last_slip_work, keys, springs, repeated) = self._kernels.contact_part(
              self._bc, self.implicit_damping, a, bb, pa, pb, nrm, dep, key, self.c_radius,
-             self.hist_keys, self.hist_springs, pos, vel, omg, b.q, b.L, h, solves)
+             self.hist_keys, self.hist_springs, pos, vel, omg, b.q, b.L, h, solves, dashpot)
         if repeated:
             raise ValueError("ContactSet has duplicate keys: one contact per body pair expected")
         self.hist_keys, self.hist_springs = keys, springs

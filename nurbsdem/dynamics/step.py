@@ -137,19 +137,20 @@ def stored_history(key: np.ndarray, spring: np.ndarray):
 
 @njit(cache=True)
 def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, hist_springs,
-                 pos_all, vel_all, omg_all, q, L, h, solves):
+                 pos_all, vel_all, omg_all, q, L, h, solves, dashpot):
     """Part 3 of the internal step (module docstring) for the active contacts a, b (their
     surface points pa, pb, normals, depths and keys; Hertz–Mindlin radii, zeros for linear
     laws), from the stored springs (hist_keys ascending, hist_springs) and the kinematics of
     all bodies (:func:`all_kinematics`).  With ``implicit`` and h > 0 the normal dashpots are
     solved implicitly first; their solves, active-set rounds, CG iterations and cycles are
-    added to ``solves`` (4,) int64.  Returns (force, torque (B,3), point, f_total, f_damp_n,
+    added to ``solves`` (4,) int64; ``dashpot`` (K,) N gives them instead (solved over the
+    whole network by the MPI ranks together: :meth:`~nurbsdem.parallel.domain.Domain.
+    implicit_dashpots`; empty: solved here).  Returns (force, torque (B,3), point, f_total, f_damp_n,
     f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip work J,
     the stored springs' keys and springs, whether a key repeats)."""
     spring = match_history(hist_keys, hist_springs, key)
     given = implicit and h > 0.0 and a.shape[0] > 0
-    dashpot = np.zeros(0)
-    if given:
+    if given and dashpot.shape[0] != a.shape[0]:
         c0 = cycles()
         dashpot, rounds, iterations = dashpots_of_evaluation(
             a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,

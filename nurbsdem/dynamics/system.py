@@ -158,8 +158,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
     max_refinements: how often a deck step found unstable is repeated with twice the sub-steps
         before :class:`InstabilityError` is raised (0: stop at once).
     watch_period2: enable the period-2 part of the guard (disable only to demonstrate it).
-    implicit_damping: implicit normal dashpots (:mod:`nurbsdem.dynamics.implicit`); one MPI
-        rank only.
+    implicit_damping: implicit normal dashpots (:mod:`nurbsdem.dynamics.implicit`).
     accuracy: η of the accuracy control (:mod:`nurbsdem.dynamics.accuracy`): a deck step whose
         energy-balance error grows by more than η × the energy scale is repeated with more
         sub-steps; None: off.
@@ -308,10 +307,6 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
             return
         if self.provider is None:
             self.provider = lambda kin: None
-        if self.implicit_damping and self.domain is not None:
-            raise InputError("Damping Implicit runs on one MPI rank only (its dashpot forces "
-                             "couple the whole contact network); run with one rank or "
-                             "Damping Explicit")
         b = self.bodies
         self._inv_mass = 1.0 / b.mass
         self._inv_I = 1.0 / b.I

@@ -80,7 +80,7 @@ ENTRIES: dict[tuple[str, str], str] = {
 _DAMPING = ("`Explicit` (the dashpots act at the half-step velocity) or `Implicit` (the "
             "normal dashpots act at the velocity at the end of each interval, backward Euler: "
             "strong damping no longer shortens the stable step, at first-order accuracy in the "
-            "damping; one MPI rank only)")
+            "damping; on several MPI ranks every rank solves the whole network's dashpots)")
 
 #: Units, default and meaning of each key, by (block, entry, key).
 KEYS: dict[tuple[str, str, str], KeyDoc] = {

@@ -60,8 +60,11 @@ import numpy as np
 
 from ..contact.contactset import ContactSet
 from ..dynamics.energy import EnergyLedger
-from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, wall_loads
-from ..dynamics.step import book_kick
+from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, match_history, wall_loads
+from ..dynamics.implicit import dashpots_of_evaluation
+from ..dynamics.rigid import omega_world
+from ..dynamics.step import all_kinematics, book_kick
+from ..geometry.rotation import quats_to_matrices
 
 #: deck steps between re-cuts at the latest; a re-cut also happens when the ghosts have grown
 #: by GHOST_GROWTH since the last cut
@@ -321,6 +324,45 @@ class Domain:
         idle = ~self.plan.tracked
         bodies.v[idle] = 0.0
         bodies.L[idle] = 0.0
+
+    # ------------------------------------------------------------------ implicit dashpots
+    @_timed("gathers")
+    def implicit_dashpots(self, a: np.ndarray, b: np.ndarray, pa: np.ndarray, pb: np.ndarray,
+                          normal: np.ndarray, depth: np.ndarray, key: np.ndarray,
+                          radius: np.ndarray, h: float, solves: np.ndarray) -> np.ndarray:
+        """The implicit normal dashpot forces (K,) N of this rank's contacts (a, b, their
+        points, normals, depths, keys and Hertz radii), solved over the whole contact network
+        as the serial run solves it (collective, every internal step with ``Damping
+        Implicit``): the counted contacts of all ranks merged in key order (the serial order)
+        and every particle's state from its owner, then the serial kernel
+        (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`) on every rank, each
+        taking its contacts' forces by key.  The solve's figures are added to ``solves``
+        (solves, active-set rounds, CG iterations) as the serial run counts them."""
+        s = self.system
+        spring = match_history(s.hist_keys, s.hist_springs, key)
+        sel = self.counted(a)
+        mine = dict(key=key[sel], a=a[sel], b=b[sel], pa=pa[sel], pb=pb[sel], n=normal[sel],
+                    d=depth[sel], r=radius[sel], s=spring[sel])
+        pieces = self.comm.allgather(mine)
+        self.sent["gathers"] += _nbytes(mine)
+        net = merge_by_key(pieces, "key")
+        if net["key"].shape[0] == 0:
+            return np.zeros(0)
+        bodies = s.bodies
+        x, q, v, L = (np.array(getattr(bodies, f)) for f in BODY_FIELDS)
+        self._from_owners([x, q, v, L])
+        omega = omega_world(q, L, s._inv_I)
+        pos, vel, omg = all_kinematics(x, v, omega, s.wall_d, s.wall_u)
+        bc = s._bc
+        f, rounds, iterations = dashpots_of_evaluation(
+            net["a"], net["b"], net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
+            net["n"].reshape(-1, 3), net["d"], pos, vel, omg, bc.material, bc.table,
+            net["s"].reshape(-1, 3), h, bc.inv_mass_all, net["r"], bc.mass, bc.gravity, q, L,
+            bc.inv_I, quats_to_matrices(q), bc.sq_m, bc.sq_I)
+        solves[0] += 1
+        solves[1] += rounds
+        solves[2] += iterations
+        return np.ascontiguousarray(f[np.searchsorted(net["key"], key)])
 
     # ------------------------------------------------------------------ the energy ledger
     def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
