@@ -24,8 +24,8 @@ def run_state(solver) -> dict:
         "version": __version__, "deck": solver.model.text, "time": solver.time,
         "step_index": solver.step_index, "step_progress": solver.step_progress,
         "bodies": solver.bodies.as_dict(), "wall_offset": solver.wall_offset,
-        "energy_offset": dict(solver.energy_offset),
-        "mech0": solver.mech0 if solver.mech0 is not None else float("nan"),
+        "energy_offset": dict(solver.ledger.offset),
+        "mech0": solver.ledger.mech0 if solver.ledger.mech0 is not None else float("nan"),
         "system": solver.system.get_state() if solver.system is not None else {},
         "scene": solver.scene.state() if solver.scene is not None else {},   # collective
         "carry_hist": ({"keys": solver.carry_hist[0], "springs": solver.carry_hist[1]}
@@ -78,8 +78,8 @@ def _restore(solver, st: dict) -> None:
     solver.step_progress = int(st["step_progress"])
     solver.bodies = Bodies.from_dict(st["bodies"])
     solver.wall_offset = np.array(st["wall_offset"], float).reshape(len(solver.model.walls), 3)
-    solver.energy_offset = {k: float(v) for k, v in dict(st["energy_offset"]).items()}
-    solver.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
+    solver.ledger.offset = {k: float(v) for k, v in dict(st["energy_offset"]).items()}
+    solver.ledger.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
     ch = st.get("carry_hist") or {}
     solver.carry_hist = (ch["keys"], ch["springs"]) if ch else None
     solver.curved.restore(st.get("curved_rest"))

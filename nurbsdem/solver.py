@@ -40,9 +40,9 @@ import numpy as np
 from .contact.scene import SceneContacts
 from .curved_wall_motion import CurvedWallMotion
 from .dynamics import DemSystem, PrescribedMotion
-from .dynamics.energy import EnergySample
 from .dynamics.monitor import MonitorSample, StateSample
 from .dynamics.system import SPLIT_PARTS, InstabilityError
+from .energy_ledger import EnergyLedger
 from .errors import InputError
 from .instant_steps import mechanical_energy, to_contact
 from .io.intervals import due
@@ -136,8 +136,7 @@ class Solver:
         self.time = 0.0
         self.step_index = 0          # next step to run
         self.step_progress = 0       # deck time steps done inside the current step
-        self.energy_offset = {"dissipated": 0.0, "external_work": 0.0}
-        self.mech0: float | None = None
+        self.ledger = EnergyLedger()
         self.system: DemSystem | None = None
         self.scene: SceneContacts | None = None
         self.summary = RunSummary()
@@ -151,7 +150,6 @@ class Solver:
         #: the translation of the wall of the running ``MoveWall … Displacement`` step
         #: (``d0``, ``t_start``), kept in checkpoints
         self.motion_spec: dict = {}
-        self._last_energy: dict = {}
         self.end_energy: dict | None = None      # see _snapshot
         self.end_contacts: dict | None = None
 
@@ -188,31 +186,16 @@ class Solver:
         b.position, b.quaternion, b.velocity, b.angular_velocity = self.system.body_state()
 
     # ------------------------------------------------------------------ energies
-    def _energy_row(self, e: EnergySample) -> dict:
-        diss = self.energy_offset["dissipated"] + e.dissipated
-        ext = self.energy_offset["external_work"] + e.external_work
-        mech = e.mechanical
-        if self.mech0 is None:
-            self.mech0 = mech
-        row = dict(kinetic=e.kinetic, potential=e.potential, elastic=e.elastic,
-                   dissipated=diss, external_work=ext, mechanical=mech,
-                   balance_error=mech - self.mech0 - ext + diss)
-        self._last_energy = row
-        return row
+    @property
+    def energy_offset(self) -> dict:
+        """The dissipated energy and external work (J) of the systems closed so far."""
+        return self.ledger.offset
 
     def _snapshot(self) -> None:
         """Keep what the end of a dynamic step leaves to read between steps (no side effects
         on the run): :attr:`end_energy` (the energies of ``monitors/energy.csv`` now) and
         :attr:`end_contacts` (the active contacts of the last evaluation, arrays)."""
-        e = self.system.energy()
-        diss = self.energy_offset["dissipated"] + e.dissipated
-        ext = self.energy_offset["external_work"] + e.external_work
-        mech0 = self.mech0 if self.mech0 is not None else e.mechanical
-        self.end_energy = dict(step=self.step_index, time=float(self.time),
-                               kinetic=float(e.kinetic), potential=float(e.potential),
-                               elastic=float(e.elastic), dissipated=float(diss),
-                               external_work=float(ext), mechanical=float(e.mechanical),
-                               balance_error=float(e.mechanical - mech0 - ext + diss))
+        self.end_energy = self.ledger.end_row(self.system.energy(), self.step_index, self.time)
         out = self._contact_output()
         normal = None if out is None else np.array(self.scene.last.normal, float)
         self.end_contacts = _contact_arrays(out, normal, len(self.bodies), self.step_index)
@@ -221,9 +204,7 @@ class Solver:
         """Fold the current system's cumulative energies into the offsets before replacing it."""
         if self.system is None:
             return
-        e = self.system.energy()
-        self.energy_offset["dissipated"] += e.dissipated
-        self.energy_offset["external_work"] += e.external_work
+        self.ledger.close(self.system.energy())
         self.carry_hist = (self.system.hist_keys.copy(), self.system.hist_springs.copy())
         self.system = None
 
@@ -231,7 +212,7 @@ class Solver:
     def _write_monitors(self, writers: OutputWriters, smp: MonitorSample) -> None:
         """The rows of ``monitors/*.csv`` of one sample (energies with the run's offsets)."""
         t = smp.time
-        row = self._energy_row(smp.energy)
+        row = self.ledger.row(smp.energy)
         writers.monitors.energy(t, row["kinetic"], row["potential"], row["elastic"],
                                 row["dissipated"], row["external_work"], row["balance_error"])
         if self.scene is not None and self.scene.last is not None:
@@ -310,7 +291,7 @@ class Solver:
             self.system.set_state(restored["system"])
             if scene_state:
                 self.scene.set_state(scene_state)
-        elif self.mech0 is None:
+        elif self.ledger.mech0 is None:
             self._sample(writers, force=True)
         sysm = self.system
         log.info("step %d: %s, %d time steps of %g s (%d sub-step(s) of %.3g s each)",
@@ -379,11 +360,7 @@ class Solver:
         before = mechanical_energy(self.model, self.bodies)
         self.bodies = replicate_step(self.model, self.bodies, step)
         after = mechanical_energy(self.model, self.bodies)
-        if self.mech0 is not None:
-            # the ledger has its reference (the first energy row): the copies' energy enters
-            # from outside; before that row the copies are part of the initial state, which
-            # the reference takes in (booking them too would count their energy twice)
-            self.energy_offset["external_work"] += after - before
+        self.ledger.book_external(after - before)     # the copies' energy enters from outside
         self.scene = None
         self.carry_hist = None
         log.info("step %d: replicated into %d layers: %d particles", step.id, step.layers,
@@ -521,9 +498,7 @@ class Solver:
         s.particles = len(self.bodies)
         s.timers = {k: v for k, v in self.timers.items()}
         s.split = dict(self.split)
-        row = self._last_energy
-        s.balance_error = row.get("balance_error", 0.0)
-        s.balance_scale = max(abs(row.get("dissipated", 0.0)) + abs(row.get("external_work", 0.0)), 0.0)
+        s.balance_error, s.balance_scale = self.ledger.balance()
         return s
 
     def _interrupted(self, writers: OutputWriters) -> Interrupted:
