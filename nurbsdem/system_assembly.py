@@ -79,7 +79,8 @@ class SystemAssembly:
         """A DemSystem at time ``t0`` (s) with time step ``dt`` (s) for ``bodies`` (in their
         order), the flat walls moving by ``motions``, then the mesh and surface walls;
         ``safety``: the fraction of the stability limit the sub-stepping uses;
-        ``compiled_steps``: whether the deck steps run compiled (:attr:`DemSystem.compiled_steps`)."""
+        ``compiled_steps``: whether the deck steps run compiled
+        (:attr:`DemSystem.compiled_steps`)."""
         model = self.model
         sysm = DemSystem(dt=dt, gravity=model.gravity, interfaces=self.interfaces,
                          safety=safety, t0=t0,
