@@ -275,10 +275,10 @@ class Simulation:
 
     def run(self):
         """Run the steps not run yet (a deck's steps), then close the files; returns the
-        :class:`~nurbsdem.solver.RunSummary`. This is what ``nurbsdem solve`` does.
+        :class:`~nurbsdem.run_report.RunSummary`. This is what ``nurbsdem solve`` does.
 
         An interrupt (Ctrl-C, a notebook's stop button) ends it at the end of a deck time
-        step with a checkpoint of that moment: :class:`~nurbsdem.solver.Interrupted` (a
+        step with a checkpoint of that moment: :class:`~nurbsdem.sigint.Interrupted` (a
         KeyboardInterrupt) reaches the caller, :attr:`time` and the bodies are the
         checkpoint's, and a new Simulation continues from it with ``restart=``."""
         self._usable()
@@ -296,7 +296,7 @@ class Simulation:
 
     def close(self):
         """Close the output files (flushed after every step anyway); returns the run's
-        :class:`~nurbsdem.solver.RunSummary`. Steps run after it open them again and
+        :class:`~nurbsdem.run_report.RunSummary`. Steps run after it open them again and
         continue them."""
         if self.solver is None:
             return None

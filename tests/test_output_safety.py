@@ -226,13 +226,13 @@ def test_checkpoints_are_saved_by_the_worker_after_what_they_refer_to(model, mon
     import csv
     import threading
 
-    import nurbsdem.solver as solver_module
+    import nurbsdem.run_checkpoint as checkpoint_module
     from nurbsdem.io.paraview import read_pvd
     from nurbsdem.io.results import read_results_times
     from nurbsdem.solver import Solver
 
     seen = []
-    original = solver_module.save_checkpoint
+    original = checkpoint_module.save_checkpoint
 
     def checked(path, state):
         t = float(state["time"])
@@ -243,7 +243,7 @@ def test_checkpoints_are_saved_by_the_worker_after_what_they_refer_to(model, mon
         seen.append((threading.current_thread().name, t, min(max(rows), listed),
                      read_results_times(out / "results.h5").max()))
         original(path, state)
-    monkeypatch.setattr(solver_module, "save_checkpoint", checked)
+    monkeypatch.setattr(checkpoint_module, "save_checkpoint", checked)
     Solver(model, quiet=True).run()
     assert len(seen) >= 2
     for thread, t, monitored, stored in seen[1:]:      # the first one commits the run

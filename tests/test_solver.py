@@ -272,7 +272,7 @@ def test_held_writes_run_as_one_job_in_order():
 def test_steps_to_the_next_output_equal_a_scan():
     """The compiled loop stops exactly where a step-by-step run would write output: the
     closed-form search of the next due step equals a scan with the same test."""
-    from nurbsdem.solver import _due, _steps_to_due
+    from nurbsdem.io.intervals import due, steps_to_due
     rng = np.random.default_rng(5)
     for _ in range(2000):
         dt = float(rng.choice([1e-3, 1e-4, 2.5e-4, 3e-4, 1e-3 / 3]))
@@ -280,6 +280,6 @@ def test_steps_to_the_next_output_equal_a_scan():
         t0 = float(rng.choice([0.0, 0.25, 1.0 / 3]))
         count = int(rng.integers(0, 5000))
         n_max = int(rng.integers(1, 300))
-        scan = next((k for k in range(1, n_max + 1) if _due(t0 + (count + k) * dt, every, dt)),
+        scan = next((k for k in range(1, n_max + 1) if due(t0 + (count + k) * dt, every, dt)),
                     n_max)
-        assert _steps_to_due(t0, count, dt, every, n_max) == scan, (dt, every, t0, count, n_max)
+        assert steps_to_due(t0, count, dt, every, n_max) == scan, (dt, every, t0, count, n_max)

@@ -162,7 +162,7 @@ def test_samples_kept_by_the_loop_or_taken_live_give_the_same_files(runs, tmp_pa
     """With a state budget of one byte the compiled loop stops at every ParaView/results
     sample and the solver takes it live: every file the same as the
     run whose loop kept the samples' states, in fewer calls."""
-    import nurbsdem.solver as solver_module
+    import nurbsdem.output_schedule as schedule_module
     deck, out = runs
     kept_dir = out[True][0]
     calls = []
@@ -173,7 +173,7 @@ def test_samples_kept_by_the_loop_or_taken_live_give_the_same_files(runs, tmp_pa
         calls.append(len(self.last_steps.states))
         return done
     monkeypatch.setattr(system_module.DemSystem, "steps", counting)
-    monkeypatch.setattr(solver_module, "STATE_BUDGET_BYTES", 1)
+    monkeypatch.setattr(schedule_module, "STATE_BUDGET_BYTES", 1)
     live = tmp_path / "live"
     Solver(parse_deck(deck), output=live, quiet=True).run()
     assert calls and not any(calls)                 # every sample taken live

@@ -18,7 +18,7 @@ from nurbsdem.io.checkpoint import load_checkpoint, restart_state, save_checkpoi
 from nurbsdem.io.deck import build_model, parse_deck
 from nurbsdem.io.giraffe import giraffe_text, import_giraffe
 from nurbsdem.io.shapefile import load_shape, save_shape
-from nurbsdem.solver import RunSummary
+from nurbsdem.run_report import RunSummary
 
 ROOT = Path(__file__).resolve().parent.parent
 
