@@ -200,7 +200,7 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
                           and np.linalg.norm(x[i] - x[j]) < r[i] + r[j]])
         t = scene.tables()
         keep, ma, mb = candidate_patch_masks_batch_jit(t.boxes, t.box_offsets, t.body_shape,
-                                                       kin.position, R, nurbs, 0.0, scene.P)
+                                                       kin.pose_origin, R, nurbs, 0.0, scene.P)
         listed = {int(k): r for r, k in enumerate(ps.keys)}
         assert keep.sum() > 10
         for (i, j), a_, b_ in zip(nurbs[keep], ma[keep], mb[keep]):

@@ -288,7 +288,7 @@ class SceneContacts:
     def __call__(self, kin) -> ContactSet:
         """Active contacts for the kinematics of a :class:`~nurbsdem.dynamics.DemSystem`."""
         t0 = time.perf_counter()
-        pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
+        pos, R = np.ascontiguousarray(kin.pose_origin), np.ascontiguousarray(kin.R)
         pose = (pos, R, np.array(kin.wall_displacement, float), np.array(kin.x, float))
         self._advance_odometers(pose)
         dom = self.domain
@@ -296,7 +296,7 @@ class SceneContacts:
         if stale:
             if dom is not None:
                 kin = dom.sync_for_build(kin)        # every particle's state from its owner
-                pos, R = np.ascontiguousarray(kin.position), np.ascontiguousarray(kin.R)
+                pos, R = np.ascontiguousarray(kin.pose_origin), np.ascontiguousarray(kin.R)
                 pose = (pos, R, pose[2], np.array(kin.x, float))
             self._build_list(kin, pos, R)
             if dom is not None:

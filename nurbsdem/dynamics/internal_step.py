@@ -30,15 +30,17 @@ from .stepcontrol import ALTERNATION_STEPS
 class Kinematics:
     """What a contact provider is given (SI units, world frame).
 
-    t (s); x (N,3) centroids; R (N,3,3) file->world rotations; position (N,3) pose positions
-    (x − R c, docs/conventions.md); v (N,3) and omega (N,3) velocities (the half-step values
-    of the integrator); wall_displacement, wall_velocity (W,3); n_particles N, n_bodies N+W.
+    t (s); x (N,3) centroids; R (N,3,3) file->world rotations; pose_origin (N,3) where each
+    shape's file origin lies (x − R c with c the centroid in the file frame,
+    docs/conventions.md: the pose the contact kernels take); v (N,3) and omega (N,3)
+    velocities (the half-step values of the integrator); wall_displacement, wall_velocity
+    (W,3); n_particles N, n_bodies N+W.
     """
 
     t: float
     x: np.ndarray
     R: np.ndarray
-    position: np.ndarray
+    pose_origin: np.ndarray
     v: np.ndarray
     omega: np.ndarray
     wall_displacement: np.ndarray
@@ -84,7 +86,7 @@ class InternalSteps:
     def _kinematics(self, t: float) -> Kinematics:
         b = self.bodies
         R, position = body_poses(b.q, b.P, b.x, b.centroid_file)
-        return Kinematics(t=t, x=b.x.copy(), R=R, position=position, v=b.v.copy(),
+        return Kinematics(t=t, x=b.x.copy(), R=R, pose_origin=position, v=b.v.copy(),
                           omega=omega_world(b.q, b.L, self._inv_I),
                           wall_displacement=self.wall_d.copy(), wall_velocity=self.wall_u.copy(),
                           n_particles=b.n, n_bodies=self.n_bodies)
