@@ -52,29 +52,7 @@ from .api.scene import SceneBuilder
 from .api.start import make_solver, start_solver
 from .api.steps import dynamic_step, move_wall_step, next_step_id, replicate_step
 from .errors import InputError
-from .model import (Bodies, CurvedWallSpec, DynamicStep, Model, MoveWallStep, Output,
-                    ReplicateStep, Step)
-
-
-def _f(x: float) -> str:
-    """A float as the deck writes it: the shortest text that reads back exactly."""
-    return repr(float(x))
-
-
-def _v(x) -> str:
-    return " ".join(_f(c) for c in np.ravel(x))
-
-
-def _curved_line(w: CurvedWallSpec) -> str:
-    """The deck line of a mesh or surface wall (its file by its absolute path)."""
-    head = "Mesh" if w.kind == "mesh" else "Surface"
-    text = f'  {head} {w.id} Name {w.name} File "{w.file}"'
-    if w.kind == "mesh":
-        text += f" Scale {_f(w.scale)}"
-    text += f" Position {_v(w.position)} Rotation {_v(w.rotation)}"
-    if w.material_id is not None:
-        text += f" Material {w.material_id}"
-    return text + (" OneSided yes" if w.one_sided else "")
+from .model import Bodies, Model, MoveWallStep, Output, ReplicateStep, ShapeEntry, Step
 
 
 class Simulation:
@@ -519,32 +497,7 @@ class Simulation:
         return Path(path)
 
 
-
 # ---------------------------------------------------------------------------- helpers
-
-
-def _step_line(s: Step) -> str:
-    damping = " Damping Implicit" if getattr(s, "damping", "explicit") == "implicit" else ""
-    if getattr(s, "accuracy", None) is not None:
-        damping += f" Accuracy {_f(s.accuracy)}"
-    if getattr(s, "safety", None) is not None:
-        damping += f" Safety {_f(s.safety)}"
-    if isinstance(s, DynamicStep):
-        return (f"  Step {s.id} Dynamic Duration {_f(s.duration)} TimeStep {_f(s.time_step)}"
-                f"{damping}")
-    if isinstance(s, ReplicateStep):
-        return f"  Step {s.id} Replicate Layers {s.layers} Height {_f(s.height)}"
-    assert isinstance(s, MoveWallStep)
-    if s.to_contact:
-        d = f" Direction {_v(s.direction)}" if s.direction is not None else ""
-        return f"  Step {s.id} MoveWall {s.wall} ToContact Gap {_f(s.gap)}{d}"
-    if s.rotate:
-        return (f"  Step {s.id} MoveWall {s.wall} Rotate AngularVelocity "
-                f"{_v(s.angular_velocity)} Center {_v(s.center)} Duration {_f(s.duration)} "
-                f"TimeStep {_f(s.time_step)}{damping}")
-    return (f"  Step {s.id} MoveWall {s.wall} Displacement {_v(s.displacement)} Duration "
-            f"{_f(s.duration)} TimeStep {_f(s.time_step)}{damping}")
-
 
 
 def _geometry_hash(shape) -> str:
@@ -573,7 +526,6 @@ def _generated_sphere_radius(shape) -> float | None:
         if _geometry_hash(type("S", (), {"patches": sphere_patches(cand)})) == target:
             return cand
     return None
-
 
 
 __all__ = ["Simulation"]

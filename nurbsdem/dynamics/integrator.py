@@ -265,16 +265,3 @@ def kick_from(omega: np.ndarray, v: np.ndarray, L: np.ndarray, x: np.ndarray, q:
     _relative_point_velocities(body_a, body_b, point, x, wall_d, v, omega_after, wall_u, w1)
     return kick_work_terms(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n,
                            f_damp_t, f_el_t, hk), omega_after
-
-
-@njit(cache=True)
-def kick_with_terms(v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
-                    inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray,
-                    torque: np.ndarray, hk: float, body_a: np.ndarray, body_b: np.ndarray,
-                    point: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray,
-                    f_total: np.ndarray, f_damp_n: np.ndarray, f_damp_t: np.ndarray,
-                    f_el_t: np.ndarray) -> np.ndarray:
-    """:func:`kick_from` the present angular velocities; returns the terms."""
-    return kick_from(omega_world(q, L, inv_I), v, L, x, q, inv_I, inv_mass, force, torque, hk,
-                     body_a, body_b, point, wall_d, wall_u, f_total, f_damp_n, f_damp_t,
-                     f_el_t)[0]
