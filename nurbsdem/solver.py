@@ -13,7 +13,9 @@ Steps (PyBaMM-like: an experiment is a list of steps):
   Replicate before the first energy row books nothing: the copies are the initial state).
 * ``MoveWall … ToContact``: translate a wall until its gap to the nearest particle is ``Gap``.
 * ``MoveWall … Displacement``: a dynamic step in which the wall translates at constant
-  velocity; its reaction force and work are monitored.
+  velocity; its reaction force, torque and work are monitored.
+* ``MoveWall … Rotate``: a dynamic step in which a mesh or surface wall turns about a centre
+  (translating too, the centre with it, when the step gives a ``Displacement``).
 
 Energies written to ``monitors/energy.csv`` are cumulative over the whole run.
 Checkpoints (``checkpoint.h5``) are written every ``Checkpoint Every`` seconds of simulated
@@ -233,7 +235,9 @@ class Solver:
         self.shape_index = {s: i for i, s in enumerate(self.shape_ids)}
         self.shapes = [model.shapes[s].shape for s in self.shape_ids]
         self.interfaces = self._interface_table()
-        self.wall_offset = np.zeros((len(model.walls), 3))
+        #: each wall's displacement (m) from its deck position: flat walls, then mesh and
+        #: surface walls (their turns are in ``_curved_rest``)
+        self.wall_offset = np.zeros((len(model.wall_names), 3))
         self.bodies: Bodies = model.bodies.copy() if model.bodies is not None else Bodies.empty()
         self.time = 0.0
         self.step_index = 0          # next step to run
@@ -325,10 +329,8 @@ class Solver:
             particles.append(dict(kinds[kind], x=b.position[i], R=Rs[i], v=b.velocity[i],
                                   omega=b.angular_velocity[i]))
         sysm.add_particles(particles)
-        for k, w in enumerate(model.walls):
+        for k, w in enumerate(model.walls + model.curved_walls):    # mesh, surface: last
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
-        for w in model.curved_walls:               # mesh and surface walls: after the flat ones
-            sysm.add_wall(None, material=self.wall_index[w.material_id], name=w.name)
         body_shape = np.array([self.shape_index[int(s)] for s in b.shape_id], np.int64)
         if self.scene is None or self.scene.n != len(b):
             self.scene = SceneContacts(self.shapes, body_shape, self._wall_patches(),
@@ -373,11 +375,14 @@ class Solver:
             return WallPose(R0=R0, shift0=shift0)
         return WallPose(omega=rot[1], center=rot[2], t0=rot[3], R0=R0, shift0=shift0)
 
-    def _curved_poses(self, t: float) -> list | None:
-        """(R, t) of each mesh or surface wall at time t (s), for walls.pvd; None: none."""
+    def _curved_poses(self, t: float, wall_d: np.ndarray) -> list | None:
+        """(R, t) of each mesh or surface wall at time t (s) with the walls' displacements
+        wall_d (W,3) m, for walls.pvd; None: none."""
         if not self.model.curved_walls:
             return None
-        return [self._curved_pose(k).at(t) for k in range(len(self.model.curved_walls))]
+        first = len(self.model.walls)
+        return [self._curved_pose(k).at(t, wall_d[first + k])
+                for k in range(len(self.model.curved_walls))]
 
     def _wall_spin(self, n_walls: int) -> np.ndarray:
         """(W,6) angular velocity and centre of each wall of the system (the one a Rotate
@@ -400,7 +405,7 @@ class Solver:
         sysm.domain = self.scene.domain = self.domain = dom
 
     def _fixed_motions(self) -> list[PrescribedMotion]:
-        return [_constant_motion(self.wall_offset[k]) for k in range(len(self.model.walls))]
+        return [_constant_motion(d) for d in self.wall_offset]
 
     def _sync_bodies_from_system(self) -> None:
         """Copy the system's body state into ``self.bodies`` (positions, orientations, velocities)."""
@@ -473,7 +478,7 @@ class Solver:
             if smp.hertz is not None:          # Hertz–Mindlin interfaces (not linear laws)
                 writers.monitors.hertz(t, *smp.hertz)
         if self.model.wall_names:
-            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction)
+            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction, smp.wall_torque)
 
     def _sample(self, writers: OutputWriters, force: bool = False,
                 samples: tuple[MonitorSample, ...] = (),
@@ -499,7 +504,7 @@ class Solver:
         if vtk:
             writers.paraview.write(t, self.bodies, wall_displacement=s.wall_displacement,
                                    contacts=self._contact_output(),
-                                   curved_poses=self._curved_poses(t))
+                                   curved_poses=self._curved_poses(t, s.wall_displacement))
         if results:
             writers.results.append(t, self.bodies)
         self.timers["output"] += time.perf_counter() - t0
@@ -513,7 +518,8 @@ class Solver:
         dt = self.system.dt
         if _due(st.time, out.vtk_every, dt):
             writers.paraview.write(st.time, bodies, wall_displacement=st.wall_displacement,
-                                   contacts=st.contacts, curved_poses=self._curved_poses(st.time))
+                                   contacts=st.contacts,
+                                   curved_poses=self._curved_poses(st.time, st.wall_displacement))
         if _due(st.time, out.results_interval, dt):
             writers.results.append(st.time, bodies)
 
@@ -561,7 +567,9 @@ class Solver:
             self.step_index = int(st["step_index"])
             self.step_progress = int(st["step_progress"])
             self.bodies = Bodies.from_dict(st["bodies"])
-            self.wall_offset = np.array(st["wall_offset"], float).reshape(len(self.model.walls), 3)
+            off = np.array(st["wall_offset"], float).reshape(-1, 3)
+            self.wall_offset = np.zeros((len(self.model.wall_names), 3))
+            self.wall_offset[:len(off)] = off     # mesh and surface walls: after the flat
             self.energy_offset = {k: float(v) for k, v in dict(st["energy_offset"]).items()}
             self.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
             ch = st.get("carry_hist") or {}
@@ -619,8 +627,7 @@ class Solver:
         self.progress.finish()
         self._sync_bodies_from_system()
         self.summary.accuracy_repeats += sysm.accuracy_repeats
-        if self.wall_offset.size:        # the flat walls' (mesh and surface walls follow)
-            self.wall_offset = sysm.wall_displacement[:len(self.model.walls)].copy()
+        self.wall_offset = sysm.wall_displacement.copy()
         self._snapshot()
         self._close_system()
 
@@ -845,18 +852,41 @@ class Solver:
 
     def _run_rotation(self, step: MoveWallStep, writers: OutputWriters, restored) -> None:
         """``MoveWall NAME Rotate``: a dynamic step in which mesh or surface wall NAME turns
-        at the step's angular velocity about its centre; it stays where it turned to."""
-        k = self._wall_index(step.wall) - len(self.model.walls)
-        self._motion_spec = {}
+        at the step's angular velocity about its centre, translating with the centre when
+        the step has a displacement; it stays where it turned to."""
+        k_all = self._wall_index(step.wall)
+        k = k_all - len(self.model.walls)
+        motions = self._wall_motions(step, restored)
         t_start = self.time - self.step_progress * float(step.time_step)
+        # the centre before the wall's displacement (the pose adds it back: WallPose)
         self._rotation = (k, np.asarray(step.angular_velocity, float),
-                          np.asarray(step.center, float), t_start)
+                          np.asarray(step.center, float) - self.wall_offset[k_all], t_start)
         try:
-            self._run_dynamic(step, writers, self._fixed_motions(), restored)
+            self._run_dynamic(step, writers, motions, restored)
             end = self._curved_pose(k).at(self.time)
         finally:
             self._rotation = None
         self.__dict__.setdefault("_curved_rest", {})[k] = end
+
+    def _wall_motions(self, step: MoveWallStep, restored) -> list[PrescribedMotion]:
+        """The walls' motions in a MoveWall step: the step's wall translates by its
+        ``displacement`` (if any) at constant velocity over the step, from where it is (or,
+        after a restart, from where the step started it: ``motion`` of the checkpoint); the
+        others stay where they are."""
+        self._motion_spec = {}
+        motions = self._fixed_motions()
+        if step.displacement is None:
+            return motions
+        k = self._wall_index(step.wall)
+        spec = restored.get("motion") if restored else None
+        if spec:
+            d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
+        else:
+            d0, t_start = self.wall_offset[k].copy(), self.time
+        self._motion_spec = {"d0": d0, "t_start": t_start}
+        motions[k] = PrescribedMotion.piecewise_linear(
+            [t_start, t_start + step.duration], [d0, d0 + step.displacement])
+        return motions
 
     def _run_step(self, step, writers: OutputWriters) -> None:
         restored = self._restored
@@ -870,17 +900,7 @@ class Solver:
         elif isinstance(step, MoveWallStep) and step.rotate:
             self._run_rotation(step, writers, restored)
         elif isinstance(step, MoveWallStep):
-            k = self._wall_index(step.wall)
-            spec = restored.get("motion") if restored else None
-            if spec:
-                d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
-            else:
-                d0, t_start = self.wall_offset[k].copy(), self.time
-            self._motion_spec = {"d0": d0, "t_start": t_start}
-            motions = self._fixed_motions()
-            motions[k] = PrescribedMotion.piecewise_linear(
-                [t_start, t_start + step.duration], [d0, d0 + step.displacement])
-            self._run_dynamic(step, writers, motions, restored)
+            self._run_dynamic(step, writers, self._wall_motions(step, restored), restored)
         else:  # pragma: no cover - the parser knows no other steps
             raise InputError(f"unknown step kind {step.kind}")
         self._restored = None
