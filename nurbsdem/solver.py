@@ -854,13 +854,12 @@ class Solver:
         """``MoveWall NAME Rotate``: a dynamic step in which mesh or surface wall NAME turns
         at the step's angular velocity about its centre, translating with the centre when
         the step has a displacement; it stays where it turned to."""
-        k_all = self._wall_index(step.wall)
-        k = k_all - len(self.model.walls)
+        k = self._wall_index(step.wall) - len(self.model.walls)
         motions = self._wall_motions(step, restored)
-        t_start = self.time - self.step_progress * float(step.time_step)
+        d0, t_start = self._motion_spec["d0"], self._motion_spec["t_start"]
         # the centre before the wall's displacement (the pose adds it back: WallPose)
         self._rotation = (k, np.asarray(step.angular_velocity, float),
-                          np.asarray(step.center, float) - self.wall_offset[k_all], t_start)
+                          np.asarray(step.center, float) - d0, t_start)
         try:
             self._run_dynamic(step, writers, motions, restored)
             end = self._curved_pose(k).at(self.time)
@@ -870,22 +869,22 @@ class Solver:
 
     def _wall_motions(self, step: MoveWallStep, restored) -> list[PrescribedMotion]:
         """The walls' motions in a MoveWall step: the step's wall translates by its
-        ``displacement`` (if any) at constant velocity over the step, from where it is (or,
-        after a restart, from where the step started it: ``motion`` of the checkpoint); the
-        others stay where they are."""
-        self._motion_spec = {}
-        motions = self._fixed_motions()
-        if step.displacement is None:
-            return motions
+        ``displacement`` (if any) at constant velocity over the step, from where it is; the
+        others stay where they are.  Where the wall was (d0, m) and when the step started
+        (t_start, s) are kept for the checkpoint (``motion``), so that a restart continues
+        from the same numbers."""
         k = self._wall_index(step.wall)
         spec = restored.get("motion") if restored else None
         if spec:
             d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
         else:
-            d0, t_start = self.wall_offset[k].copy(), self.time
+            d0 = self.wall_offset[k].copy()
+            t_start = self.time - self.step_progress * float(step.time_step)
         self._motion_spec = {"d0": d0, "t_start": t_start}
-        motions[k] = PrescribedMotion.piecewise_linear(
-            [t_start, t_start + step.duration], [d0, d0 + step.displacement])
+        motions = self._fixed_motions()
+        if step.displacement is not None:
+            motions[k] = PrescribedMotion.piecewise_linear(
+                [t_start, t_start + step.duration], [d0, d0 + step.displacement])
         return motions
 
     def _run_step(self, step, writers: OutputWriters) -> None:

@@ -150,7 +150,7 @@ def test_monitor_headers_and_rows(tmp_path):
     # rows are flushed as written (readable before close)
     assert _rows(d / "contacts.csv")[1] == "0.001,10,4,1,0"
     assert _rows(d / "energy.csv")[2] == "0.001,0.5,2.0,0.5,0.25,0.0,3.0,-0.25"
-    assert _rows(d / "wall_lid.csv")[1] == "0.001,0.0,0.0,-0.001,0.0,0.0,12.5"
+    assert _rows(d / "wall_lid.csv")[1] == "0.001,0.0,0.0,-0.001,0.0,0.0,12.5,0.5,-0.25,0.0"
     data = np.genfromtxt(d / "energy.csv", delimiter=",", names=True)
     assert data["mechanical"][0] == 3.5
     m.close()
