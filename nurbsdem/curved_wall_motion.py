@@ -25,7 +25,8 @@ class CurvedWallMotion:
 
     @contextlib.contextmanager
     def turning(self, k: int, omega, center, t_start: float):
-        """Wall k turns at ``omega`` about ``center`` from ``t_start`` (s) while inside."""
+        """Wall k turns at ``omega`` about ``center`` (before its displacement: the pose adds
+        it) from ``t_start`` (s) while inside."""
         self.rotation = (k, np.asarray(omega, float), np.asarray(center, float), t_start)
         try:
             yield
@@ -42,11 +43,14 @@ class CurvedWallMotion:
             return WallPose(R0=R0, shift0=shift0)
         return WallPose(omega=rot[1], center=rot[2], t0=rot[3], R0=R0, shift0=shift0)
 
-    def poses(self, t: float) -> list | None:
-        """(R, t) of each mesh or surface wall at time t (s), for walls.pvd; None: none."""
+    def poses(self, t: float, wall_d: np.ndarray) -> list | None:
+        """(R, t) of each mesh or surface wall at time t (s) with the walls' displacements
+        wall_d (W,3) m, for walls.pvd; None: none."""
         if not self.model.curved_walls:
             return None
-        return [self.pose(k).at(t) for k in range(len(self.model.curved_walls))]
+        first = len(self.model.walls)
+        return [self.pose(k).at(t, wall_d[first + k])
+                for k in range(len(self.model.curved_walls))]
 
     def spin(self, n_walls: int) -> np.ndarray:
         """(W,6) angular velocity and centre of each of the system's ``n_walls`` walls (the one

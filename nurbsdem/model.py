@@ -414,7 +414,7 @@ class ReplicateStep(Step):
 
 @dataclass
 class MoveWallStep(Step):
-    """``Step ID MoveWall NAME ...`` — two forms:
+    """``Step ID MoveWall NAME ...`` — three forms:
 
     * ``ToContact [Gap g] [Direction dx dy dz]``: instantaneous; translate the wall along
       ``direction`` (default: its normal, i.e. towards the particles) until its distance to
@@ -422,7 +422,10 @@ class MoveWallStep(Step):
     * ``Displacement dx dy dz Duration T TimeStep DT``: the wall translates by the given
       vector (m) at constant velocity over T seconds while the particles move (a dynamic
       step with a prescribed wall motion; ``[Damping Explicit|Implicit] [Accuracy η]
-      [Safety f]`` as for Dynamic).
+      [Safety f]`` as for Dynamic). Any wall: flat, mesh or surface.
+    * ``Rotate AngularVelocity .. Center .. [Displacement ..] Duration T TimeStep DT``: a
+      mesh or surface wall turns (``rotate`` below), translating by the displacement as
+      well when one is given, its centre with it.
     """
 
     wall: str = ""
@@ -437,7 +440,8 @@ class MoveWallStep(Step):
     safety: float | None = None
     #: ``Rotate AngularVelocity wx wy wz Center cx cy cz Duration T TimeStep DT``: a mesh or
     #: surface wall turns at the constant angular velocity (rad/s, world frame) about the
-    #: centre (m) for T seconds, then stays where it turned to
+    #: centre (m; where it is at the step's start) for T seconds, then stays where it turned
+    #: to; with a ``displacement`` the wall and its centre translate by it meanwhile
     rotate: bool = False
     angular_velocity: np.ndarray | None = None
     center: np.ndarray | None = None

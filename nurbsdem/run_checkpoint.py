@@ -77,7 +77,9 @@ def _restore(solver, st: dict) -> None:
     solver.step_index = int(st["step_index"])
     solver.step_progress = int(st["step_progress"])
     solver.bodies = Bodies.from_dict(st["bodies"])
-    solver.wall_offset = np.array(st["wall_offset"], float).reshape(len(solver.model.walls), 3)
+    off = np.array(st["wall_offset"], float).reshape(-1, 3)
+    solver.wall_offset = np.zeros((len(solver.model.wall_names), 3))
+    solver.wall_offset[:len(off)] = off      # mesh and surface walls: after the flat ones
     solver.ledger.offset = {k: float(v) for k, v in dict(st["energy_offset"]).items()}
     solver.ledger.mech0 = None if math.isnan(st["mech0"]) else float(st["mech0"])
     ch = st.get("carry_hist") or {}

@@ -264,8 +264,9 @@ class Simulation:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
-        particle is ``gap`` m away (no time passes), or ``angular_velocity`` (rad/s): a mesh
-        or surface wall turns about ``center`` (m) over ``duration`` s (``Rotate``).
+        particle is ``gap`` m away (no time passes; flat walls), or ``angular_velocity``
+        (rad/s): a mesh or surface wall turns about ``center`` (m) over ``duration`` s
+        (``Rotate``), translating by ``displacement`` too when given (the centre with it).
         ``damping``, ``accuracy``, ``safety``: as for :meth:`run_dynamic`."""
         self._run(move_wall_step(
             self.model, next_step_id(self.model), name, displacement, duration,

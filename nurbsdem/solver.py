@@ -13,7 +13,9 @@ Steps (PyBaMM-like: an experiment is a list of steps):
   Replicate before the first energy row books nothing: the copies are the initial state).
 * ``MoveWall … ToContact``: translate a wall until its gap to the nearest particle is ``Gap``.
 * ``MoveWall … Displacement``: a dynamic step in which the wall translates at constant
-  velocity; its reaction force and work are monitored.
+  velocity; its reaction force, torque and work are monitored.
+* ``MoveWall … Rotate``: a dynamic step in which a mesh or surface wall turns about a centre
+  (translating too, the centre with it, when the step gives a ``Displacement``).
 
 Energies written to ``monitors/energy.csv`` are cumulative over the whole run.
 Checkpoints (``checkpoint.h5``, :mod:`nurbsdem.run_checkpoint`) are written every
@@ -131,7 +133,9 @@ class Solver:
         self.wall_index = self.assembly.wall_index
         self.interfaces = self.assembly.interfaces
         self.curved = CurvedWallMotion(model)
-        self.wall_offset = np.zeros((len(model.walls), 3))
+        #: each wall's displacement (m) from its deck position: flat walls, then mesh and
+        #: surface walls (their turns are in ``curved``)
+        self.wall_offset = np.zeros((len(model.wall_names), 3))
         self.bodies: Bodies = model.bodies.copy() if model.bodies is not None else Bodies.empty()
         self.time = 0.0
         self.step_index = 0          # next step to run
@@ -178,7 +182,7 @@ class Solver:
         return sysm
 
     def _fixed_motions(self) -> list[PrescribedMotion]:
-        return [PrescribedMotion.fixed(self.wall_offset[k]) for k in range(len(self.model.walls))]
+        return [PrescribedMotion.fixed(d) for d in self.wall_offset]
 
     def _sync_bodies_from_system(self) -> None:
         """Copy the system's body state into ``self.bodies`` (positions, orientations, velocities)."""
@@ -220,7 +224,7 @@ class Solver:
             if smp.hertz is not None:          # Hertz–Mindlin interfaces (not linear laws)
                 writers.monitors.hertz(t, *smp.hertz)
         if self.model.wall_names:
-            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction)
+            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction, smp.wall_torque)
 
     def _sample(self, writers: OutputWriters, force: bool = False,
                 samples: tuple[MonitorSample, ...] = (),
@@ -246,7 +250,7 @@ class Solver:
         if vtk:
             writers.paraview.write(t, self.bodies, wall_displacement=s.wall_displacement,
                                    contacts=self._contact_output(),
-                                   curved_poses=self.curved.poses(t))
+                                   curved_poses=self.curved.poses(t, s.wall_displacement))
         if results:
             writers.results.append(t, self.bodies)
         self.timers["output"] += time.perf_counter() - t0
@@ -260,7 +264,8 @@ class Solver:
         dt = self.system.dt
         if due(st.time, out.vtk_every, dt):
             writers.paraview.write(st.time, bodies, wall_displacement=st.wall_displacement,
-                                   contacts=st.contacts, curved_poses=self.curved.poses(st.time))
+                                   contacts=st.contacts,
+                                   curved_poses=self.curved.poses(st.time, st.wall_displacement))
         if due(st.time, out.results_interval, dt):
             writers.results.append(st.time, bodies)
 
@@ -308,8 +313,7 @@ class Solver:
         self.progress.finish()
         self._sync_bodies_from_system()
         self.summary.accuracy_repeats += sysm.accuracy_repeats
-        if self.wall_offset.size:        # the flat walls' (mesh and surface walls follow)
-            self.wall_offset = sysm.wall_displacement[:len(self.model.walls)].copy()
+        self.wall_offset = sysm.wall_displacement.copy()
         self._snapshot()
         self._close_system()
 
@@ -374,29 +378,37 @@ class Solver:
 
     def _run_rotation(self, step: MoveWallStep, writers: OutputWriters, restored) -> None:
         """``MoveWall NAME Rotate``: a dynamic step in which mesh or surface wall NAME turns
-        at the step's angular velocity about its centre; it stays where it turned to."""
+        at the step's angular velocity about its centre, translating with the centre when
+        the step has a displacement; it stays where it turned to."""
         k = self.model.wall_names.index(step.wall) - len(self.model.walls)
-        self.motion_spec = {}
-        t_start = self.time - self.step_progress * float(step.time_step)
-        with self.curved.turning(k, step.angular_velocity, step.center, t_start):
-            self._run_dynamic(step, writers, self._fixed_motions(), restored)
+        motions = self._wall_motions(step, restored)
+        d0, t_start = self.motion_spec["d0"], self.motion_spec["t_start"]
+        # the centre before the wall's displacement (the pose adds it back: WallPose)
+        with self.curved.turning(k, step.angular_velocity, np.asarray(step.center, float) - d0,
+                                 t_start):
+            self._run_dynamic(step, writers, motions, restored)
             end = self.curved.pose(k).at(self.time)
         self.curved.rest[k] = end
 
-    def _run_translation(self, step: MoveWallStep, writers: OutputWriters, restored) -> None:
-        """``MoveWall NAME Displacement``: a dynamic step in which flat wall NAME translates
-        by the step's displacement at constant velocity."""
+    def _wall_motions(self, step: MoveWallStep, restored) -> list[PrescribedMotion]:
+        """The walls' motions in a MoveWall step: the step's wall translates by its
+        ``displacement`` (if any) at constant velocity over the step, from where it is; the
+        others stay where they are.  Where the wall was (d0, m) and when the step started
+        (t_start, s) are kept for the checkpoint (``motion_spec``), so that a restart
+        continues from the same numbers."""
         k = self.model.wall_names.index(step.wall)
         spec = restored.get("motion") if restored else None
         if spec:
             d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
         else:
-            d0, t_start = self.wall_offset[k].copy(), self.time
+            d0 = self.wall_offset[k].copy()
+            t_start = self.time - self.step_progress * float(step.time_step)
         self.motion_spec = {"d0": d0, "t_start": t_start}
         motions = self._fixed_motions()
-        motions[k] = PrescribedMotion.piecewise_linear(
-            [t_start, t_start + step.duration], [d0, d0 + step.displacement])
-        self._run_dynamic(step, writers, motions, restored)
+        if step.displacement is not None:
+            motions[k] = PrescribedMotion.piecewise_linear(
+                [t_start, t_start + step.duration], [d0, d0 + step.displacement])
+        return motions
 
     def _run_step(self, step, writers: OutputWriters) -> None:
         restored = self._restored
@@ -410,7 +422,7 @@ class Solver:
         elif isinstance(step, MoveWallStep) and step.rotate:
             self._run_rotation(step, writers, restored)
         elif isinstance(step, MoveWallStep):
-            self._run_translation(step, writers, restored)
+            self._run_dynamic(step, writers, self._wall_motions(step, restored), restored)
         else:  # pragma: no cover - the parser knows no other steps
             raise InputError(f"unknown step kind {step.kind}")
         self._restored = None

@@ -77,7 +77,7 @@ class SystemAssembly:
                safety: float, compiled_steps: bool, implicit_damping: bool = False,
                accuracy: float | None = None) -> DemSystem:
         """A DemSystem at time ``t0`` (s) with time step ``dt`` (s) for ``bodies`` (in their
-        order), the flat walls moving by ``motions``, then the mesh and surface walls;
+        order), the walls moving by ``motions`` (the flat walls, then the mesh and surface walls);
         ``safety``: the fraction of the stability limit the sub-stepping uses;
         ``compiled_steps``: whether the deck steps run compiled
         (:attr:`DemSystem.compiled_steps`)."""
@@ -97,10 +97,8 @@ class SystemAssembly:
             particles.append(dict(kinds[kind], x=b.position[i], R=Rs[i], v=b.velocity[i],
                                   omega=b.angular_velocity[i]))
         sysm.add_particles(particles)
-        for k, w in enumerate(model.walls):
+        for k, w in enumerate(model.walls + model.curved_walls):    # mesh, surface: last
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
-        for w in model.curved_walls:               # mesh and surface walls: after the flat ones
-            sysm.add_wall(None, material=self.wall_index[w.material_id], name=w.name)
         return sysm
 
     def scene(self, previous: SceneContacts | None, bodies: Bodies,

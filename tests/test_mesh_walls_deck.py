@@ -85,11 +85,15 @@ def test_nurbs_particles_against_mesh_walls_are_refused(files):
         build_model(deck.read_text(), str(deck))
 
 
-def test_move_wall_translation_of_a_mesh_wall_is_refused(files):
+def test_move_wall_to_contact_of_a_mesh_wall_is_refused(files):
     deck = _deck(files, "  Mesh 7 Name floor File floor.stl",
-                 extra="  Step 2 MoveWall floor Displacement 0 0 0.1 Duration 0.1 TimeStep 1e-3")
-    with pytest.raises(InputError, match=r"case.inp:15: .*mesh and surface walls turn"):
+                 extra="  Step 2 MoveWall floor ToContact")
+    with pytest.raises(InputError, match=r"case.inp:15: .*ToContact moves flat walls only"):
         build_model(deck.read_text(), str(deck))
+    moved = deck.read_text().replace("ToContact", "Displacement 0 0 0.1 Duration 0.1 "
+                                                  "TimeStep 1e-3")
+    step = build_model(moved, str(deck)).steps[-1]
+    assert step.wall == "floor" and not step.rotate and step.displacement[2] == 0.1
 
 
 def test_api_deck_text_round_trip(files):
@@ -150,8 +154,8 @@ def test_api_rotation_reads_back_from_deck_text(files):
     sim.add_interface(normal_penalty=1e5, tangential_penalty=1e5, friction=0.3)
     sim.add_particle(nurbsdem.shapes.sphere(0.01), 1, (0, 0, -0.0895))
     sim.add_surface_wall("drum", files / "drum.yaml", position=(-0.1, 0, 0))
-    with pytest.raises(InputError, match="mesh and surface walls turn"):
-        sim.move_wall("drum", displacement=(0, 0, 1), duration=0.01, time_step=1e-3)
+    with pytest.raises(InputError, match="to_contact moves flat walls only"):
+        sim.move_wall("drum", to_contact=True)
     sim.move_wall("drum", angular_velocity=(1.0, 0, 0), center=(0, 0, 0), duration=0.01,
                   time_step=1e-3)
     text = sim.deck_text

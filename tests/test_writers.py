@@ -135,21 +135,22 @@ def test_monitor_headers_and_rows(tmp_path):
     err = m.energy(0.001, kinetic=0.5, potential=2.0, elastic=0.5, dissipated=0.25, external_work=0.0)
     assert err == pytest.approx(-0.25)
     m.contacts(0.001, 10, 4, 1, 0)
-    m.wall("lid", 0.001, [0, 0, -0.001], [0, 0, 12.5])
+    m.wall("lid", 0.001, [0, 0, -0.001], [0, 0, 12.5], [0.5, -0.25, 0])
     d = tmp_path / "monitors"
     assert _rows(d / "energy.csv")[0] == \
         "time,kinetic,potential,elastic,dissipated,external_work,mechanical,balance_error"
     assert _rows(d / "contacts.csv")[0] == "time,monitored,active,degenerated,failed"
     for name in ("bottom", "lid"):
         assert _rows(d / f"wall_{name}.csv")[0] == ("time,displacement_x,displacement_y,"
-                                                    "displacement_z,reaction_x,reaction_y,reaction_z")
+                                                    "displacement_z,reaction_x,reaction_y,reaction_z,"
+                                                    "torque_x,torque_y,torque_z")
     assert ",".join(ENERGY_COLUMNS) == _rows(d / "energy.csv")[0]
     assert ",".join(CONTACT_COLUMNS) == _rows(d / "contacts.csv")[0]
     assert ",".join(WALL_COLUMNS) == _rows(d / "wall_lid.csv")[0]
     # rows are flushed as written (readable before close)
     assert _rows(d / "contacts.csv")[1] == "0.001,10,4,1,0"
     assert _rows(d / "energy.csv")[2] == "0.001,0.5,2.0,0.5,0.25,0.0,3.0,-0.25"
-    assert _rows(d / "wall_lid.csv")[1] == "0.001,0.0,0.0,-0.001,0.0,0.0,12.5"
+    assert _rows(d / "wall_lid.csv")[1] == "0.001,0.0,0.0,-0.001,0.0,0.0,12.5,0.5,-0.25,0.0"
     data = np.genfromtxt(d / "energy.csv", delimiter=",", names=True)
     assert data["mechanical"][0] == 3.5
     m.close()
@@ -223,7 +224,7 @@ def test_output_writers_from_paper_model(tmp_path):
     out = OutputWriters(m)
     out.paraview.write(0.0, m.bodies, np.zeros((6, 3)), None)
     out.monitors.energy(0.0, 0, 1, 0, 0, 0)
-    out.monitors.wall("lid", 0.0, [0, 0, 0], [0, 0, 0])
+    out.monitors.wall("lid", 0.0, [0, 0, 0], [0, 0, 0], [0, 0, 0])
     out.results.append(0.0, m.bodies)
     out.sync()
     out.close()
@@ -404,9 +405,9 @@ def test_plot_monitors(tmp_path):
         t = k * 0.01
         m.energy(t, np.exp(-t), -t, 0.1, t / 2, 0.0)
         m.contacts(t, 20 + k, 10 + k // 2, k // 10, 0)
-        m.wall("bottom", t, [0, 0, 0], [0, 0, 5.0])
+        m.wall("bottom", t, [0, 0, 0], [0, 0, 5.0], [0, 0, 0])
         dz = -0.08 * min(k, 25) / 25 + 0.08 * max(k - 25, 0) / 25
-        m.wall("lid", t, [0, 0, dz], [0, 0, 100 * -dz + (5 if k < 25 else 0)])
+        m.wall("lid", t, [0, 0, dz], [0, 0, 100 * -dz + (5 if k < 25 else 0)], [0, 0, 0])
     m.close()
     res = subprocess.run([sys.executable, str(ROOT / "postproc" / "plot_monitors.py"),
                           str(tmp_path)], capture_output=True, text=True)

@@ -22,10 +22,11 @@ def time(solver) -> float:
 
 
 def wall_displacements(model: Model, solver) -> dict[str, np.ndarray]:
-    """Each wall's displacement from where it was defined (m), by name."""
-    off = (solver.wall_offset if solver is not None
-           else np.zeros((len(model.walls), 3)))
-    return {w.name: np.array(off[k]) for k, w in enumerate(model.walls)}
+    """Each wall's displacement from where it was defined (m), by name (a mesh or surface
+    wall's translation; its turns are not in it)."""
+    names = model.wall_names
+    off = solver.wall_offset if solver is not None else np.zeros((len(names), 3))
+    return {name: np.array(off[k]) for k, name in enumerate(names)}
 
 
 def free_energies(model: Model, b: Bodies) -> tuple[float, float]:

@@ -65,7 +65,8 @@ def move_wall_step(model: Model, sid: int, name: Any,
                    angular_velocity: Sequence[float] | None,
                    center: Sequence[float]) -> MoveWallStep:
     """``MoveWall`` (see :meth:`~nurbsdem.simulation.Simulation.move_wall`): a turn of a
-    mesh or surface wall, a flat wall moved to contact, or a flat wall's displacement."""
+    mesh or surface wall (with a displacement too, if given), a flat wall moved to contact,
+    or a wall's displacement."""
     what = f"Step {sid}"
     if not isinstance(name, str) or name not in model.wall_names:
         names = ", ".join(model.wall_names) or "no walls defined"
@@ -74,14 +75,14 @@ def move_wall_step(model: Model, sid: int, name: Any,
     if angular_velocity is not None:
         if not curved:
             raise InputError(f"{what}: only mesh and surface walls turn (angular_velocity)")
-        if displacement is not None or to_contact or duration is None or time_step is None:
-            raise InputError(f"{what}: angular_velocity takes center, duration and "
-                             f"time_step, not displacement or to_contact")
-        return _turn(sid, name, angular_velocity, center, duration, time_step, damping_scheme,
-                     accuracy, safety)
-    if curved:
-        raise InputError(f"{what}: mesh and surface walls turn (angular_velocity); "
-                         f"displacement and to_contact move flat walls")
+        if to_contact or duration is None or time_step is None:
+            raise InputError(f"{what}: angular_velocity takes center, duration, time_step "
+                             f"and optionally displacement, not to_contact")
+        return _turn(sid, name, angular_velocity, center, displacement, duration, time_step,
+                     damping_scheme, accuracy, safety)
+    if curved and to_contact:
+        raise InputError(f"{what}: to_contact moves flat walls only; move a mesh or surface "
+                         f"wall by displacement")
     if to_contact:
         if displacement is not None or duration is not None or time_step is not None:
             raise InputError(f"{what}: to_contact=True takes gap and direction, not "
@@ -98,16 +99,19 @@ def move_wall_step(model: Model, sid: int, name: Any,
                         safety=optional_positive("Safety", sid, safety))
 
 
-def _turn(sid: int, name: str, angular_velocity: Any, center: Any, duration: Any,
-          time_step: Any, damping_scheme: Any, accuracy: Any, safety: Any) -> MoveWallStep:
-    """``MoveWall NAME Rotate``: a turn at ``angular_velocity`` (rad/s) about ``center`` (m)."""
+def _turn(sid: int, name: str, angular_velocity: Any, center: Any, displacement: Any,
+          duration: Any, time_step: Any, damping_scheme: Any, accuracy: Any,
+          safety: Any) -> MoveWallStep:
+    """``MoveWall NAME Rotate``: a turn at ``angular_velocity`` (rad/s) about ``center`` (m),
+    with a translation by ``displacement`` (m; None: none)."""
     what = f"Step {sid}"
     omega = vector("AngularVelocity", angular_velocity, what)
     if not np.linalg.norm(omega) > 0:
         raise InputError(f"{what}: angular_velocity must not be zero")
     dur, dt = timing(sid, duration, time_step)
+    shift = None if displacement is None else vector("Displacement", displacement, what)
     return MoveWallStep(sid, 0, wall=name, rotate=True, angular_velocity=omega,
-                        center=vector("Center", center, what), duration=dur,
+                        center=vector("Center", center, what), displacement=shift, duration=dur,
                         time_step=dt, damping=damping(sid, damping_scheme),
                         accuracy=optional_positive("Accuracy", sid, accuracy),
                         safety=optional_positive("Safety", sid, safety))

@@ -4,9 +4,11 @@ walls (:mod:`nurbsdem.contact.surface_wall`) to those of another provider (the s
 particles and the flat walls, :class:`~nurbsdem.contact.scene.SceneContacts`).
 
 Each curved wall is a body of the system (global index ``N + first_wall + w``) held in its own
-frame and placed by a pose ``x_world = R(t) x_wall + t(t)`` (:class:`WallPose`: fixed, or a
-rotation at a constant angular velocity about a centre); the kernels bring the sphere's centre
-into the wall frame, so the wall's own broad-phase grid stays valid as it moves.
+frame and placed by a pose ``x_world = R(t) x_wall + t(t) + d(t)`` (:class:`WallPose`: fixed,
+or a rotation at a constant angular velocity about a centre, plus the body's prescribed
+displacement d(t) (m) from :class:`~nurbsdem.dynamics.rigid.Walls`, which carries the centre
+with it); the kernels bring the sphere's centre into the wall frame, so the wall's own
+broad-phase grid stays valid as it moves.
 
 Per evaluation and wall: the world box of the wall's points at its pose is tested against
 each sphere's bounding box (centre ± radius); a sphere that overlaps it is handed to the
@@ -44,7 +46,9 @@ MAX_PER_WALL = 8
 class WallPose:
     """A wall's pose in time: at rest (``omega`` = 0) or turning at the constant angular
     velocity ``omega`` (3,) rad/s about the point ``center`` (3,) m from time ``t0`` (s) on,
-    with the rest pose ``R0`` (3,3), ``t0_shift`` (3,) m at ``t0``."""
+    with the rest pose ``R0`` (3,3), ``shift0`` (3,) m at ``t0``; the wall's displacement d
+    (its prescribed translation, m) is added after the turn, so ``center`` is the centre
+    before that translation and ``center + d`` the centre at time t."""
 
     omega: np.ndarray = field(default_factory=lambda: np.zeros(3))
     center: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -52,15 +56,17 @@ class WallPose:
     R0: np.ndarray = field(default_factory=lambda: np.eye(3))
     shift0: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+    def at(self, t: float, d: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(R (3,3), t (3,) m): ``x_world = R x_wall + t`` at time t (s): the rest pose turned
-        by the rotation vector ω (t − t0) about the centre (Rodrigues, by scipy)."""
+        by the rotation vector ω (t − t0) about the centre (Rodrigues, by scipy), then
+        translated by the wall's displacement d (3,) m at t (None: none)."""
         from scipy.spatial.transform import Rotation
         rot = Rotation.from_rotvec(np.asarray(self.omega, float)
                                    * max(float(t) - self.t0, 0.0)).as_matrix()
         c = np.asarray(self.center, float)
         R = rot @ self.R0
-        return R, rot @ (self.shift0 - c) + c
+        shift = rot @ (self.shift0 - c) + c
+        return R, (shift if d is None else shift + np.asarray(d, float))
 
 
 @dataclass
@@ -151,9 +157,10 @@ class CurvedWallContacts:
         near = np.all((x + r >= lo) & (x - r <= hi), axis=1) & self.spheres
         return np.flatnonzero(near).astype(np.int64)
 
-    def _wall_rows(self, w: CurvedWall, x: np.ndarray, t: float):
-        """(rows_f, rows_i, owner, rank) of the spheres' contacts with wall w at time t."""
-        R, tv = w.pose.at(t)
+    def _wall_rows(self, w: CurvedWall, x: np.ndarray, t: float, d: np.ndarray):
+        """(rows_f, rows_i, owner, rank) of the spheres' contacts with wall w at time t (s),
+        displaced by d (3,) m."""
+        R, tv = w.pose.at(t, d)
         idx = self._candidates(x, *w.world_box(R, tv))
         g = w.geometry
         if isinstance(g, MeshWall):
@@ -188,7 +195,8 @@ class CurvedWallContacts:
         N, nb = kin.n_particles, kin.n_bodies
         parts = []
         for w_i, w in enumerate(self.walls):
-            rf, owner, rank = self._wall_rows(w, x, kin.t)
+            d = kin.wall_displacement[self.first_wall + w_i]
+            rf, owner, rank = self._wall_rows(w, x, kin.t, d)
             if len(owner) == 0:
                 continue
             body = N + self.first_wall + w_i

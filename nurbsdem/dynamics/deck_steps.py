@@ -459,7 +459,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         counters[DEGENERATED_SUM] += ev.degenerated
         if sample_at[j]:
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
-                       ev.monitored, active, ev.degenerated, wall_d, ev.force)
+                       ev.monitored, active, ev.degenerated, wall_d, ev.force, ev.torque)
         if state_at[j]:
             states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         c0 = cycles()

@@ -97,7 +97,7 @@ class InternalSteps:
         pos = np.concatenate([b.x, self.wall_d])
         vel = np.concatenate([b.v, self.wall_u])
         omg = np.concatenate([omega_world(b.q, b.L, self._inv_I), np.zeros((self.walls.n, 3))])
-        if self.wall_spin is not None:       # a turning wall: its points move at u + ω × (p − c)
+        if self.wall_spin is not None:   # a turning wall: its points move at u + ω × (p − c − d)
             pos[b.n:] += self.wall_spin[:, 3:]
             omg[b.n:] = self.wall_spin[:, :3]
         return pos, vel, omg
@@ -105,7 +105,8 @@ class InternalSteps:
     def _spun_contacts(self, wall_u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body_b, wall_d, wall_u) for the kick's work terms when walls turn: each contact
         with a turning wall gets a wall of its own (index W + j) that moves at that wall's
-        point velocity u + ω × (p − c) (m/s) at the contact point p."""
+        point velocity u + ω × (p − c − d) (m/s) at the contact point p, c + d the wall's
+        rotation centre carried by its displacement d (``wall_spin`` holds ω and c)."""
         n, W = self.bodies.n, self.walls.n
         w = self.c_b - n
         idx = np.flatnonzero(w >= 0)

@@ -1,5 +1,5 @@
 """Monitor samples: what ``monitors/*.csv`` record at a deck step's end (energies in J, wall
-displacements in m, reactions in N, contact counts).
+displacements in m, reactions in N, torques in N m, contact counts).
 
 A sample is taken either live from a :class:`~nurbsdem.dynamics.system.DemSystem`
 (:meth:`~nurbsdem.dynamics.system.DemSystem.monitor_sample`) or, inside the compiled deck
@@ -21,20 +21,22 @@ from .energy import EnergyLedger, EnergySample, energy_terms
 
 #: columns of a recorded row: the five energy terms of energy_terms, the five ledger entries
 #: (EnergyLedger.to_array order), the monitored / active / degenerated counts, then W×3 wall
-#: displacements and W×3 wall reactions
+#: displacements, W×3 wall reactions and W×3 wall torques
 ROW_TERMS, ROW_LEDGER, ROW_MONITORED, ROW_ACTIVE, ROW_DEGENERATED, ROW_WALLS = 0, 5, 10, 11, 12, 13
 
 
 def row_width(n_walls: int) -> int:
     """Length of a recorded row for ``n_walls`` walls."""
-    return ROW_WALLS + 6 * n_walls
+    return ROW_WALLS + 9 * n_walls
 
 
 @dataclass(frozen=True)
 class MonitorSample:
     """One sample of the monitors at time ``time`` (s): energies, contact counts (monitored
     pairs, active, degenerated and failed contacts of the last evaluation), wall displacements
-    (W,3) m and reactions (W,3) N; ``hertz`` (active, fallbacks, radii (K,) m, normal
+    (W,3) m, reactions (W,3) N and torques (W,3) N m (of the particles' contact forces on each
+    wall, about its reference point: :attr:`~nurbsdem.dynamics.system.DemSystem.wall_torque`);
+    ``hertz`` (active, fallbacks, radii (K,) m, normal
     stiffnesses (K,) N/m) with Hertz–Mindlin interfaces, else None."""
 
     time: float
@@ -45,6 +47,7 @@ class MonitorSample:
     failed: int
     wall_displacement: np.ndarray
     wall_reaction: np.ndarray
+    wall_torque: np.ndarray
     hertz: tuple | None = None
 
     @staticmethod
@@ -54,10 +57,11 @@ class MonitorSample:
         energy = energy_sample(time, et, er, pot, en, etan,
                                EnergyLedger.from_array(row[ROW_LEDGER:ROW_LEDGER + 5]))
         W = n_walls
-        walls = row[ROW_WALLS:ROW_WALLS + 6 * W]
+        walls = row[ROW_WALLS:ROW_WALLS + 9 * W]
         return MonitorSample(time, energy, int(row[ROW_MONITORED]), int(row[ROW_ACTIVE]),
                              int(row[ROW_DEGENERATED]), 0, walls[:3 * W].reshape(W, 3).copy(),
-                             walls[3 * W:].reshape(W, 3).copy())
+                             walls[3 * W:6 * W].reshape(W, 3).copy(),
+                             walls[6 * W:].reshape(W, 3).copy())
 
 
 def energy_sample(time: float, et: float, er: float, pot: float, en: float, etan: float,
@@ -78,9 +82,10 @@ def energy_sample(time: float, et: float, er: float, pot: float, en: float, etan
 def record_row(row: np.ndarray, mass: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray,
                L: np.ndarray, inv_I: np.ndarray, gravity: np.ndarray, eel: np.ndarray,
                ledger: np.ndarray, monitored: int, active: int, degenerated: int,
-               wall_d: np.ndarray, force: np.ndarray) -> None:
-    """Write the monitor row of the present state (columns ROW_*); force (N+W,3): the last
-    evaluation's loads, the walls' rows negated are their reactions."""
+               wall_d: np.ndarray, force: np.ndarray, torque: np.ndarray) -> None:
+    """Write the monitor row of the present state (columns ROW_*); force, torque (N+W,3):
+    the last evaluation's loads, the walls' force rows negated are their reactions, their
+    torque rows their torques."""
     et, er, pot, en, etan = energy_terms(mass, x, v, q, L, inv_I, gravity, eel)
     row[ROW_TERMS] = et
     row[ROW_TERMS + 1] = er
@@ -97,6 +102,7 @@ def record_row(row: np.ndarray, mass: np.ndarray, x: np.ndarray, v: np.ndarray, 
         for k in range(3):
             row[ROW_WALLS + 3 * w + k] = wall_d[w, k]
             row[ROW_WALLS + 3 * W + 3 * w + k] = -force[N + w, k]
+            row[ROW_WALLS + 6 * W + 3 * w + k] = torque[N + w, k]
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,9 @@ frame.
 Prescribed-motion bodies
 ------------------------
 A wall moves by a translation ``d(t)`` (m) with velocity ``u(t)`` (m/s) given by a function of
-time (:class:`PrescribedMotion`); a fixed wall has ``d = u = 0``.  Walls do not rotate.  The
+time (:class:`PrescribedMotion`); a fixed wall has ``d = u = 0``.  A mesh or surface wall may
+also turn about a centre that d carries (the system's ``wall_spin``, the pose of
+:class:`~nurbsdem.contact.curved_walls.WallPose`); flat walls only translate.  The
 solver computes the contact forces on them; the force that holds a wall on its path (its
 *reaction*) is minus the sum of the contact forces the particles exert on it, and the work done by
 it on the system is ``∫ reaction · u dt`` (see :mod:`nurbsdem.dynamics.energy`).

@@ -235,8 +235,9 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         #: run scenes in compiled deck steps (:meth:`steps`)
         self.compiled_steps = True
         self._deck_steps = None
-        #: (W,6) per wall: the angular velocity (rad/s) and the centre (m) it turns about (a
-        #: mesh or surface wall, :mod:`nurbsdem.contact.curved_walls`); None: no wall turns
+        #: (W,6) per wall: the angular velocity (rad/s) and the centre c (m) it turns about
+        #: before its displacement d (the centre is c + d: a mesh or surface wall,
+        #: :mod:`nurbsdem.contact.curved_walls`); None: no wall turns
         self.wall_spin: np.ndarray | None = None
         self.last_steps = StepTally()
         #: (keys, springs) of tangential springs to start from (set before initialize()).

@@ -38,7 +38,7 @@ class SystemState:
                              int(getattr(cs, "active", 0) or 0),
                              int(getattr(cs, "degenerated_count", 0) or 0),
                              int(getattr(cs, "failed", 0) or 0), self.wall_displacement,
-                             self.wall_reaction, hertz)
+                             self.wall_reaction, self.wall_torque, hertz)
 
     def body_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The particles' state as the model and the writers hold it (copies): centroids
@@ -108,6 +108,14 @@ class SystemState:
     def wall_reaction(self) -> np.ndarray:
         """(W,3) force that holds each wall on its prescribed path (N) = −wall_contact_force."""
         return -self.wall_contact_force
+
+    @property
+    def wall_torque(self) -> np.ndarray:
+        """(W,3) torque (N m) of the contact forces the particles exert on each wall, last
+        evaluation, about the wall's reference point: while a wall turns, its rotation centre
+        (carried by its displacement); otherwise the point its displacement carries from the
+        world origin (``wall_displacement``)."""
+        return self.torque[self.n_particles:].copy()
 
     @property
     def wall_displacement(self) -> np.ndarray:

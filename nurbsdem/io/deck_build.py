@@ -314,9 +314,11 @@ class DeckBuilder:
 
     def move_wall(self, e: Entry) -> MoveWallStep:
         modes = [k for k in ("ToContact", "Displacement", "Rotate") if e.has(k)]
+        if e.has("Rotate") and modes == ["Displacement", "Rotate"]:
+            modes = ["Rotate"]                       # a turn with a translation
         if len(modes) != 1:
             self.fail(f"Step {e.id}: MoveWall needs exactly one of ToContact, Displacement, "
-                      f"Rotate", e.line)
+                      f"Rotate (Rotate may take a Displacement)", e.line)
         name = e.get("MoveWall")
         if modes[0] == "Rotate":
             return rotate_step(self, e, name)

@@ -6,8 +6,10 @@ their geometry for the solver.
 [Material m]`` make a :class:`~nurbsdem.model.CurvedWallSpec`; the file is read at parse time
 (so that a missing or broken file is reported at its deck line) and again by the solver
 (:func:`curved_wall_geometry`).  Placement: ``x_world = R(rotation) (scale x_file) +
-position``, rotation a rotation vector (rad).  ``MoveWall NAME Rotate`` steps
-(:func:`rotate_step`) turn them; :func:`curved_tessellation` draws them in ``walls.pvd``.
+position``, rotation a rotation vector (rad).  ``MoveWall NAME Displacement`` steps translate
+them as they do flat walls, ``MoveWall NAME Rotate`` steps (:func:`rotate_step`) turn them
+(and translate them too with a ``Displacement``); :func:`curved_tessellation` draws them in
+``walls.pvd``.
 """
 from __future__ import annotations
 
@@ -124,8 +126,8 @@ def refuse_nurbs_particles(model, shape_ids) -> None:
 
 
 def check_curved_walls(builder, model) -> None:
-    """Cross-checks of a deck's mesh and surface walls: only exact spheres meet them, and
-    ``MoveWall`` translations move flat walls."""
+    """Cross-checks of a deck's mesh and surface walls: only exact spheres meet them, only
+    they turn, and ``ToContact`` moves flat walls only (it needs the wall's plane)."""
     from ..model import MoveWallStep
     curved = {w.name for w in model.curved_walls}
     for s in model.steps:
@@ -135,21 +137,23 @@ def check_curved_walls(builder, model) -> None:
     if not model.curved_walls:
         return
     for s in model.steps:
-        if isinstance(s, MoveWallStep) and s.wall in curved and not s.rotate:
-            builder.fail(f"Step {s.id}: MoveWall {s.wall}: ToContact and Displacement move "
-                         f"flat walls; mesh and surface walls turn (Rotate)", s.line)
+        if isinstance(s, MoveWallStep) and s.wall in curved and s.to_contact:
+            builder.fail(f"Step {s.id}: MoveWall {s.wall} ToContact moves flat walls only; "
+                         f"move a mesh or surface wall by Displacement", s.line)
     shape_ids = [sid for g in model.random_groups for sid in g.shape_ids]
     shape_ids += [p.shape_id for p in model.particles]
     refuse_nurbs_particles(model, [sid for sid in shape_ids if sid in model.shapes])
 
 
 def rotate_step(builder, e, name: str):
-    """``Step ID MoveWall NAME Rotate AngularVelocity wx wy wz Center cx cy cz Duration T
-    TimeStep DT [Damping ..] [Accuracy ..] [Safety ..]``: a :class:`~nurbsdem.model.MoveWallStep`
-    that turns a mesh or surface wall at a constant angular velocity (rad/s) about a point (m)."""
+    """``Step ID MoveWall NAME Rotate AngularVelocity wx wy wz Center cx cy cz [Displacement dx
+    dy dz] Duration T TimeStep DT [Damping ..] [Accuracy ..] [Safety ..]``: a
+    :class:`~nurbsdem.model.MoveWallStep` that turns a mesh or surface wall at a constant
+    angular velocity (rad/s) about a point (m), which translates with the wall by the
+    displacement (m, at constant velocity over the step) when one is given."""
     from ..model import MoveWallStep
-    builder.only(e, {"MoveWall", "Rotate", "AngularVelocity", "Center", "Duration", "TimeStep",
-                     "Damping", "Accuracy", "Safety"}, "MoveWall Rotate")
+    builder.only(e, {"MoveWall", "Rotate", "AngularVelocity", "Center", "Displacement",
+                     "Duration", "TimeStep", "Damping", "Accuracy", "Safety"}, "MoveWall Rotate")
     builder.require(e, "AngularVelocity", "Duration", "TimeStep")
     dur, dt = builder.timing(e)
     if not np.linalg.norm(e.get("AngularVelocity")) > 0:
@@ -160,7 +164,7 @@ def rotate_step(builder, e, name: str):
     return MoveWallStep(e.id, e.line, wall=name, rotate=True,
                         angular_velocity=np.asarray(e.get("AngularVelocity"), float),
                         center=np.asarray(e.get("Center", np.zeros(3)), float),
-                        duration=dur, time_step=dt, damping=damping, accuracy=accuracy,
+                        displacement=e.get("Displacement"), duration=dur, time_step=dt, damping=damping, accuracy=accuracy,
                         safety=safety)
 
 

@@ -207,8 +207,10 @@ def step_entry(s: Step) -> Entry:
             values["Direction"] = unit_preimage(s.direction)
         return _entry("Steps", "Step", s.id, **values)
     if s.rotate:
+        shift = {} if s.displacement is None else {"Displacement": s.displacement}
         return _entry("Steps", "Step", s.id, MoveWall=s.wall, Rotate=True,
-                      AngularVelocity=s.angular_velocity, Center=s.center, **_timing(s))
+                      AngularVelocity=s.angular_velocity, Center=s.center, **shift,
+                      **_timing(s))
     return _entry("Steps", "Step", s.id, MoveWall=s.wall, Displacement=s.displacement,
                   **_timing(s))
 

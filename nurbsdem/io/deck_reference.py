@@ -67,8 +67,9 @@ ENTRIES: dict[tuple[str, str], str] = {
         "`Materials`) is the one used; a pair no interface covers does not interact."),
     ("Steps", "Step"): (
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
-        "with `ToContact` (instantaneous), `Displacement` (timed) or `Rotate` (timed; mesh "
-        "and surface walls). A timed step is split "
+        "with `ToContact` (instantaneous; flat walls), `Displacement` (timed; any wall) or "
+        "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`). A timed "
+        "step is split "
         "into internal sub-steps below the contact network's stability limit."),
     ("Output", "Directory"): "The results folder, relative to the deck.",
     ("Output", "VTK"): "ParaView series of particles, walls and contact points.",
@@ -211,14 +212,16 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "shifted up by `Height` / (`Layers` - 1) each; all velocities are set to zero."),
     ("Steps", "Step", "Rotate"): KeyDoc(
         "", "no", "With `MoveWall NAME`: the mesh or surface wall turns at `AngularVelocity` "
-        "about `Center` for `Duration`, then stays where it turned to."),
+        "about `Center` for `Duration`, then stays where it turned to; with a `Displacement` "
+        "it translates as well, the centre with it."),
     ("Steps", "Step", "AngularVelocity"): KeyDoc(
         "rad/s", "required with Rotate", "The wall's angular velocity, world frame."),
     ("Steps", "Step", "Center"): KeyDoc(
-        "m", "0 0 0", "A point of the rotation axis (the wall's torque in its monitor is "
-        "about it)."),
+        "m", "0 0 0", "A point of the rotation axis at the step's start (the wall's torque "
+        "in its monitor is about it while it turns)."),
     ("Steps", "Step", "MoveWall"): KeyDoc(
-        "", "-", "The name of the wall to move (with `ToContact` or `Displacement`)."),
+        "", "-", "The name of the wall to move (with `ToContact`, `Displacement` or "
+        "`Rotate`; `ToContact` moves flat walls only)."),
     ("Steps", "Step", "Duration"): KeyDoc(
         "s", "required by timed steps", "Simulated time; a whole number of `TimeStep`s."),
     ("Steps", "Step", "TimeStep"): KeyDoc(
@@ -236,8 +239,9 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "-", "the wall's normal", "`ToContact`: the direction of travel (towards the "
         "particles)."),
     ("Steps", "Step", "Displacement"): KeyDoc(
-        "m", "-", "dx dy dz: the wall translates by this vector at constant velocity over "
-        "`Duration` while the particles move."),
+        "m", "-", "dx dy dz: the wall (flat, mesh or surface) translates by this vector at "
+        "constant velocity over `Duration` while the particles move; with `Rotate`, while "
+        "it turns."),
     ("Steps", "Step", "Damping"): KeyDoc("", "Explicit", _DAMPING + "."),
     ("Steps", "Step", "Accuracy"): KeyDoc(
         "-", "off", "eta: a deck step whose energy-balance error grows by more than eta x the "

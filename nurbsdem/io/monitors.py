@@ -1,5 +1,5 @@
 """The monitor files ``monitors/*.csv`` (:class:`MonitorWriter`): energies, contact counts,
-Hertz radii and each wall's displacement and reaction, one row per sample, each file a
+Hertz radii and each wall's displacement, reaction and torque, one row per sample, each file a
 :class:`CsvMonitor`."""
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ CONTACT_COLUMNS = ("time", "monitored", "active", "degenerated", "failed")
 HERTZ_COLUMNS = ("time", "active", "fallback_radius", "radius_min", "radius_median",
                  "radius_max", "stiffness_normal_max")
 WALL_COLUMNS = ("time", "displacement_x", "displacement_y", "displacement_z",
-                "reaction_x", "reaction_y", "reaction_z")
+                "reaction_x", "reaction_y", "reaction_z", "torque_x", "torque_y", "torque_z")
 
 _float_repr = float.__repr__
 
@@ -135,8 +135,11 @@ def _file_in(folder: Path, name: str) -> Path:
 class MonitorWriter:
     """``monitors/energy.csv``, ``monitors/contacts.csv`` and ``monitors/wall_<name>.csv``.
 
-    Energies in J, times in s, displacements in m, reactions in N (the total force the
-    particles exert on the wall, world frame).
+    Energies in J, times in s, displacements in m, reactions in N (the force that holds the
+    wall on its path: minus the total force the particles exert on it, world frame), torques
+    in N m (of the particles' contact forces on the wall about its reference point: the
+    rotation centre of a turning wall, else the point its displacement carries from the
+    world origin; world frame).
     """
 
     def __init__(self, outdir: str | Path, wall_names: Sequence[str] = (),
@@ -199,21 +202,25 @@ class MonitorWriter:
         self.hertz_csv.append([time, int(active), int(fallback), *stats])
 
     def wall(self, name: str, time: float, displacement: Sequence[float],
-             reaction: Sequence[float]) -> None:
-        """Append a row to ``wall_<name>.csv``: displacement from the deck position (m) and
+             reaction: Sequence[float], torque: Sequence[float]) -> None:
+        """Append a row to ``wall_<name>.csv``: displacement from the deck position (m),
         reaction (N): the force that holds the wall on its prescribed path, i.e. minus the
-        sum of the contact forces the particles exert on it."""
+        sum of the contact forces the particles exert on it, and torque (N m): that of the
+        particles' contact forces on the wall about its reference point."""
         d = np.asarray(displacement, float).reshape(3).tolist()
         r = np.asarray(reaction, float).reshape(3).tolist()
-        self.wall_csv[name].append_floats([float(time), *d, *r])
+        m = np.asarray(torque, float).reshape(3).tolist()
+        self.wall_csv[name].append_floats([float(time), *d, *r, *m])
 
-    def walls(self, time: float, displacement: np.ndarray, reaction: np.ndarray) -> None:
-        """:meth:`wall` rows of every wall at once: displacement, reaction (W, 3) in the
-        order of the wall names given at construction."""
+    def walls(self, time: float, displacement: np.ndarray, reaction: np.ndarray,
+              torque: np.ndarray) -> None:
+        """:meth:`wall` rows of every wall at once: displacement, reaction, torque (W, 3) in
+        the order of the wall names given at construction."""
         t = float(time)
-        for csv, d, r in zip(self.wall_csv.values(), np.asarray(displacement, float).tolist(),
-                             np.asarray(reaction, float).tolist()):
-            csv.append_floats([t, *d, *r])
+        for csv, d, r, m in zip(self.wall_csv.values(), np.asarray(displacement, float).tolist(),
+                                np.asarray(reaction, float).tolist(),
+                                np.asarray(torque, float).tolist()):
+            csv.append_floats([t, *d, *r, *m])
 
     def _all(self) -> list[CsvMonitor]:
         return [self.energy_csv, self.contacts_csv, *self.wall_csv.values(),

@@ -9,7 +9,8 @@ In the output directory (``Output Directory``, default ``results`` next to the d
     monitors/contacts.csv                      time,monitored,active,degenerated,failed
     monitors/hertz.csv (Hertz-Mindlin runs)    time,active,fallback_radius,radius_min,radius_median,radius_max,stiffness_normal_max
     monitors/wall_<name>.csv                   time,displacement_x,displacement_y,
-                                               displacement_z,reaction_x,reaction_y,reaction_z
+                                               displacement_z,reaction_x,reaction_y,reaction_z,
+                                               torque_x,torque_y,torque_z
     results.h5                                 every sample's body states (see
                                                nurbsdem.io.results.ResultsWriter)
 
@@ -34,7 +35,7 @@ Typical use by the solver (see :class:`OutputWriters`)::
     out.monitors.energy(t, kinetic=..., potential=..., elastic=..., dissipated=...,
                         external_work=...)                              # every Monitors Every
     out.monitors.contacts(t, monitored, active, degenerated, failed)
-    out.monitors.wall("lid", t, displacement, reaction)
+    out.monitors.wall("lid", t, displacement, reaction, torque)
     out.results.append(t, bodies)                                       # every Results Every
     out.checkpoint(save, *args)   # results.h5 flushed, CSVs fsynced, then save(*args)
     out.close()
