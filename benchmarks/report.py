@@ -23,7 +23,7 @@ Usage::
 
 ``--quick`` (CI) runs in about two minutes on 2 cores; the full mode in about 15–20 min.
 The LCP tolerance sweep recompiles the LCP with a patched ``ANGLE_TOL`` (the direction
-Newton's stopping angle, a module constant of :mod:`nurbsdem.contact.lcp`) in worker
+Newton's stopping angle, a module constant of :mod:`nurbsdem.contact.stage2`) in worker
 processes with their own numba cache (kept under the temp folder, keyed by the source).
 """
 from __future__ import annotations
@@ -134,9 +134,9 @@ def _source_hash() -> str:
 
 def lcp_worker(inp: str, out: str, tol: str) -> None:
     """Worker process: solve the saved poses at ANGLE_TOL = tol (cold, warm) and time them."""
-    from nurbsdem.contact import lcp
+    from nurbsdem.contact import stage2
     if tol != DEFAULT_TOL:
-        lcp.ANGLE_TOL = float(tol)     # read by numba at (re)compilation: own cache dir
+        stage2.ANGLE_TOL = float(tol)     # read by numba at (re)compilation: own cache dir
     import numba
     from nurbsdem.contact import detect_batch
     numba.set_num_threads(1)

@@ -47,35 +47,22 @@ stationarity condition of f2 as well (the CSO point nearest to / deepest from th
 where |map_CSO| = |phi|). Both functions have the same minimiser; phi has the simpler
 derivatives (first derivative: the support points; second: the support Hessians).
 
-**Newton on the sphere.** Each iteration uses a *local chart re-centred on the current
-direction*, d(a, b) = normalize(d0 + a t1 + b t2) with (t1, t2) an orthonormal tangent
-basis: no pole singularity. In that chart
-
-    grad = Tᵀ (p_A − p_B),      Hess = Tᵀ (H_A + H_B) T − phi I,
-
-with H_A = R_A M_A R_Aᵀ, H_B = R_B M_B R_Bᵀ the Hessians of the support functions, from the
-implicit differentiation of the support conditions (the paper's A x = b, reduced by P_s for
-degenerated parameters, Eq. 14–15; see :mod:`.support`), and −phi I the curvature of the unit
-sphere. The step is the exact trust-region step (eigen-decomposition of the 2×2 Hessian,
-shift when indefinite), trust radius in radians, ratio test with eta = 0.1. The support
-points for the trial direction start from the first-order prediction
-u + (du/de) (e' − e), so each support mapping takes 1–2 Newton iterations near convergence.
-A warm start predicts its start parameters the same way for the bodies' turn since the
-previous solve (that solve's du/de and body-frame directions are kept in its result row,
-columns ``F_EA`` .. ``F_GB``): at the small turns of a sub-step each support mapping then
-ends after one evaluation, by the Taylor step below.  The warm start of a penetrating pair
-also moves its start direction: the previous solve's support points and dp/de (columns
-``F_QA`` .. ``F_SB``) give the support points, gradient and Hessian of the outer problem at
-the new poses to first order, and the start is the previous normal moved by that model's
-Newton step (:func:`_predicted_direction`).  The first outer iteration then lands within
-the Taylor step's reach of the solution: one support mapping per body instead of two (a
-captured compaction batch at 1e-4 rad turns: 4.4 -> 2.5 patch evaluations per pair).
-Stopping: Newton step < 1e-11 rad, or tangential gradient < 1e-15 × scale; a last Newton step
-below 1e-7 rad is taken by a Taylor update (points moved by dp/de, depth by the quadratic
-model) instead of two more support mappings — its error is second order (~1e-14).
-Nearly convex shapes (a non-convexity height h > 0): a search that stalls at a saddle, where
-the support mapping can return a lower local maximum, moves to the higher one or is
-accepted within h_A + h_B (:func:`solve_pair`, "saddle stall"); convex shapes never take
+**Newton on the sphere** (:mod:`.stage2`): a trust-region Newton search over unit
+directions in a chart re-centred on the current direction, with the exact Hessian from the
+support mappings' dp/de; the support points of a trial direction start from the first-order
+prediction u + (du/de) (e' − e). A warm start predicts its start parameters the same way for
+the bodies' turn since the previous solve (that solve's du/de and body-frame directions are
+kept in its result row, columns ``F_EA`` .. ``F_GB``): at the small turns of a sub-step each
+support mapping then ends after one evaluation, by the search's Taylor step.  The warm start
+of a penetrating pair also moves its start direction: the previous solve's support points
+and dp/de (columns ``F_QA`` .. ``F_SB``) give the support points, gradient and Hessian of the
+outer problem at the new poses to first order, and the start is the previous normal moved
+by that model's Newton step (:func:`_predicted_direction`).  The first outer iteration then
+lands within the Taylor step's reach of the solution: one support mapping per body instead
+of two (a captured compaction batch at 1e-4 rad turns: 4.4 -> 2.5 patch evaluations per
+pair). Nearly convex shapes (a non-convexity height h > 0): a search that stalls at a
+saddle, where the support mapping can return a lower local maximum, moves to the higher one
+or is accepted within h_A + h_B (:mod:`.stage2`, "saddle stall"); convex shapes never take
 that path.
 
 Result rows (``resF`` float, ``resI`` int) use the column constants below. Lengths in metres.
@@ -91,8 +78,10 @@ from ..jit import kernel
 from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
                      S1_C, S1_G, S1_INTERSECTING, S1_NONE, S1_PAW, S1_PBW, S1_ROW, S1_ROWS,
                      S1_SEPARATED, W4_COLS, W4_ROWS, nearest_seed, outward_normal, stage1)
-from .support import CREASE, dot3, norm3, seed_start, support_map
-from .trust_region import tr_step2
+from .stage2 import (SADDLE_PHI_IT, SADDLE_PHI_TOL, SADDLE_STALL_ANGLE, WORK_ROWS, _D, _DT, _EA,
+                     _EB, _GA, _GB, _H, _JUMP, _MA, _MB, _PA, _PB, _T1, _T2, _TMP,
+                     _rot_t, _tangent_basis, _to_world, direction_search)
+from .support import CREASE, norm3, seed_start
 
 # float result columns
 F_SD = 0          # signed distance (m): < 0 penetration depth, > 0 separation
@@ -137,14 +126,9 @@ def full_rows(rows_f) -> np.ndarray:
     return np.ascontiguousarray(rows_f)
 
 
-MAX_OUTER_IT = 60
-ANGLE_TOL = 1e-11
 #: a warm start of a penetrating pair moves the previous direction by the Newton step of the
 #: previous solve's model at the new poses when that step is shorter than this (rad)
 PREDICT_ANGLE = 1e-2
-#: A final Newton step on the sphere shorter than this (rad) is taken by a Taylor update.
-TAYLOR_ANGLE = 1e-7
-WORK_ROWS = 96     # rows 0..47 stage 2, rows S1_ROW.. stage 1 (see .stage1)
 #: row of the (W4_ROWS, 4) work array holding the stage-1 summary
 W4_OUT = 23
 #: stage-2 start modes
@@ -153,24 +137,6 @@ MODE_COLD, MODE_WARM, MODE_S1, MODE_NORMALS = 0, 1, 2, 3
 #: iterations, at the same distance (relative to the scale) and the same points
 S1_CERT_IT = 3
 S1_CERT_TOL = 1e-9
-#: saddle stall of a nearly convex pair (``tol_nc`` > 0, :func:`solve_pair`): the trust
-#: radius (rad) below which a search that cannot move counts as stalled; phi has converged
-#: when it stayed within this change (× scale) of one value over the last SADDLE_PHI_IT
-#: iterations or more; how often the search may move to a higher local maximum of the
-#: support problem, the iterations each such move adds and the trust radius (rad) it
-#: restarts with
-SADDLE_STALL_ANGLE = 1e-8
-SADDLE_PHI_TOL = 1e-10
-SADDLE_PHI_IT = 10
-SADDLE_MAX_MOVES = 2
-SADDLE_EXTRA_IT = 40
-SADDLE_DELTA = 1e-3
-
-# rows of the float work array (rows of 3)
-_PA, _MA, _GA, _PB, _MB, _GB = 0, 1, 4, 6, 7, 10
-_TRIAL = 12
-_EV, _EV2, _TMP, _EA, _EB, _D, _T1, _T2, _DT, _H = 24, 30, 36, 37, 38, 39, 40, 41, 42, 43
-_TR = 45     # 3 rows: scratch of the trust-region step (rows 45..47)
 
 
 @njit(cache=True)
@@ -207,105 +173,6 @@ def _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB
     wi[1, 0] = seedsB[1][kb]
     wfs[1, 0] = seedsB[2][kb, 0]
     wfs[1, 1] = seedsB[2][kb, 1]
-
-
-@kernel
-def _tangent_basis(d, t1, t2):
-    """Orthonormal t1, t2 with t1 × t2 = d (d unit)."""
-    ax = abs(d[0])
-    ay = abs(d[1])
-    az = abs(d[2])
-    if ax <= ay and ax <= az:
-        a0, a1, a2 = 1.0, 0.0, 0.0
-    elif ay <= az:
-        a0, a1, a2 = 0.0, 1.0, 0.0
-    else:
-        a0, a1, a2 = 0.0, 0.0, 1.0
-    # t1 = normalize(a - (a.d) d)
-    ad = a0 * d[0] + a1 * d[1] + a2 * d[2]
-    t1[0] = a0 - ad * d[0]
-    t1[1] = a1 - ad * d[1]
-    t1[2] = a2 - ad * d[2]
-    n = norm3(t1)
-    for c in range(3):
-        t1[c] /= n
-    t2[0] = d[1] * t1[2] - d[2] * t1[1]
-    t2[1] = d[2] * t1[0] - d[0] * t1[2]
-    t2[2] = d[0] * t1[1] - d[1] * t1[0]
-
-
-@kernel
-def _rot_t(R, d, sign, out):
-    """out = sign * Rᵀ d (world direction to file frame)."""
-    for a in range(3):
-        out[a] = sign * (R[0, a] * d[0] + R[1, a] * d[1] + R[2, a] * d[2])
-
-
-@kernel
-def _to_world(pos, R, p, out):
-    """out = pos + R p."""
-    for a in range(3):
-        out[a] = pos[a] + R[a, 0] * p[0] + R[a, 1] * p[1] + R[a, 2] * p[2]
-
-
-@kernel
-def _quad_world(R, M, x, y):
-    """xᵀ (R M Rᵀ) y."""
-    s = 0.0
-    for a in range(3):
-        rx = R[0, a] * x[0] + R[1, a] * x[1] + R[2, a] * x[2]
-        for b in range(3):
-            ry = R[0, b] * y[0] + R[1, b] * y[1] + R[2, b] * y[2]
-            s += rx * M[a, b] * ry
-    return s
-
-
-@kernel
-def _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, base, ws, sA, sB):
-    """Both support mappings for the world direction d into rows ``base`` (0: current,
-    _TRIAL: trial) of the work arrays; states in wi/wfs rows sA, sB. Returns (phi, nev, ok)."""
-    ev = wf[_EV:_EV + 6]
-    ev2 = wf[_EV2:_EV2 + 6]
-    tmp = wf[_TMP]
-    eA = wf[_EA]
-    eB = wf[_EB]
-    _rot_t(RA, d, 1.0, eA)
-    _rot_t(RB, d, -1.0, eB)
-    okA, nA = support_map(tabA, eA, wi[sA], wfs[sA], scA, ws, ev, ev2, tmp,
-                          wf[base + _PA], wf[base + _MA:base + _MA + 3], wf[base + _GA:base + _GA + 2])
-    okB, nB = support_map(tabB, eB, wi[sB], wfs[sB], scB, ws, ev, ev2, tmp,
-                          wf[base + _PB], wf[base + _MB:base + _MB + 3], wf[base + _GB:base + _GB + 2])
-    # phi = d . (posA + RA pA) - d . (posB + RB pB), with the positions' difference taken
-    # first: d . posA alone carries a rounding error of eps |posA| (4e-16 m at 2 m from the
-    # origin), more than the decrease a last Newton step predicts (~|grad|^2 / curvature,
-    # 1e-16 m for |grad| = 1e-9 m); the ratio test would then reject it for ever (the
-    # stalls of tests/test_lcp_stalls.py). The difference is exact for nearby bodies.
-    pA = wf[base + _PA]
-    pB = wf[base + _PB]
-    phi = (d[0] * (posA[0] - posB[0]) + d[1] * (posA[1] - posB[1]) + d[2] * (posA[2] - posB[2])
-           + dot3(eA, pA) + dot3(eB, pB))
-    return phi, nA + nB, okA and okB
-
-
-@kernel
-def _predict(wf, wfs, base, sA, sB, tA, tB, RA, RB, dnew):
-    """First-order prediction of the trial parameters: u' = u + G (e' − e)."""
-    eA = wf[_EA]
-    eB = wf[_EB]
-    GA = wf[base + _GA:base + _GA + 2]
-    GB = wf[base + _GB:base + _GB + 2]
-    for a in range(2):
-        sa = 0.0
-        sb = 0.0
-        for c in range(3):
-            ea = RA[0, c] * dnew[0] + RA[1, c] * dnew[1] + RA[2, c] * dnew[2]
-            eb = -(RB[0, c] * dnew[0] + RB[1, c] * dnew[1] + RB[2, c] * dnew[2])
-            sa += GA[a, c] * (ea - eA[c])
-            sb += GB[a, c] * (eb - eB[c])
-        wfs[tA, a] = wfs[sA, a] + sa
-        wfs[tB, a] = wfs[sB, a] + sb
-    wfs[tA, 2] = wfs[sA, 2]
-    wfs[tB, 2] = wfs[sB, 2]
 
 
 @kernel
@@ -428,52 +295,6 @@ def _predicted_direction(prevF, posA, RA, posB, RB, d, wf):
 
 
 @kernel
-def _taylor_finish(wf, wfs, RA, RB, d, x1, x2):
-    """Take a final Newton step of angle <= TAYLOR_ANGLE without new support mappings:
-    d' = normalize(d + x1 t1 + x2 t2), p' = p + M (e' − e), u' = u + G (e' − e).
-    The remaining errors are second order in the step (<= 1e-14 relative)."""
-    t1 = wf[_T1]
-    t2 = wf[_T2]
-    dt = wf[_DT]
-    nd = 0.0
-    for c in range(3):
-        dt[c] = d[c] + x1 * t1[c] + x2 * t2[c]
-        nd += dt[c] * dt[c]
-    nd = math.sqrt(nd)
-    for c in range(3):
-        dt[c] = dt[c] / nd - d[c]          # delta d
-    for body in range(2):
-        R = RA if body == 0 else RB
-        sg = 1.0 if body == 0 else -1.0
-        P = _PA if body == 0 else _PB
-        Mr = _MA if body == 0 else _MB
-        Gr = _GA if body == 0 else _GB
-        de0 = sg * (R[0, 0] * dt[0] + R[1, 0] * dt[1] + R[2, 0] * dt[2])
-        de1 = sg * (R[0, 1] * dt[0] + R[1, 1] * dt[1] + R[2, 1] * dt[2])
-        de2 = sg * (R[0, 2] * dt[0] + R[1, 2] * dt[1] + R[2, 2] * dt[2])
-        for a in range(3):
-            wf[P, a] += wf[Mr + a, 0] * de0 + wf[Mr + a, 1] * de1 + wf[Mr + a, 2] * de2
-        for a in range(2):
-            wfs[body, a] += wf[Gr + a, 0] * de0 + wf[Gr + a, 1] * de1 + wf[Gr + a, 2] * de2
-    for c in range(3):
-        d[c] += dt[c]
-
-
-@kernel
-def _copy_trial(wf, wi, wfs):
-    """Make the trial rows/states current."""
-    for r in range(12):
-        for c in range(3):
-            wf[r, c] = wf[_TRIAL + r, c]
-    for c in range(4):
-        wi[0, c] = wi[2, c]
-        wi[1, c] = wi[3, c]
-    for c in range(3):
-        wfs[0, c] = wfs[2, c]
-        wfs[1, c] = wfs[3, c]
-
-
-@kernel
 def _unit_direction(cA, cB, d):
     """d (3,) = the unit vector from cA to cB (+z when they coincide); returns |cB − cA|."""
     dist = 0.0
@@ -514,6 +335,251 @@ def bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, 
     return True
 
 
+@kernel(inline="always")
+def _warm_normal(prevF, prevI):
+    """Whether the previous row is a warm start (valid, with a nonzero normal) and the
+    length of its normal. Returns (warm, |n|)."""
+    if prevI[I_VALID] != 1:
+        return False, 0.0
+    nn = norm3(prevF[F_N:F_N + 3])
+    return nn > 0.0, nn
+
+
+@kernel(inline="always")
+def _run_stage1(tabA, posA, RA, tabB, posB, RB, infoA, infoB, maskA, maskB, seedsA, seedsB,
+                prevF, prevI, warm, scale, d, ws, wf, wi, wfs, w4):
+    """Stage 1 (paper Eq. 5) of a cold start (from the nearest samples, ``d`` the centres'
+    direction) or of a pair that was separated (from its previous parameters), and the start
+    mode of stage 2 it gives (module docstring). Returns (mode, stage-1 iterations, patch
+    evaluations, |g| (m))."""
+    if warm:
+        wi[0, 0] = infoA[0] + prevI[I_PA]
+        wi[1, 0] = infoB[0] + prevI[I_PB]
+        wfs[0, 0] = prevF[F_PAR]
+        wfs[0, 1] = prevF[F_PAR + 1]
+        wfs[1, 0] = prevF[F_PAR + 2]
+        wfs[1, 1] = prevF[F_PAR + 3]
+    else:
+        _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB,
+                   wf, wi, wfs)
+    for r in range(2):
+        wi[r, 1] = 0
+        wi[r, 2] = 0
+        wi[r, 3] = 0
+    s1out = w4[W4_OUT]
+    cls, it1, ne1 = stage1(tabA, posA, RA, tabB, posB, RB, scale, wi, wfs, np.int64(S1_MAX_IT),
+                           S1_DELTA0, ws, wf, w4, s1out)
+    gl = s1out[O_GL]
+    fin = gl == gl and abs(gl) < np.inf
+    if fin and cls == S1_SEPARATED and gl > 0.0:
+        mode = MODE_S1
+    elif warm:
+        mode = MODE_WARM
+    elif fin and (cls == S1_INTERSECTING or (cls != S1_NONE and gl <= 1e-8 * scale)):
+        mode = MODE_NORMALS
+    else:
+        mode = MODE_COLD
+    return mode, it1, ne1, gl
+
+
+@kernel(inline="always")
+def _normals_direction(wf, cA, cB, d):
+    """Giraffe's recipe after an intersection: d = nA − nB, the outward normals at stage 1's
+    intersection point (normalised). Returns False (d unchanged) where a normal is undefined
+    or the two nearly cancel."""
+    s1 = wf[S1_ROW:S1_ROW + S1_ROWS]
+    nA = wf[_TMP]
+    nB = wf[_DT]
+    dt = wf[_DT]
+    okA = outward_normal(s1[S1_C], s1[S1_C + 1], s1[S1_PAW], cA, nA)
+    okB = outward_normal(s1[S1_C + 2], s1[S1_C + 3], s1[S1_PBW], cB, nB)
+    nd = 0.0
+    for c in range(3):
+        dt[c] = nA[c] - nB[c]
+        nd += dt[c] * dt[c]
+    nd = math.sqrt(nd)
+    if okA and okB and nd > 0.1:
+        for c in range(3):
+            d[c] = dt[c] / nd
+        return True
+    return False
+
+
+@kernel(inline="always")
+def _stage2_start(mode, gl, nn, prev_sep, prevF, prevI, posA, RA, posB, RB, cA, cB, infoA,
+                  infoB, maskA, maskB, seedsA, seedsB, d, wf, wi, wfs):
+    """The start direction ``d`` and support states (``wi``/``wfs`` rows 0, 1) of stage 2
+    for a start mode (module docstring): along the stage-1 gap (``MODE_S1``), the previous
+    normal and parameters (``MODE_WARM``), the normals at an intersection
+    (``MODE_NORMALS``) or the centres' direction with the samples farthest along it.
+    Returns (mode, trust radius (rad))."""
+    if mode == MODE_NORMALS and not _normals_direction(wf, cA, cB, d):
+        mode = MODE_COLD
+    if mode == MODE_S1:
+        # d along the stage-1 gap (from A towards B), supports from the stage-1 points
+        for c in range(3):
+            d[c] = -wf[S1_ROW + S1_G, c] / gl
+        delta = 0.1
+    elif mode == MODE_WARM:
+        for c in range(3):
+            d[c] = prevF[F_N + c] / nn
+        if not prev_sep:
+            _predicted_direction(prevF, posA, RA, posB, RB, d, wf)
+        wi[0, 0] = infoA[0] + prevI[I_PA]
+        wi[1, 0] = infoB[0] + prevI[I_PB]
+        _rot_t(RA, d, 1.0, wf[_EA])
+        _rot_t(RB, d, -1.0, wf[_EB])
+        _predicted_params(prevF, 0, wf[_EA], wfs[0])
+        _predicted_params(prevF, 1, wf[_EB], wfs[1])
+        delta = 0.1
+    else:
+        if mode == MODE_COLD:
+            _unit_direction(cA, cB, d)        # the centres' direction again
+        eA = wf[_EA]
+        eB = wf[_EB]
+        _rot_t(RA, d, 1.0, eA)
+        _rot_t(RB, d, -1.0, eB)
+        ka = seed_start(seedsA[0], seedsA[1], seedsA[2], infoA[2], infoA[3], maskA, infoA[0], eA)
+        kb = seed_start(seedsB[0], seedsB[1], seedsB[2], infoB[2], infoB[3], maskB, infoB[0], eB)
+        wi[0, 0] = seedsA[1][ka]
+        wfs[0, 0] = seedsA[2][ka, 0]
+        wfs[0, 1] = seedsA[2][ka, 1]
+        wi[1, 0] = seedsB[1][kb]
+        wfs[1, 0] = seedsB[2][kb, 0]
+        wfs[1, 1] = seedsB[2][kb, 1]
+        delta = 0.5
+    for r in range(2):
+        wi[r, 1] = 0
+        wi[r, 2] = 0
+        wi[r, 3] = 0
+        wfs[r, 2] = 0.0
+    return mode, delta
+
+
+@kernel(inline="always")
+def _write_solution(resF, d, phi, gnorm, posA, RA, posB, RB, wf, wfs):
+    """The float row of the search's end: normal, world points, signed distance −phi,
+    parameters, tangential gradient, and the warm-start prediction and model columns."""
+    for c in range(3):
+        resF[F_N + c] = d[c]
+    _to_world(posA, RA, wf[_PA], resF[F_PA:F_PA + 3])
+    _to_world(posB, RB, wf[_PB], resF[F_PB:F_PB + 3])
+    resF[F_SD] = -phi
+    resF[F_PAR] = wfs[0, 0]
+    resF[F_PAR + 1] = wfs[0, 1]
+    resF[F_PAR + 2] = wfs[1, 0]
+    resF[F_PAR + 3] = wfs[1, 1]
+    resF[F_GRAD] = gnorm
+    _rot_t(RA, d, 1.0, wf[_EA])
+    _rot_t(RB, d, -1.0, wf[_EB])
+    _store_prediction(resF, 0, wf[_EA], wf[_GA:_GA + 2])
+    _store_prediction(resF, 1, wf[_EB], wf[_GB:_GB + 2])
+    _store_model(resF, 0, wf[_PA], wf[_MA:_MA + 3])
+    _store_model(resF, 1, wf[_PB], wf[_MB:_MB + 3])
+
+
+@kernel(inline="always")
+def _accept_saddle_stall(resF, d, phi, wf):
+    """Rule 2 of a saddle stall (:mod:`.stage2`): when the support pair jumped (to the
+    world points in rows ``_JUMP``) by at least the remaining tangential gap, the contact
+    points become the convex combination of the two pairs with the smallest tangential gap,
+    and the row's depth and gradient follow. Returns (accepted, phi (m))."""
+    ja = wf[_JUMP]              # the jump of the support pair (world)
+    jb = wf[_JUMP + 1]
+    for c in range(3):
+        ja[c] = ja[c] - resF[F_PA + c]
+        jb[c] = jb[c] - resF[F_PB + c]
+    t1 = wf[_T1]
+    t2 = wf[_T2]
+    _tangent_basis(d, t1, t2)
+    r1 = r2 = s1_ = s2_ = 0.0      # tangential gap now, and its change to the other pair
+    for c in range(3):
+        r1 += t1[c] * (resF[F_PA + c] - resF[F_PB + c])
+        r2 += t2[c] * (resF[F_PA + c] - resF[F_PB + c])
+        s1_ += t1[c] * (ja[c] - jb[c])
+        s2_ += t2[c] * (ja[c] - jb[c])
+    if not norm3(ja) + norm3(jb) >= math.sqrt(r1 * r1 + r2 * r2):
+        return False, phi
+    ss = s1_ * s1_ + s2_ * s2_
+    lam = 0.0
+    if ss > 0.0:
+        lam = min(max(-(r1 * s1_ + r2 * s2_) / ss, 0.0), 1.0)
+    phi = 0.0
+    for c in range(3):
+        resF[F_PA + c] += lam * ja[c]
+        resF[F_PB + c] += lam * jb[c]
+        phi += d[c] * (resF[F_PA + c] - resF[F_PB + c])
+    resF[F_SD] = -phi
+    r1 += lam * s1_
+    r2 += lam * s2_
+    resF[F_GRAD] = math.sqrt(r1 * r1 + r2 * r2)
+    return True, phi
+
+
+@kernel(inline="always")
+def _write_counts(resF, resI, wi, infoA, infoB, it, it1, nev):
+    """Patches, degeneration level and counts of the int row (stage-1 iterations also in
+    the float row)."""
+    resI[I_PA] = wi[0, 0] - infoA[0]
+    resI[I_PB] = wi[1, 0] - infoB[0]
+    deg = 0
+    for r in range(2):
+        if wi[r, 1] == CREASE:
+            deg += 1
+        if wi[r, 2] == CREASE:
+            deg += 1
+    resI[I_DEG] = deg
+    resI[I_IT] = it + it1
+    resI[I_NEV] = nev
+    resF[F_IT1] = it1
+
+
+@kernel(inline="always")
+def _stage_of(mode, converged, it, phi, gl, scale, resF, wf):
+    """The stage that produced the row: 1 when it certifies the stage-1 minimum (the support
+    points along ±n are the stage-1 points and h_A(n) + h_B(−n) = −|g|, a separating slab
+    of width |g|), else 2."""
+    if mode == MODE_S1 and converged and it <= S1_CERT_IT and phi < 0.0:
+        tol = S1_CERT_TOL * scale
+        dp = 0.0
+        for c in range(3):
+            dp = max(dp, abs(resF[F_PA + c] - wf[S1_ROW + S1_PAW, c]),
+                     abs(resF[F_PB + c] - wf[S1_ROW + S1_PBW, c]))
+        if abs(phi + gl) <= tol and dp <= 1e3 * tol:
+            return 1
+    return 2
+
+
+@kernel(inline="always")
+def _finish_flags(resF, resI, prevF, prevI, converged, phi, cA, cB, scA, scB):
+    """The row's flags; a row that is not finite is replaced by the previous valid row, or
+    else by the bounding spheres' gap and direction, and marked failed."""
+    finite = True
+    for k in range(14):
+        if not (resF[k] == resF[k]) or abs(resF[k]) == np.inf:
+            finite = False
+    if finite:
+        resI[I_FAIL] = 0 if converged else 1
+        resI[I_VALID] = 1
+        resI[I_ACTIVE] = 1 if phi > 0.0 else 0
+        return
+    if prevI[I_VALID] == 1:
+        for k in range(resF.shape[0]):
+            resF[k] = prevF[k]
+        for k in range(resI.shape[0]):
+            resI[k] = prevI[k]
+    else:
+        dist = math.sqrt((cB[0] - cA[0]) ** 2 + (cB[1] - cA[1]) ** 2 + (cB[2] - cA[2]) ** 2)
+        resF[F_SD] = dist - scA - scB
+        for k in range(1, 14):
+            resF[k] = 0.0
+        for c in range(3):
+            resF[F_N + c] = (cB[c] - cA[c]) / dist if dist > 0.0 else 0.0
+    resI[I_FAIL] = 1
+    resI[I_VALID] = 0
+    resI[I_ACTIVE] = 0
+
+
 @kernel
 def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
                posA, RA, posB, RB, prevF, prevI, maskA, maskB, seedsA, seedsB,
@@ -531,351 +597,41 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     seedsA, seedsB: (x (S, 3), patch (S,), uv (S, 2)) surface samples for cold starts.
     ws, wf, wi, wfs, w4: per-thread workspaces (kernel.make_workspace, make_work()).
     tol_nc: h_A + h_B, the two shapes' non-convexity heights (m; 0 for convex shapes, which
-        turns the saddle-stall rule below off: their results do not depend on it).
-
-    **Saddle stall** (nearly convex shapes only, ``tol_nc`` > 0). At a saddle (a CAD patch
-    corner) e·x can have several local maxima on one body, about its non-convexity height h
-    apart (the higher point rises above the lower one's supporting plane; h is measured on
-    samples and refined to its local maximum, and at a crease that plane is no tangent
-    plane, so the gap can exceed h a little), and the support mapping, a local Newton
-    method, may return the lower one: the computed phi is then too small and not smooth.
-    The search notices it when it has stalled (trust radius <= ``SADDLE_STALL_ANGLE``) and
-    a trial a vanishing angle xn away lands on a maximum higher by J > 2·scale·xn — more
-    than the support function of bodies within their bounding spheres can change
-    (|grad phi| = |p_A − p_B| <= 2 scale):
-
-    1. the current support point was not the maximum: the search goes on from the higher
-       one (trust radius ``SADDLE_DELTA``, ``SADDLE_EXTRA_IT`` more iterations), at most
-       ``SADDLE_MAX_MOVES`` times;
-    2. after that, a search that stalls again is accepted (not failed) when J <= ``tol_nc``,
-       phi has converged (within ``SADDLE_PHI_TOL`` × scale of one value over the last
-       ``SADDLE_PHI_IT`` iterations or more: a search still creeping down the lower branch
-       by ever smaller steps counts once the steps add up to less than that) and the
-       support pair jumped by at least the remaining tangential gradient (the residual is
-       of the size of the support set, not a descent the search missed). Both support
-       pairs are J-support points of the CSO; the contact points are their convex
-       combination with the smallest tangential gap (the point of the support
-       set nearest to stationarity), so (p_A − p_B)·n = phi stays the reported depth and
-       lies between the two maxima (within J <= tol_nc of either). Parameters and patches
-       stay those of the current support point (the warm-start state).
+        turns the saddle-stall rule of :mod:`.stage2` off: their results do not depend on it).
     """
     for k in range(resF.shape[0]):
         resF[k] = 0.0
     for k in range(resI.shape[0]):
         resI[k] = 0
     d = wf[_D]
-    t1 = wf[_T1]
-    t2 = wf[_T2]
-    dt = wf[_DT]
     # ---- global level 1: bounding spheres (paper Eq. 3)
     cA = wf[_H]
     cB = wf[_H + 1]
     if bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, resF, resI):
         return
-    pA0 = infoA[0]
-    pB0 = infoB[0]
     scale = scA + scB
-    warm = prevI[I_VALID] == 1
-    if warm:
-        nn = norm3(prevF[F_N:F_N + 3])
-        if not nn > 0.0:
-            warm = False
+    warm, nn = _warm_normal(prevF, prevI)
     prev_sep = warm and prevF[F_SD] > 0.0
     # ---- stage 1 (paper Eq. 5): cold starts and pairs that were separated
     nev = 0
     it1 = 0
-    cls = S1_NONE
-    mode = MODE_WARM if warm else MODE_COLD
-    s1 = wf[S1_ROW:S1_ROW + S1_ROWS]
-    s1out = w4[W4_OUT]
     gl = 0.0
+    mode = MODE_WARM if warm else MODE_COLD
     if not warm or prev_sep:
-        if warm:
-            wi[0, 0] = pA0 + prevI[I_PA]
-            wi[1, 0] = pB0 + prevI[I_PB]
-            wfs[0, 0] = prevF[F_PAR]
-            wfs[0, 1] = prevF[F_PAR + 1]
-            wfs[1, 0] = prevF[F_PAR + 2]
-            wfs[1, 1] = prevF[F_PAR + 3]
-        else:
-            _seed_pair(RA, posA, RB, posB, d, infoA, infoB, maskA, maskB, seedsA, seedsB,
-                       wf, wi, wfs)
-        for r in range(2):
-            wi[r, 1] = 0
-            wi[r, 2] = 0
-            wi[r, 3] = 0
-        cls, it1, ne1 = stage1(tabA, posA, RA, tabB, posB, RB, scale, wi, wfs, np.int64(S1_MAX_IT),
-                               S1_DELTA0, ws, wf, w4, s1out)
-        nev += ne1
-        gl = s1out[O_GL]
-        fin = gl == gl and abs(gl) < np.inf
-        if fin and cls == S1_SEPARATED and gl > 0.0:
-            mode = MODE_S1
-        elif warm:
-            mode = MODE_WARM
-        elif fin and (cls == S1_INTERSECTING or (cls != S1_NONE and gl <= 1e-8 * scale)):
-            mode = MODE_NORMALS
-        else:
-            mode = MODE_COLD
-    # ---- stage 2 start (or the stage-1 certificate, module docstring)
-    if mode == MODE_NORMALS:
-        # Giraffe's recipe after an intersection: d = nA − nB at the intersection point
-        nA = wf[_TMP]
-        nB = wf[_DT]
-        okA = outward_normal(s1[S1_C], s1[S1_C + 1], s1[S1_PAW], cA, nA)
-        okB = outward_normal(s1[S1_C + 2], s1[S1_C + 3], s1[S1_PBW], cB, nB)
-        nd = 0.0
-        for c in range(3):
-            dt[c] = nA[c] - nB[c]
-            nd += dt[c] * dt[c]
-        nd = math.sqrt(nd)
-        if okA and okB and nd > 0.1:
-            for c in range(3):
-                d[c] = dt[c] / nd
-        else:
-            mode = MODE_COLD
-    if mode == MODE_S1:
-        # d along the stage-1 gap (from A towards B), supports from the stage-1 points
-        for c in range(3):
-            d[c] = -s1[S1_G, c] / gl
-        delta = 0.1
-    elif mode == MODE_WARM:
-        for c in range(3):
-            d[c] = prevF[F_N + c] / nn
-        if not prev_sep:
-            _predicted_direction(prevF, posA, RA, posB, RB, d, wf)
-        wi[0, 0] = pA0 + prevI[I_PA]
-        wi[1, 0] = pB0 + prevI[I_PB]
-        _rot_t(RA, d, 1.0, wf[_EA])
-        _rot_t(RB, d, -1.0, wf[_EB])
-        _predicted_params(prevF, 0, wf[_EA], wfs[0])
-        _predicted_params(prevF, 1, wf[_EB], wfs[1])
-        delta = 0.1
-    else:
-        if mode == MODE_COLD:
-            _unit_direction(cA, cB, d)        # the centres' direction again
-        eA = wf[_EA]
-        eB = wf[_EB]
-        _rot_t(RA, d, 1.0, eA)
-        _rot_t(RB, d, -1.0, eB)
-        ka = seed_start(seedsA[0], seedsA[1], seedsA[2], infoA[2], infoA[3], maskA, pA0, eA)
-        kb = seed_start(seedsB[0], seedsB[1], seedsB[2], infoB[2], infoB[3], maskB, pB0, eB)
-        wi[0, 0] = seedsA[1][ka]
-        wfs[0, 0] = seedsA[2][ka, 0]
-        wfs[0, 1] = seedsA[2][ka, 1]
-        wi[1, 0] = seedsB[1][kb]
-        wfs[1, 0] = seedsB[2][kb, 0]
-        wfs[1, 1] = seedsB[2][kb, 1]
-        delta = 0.5
-    for r in range(2):
-        wi[r, 1] = 0
-        wi[r, 2] = 0
-        wi[r, 3] = 0
-        wfs[r, 2] = 0.0
-    phi, ne2, ok = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, 0, ws, 0, 1)
+        mode, it1, nev, gl = _run_stage1(tabA, posA, RA, tabB, posB, RB, infoA, infoB, maskA,
+                                         maskB, seedsA, seedsB, prevF, prevI, warm, scale, d,
+                                         ws, wf, wi, wfs, w4)
+    # ---- stage 2 (paper Eq. 6-9), or the stage-1 certificate (module docstring)
+    mode, delta = _stage2_start(mode, gl, nn, prev_sep, prevF, prevI, posA, RA, posB, RB, cA,
+                                cB, infoA, infoB, maskA, maskB, seedsA, seedsB, d, wf, wi, wfs)
+    phi, it, ne2, gnorm, converged, delta, jump, phi_ref, it_ref = direction_search(
+        tabA, tabB, posA, RA, scA, posB, RB, scB, d, delta, tol_nc, ws, wf, wi, wfs)
     nev += ne2
-    converged = False
-    it = 0
-    gnorm = 0.0
-    # saddle stall (tol_nc > 0): last support jump at a vanishing step (its size, the trial's
-    # world support points) and the value phi has stayed within SADDLE_PHI_TOL × scale of
-    # since iteration it_ref
-    jump = -1.0
-    qa0 = qa1 = qa2 = qb0 = qb1 = qb2 = 0.0
-    phi_ref = np.inf
-    it_ref = 0
-    nadopt = 0
-    while it < MAX_OUTER_IT + SADDLE_EXTRA_IT * nadopt:
-        it += 1
-        if tol_nc > 0.0 and not abs(phi - phi_ref) <= SADDLE_PHI_TOL * scale:
-            phi_ref = phi
-            it_ref = it
-        _tangent_basis(d, t1, t2)
-        # gradient G = pA_w - pB_w (world); tangential components
-        g1 = 0.0
-        g2 = 0.0
-        for c in range(3):
-            # translation invariant, like phi (_eval_supports)
-            pa = RA[c, 0] * wf[_PA, 0] + RA[c, 1] * wf[_PA, 1] + RA[c, 2] * wf[_PA, 2]
-            pb = RB[c, 0] * wf[_PB, 0] + RB[c, 1] * wf[_PB, 1] + RB[c, 2] * wf[_PB, 2]
-            gc = (posA[c] - posB[c]) + (pa - pb)
-            g1 += t1[c] * gc
-            g2 += t2[c] * gc
-        gnorm = math.sqrt(g1 * g1 + g2 * g2)
-        if gnorm <= 1e-15 * scale:
-            converged = True
-            break
-        MA = wf[_MA:_MA + 3]
-        MB = wf[_MB:_MB + 3]
-        k11 = _quad_world(RA, MA, t1, t1) + _quad_world(RB, MB, t1, t1) - phi
-        k12 = _quad_world(RA, MA, t1, t2) + _quad_world(RB, MB, t1, t2)
-        k22 = _quad_world(RA, MA, t2, t2) + _quad_world(RB, MB, t2, t2) - phi
-        x1, x2, mval = tr_step2(k11, k12, k22, g1, g2, delta, wf[_TR:_TR + 3])
-        xn = math.sqrt(x1 * x1 + x2 * x2)
-        newton = xn < 0.99 * delta          # the step is the (positive definite) Newton step
-        if newton and xn <= ANGLE_TOL:
-            converged = True
-            break
-        if newton and xn <= TAYLOR_ANGLE:
-            _taylor_finish(wf, wfs, RA, RB, d, x1, x2)
-            phi += mval
-            converged = True
-            break
-        nd = 0.0
-        for c in range(3):
-            dt[c] = d[c] + x1 * t1[c] + x2 * t2[c]
-            nd += dt[c] * dt[c]
-        nd = math.sqrt(nd)
-        for c in range(3):
-            dt[c] /= nd
-        # trial states: same patches, predicted parameters
-        for c in range(4):
-            wi[2, c] = wi[0, c]
-            wi[3, c] = wi[1, c]
-        _predict(wf, wfs, 0, 0, 1, 2, 3, RA, RB, dt)
-        phin, ne, okn = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, dt, wf, wi, wfs,
-                                       _TRIAL, ws, 2, 3)
-        nev += ne
-        actual = phi - phin
-        pred = -mval
-        noise = 1e-15 * scale
-        if pred > noise:
-            rho = actual / pred
-        else:
-            rho = 1.0 if actual >= -4.0 * noise else -1.0
-        if rho > 0.1 and phin == phin:
-            _copy_trial(wf, wi, wfs)
-            for c in range(3):
-                d[c] = dt[c]
-            phi = phin
-            ok = okn
-            if rho > 0.75 and xn >= 0.9 * delta:
-                delta = min(2.0 * delta, 1.0)
-            if xn > SADDLE_STALL_ANGLE:
-                jump = -1.0
-        elif (tol_nc > 0.0 and xn <= SADDLE_STALL_ANGLE
-              and phin - phi > 2.0 * scale * xn + 4.0 * noise):
-            # the support jumped to a higher local maximum (docstring: saddle stall)
-            jump = phin - phi
-            if nadopt < SADDLE_MAX_MOVES:
-                # the current support point is not the maximum: go on from the higher one
-                nadopt += 1
-                _copy_trial(wf, wi, wfs)
-                for c in range(3):
-                    d[c] = dt[c]
-                phi = phin
-                ok = okn
-                delta = SADDLE_DELTA
-                jump = -1.0
-                phi_ref = np.inf
-                continue
-            pT = wf[_TRIAL + _PA]
-            qa0 = posA[0] + RA[0, 0] * pT[0] + RA[0, 1] * pT[1] + RA[0, 2] * pT[2]
-            qa1 = posA[1] + RA[1, 0] * pT[0] + RA[1, 1] * pT[1] + RA[1, 2] * pT[2]
-            qa2 = posA[2] + RA[2, 0] * pT[0] + RA[2, 1] * pT[1] + RA[2, 2] * pT[2]
-            pT = wf[_TRIAL + _PB]
-            qb0 = posB[0] + RB[0, 0] * pT[0] + RB[0, 1] * pT[1] + RB[0, 2] * pT[2]
-            qb1 = posB[1] + RB[1, 0] * pT[0] + RB[1, 1] * pT[1] + RB[1, 2] * pT[2]
-            qb2 = posB[2] + RB[2, 0] * pT[0] + RB[2, 1] * pT[1] + RB[2, 2] * pT[2]
-        if rho < 0.25:
-            delta = 0.25 * xn
-            if delta < 1e-14:
-                break
     # ---- result
-    for c in range(3):
-        resF[F_N + c] = d[c]
-    _to_world(posA, RA, wf[_PA], resF[F_PA:F_PA + 3])
-    _to_world(posB, RB, wf[_PB], resF[F_PB:F_PB + 3])
-    resF[F_SD] = -phi
-    resF[F_PAR] = wfs[0, 0]
-    resF[F_PAR + 1] = wfs[0, 1]
-    resF[F_PAR + 2] = wfs[1, 0]
-    resF[F_PAR + 3] = wfs[1, 1]
-    resF[F_GRAD] = gnorm
-    _rot_t(RA, d, 1.0, wf[_EA])
-    _rot_t(RB, d, -1.0, wf[_EB])
-    _store_prediction(resF, 0, wf[_EA], wf[_GA:_GA + 2])
-    _store_prediction(resF, 1, wf[_EB], wf[_GB:_GB + 2])
-    _store_model(resF, 0, wf[_PA], wf[_MA:_MA + 3])
-    _store_model(resF, 1, wf[_PB], wf[_MB:_MB + 3])
+    _write_solution(resF, d, phi, gnorm, posA, RA, posB, RB, wf, wfs)
     if (not converged and tol_nc > 0.0 and 0.0 <= jump <= tol_nc and delta <= SADDLE_STALL_ANGLE
             and abs(phi - phi_ref) <= SADDLE_PHI_TOL * scale and it - it_ref >= SADDLE_PHI_IT):
-        # saddle stall (docstring): the current support pair and the one it jumped to,
-        # differences ja, jb (world; scratch rows, free after the loop)
-        ja = wf[_EV2]
-        jb = wf[_EV2 + 1]
-        ja[0] = qa0 - resF[F_PA]
-        ja[1] = qa1 - resF[F_PA + 1]
-        ja[2] = qa2 - resF[F_PA + 2]
-        jb[0] = qb0 - resF[F_PB]
-        jb[1] = qb1 - resF[F_PB + 1]
-        jb[2] = qb2 - resF[F_PB + 2]
-        _tangent_basis(d, t1, t2)
-        r1 = r2 = s1_ = s2_ = 0.0      # tangential gap now, and its change to the other pair
-        for c in range(3):
-            r1 += t1[c] * (resF[F_PA + c] - resF[F_PB + c])
-            r2 += t2[c] * (resF[F_PA + c] - resF[F_PB + c])
-            s1_ += t1[c] * (ja[c] - jb[c])
-            s2_ += t2[c] * (ja[c] - jb[c])
-        if norm3(ja) + norm3(jb) >= math.sqrt(r1 * r1 + r2 * r2):
-            ss = s1_ * s1_ + s2_ * s2_
-            lam = 0.0
-            if ss > 0.0:
-                lam = min(max(-(r1 * s1_ + r2 * s2_) / ss, 0.0), 1.0)
-            phi = 0.0
-            for c in range(3):
-                resF[F_PA + c] += lam * ja[c]
-                resF[F_PB + c] += lam * jb[c]
-                phi += d[c] * (resF[F_PA + c] - resF[F_PB + c])
-            resF[F_SD] = -phi
-            r1 += lam * s1_
-            r2 += lam * s2_
-            resF[F_GRAD] = math.sqrt(r1 * r1 + r2 * r2)
-            converged = True
-    resI[I_PA] = wi[0, 0] - pA0
-    resI[I_PB] = wi[1, 0] - pB0
-    deg = 0
-    for r in range(2):
-        if wi[r, 1] == CREASE:
-            deg += 1
-        if wi[r, 2] == CREASE:
-            deg += 1
-    resI[I_DEG] = deg
-    resI[I_IT] = it + it1
-    resI[I_NEV] = nev
-    resF[F_IT1] = it1
-    stage = 2
-    if mode == MODE_S1 and converged and it <= S1_CERT_IT and phi < 0.0:
-        # certificate of the stage-1 minimum: the support points along ±n are the stage-1
-        # points and h_A(n) + h_B(-n) = -|g| (a separating slab of width |g|)
-        tol = S1_CERT_TOL * scale
-        dp = 0.0
-        for c in range(3):
-            dp = max(dp, abs(resF[F_PA + c] - s1[S1_PAW, c]), abs(resF[F_PB + c] - s1[S1_PBW, c]))
-        if abs(phi + gl) <= tol and dp <= 1e3 * tol:
-            stage = 1
-    resI[I_STAGE] = stage
-    finite = True
-    for k in range(14):
-        if not (resF[k] == resF[k]) or abs(resF[k]) == np.inf:
-            finite = False
-    if not finite:
-        if prevI[I_VALID] == 1:
-            for k in range(resF.shape[0]):
-                resF[k] = prevF[k]
-            for k in range(resI.shape[0]):
-                resI[k] = prevI[k]
-        else:
-            dist = math.sqrt((cB[0] - cA[0]) ** 2 + (cB[1] - cA[1]) ** 2 + (cB[2] - cA[2]) ** 2)
-            resF[F_SD] = dist - scA - scB
-            for k in range(1, 14):
-                resF[k] = 0.0
-            for c in range(3):
-                resF[F_N + c] = (cB[c] - cA[c]) / dist if dist > 0.0 else 0.0
-        resI[I_FAIL] = 1
-        resI[I_VALID] = 0
-        resI[I_ACTIVE] = 0
-        return
-    resI[I_FAIL] = 0 if converged else 1
-    resI[I_VALID] = 1
-    resI[I_ACTIVE] = 1 if phi > 0.0 else 0
+        converged, phi = _accept_saddle_stall(resF, d, phi, wf)
+    _write_counts(resF, resI, wi, infoA, infoB, it, it1, nev)
+    resI[I_STAGE] = _stage_of(mode, converged, it, phi, gl, scale, resF, wf)
+    _finish_flags(resF, resI, prevF, prevI, converged, phi, cA, cB, scA, scB)

@@ -33,14 +33,13 @@ from numba import njit, prange
 
 from ..geometry.kernel import make_workspace
 from ..jit import kernel
-from . import lcp
 from .analytic import parallelogram_coordinates
 from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, next_chunk,
                      table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
-                  I_PA, I_PB, I_VALID, NF, NI, _EA, _EV, _EV2, _GA, _MA, _PA, _TMP,
-                  full_rows, make_work, _predicted_params, _rot_t, _store_prediction,
-                  _to_world)
+                  I_PA, I_PB, I_VALID, NF, NI, full_rows, make_work, _predicted_params,
+                  _store_prediction)
+from .stage2 import _EA, _EV, _EV2, _GA, _H, _MA, _PA, _TMP, _rot_t, _to_world
 from .support import CREASE, seed_start, support_map
 
 
@@ -77,7 +76,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
         resI[I_PB] = -1
         return
     p0 = info[0]
-    d = wf[lcp._H]
+    d = wf[_H]
     d[0] = -n0
     d[1] = -n1
     d[2] = -n2
