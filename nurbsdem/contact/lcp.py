@@ -29,7 +29,7 @@ and fallback of stage 1.)
     (stage-1 fallback, ``I_STAGE`` = 2) — never an abort;
   - intersecting (or a weak minimum within 1e-8 × scale): stage 2 from d = nA − nB, the
     outward normals at the intersection point (Giraffe's recipe), supports from the samples;
-  - stage 1 not converged / saddle: stage 2 from the centroid direction (the former start).
+  - stage 1 not converged / saddle: stage 2 from the centroid direction.
 * warm start, previous result separated: stage 1 from the previous parameters (1–3 Newton
   steps), then as above; if it finds an intersection, stage 2 warm from the previous normal.
 * warm start, previous result penetrating: stage 2 from the previous normal and parameters
