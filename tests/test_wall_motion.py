@@ -226,7 +226,7 @@ def test_api_turn_with_displacement_reads_back_and_runs(tmp_path):
     assert step.rotate and list(step.displacement) == [0, 0.01, 0]
     np.testing.assert_allclose(sim.wall_displacements["floor"], [0, 0.01, 0], rtol=1e-12)
     solver = sim.solver
-    (Rw, tw), = solver._curved_poses(sim.time, solver.wall_offset)
+    (Rw, tw), = solver.curved.poses(sim.time, solver.wall_offset)
     turn = np.array([[np.cos(0.01), -np.sin(0.01), 0], [np.sin(0.01), np.cos(0.01), 0],
                      [0, 0, 1]])
     corner = np.array([-1.0, -1, 0])
