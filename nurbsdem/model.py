@@ -554,6 +554,8 @@ class Model:
         they are the walls after the flat ones (wall indices len(walls) ...).
     interfaces: contact interfaces in deck order (later ones override earlier ones).
     steps: solution steps in deck order.
+    inlets, outlets: :class:`~nurbsdem.flow_spec.InletSpec` and
+        :class:`~nurbsdem.flow_spec.OutletSpec` in deck order (block ``Flow``).
     output: :class:`Output`.
     bodies: the initial particle state (:class:`Bodies`), filled by
         :func:`nurbsdem.io.deck.parse_deck` (``place=True``).
@@ -570,6 +572,8 @@ class Model:
     curved_walls: list[CurvedWallSpec] = field(default_factory=list)
     interfaces: list[Interface] = field(default_factory=list)
     steps: list[Step] = field(default_factory=list)
+    inlets: list = field(default_factory=list)
+    outlets: list = field(default_factory=list)
     output: Output | None = None
     bodies: "Bodies | None" = None
 
@@ -620,8 +624,9 @@ class Model:
         return found
 
     def particle_materials(self) -> set[int]:
-        """Material ids used by particles."""
-        return {g.material_id for g in self.random_groups} | {p.material_id for p in self.particles}
+        """Material ids used by particles (those inlets create included)."""
+        return ({g.material_id for g in self.random_groups} | {p.material_id for p in self.particles}
+                | {i.material_id for i in self.inlets})
 
     # ------------------------------------------------------------------ summary
     def summary(self) -> str:

@@ -44,6 +44,7 @@ from .dynamics.monitor import MonitorSample, StateSample
 from .dynamics.system import SPLIT_PARTS, InstabilityError
 from .energy_ledger import EnergyLedger
 from .errors import InputError
+from .flow_run import FlowRun, exchange
 from .instant_steps import mechanical_energy, to_contact
 from .io.intervals import due
 from .io.writers import OutputWriters
@@ -106,6 +107,9 @@ class Solver:
         #: the domain decomposition of the current (or last) dynamic step on several ranks
         self.domain = None
         self.rank = int(self.comm.rank) if self.comm is not None else 0
+        #: the inlets and outlets (:mod:`nurbsdem.flow_run`)
+        self.flow = FlowRun(model)
+        self.flow.refuse_ranks(self.comm)
         if self.comm is not None:
             _share_cores(self.comm)
             quiet = quiet or self.rank > 0      # one progress line: rank 0's
@@ -280,9 +284,10 @@ class Solver:
             raise self.model.error(f"Step {step.id}: Duration {duration} is not a whole number "
                                    f"of TimeStep {dt}", step.line)
         step_t0 = self.time - self.step_progress * dt
-        self.system = self._build_system(dt, motions, step.damping == "implicit",
-                                         getattr(step, "accuracy", None),
-                                         getattr(step, "safety", None))
+        self._build = lambda: self._build_system(dt, motions, step.damping == "implicit",
+                                                 getattr(step, "accuracy", None),
+                                                 getattr(step, "safety", None))
+        self.system = self._build()
         scene_state = restored.get("scene") if restored else None
         if scene_state:
             self.scene.set_state(scene_state)
@@ -304,6 +309,7 @@ class Solver:
         self.progress.start(f"step {step.id} {step.kind}", duration)
         with self.sigint.time_loop():
             self._time_loop(writers, n_total, step_t0, dt)
+        sysm = self.system          # inlets and outlets may have built it anew
         self.progress.update(self.time - step_t0, dt, sysm.substeps, self.scene.last.active, force=True)
         self.progress.finish()
         self._sync_bodies_from_system()
@@ -313,17 +319,30 @@ class Solver:
         self._snapshot()
         self._close_system()
 
+    def rebuild(self) -> None:
+        """A new system of the present bodies for the running step (inlets and outlets
+        changed them), initialised."""
+        self.system = self._build()
+        t0 = time.perf_counter()
+        self.system.initialize()
+        self.system.load_compiled()
+        self.timers["setup"] += time.perf_counter() - t0
+
     def _time_loop(self, writers: OutputWriters, n_total: int, step_t0: float,
                    dt: float) -> None:
-        """The deck steps of a dynamic step, in compiled chunks up to the next checkpoint or
-        the step's end; output of each chunk written after it, a Ctrl-C obeyed between them
-        (a checkpoint of that moment first)."""
-        sysm = self.system
+        """The deck steps of a dynamic step, in compiled chunks up to the next checkpoint,
+        segment end (inlets and outlets) or the step's end; output of each chunk written
+        after it, a Ctrl-C obeyed between them (a checkpoint of that moment first)."""
         ck_every = self.model.output.checkpoint_every
+        flow = self.flow.active
         while self.step_progress < n_total:
+            sysm = self.system
             meter = ChunkMeter(self.scene, sysm)
-            n, monitors_due, states_due = steps_to_event(
-                sysm, self.model.output, n_total - self.step_progress, ck_every)
+            left = n_total - self.step_progress
+            if flow:
+                left = min(left, self.flow.steps_to_segment_end(self.step_progress, dt))
+            n, monitors_due, states_due = steps_to_event(sysm, self.model.output, left,
+                                                         ck_every)
             try:
                 done = sysm.steps(n, monitors_due, states_due)
             except InstabilityError:
@@ -335,6 +354,9 @@ class Solver:
             cs = self.scene.last
             tally = sysm.last_steps
             self._sample(writers, samples=tally.samples, states=tally.states)
+            if flow and self.step_progress < n_total and \
+                    self.step_progress % self.flow.segment_steps(dt) == 0:
+                exchange(self, writers)
             if self.step_progress < n_total and (due(self.time, ck_every, dt)
                                                  or self.sigint.requested):
                 self._sync_bodies_from_system()
