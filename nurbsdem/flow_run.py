@@ -208,7 +208,9 @@ def exchange(solver, writers) -> None:
         return
     model = solver.model
     brought = mechanical_energy(model, added) - mechanical_energy(model, bodies.take(~keep))
-    solver.summary.accuracy_repeats += solver.system.accuracy_repeats
+    sysm = solver.system
+    solver.summary.accuracy_repeats += sysm.accuracy_repeats
+    clock = (sysm.t0, sysm.step_count)
     solver._close_system()
     solver.ledger.book_external(brought)
     new_index = np.full(len(bodies), -1, np.int64)
@@ -220,6 +222,6 @@ def exchange(solver, writers) -> None:
                                       len(model.curved_walls))
     solver.bodies = Bodies.concatenate([survivors, added])
     solver.scene = None
-    solver.rebuild()
+    solver.rebuild(*clock)
     log.debug("t = %.6g s: %d particle(s) out, %d in: %d particles", t,
               int((~keep).sum()), len(added), n_new)
