@@ -95,6 +95,7 @@ def test_an_outlet_accounts_for_every_particle_and_the_energy_balance_stays_clos
     out = rows(tmp_path / "out" / "monitors" / "outlet_floor.csv")
     left = len(solver.bodies)
     assert 0 < out[-1]["count"] < len(start) and out[-1]["count"] + left == len(start)
+
     def mass(b):
         return sum(model.shapes[int(s)].mass(2500.0) for s in b.shape_id)
     assert out[-1]["mass"] + mass(solver.bodies) == pytest.approx(mass(start), rel=1e-12)
