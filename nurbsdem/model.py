@@ -719,6 +719,13 @@ def summary_text(model: Model) -> str:
         out.append(f"  {s.id}: t = {t:g} s: {desc}")
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")
+    for i in model.inlets:
+        out.append(f"Inlet {i.name}: {i.count} particles of shapes {list(i.shapes)} at "
+                   f"{i.rate:g} per s into the box {_vec(i.lo)} .. {_vec(i.hi)} m")
+    for o in model.outlets:
+        where = (f"in the box {_vec(o.lo)} .. {_vec(o.hi)} m" if o.normal is None else
+                 f"beyond the plane through {_vec(o.point)} m, normal {_vec(o.normal)}")
+        out.append(f"Outlet {o.name}: removes the particles {where}")
     o = model.output
     if o is not None:
         out.append(f"Output: {o.directory}; VTK every {o.vtk_every:g} s (resolution "
