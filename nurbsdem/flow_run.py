@@ -210,7 +210,7 @@ def exchange(solver, writers) -> None:
     brought = mechanical_energy(model, added) - mechanical_energy(model, bodies.take(~keep))
     sysm = solver.system
     solver.summary.accuracy_repeats += sysm.accuracy_repeats
-    clock = (sysm.t0, sysm.step_count)
+    clock = (sysm.t0, sysm.step_count, sysm._warned_heavy)
     solver._close_system()
     solver.ledger.book_external(brought)
     new_index = np.full(len(bodies), -1, np.int64)
