@@ -289,4 +289,4 @@ def test_deck_text_names_a_python_shape_object_by_its_geometry():
     line = [x for x in sim.deck_text.splitlines() if x.startswith("  Shape 1 ")][0]
     assert line.startswith('  Shape 1 File "<python object ellipsoid')
     assert "  # geometry sha256 " in line
-    assert sim.deck_text.endswith("Steps\nFlow\nOutput\n")
+    assert sim.deck_text.endswith("Steps\nOutput\n")

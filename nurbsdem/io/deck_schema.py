@@ -63,11 +63,6 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
         "NormalPenalty": F1, "TangentialPenalty": F1, "NormalDamping": F1,
         "TangentialDamping": F1, "Friction": F1, "Between": S1, "Materials": IN,
         "Model": S1, "Restitution": F1})},
-    "Steps": {"Step": EntrySpec(True, {
-        "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
-        "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
-        "Displacement": F3, "Damping": S1, "Accuracy": F1, "Safety": F1, "Rotate": FLAG,
-        "AngularVelocity": F3, "Center": F3})},
     "Flow": {
         "Inlet": EntrySpec(True, {"Name": S1, "Shapes": IN, "Fractions": FN, "Material": I1,
                                   "Box": F6, "Rate": F1, "Count": I1, "Velocity": F3,
@@ -75,6 +70,11 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
         "Outlet": EntrySpec(True, {"Name": S1, "Box": F6, "Point": F3, "Normal": F3,
                                    "Every": F1}),
     },
+    "Steps": {"Step": EntrySpec(True, {
+        "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
+        "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
+        "Displacement": F3, "Damping": S1, "Accuracy": F1, "Safety": F1, "Rotate": FLAG,
+        "AngularVelocity": F3, "Center": F3})},
     "Output": {
         "Directory": EntrySpec(False, head=S1),
         "VTK": EntrySpec(False, {"Every": F1, "Resolution": I1}),
