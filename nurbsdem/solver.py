@@ -24,8 +24,10 @@ time loop stops the run at the end of a deck time step, after a checkpoint of th
 (:class:`~nurbsdem.sigint.Interrupted`, a KeyboardInterrupt; ``nurbsdem solve`` exits with
 status 130).  The Solver composes these parts: :class:`~nurbsdem.system_assembly.SystemAssembly`
 (the system of a step), :class:`~nurbsdem.curved_wall_motion.CurvedWallMotion` (mesh and
-surface walls in time), :mod:`nurbsdem.instant_steps` (steps that take no time) and
-:mod:`nurbsdem.run_report` (progress line and summary).
+surface walls in time), :mod:`nurbsdem.instant_steps` (steps that take no time),
+:mod:`nurbsdem.flow_run` (inlets and outlets: a timed step in segments, the particle set
+changed and the system built anew between them) and :mod:`nurbsdem.run_report` (progress
+line and summary).
 """
 from __future__ import annotations
 
