@@ -78,13 +78,19 @@ class FlowRun:
 
     # ------------------------------------------------------------------ the exchange
     def _radii(self, shape_id: np.ndarray) -> np.ndarray:
-        r = {s: e.bounding_radius for s, e in self.model.shapes.items()}
-        return np.array([r[int(s)] for s in shape_id], float)
+        """Bounding radii (m) of bodies of the shapes ``shape_id`` (N,)."""
+        ids = np.array(sorted(self.model.shapes), np.int64)
+        r = np.array([self.model.shapes[int(s)].bounding_radius for s in ids], float)
+        return r[np.searchsorted(ids, shape_id)]
 
     def _masses(self, bodies: Bodies) -> np.ndarray:
+        """Masses (kg) of ``bodies``, by their shape and material."""
         m = self.model
-        return np.array([m.shapes[int(s)].mass(m.materials[int(k)].density)
-                         for s, k in zip(bodies.shape_id, bodies.material_id)], float)
+        kinds, which = np.unique(np.stack([bodies.shape_id, bodies.material_id], axis=1),
+                                 axis=0, return_inverse=True)
+        mass = np.array([m.shapes[int(s)].mass(m.materials[int(k)].density) for s, k in kinds],
+                        float)
+        return mass[np.ravel(which)] if len(bodies) else np.zeros(0)
 
     def remove(self, t: float, bodies: Bodies) -> np.ndarray:
         """Bool (N,): the bodies no outlet caught at time t (s) (each outlet counts its own)."""
