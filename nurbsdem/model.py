@@ -558,6 +558,8 @@ class Model:
         they are the walls after the flat ones (wall indices len(walls) ...).
     interfaces: contact interfaces in deck order (later ones override earlier ones).
     steps: solution steps in deck order.
+    inlets, outlets: :class:`~nurbsdem.flow_spec.InletSpec` and
+        :class:`~nurbsdem.flow_spec.OutletSpec` in deck order (block ``Flow``).
     output: :class:`Output`.
     bodies: the initial particle state (:class:`Bodies`), filled by
         :func:`nurbsdem.io.deck.parse_deck` (``place=True``).
@@ -574,6 +576,8 @@ class Model:
     curved_walls: list[CurvedWallSpec] = field(default_factory=list)
     interfaces: list[Interface] = field(default_factory=list)
     steps: list[Step] = field(default_factory=list)
+    inlets: list = field(default_factory=list)
+    outlets: list = field(default_factory=list)
     output: Output | None = None
     bodies: "Bodies | None" = None
 
@@ -624,8 +628,9 @@ class Model:
         return found
 
     def particle_materials(self) -> set[int]:
-        """Material ids used by particles."""
-        return {g.material_id for g in self.random_groups} | {p.material_id for p in self.particles}
+        """Material ids used by particles (those inlets create included)."""
+        return ({g.material_id for g in self.random_groups} | {p.material_id for p in self.particles}
+                | {i.material_id for i in self.inlets})
 
     # ------------------------------------------------------------------ summary
     def summary(self) -> str:
@@ -718,6 +723,13 @@ def summary_text(model: Model) -> str:
         out.append(f"  {s.id}: t = {t:g} s: {desc}")
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")
+    for i in model.inlets:
+        out.append(f"Inlet {i.name}: {i.count} particles of shapes {list(i.shapes)} at "
+                   f"{i.rate:g} per s into the box {_vec(i.lo)} .. {_vec(i.hi)} m")
+    for o in model.outlets:
+        where = (f"in the box {_vec(o.lo)} .. {_vec(o.hi)} m" if o.normal is None else
+                 f"beyond the plane through {_vec(o.point)} m, normal {_vec(o.normal)}")
+        out.append(f"Outlet {o.name}: removes the particles {where}")
     o = model.output
     if o is not None:
         out.append(f"Output: {o.directory}; VTK every {o.vtk_every:g} s (resolution "

@@ -35,7 +35,8 @@ class Range:
 #: Supported magnitudes by key (or ``Keyword`` for a setting's own values).
 RANGES: dict[str, Range] = {
     **{k: Range(0.0, 1e6, "m", _COORD) for k in ("Position", "Region", "Min", "Max", "Point",
-                                                  "Displacement", "Height", "Gap", "Center")},
+                                                  "Displacement", "Height", "Gap", "Center",
+                                                  "Box")},
     **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size")},
     **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
        for k in ("Normal", "Axis", "Direction")},
@@ -66,7 +67,12 @@ RANGES: dict[str, Range] = {
                     "0.01 a smaller TimeStep says the same"),
     "Duration": Range(0.0, 1e7, "s", "a simulated time of months is beyond a DEM run"),
     "TimeStep": Range(1e-15, 1e7, "s", "below a femtosecond nothing granular happens"),
-    "Every": Range(1e-12, 1e7, "s", "output intervals beyond this range are meaningless"),
+    "Every": Range(1e-12, 1e7, "s", "output, inflow and outflow intervals beyond this range "
+                   "are meaningless"),
+    "Rate": Range(1e-9, 1e9, "1/s", "a billion particles a second do not fit in memory; fewer "
+                  "than one in thirty years never enter a DEM run"),
+    "Count": Range(0, 10 ** 8, "", "more particles do not fit in memory"),
+    "Fractions": Range(0.0, 1.0, "", "a fraction of the particles an inlet creates"),
     "MaxAttempts": Range(1, 10 ** 7, "", "more attempts take hours without placing the particle"),
     "Seed": Range(0, 2 ** 63 - 1, "", "seeds are 64-bit integers"),
     "Resolution": Range(1, 10 ** 4, "", "finer tessellations than this do not fit in memory"),

@@ -33,6 +33,7 @@ def run_state(solver) -> dict:
         "motion": solver.motion_spec,
         # where Rotate steps left the mesh and surface walls: R (9,) then t (3,) each
         "curved_rest": solver.curved.rest_state(),
+        "flow": solver.flow.state() if solver.flow.active else {},
     }
 
 
@@ -85,3 +86,4 @@ def _restore(solver, st: dict) -> None:
     ch = st.get("carry_hist") or {}
     solver.carry_hist = (ch["keys"], ch["springs"]) if ch else None
     solver.curved.restore(st.get("curved_rest"))
+    solver.flow.restore(st.get("flow"))

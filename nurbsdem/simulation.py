@@ -47,11 +47,13 @@ import numpy as np
 
 from .api import checks, state
 from .api.checks import PYTHON_SCENE, optional_path, strip_location
+from .api.flow import add_inlet, add_outlet
 from .api.restart import check_restart_step, checkpoint_of_scene
 from .api.scene import SceneBuilder
 from .api.start import make_solver, start_solver
 from .api.steps import dynamic_step, move_wall_step, next_step_id, replicate_step
 from .errors import InputError
+from .flow_spec import DEFAULT_EVERY
 from .model import Bodies, Model, MoveWallStep, Output, ReplicateStep, ShapeEntry, Step
 
 
@@ -236,6 +238,30 @@ class Simulation:
         self._editable("add_surface_wall")
         return self._scene.add_curved_wall("surface", name, file, 1.0, position, rotation,
                                            material, False)
+
+    def add_inlet(self, shapes: Sequence[Any], material: int, box: Sequence[float],
+                  rate: float, count: int, fractions: Sequence[float] | None = None,
+                  velocity: Sequence[float] = (0.0, 0.0, 0.0), seed: int = 0,
+                  every: float = DEFAULT_EVERY, name: str | None = None) -> str:
+        """``Inlet`` (the deck's block ``Flow``): during every timed step, ``count`` particles
+        of ``shapes`` (Shape objects, shape files or shape ids; by number ``fractions``,
+        summing to 1) and ``material`` enter the box (x0, y0, z0, x1, y1, z1) (m) at ``rate``
+        particles/s with ``velocity`` (m/s), clear of the particles present, at the end of
+        each ``every`` s; ``seed`` of its own random stream. Returns the name."""
+        self._editable("add_inlet")
+        return add_inlet(self._scene, shapes, material, box, rate, count, fractions, velocity,
+                         seed, every, name)
+
+    def add_outlet(self, box: Sequence[float] | None = None,
+                   point: Sequence[float] | None = None,
+                   normal: Sequence[float] | None = None, every: float = DEFAULT_EVERY,
+                   name: str | None = None) -> str:
+        """``Outlet``: during every timed step, the particles whose centroid lies in ``box``
+        (x0, y0, z0, x1, y1, z1) (m), or beyond the plane through ``point`` on the side
+        ``normal`` points to, are removed at the end of each ``every`` s and counted
+        (``monitors/outlet_<name>.csv``). Returns the name."""
+        self._editable("add_outlet")
+        return add_outlet(self.model, box, point, normal, every, name)
 
     # ------------------------------------------------------------------ steps
     def run_dynamic(self, duration: float, time_step: float, damping: str = "explicit",

@@ -26,8 +26,10 @@ time loop stops the run at the end of a deck time step, after a checkpoint of th
 (:class:`~nurbsdem.sigint.Interrupted`, a KeyboardInterrupt; ``nurbsdem solve`` exits with
 status 130).  The Solver composes these parts: :class:`~nurbsdem.system_assembly.SystemAssembly`
 (the system of a step), :class:`~nurbsdem.curved_wall_motion.CurvedWallMotion` (mesh and
-surface walls in time), :mod:`nurbsdem.instant_steps` (steps that take no time) and
-:mod:`nurbsdem.run_report` (progress line and summary).
+surface walls in time), :mod:`nurbsdem.instant_steps` (steps that take no time),
+:mod:`nurbsdem.flow_run` (inlets and outlets: a timed step in segments, the particle set
+changed and the system built anew between them) and :mod:`nurbsdem.run_report` (progress
+line and summary).
 """
 from __future__ import annotations
 
@@ -46,6 +48,7 @@ from .dynamics.monitor import MonitorSample, StateSample
 from .dynamics.system import SPLIT_PARTS, InstabilityError
 from .energy_ledger import EnergyLedger
 from .errors import InputError
+from .flow_run import FlowRun, exchange
 from .instant_steps import mechanical_energy, to_contact
 from .io.intervals import due
 from .io.writers import OutputWriters
@@ -108,6 +111,9 @@ class Solver:
         #: the domain decomposition of the current (or last) dynamic step on several ranks
         self.domain = None
         self.rank = int(self.comm.rank) if self.comm is not None else 0
+        #: the inlets and outlets (:mod:`nurbsdem.flow_run`)
+        self.flow = FlowRun(model)
+        self.flow.refuse_ranks(self.comm)
         if self.comm is not None:
             _share_cores(self.comm)
             quiet = quiet or self.rank > 0      # one progress line: rank 0's
@@ -285,9 +291,10 @@ class Solver:
             raise self.model.error(f"Step {step.id}: Duration {duration} is not a whole number "
                                    f"of TimeStep {dt}", step.line)
         step_t0 = self.time - self.step_progress * dt
-        self.system = self._build_system(dt, motions, step.damping == "implicit",
-                                         getattr(step, "accuracy", None),
-                                         getattr(step, "safety", None))
+        self._build = lambda: self._build_system(dt, motions, step.damping == "implicit",
+                                                 getattr(step, "accuracy", None),
+                                                 getattr(step, "safety", None))
+        self.system = self._build()
         scene_state = restored.get("scene") if restored else None
         if scene_state:
             self.scene.set_state(scene_state)
@@ -309,6 +316,7 @@ class Solver:
         self.progress.start(f"step {step.id} {step.kind}", duration)
         with self.sigint.time_loop():
             self._time_loop(writers, n_total, step_t0, dt)
+        sysm = self.system          # inlets and outlets may have built it anew
         self.progress.update(self.time - step_t0, dt, sysm.substeps, self.scene.last.active, force=True)
         self.progress.finish()
         self._sync_bodies_from_system()
@@ -317,17 +325,34 @@ class Solver:
         self._snapshot()
         self._close_system()
 
+    def rebuild(self, t0: float, step_count: int, warned: bool) -> None:
+        """A new system of the present bodies for the running step (inlets and outlets
+        changed them), initialised; its clock goes on from the last one's (start ``t0`` s,
+        ``step_count`` deck steps done), so that times stay t0 + k·dt, and it warns of heavy
+        sub-stepping only if the last one did not (``warned``)."""
+        self.system = self._build()
+        self.system.t0, self.system.step_count = t0, step_count
+        self.system._warned_heavy = warned
+        t0 = time.perf_counter()
+        self.system.initialize()
+        self.system.load_compiled()
+        self.timers["setup"] += time.perf_counter() - t0
+
     def _time_loop(self, writers: OutputWriters, n_total: int, step_t0: float,
                    dt: float) -> None:
-        """The deck steps of a dynamic step, in compiled chunks up to the next checkpoint or
-        the step's end; output of each chunk written after it, a Ctrl-C obeyed between them
-        (a checkpoint of that moment first)."""
-        sysm = self.system
+        """The deck steps of a dynamic step, in compiled chunks up to the next checkpoint,
+        segment end (inlets and outlets) or the step's end; output of each chunk written
+        after it, a Ctrl-C obeyed between them (a checkpoint of that moment first)."""
         ck_every = self.model.output.checkpoint_every
+        flow = self.flow.active
         while self.step_progress < n_total:
+            sysm = self.system
             meter = ChunkMeter(self.scene, sysm)
-            n, monitors_due, states_due = steps_to_event(
-                sysm, self.model.output, n_total - self.step_progress, ck_every)
+            left = n_total - self.step_progress
+            if flow:
+                left = min(left, self.flow.steps_to_segment_end(self.step_progress, dt))
+            n, monitors_due, states_due = steps_to_event(sysm, self.model.output, left,
+                                                         ck_every)
             try:
                 done = sysm.steps(n, monitors_due, states_due)
             except InstabilityError:
@@ -339,6 +364,9 @@ class Solver:
             cs = self.scene.last
             tally = sysm.last_steps
             self._sample(writers, samples=tally.samples, states=tally.states)
+            if flow and self.step_progress < n_total and \
+                    self.step_progress % self.flow.segment_steps(dt) == 0:
+                exchange(self, writers)
             if self.step_progress < n_total and (due(self.time, ck_every, dt)
                                                  or self.sigint.requested):
                 self._sync_bodies_from_system()

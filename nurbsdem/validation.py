@@ -385,13 +385,14 @@ def max_particle_count(model: "Model") -> tuple[int, int | None]:
 
 
 def check_nothing_to_solve(model: "Model") -> None:
-    """A deck must define particles and at least one step."""
+    """A deck must define particles (or an inlet that creates them) and at least one step."""
     if not model.steps:
         raise model.error("the deck defines no solution steps (a Steps block with e.g. "
                           "'Step 1 Dynamic Duration T TimeStep DT'): nothing to solve", None)
-    if model.particle_count == 0:
+    if model.particle_count == 0 and not model.inlets:
         raise model.error("the deck defines no particles (a Particles block with Particle or "
-                          "Random entries): nothing to solve", None)
+                          "Random entries, or a Flow block with an Inlet): nothing to solve",
+                          None)
 
 
 def check_time_steps(model: "Model") -> None:

@@ -26,8 +26,9 @@ def make_solver(model: Model, *, restart: Path | None, quiet: bool, write_output
     from ..placement import explicit_bodies
     from ..solver import Solver
     from ..validation import check_model, validate_scene
-    if not model.particles:
-        raise InputError("no particles: add_particle(...) before running a step")
+    if not model.particles and not model.inlets:
+        raise InputError("no particles: add_particle(...) or add_inlet(...) before running a "
+                         "step")
     _check_interfaces(model)
     check_model(model)
     model.bodies = explicit_bodies(model)

@@ -17,6 +17,7 @@ from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep
                      ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 from ..ranges import ASPECT_MAX
 from .deck_curved import check_curved_walls, curved_entry, rotate_step
+from .deck_flow import check_inlet, check_outlet, inlet_spec, outlet_spec
 from .deck_schema import SCHEMA, Entry, LineError
 
 
@@ -377,6 +378,14 @@ class DeckBuilder:
                 setattr(out, attr, val)
         self.model.output = out
 
+    def flow(self, e: Entry) -> None:
+        """``Inlet`` or ``Outlet`` (:mod:`nurbsdem.io.deck_flow`)."""
+        inlet = e.keyword == "Inlet"
+        specs = self.model.inlets if inlet else self.model.outlets
+        self.unique({s.id: s for s in specs}, e, e.keyword.lower())
+        make = inlet_spec if inlet else outlet_spec
+        specs.append(make(e.id, e.values, e.line, lambda msg: self.fail(msg, e.line)))
+
     # -- cross references ------------------------------------------------------
     def check_references(self) -> None:
         m = self.model
@@ -403,6 +412,10 @@ class DeckBuilder:
                 known = f" (walls: {', '.join(names)})" if names else " (no walls defined)"
                 self.fail(f"Step {s.id}: no wall named {s.wall!r}{known}", s.line)
         check_curved_walls(self, m)
+        for inlet in m.inlets:
+            check_inlet(m, inlet, lambda msg: self.fail(msg, inlet.line))
+        for outlet in m.outlets:
+            check_outlet(m, outlet, lambda msg: self.fail(msg, outlet.line))
         self.check_interfaces()
 
     @staticmethod
@@ -435,6 +448,7 @@ class DeckBuilder:
         """Line of the first particle entry of that material."""
         lines = [g.line for g in self.model.random_groups if g.material_id == material]
         lines += [p.line for p in self.model.particles if p.material_id == material]
+        lines += [i.line for i in self.model.inlets if i.material_id == material]
         return min(lines)
 
 
@@ -450,11 +464,14 @@ _HANDLERS: dict[tuple[str, str], Callable[[DeckBuilder, Entry], None]] = {
     ("Walls", "Surface"): lambda b, e: curved_entry(b, e, "surface"),
     ("Contact", "Interface"): DeckBuilder.interface,
     ("Steps", "Step"): DeckBuilder.step,
+    ("Flow", "Inlet"): DeckBuilder.flow,
+    ("Flow", "Outlet"): DeckBuilder.flow,
 }
 
 
 #: the blocks in the order they are built: definitions before uses, whatever the deck's order
-BUILD_ORDER = ("Environment", "Materials", "Shapes", "Particles", "Walls", "Contact", "Steps")
+BUILD_ORDER = ("Environment", "Materials", "Shapes", "Particles", "Walls", "Contact", "Steps",
+               "Flow")
 
 
 def build_entries(entries: list[Entry], path: str, text: str) -> Model:

@@ -23,6 +23,7 @@ import numpy as np
 from ..model import (CurvedWallSpec, DynamicStep, Interface, Model, MoveWallStep, ReplicateStep,
                      ShapeEntry, Step, WallSpec)
 from .deck import split_tokens, strip_comment
+from .deck_flow import inlet_values, outlet_values
 from .deck_schema import SCHEMA, Arg, Entry
 
 #: keys whose value is a path: always quoted (a path may hold blanks)
@@ -356,6 +357,8 @@ def model_entries(model: Model, walls: list[Entry] | None = None,
     out += [curved_wall_entry(w) for w in model.curved_walls]
     out += [interface_entry(i) for i in model.interfaces]
     out += [step_entry(s) for s in model.steps]
+    out += [_entry("Flow", "Inlet", i.id, **inlet_values(i)) for i in model.inlets]
+    out += [_entry("Flow", "Outlet", o.id, **outlet_values(o)) for o in model.outlets]
     return out + output_entries(model)
 
 

@@ -71,6 +71,16 @@ ENTRIES: dict[tuple[str, str], str] = {
         "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`). A timed "
         "step is split "
         "into internal sub-steps below the contact network's stability limit."),
+    ("Flow", "Inlet"): (
+        "Particles created during every timed step in a box at a rate until a count: a mix "
+        "of shapes by number fractions, random orientations, a given velocity, never "
+        "overlapping the bounding spheres present (a full inlet waits). At the end of each "
+        "`Every` seconds the due particles enter and the system is built anew; "
+        "`monitors/inlet_<name>.csv` counts them."),
+    ("Flow", "Outlet"): (
+        "Particles removed at the end of each `Every` seconds of every timed step when "
+        "their centroid lies in a box or beyond a plane; `monitors/outlet_<name>.csv` "
+        "counts them and their mass."),
     ("Output", "Directory"): "The results folder, relative to the deck.",
     ("Output", "VTK"): "ParaView series of particles, walls and contact points.",
     ("Output", "Monitors"): "CSV monitors (`monitors/*.csv`): energies, contacts, wall loads.",
@@ -249,6 +259,38 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
     ("Steps", "Step", "Safety"): KeyDoc(
         "-", "0.5", "The sub-step as a fraction of the contact network's stability limit, "
         "0.01 to 0.95."),
+
+    ("Flow", "Inlet", "Name"): KeyDoc(
+        "", "inlet<ID>", "Names `monitors/inlet_<name>.csv` (the wall names' rule)."),
+    ("Flow", "Inlet", "Shapes"): KeyDoc("", "required", "Shape ids s1 s2 ... of the mix."),
+    ("Flow", "Inlet", "Fractions"): KeyDoc(
+        "-", "1 (one shape)", "f1 f2 ...: the number fraction of each shape in `Shapes`, "
+        ">= 0, summing to 1."),
+    ("Flow", "Inlet", "Material"): KeyDoc("", "required", "Material id of the new particles."),
+    ("Flow", "Inlet", "Box"): KeyDoc(
+        "m", "required", "x0 y0 z0 x1 y1 z1: the box the new particles lie wholly inside; "
+        "it may not reach behind a flat wall."),
+    ("Flow", "Inlet", "Rate"): KeyDoc("1/s", "required", "Particles per second."),
+    ("Flow", "Inlet", "Count"): KeyDoc("", "required", "How many particles in all, >= 1."),
+    ("Flow", "Inlet", "Velocity"): KeyDoc(
+        "m/s", "0 0 0", "Velocity of every new particle, world frame."),
+    ("Flow", "Inlet", "Seed"): KeyDoc(
+        "", "0", "Seed of the inlet's own random shapes, positions and orientations."),
+    ("Flow", "Inlet", "Every"): KeyDoc(
+        "s", "0.01", "Segment length: particles enter at the end of each; a timed step "
+        "takes the smallest `Every` of its inlets and outlets, rounded to whole TimeSteps."),
+    ("Flow", "Outlet", "Name"): KeyDoc(
+        "", "outlet<ID>", "Names `monitors/outlet_<name>.csv` (the wall names' rule)."),
+    ("Flow", "Outlet", "Box"): KeyDoc(
+        "m", "Point and Normal", "x0 y0 z0 x1 y1 z1: particles whose centroid is inside "
+        "leave."),
+    ("Flow", "Outlet", "Point"): KeyDoc(
+        "m", "Box", "A point of the outlet plane (with `Normal`)."),
+    ("Flow", "Outlet", "Normal"): KeyDoc(
+        "-", "Box", "Points out of the scene: particles whose centroid is beyond the plane "
+        "on this side leave."),
+    ("Flow", "Outlet", "Every"): KeyDoc(
+        "s", "0.01", "Segment length: particles leave at the end of each (as the Inlet's)."),
 
     ("Output", "Directory", HEAD): KeyDoc("", "results", "Folder of the result files."),
     ("Output", "VTK", "Every"): KeyDoc("s", "0.01", "Interval of the ParaView samples."),

@@ -22,7 +22,8 @@ class Arg:
     count: int | None = 1
 
 
-F1, F2, F3, F6 = Arg("float", 1), Arg("float", 2), Arg("float", 3), Arg("float", 6)
+F1, F2, F3, F6, FN = (Arg("float", 1), Arg("float", 2), Arg("float", 3), Arg("float", 6),
+                      Arg("float", None))
 I1, IN, S1, B1, FLAG = Arg("int", 1), Arg("int", None), Arg("str", 1), Arg("bool", 1), Arg("flag", 0)
 
 
@@ -62,6 +63,13 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
         "NormalPenalty": F1, "TangentialPenalty": F1, "NormalDamping": F1,
         "TangentialDamping": F1, "Friction": F1, "Between": S1, "Materials": IN,
         "Model": S1, "Restitution": F1})},
+    "Flow": {
+        "Inlet": EntrySpec(True, {"Name": S1, "Shapes": IN, "Fractions": FN, "Material": I1,
+                                  "Box": F6, "Rate": F1, "Count": I1, "Velocity": F3,
+                                  "Seed": I1, "Every": F1}),
+        "Outlet": EntrySpec(True, {"Name": S1, "Box": F6, "Point": F3, "Normal": F3,
+                                   "Every": F1}),
+    },
     "Steps": {"Step": EntrySpec(True, {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,

@@ -152,6 +152,8 @@ class MonitorWriter:
                                           restart_time)
                          for name in wall_names}
         self.hertz_csv: CsvMonitor | None = None       # made by the first hertz() row
+        #: ``inlet_<name>.csv`` and ``outlet_<name>.csv`` by file name, made by their first row
+        self.flow_csv: dict[str, CsvMonitor] = {}
         self._restart_time = restart_time
         self._reference: float | None = None
         if self.energy_csv.rows_at_start:
@@ -222,9 +224,18 @@ class MonitorWriter:
                                 np.asarray(torque, float).tolist()):
             csv.append_floats([t, *d, *r, *m])
 
+    def flow(self, name: str, columns: Sequence[str], row: Sequence[Any]) -> None:
+        """Append ``row`` to the inlet or outlet monitor ``name`` (its ``columns`` given with
+        its first row; :mod:`nurbsdem.flow_run`)."""
+        if name not in self.flow_csv:
+            self.flow_csv[name] = CsvMonitor(_file_in(self.dir, name), columns,
+                                             self._restart_time)
+        self.flow_csv[name].append(row)
+
     def _all(self) -> list[CsvMonitor]:
         return [self.energy_csv, self.contacts_csv, *self.wall_csv.values(),
-                *([self.hertz_csv] if self.hertz_csv is not None else [])]
+                *([self.hertz_csv] if self.hertz_csv is not None else []),
+                *self.flow_csv.values()]
 
     @contextmanager
     def batch(self):

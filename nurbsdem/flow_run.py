@@ -1,0 +1,233 @@
+"""Inlets and outlets in a run (:class:`FlowRun`): a timed step of a model with inlets or
+outlets runs in segments of ``Every`` seconds (the smallest of its inlets' and outlets',
+rounded to a whole number of the step's TimeStep, at least one); at the end of each segment
+inside the step (:func:`exchange`) the solver's bodies lose the particles in an outlet and
+gain the particles an inlet owes (placed clear of the bounding spheres present,
+:meth:`nurbsdem.dynamics.flow.Inlet.insert`), and the system is built anew for the new set.
+
+Between two systems the step engine is of fixed size: the tangential springs of the
+surviving contacts go to the new system under their keys renumbered for the new particle
+count (:func:`remap_history`); the kinetic and potential energy the new particles bring in,
+less that of the particles removed, is booked as external work, so that the energy balance
+of ``monitors/energy.csv`` stays closed.  Monitors: ``monitors/inlet_<name>.csv`` (time,
+inserted, mass, waiting) and ``monitors/outlet_<name>.csv`` (time, count, mass, mass_rate),
+one row per segment end; cumulative counts and masses (kg), mass rate in kg/s.  The state of
+the inlets (counts, random streams, waiting particles) and outlets is kept in checkpoints.
+Units: SI."""
+from __future__ import annotations
+
+import json
+import logging
+
+import numpy as np
+
+from .contact.curved_walls import MAX_PER_WALL
+from .dynamics.flow import InsertionRegion, Inlet, Outlet
+from .errors import InputError
+from .instant_steps import mechanical_energy
+from .model import Bodies, Model
+
+log = logging.getLogger("nurbsdem")
+
+INLET_COLUMNS = ("time", "inserted", "mass", "waiting")
+OUTLET_COLUMNS = ("time", "count", "mass", "mass_rate")
+
+
+class FlowRun:
+    """The inlets and outlets of ``model`` as the solver runs them (module docstring)."""
+
+    def __init__(self, model: Model) -> None:
+        self.model = model
+        self.inlets = [self._inlet(s) for s in model.inlets]
+        self.outlets = [Outlet(s.name, lo=s.lo, hi=s.hi, point=s.point, normal=s.normal)
+                        for s in model.outlets]
+        self.every = min((s.every for s in model.inlets + model.outlets), default=0.0)
+        #: the id the next inserted particle takes (None: one more than the largest present)
+        self.next_id: int | None = None
+        self._told_waiting: set[str] = set()
+
+    def _inlet(self, spec) -> Inlet:
+        rho = self.model.materials[spec.material_id].density
+        entries = [self.model.shapes[s] for s in spec.shapes]
+        return Inlet(InsertionRegion(lo=spec.lo, hi=spec.hi), np.array(spec.shapes, np.int64),
+                     np.array(spec.fractions, float),
+                     np.array([e.bounding_radius for e in entries], float),
+                     np.array([e.mass(rho) for e in entries], float), spec.rate,
+                     velocity=np.asarray(spec.velocity, float), count=spec.count,
+                     seed=spec.seed)
+
+    @property
+    def active(self) -> bool:
+        """Whether the model has inlets or outlets."""
+        return bool(self.inlets or self.outlets)
+
+    def refuse_ranks(self, comm) -> None:
+        """Inlets and outlets run on one rank only."""
+        if self.active and comm is not None and int(comm.size) > 1:
+            raise InputError("inlets and outlets (block Flow) run on one MPI rank only; run "
+                             "without mpiexec")
+
+    def segment_steps(self, dt: float) -> int:
+        """Deck time steps of ``dt`` s in one segment."""
+        return max(1, int(round(self.every / dt)))
+
+    def steps_to_segment_end(self, progress: int, dt: float) -> int:
+        """Deck time steps from ``progress`` (done in the step) to the end of its segment."""
+        seg = self.segment_steps(dt)
+        return seg - progress % seg
+
+    # ------------------------------------------------------------------ the exchange
+    def _radii(self, shape_id: np.ndarray) -> np.ndarray:
+        """Bounding radii (m) of bodies of the shapes ``shape_id`` (N,)."""
+        ids = np.array(sorted(self.model.shapes), np.int64)
+        r = np.array([self.model.shapes[int(s)].bounding_radius for s in ids], float)
+        return r[np.searchsorted(ids, shape_id)]
+
+    def _masses(self, bodies: Bodies) -> np.ndarray:
+        """Masses (kg) of ``bodies``, by their shape and material."""
+        m = self.model
+        kinds, which = np.unique(np.stack([bodies.shape_id, bodies.material_id], axis=1),
+                                 axis=0, return_inverse=True)
+        mass = np.array([m.shapes[int(s)].mass(m.materials[int(k)].density) for s, k in kinds],
+                        float)
+        return mass[np.ravel(which)] if len(bodies) else np.zeros(0)
+
+    def remove(self, t: float, bodies: Bodies) -> np.ndarray:
+        """Bool (N,): the bodies no outlet caught at time t (s) (each outlet counts its own)."""
+        keep = np.ones(len(bodies), bool)
+        masses = self._masses(bodies)
+        for outlet in self.outlets:
+            idx = np.flatnonzero(keep)
+            gone = outlet.remove(t, bodies.position[idx], masses[idx])
+            keep[idx[gone]] = False
+        return keep
+
+    def insert(self, t: float, bodies: Bodies) -> Bodies:
+        """The particles the inlets owe at time t (s), clear of ``bodies`` and of each other."""
+        centers, radii = bodies.position, self._radii(bodies.shape_id)
+        if self.next_id is None:
+            self.next_id = int(bodies.id.max()) + 1 if len(bodies) else 1
+        added = []
+        for spec, inlet in zip(self.model.inlets, self.inlets):
+            new = inlet.insert(t, centers, radii)
+            k = len(new.shapes)
+            if inlet.waiting and spec.name not in self._told_waiting:
+                self._told_waiting.add(spec.name)
+                log.warning("inlet %s: no room for %d particle(s) at t = %.6g s; they wait",
+                            spec.name, inlet.waiting, t)
+            if k == 0:
+                continue
+            ids = np.arange(self.next_id, self.next_id + k, dtype=np.int64)
+            self.next_id += k
+            added.append(Bodies(ids, new.shapes, np.full(k, spec.material_id),
+                                new.positions, new.quaternions, new.velocities,
+                                np.zeros((k, 3)), np.full(k, spec.line or 0)))
+            centers = np.concatenate([centers, new.positions])
+            radii = np.concatenate([radii, inlet.radii[np.searchsorted(inlet.shapes,
+                                                                        new.shapes)]])
+        return Bodies.concatenate(added)
+
+    def rows(self, t: float) -> list[tuple[str, tuple, list]]:
+        """The monitor rows of time t (s): (file name, columns, values) per inlet and outlet."""
+        out = [(f"inlet_{s.name}.csv", INLET_COLUMNS,
+                [t, inlet.inserted, inlet.inserted_mass, inlet.waiting])
+               for s, inlet in zip(self.model.inlets, self.inlets)]
+        out += [(f"outlet_{o.name}.csv", OUTLET_COLUMNS, list(o.rows[-1]))
+                for o in self.outlets if o.rows]
+        return out
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> dict:
+        """What a checkpoint keeps of the inlets and outlets."""
+        return {
+            "next_id": -1 if self.next_id is None else int(self.next_id),
+            "inlets": [{"inserted": int(i.inserted), "inserted_mass": float(i.inserted_mass),
+                        "waiting": int(i.waiting), "queue": np.asarray(i._queue, np.int64),
+                        "rng": json.dumps(i._rng.bit_generator.state)} for i in self.inlets],
+            "outlets": [{"count": int(o.count), "mass": float(o.mass),
+                         "rows": np.array(o.rows, float).reshape(-1, 4)} for o in self.outlets],
+            "told": sorted(self._told_waiting),
+        }
+
+    def restore(self, st: dict | None) -> None:
+        """Set the state a checkpoint kept (:meth:`state`; None or empty: nothing)."""
+        if not st:
+            return
+        self.next_id = None if int(st["next_id"]) < 0 else int(st["next_id"])
+        for inlet, s in zip(self.inlets, st["inlets"]):
+            inlet.inserted, inlet.inserted_mass = int(s["inserted"]), float(s["inserted_mass"])
+            inlet.waiting = int(s["waiting"])
+            inlet._queue = np.asarray(s["queue"], np.int64)
+            inlet._rng.bit_generator.state = json.loads(s["rng"])
+        for outlet, s in zip(self.outlets, st["outlets"]):
+            outlet.count, outlet.mass = int(s["count"]), float(s["mass"])
+            outlet.rows = [(float(r[0]), int(r[1]), float(r[2]), float(r[3]))
+                           for r in np.asarray(s["rows"], float).reshape(-1, 4)]
+        self._told_waiting = set(st.get("told", []))
+
+
+def remap_history(keys: np.ndarray, springs: np.ndarray, new_index: np.ndarray,
+                  n_new: int, n_walls: int, n_curved: int) -> tuple[np.ndarray, np.ndarray]:
+    """The tangential springs (keys (H,), springs (H,3)) of a system of N = len(new_index)
+    particles and ``n_walls`` walls (the last ``n_curved`` of them mesh or surface walls)
+    under the keys of a system of ``n_new`` particles and the same walls: particle i becomes
+    ``new_index[i]`` (-1: removed, its springs dropped).  Pair keys are a·(N+W) + b (b >= N:
+    wall b − N); mesh and surface wall keys lie above (N+W)² (:mod:`nurbsdem.contact.curved_walls`).
+    Returned sorted by key, as the systems keep them."""
+    keys = np.asarray(keys, np.int64)
+    springs = np.asarray(springs, float).reshape(-1, 3)
+    n_old = len(new_index)
+    nb_old, nb_new = n_old + n_walls, n_new + n_walls
+    pair = keys < nb_old * nb_old
+    out = np.full(len(keys), -1, np.int64)
+    a, b = keys[pair] // nb_old, keys[pair] % nb_old
+    a2 = new_index[a]
+    b2 = np.where(b < n_old, new_index[np.minimum(b, n_old - 1)], b - n_old + n_new)
+    ok = (a2 >= 0) & (b2 >= 0)
+    out[np.flatnonzero(pair)[ok]] = a2[ok] * nb_new + b2[ok]
+    if n_curved and np.any(~pair):
+        off = keys[~pair] - nb_old * nb_old
+        rank, rest = off % MAX_PER_WALL, off // MAX_PER_WALL
+        wall, owner = rest % n_curved, rest // n_curved
+        o2 = new_index[owner]
+        ok = o2 >= 0
+        out[np.flatnonzero(~pair)[ok]] = (nb_new * nb_new + (o2[ok] * n_curved + wall[ok])
+                                          * MAX_PER_WALL + rank[ok])
+    kept = out >= 0
+    order = np.argsort(out[kept], kind="stable")
+    return out[kept][order], springs[kept][order]
+
+
+def exchange(solver, writers) -> None:
+    """The end of a segment: bodies out through the outlets and in through the inlets, their
+    energies booked, the monitor rows written, and the system built anew when the set
+    changed (:attr:`solver.rebuild <nurbsdem.solver.Solver.rebuild>`)."""
+    flow, t = solver.flow, solver.time
+    solver._sync_bodies_from_system()
+    bodies = solver.bodies
+    keep = flow.remove(t, bodies)
+    survivors = bodies.take(keep)
+    added = flow.insert(t, survivors)
+    for name, columns, row in flow.rows(t):
+        writers.monitors.flow(name, columns, row)
+    if keep.all() and len(added) == 0:
+        return
+    model = solver.model
+    brought = mechanical_energy(model, added) - mechanical_energy(model, bodies.take(~keep))
+    sysm = solver.system
+    solver.summary.accuracy_repeats += sysm.accuracy_repeats
+    clock = (sysm.t0, sysm.step_count, sysm._warned_heavy)
+    solver._close_system()
+    solver.ledger.book_external(brought)
+    new_index = np.full(len(bodies), -1, np.int64)
+    new_index[keep] = np.arange(int(keep.sum()))
+    n_new = len(survivors) + len(added)
+    keys, springs = solver.carry_hist
+    solver.carry_hist = remap_history(keys, springs, new_index, n_new,
+                                      len(model.walls) + len(model.curved_walls),
+                                      len(model.curved_walls))
+    solver.bodies = Bodies.concatenate([survivors, added])
+    solver.scene = None
+    solver.rebuild(*clock)
+    log.debug("t = %.6g s: %d particle(s) out, %d in: %d particles", t,
+              int((~keep).sum()), len(added), n_new)
