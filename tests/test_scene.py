@@ -10,7 +10,7 @@ from nurbsdem.shapes import box_walls, ellipsoid, sphere
 
 def kinematics(x, R, shapes, body_shape, W):
     pos = np.array([x[i] - R[i] @ shapes[body_shape[i]].centroid for i in range(len(x))])
-    return SimpleNamespace(x=np.asarray(x, float), R=np.asarray(R, float), position=pos,
+    return SimpleNamespace(x=np.asarray(x, float), R=np.asarray(R, float), pose_origin=pos,
                            wall_displacement=np.zeros((W, 3)))
 
 

@@ -295,7 +295,7 @@ def failing(monkeypatch, when):
 def two_spheres_kin(gap_x, r=0.02):
     from types import SimpleNamespace
     x = np.array([[0.1, 0.1, 0.1], [0.1 + 2 * r + gap_x, 0.1, 0.1]])
-    return SimpleNamespace(x=x, R=np.repeat(np.eye(3)[None], 2, 0), position=x.copy(),
+    return SimpleNamespace(x=x, R=np.repeat(np.eye(3)[None], 2, 0), pose_origin=x.copy(),
                            wall_displacement=np.zeros((0, 3)))
 
 
