@@ -196,6 +196,7 @@ def test_implicit_damping_with_accuracy_on_several_ranks(implicit_run, tmp_path,
 
 
 @needs_mpi
+@pytest.mark.slow      # 3 ranks on the 2 cores CI has: the 2-rank tests cover the default suite
 def test_three_ranks_through_the_python_api(serial, tmp_path):
     """The Python API under mpiexec (Simulation -> Solver picks up the MPI world), on a
     number of ranks that is not a power of two."""
@@ -204,7 +205,7 @@ def test_three_ranks_through_the_python_api(serial, tmp_path):
 
 
 @needs_mpi
-@pytest.mark.parametrize("before, after", [(2, 1), (1, 2)])
+@pytest.mark.parametrize("before, after", [(2, 1), pytest.param(1, 2, marks=pytest.mark.slow)])
 def test_a_checkpoint_written_on_p_ranks_restarts_on_q(serial, tmp_path, before, after):
     """Killed after the replication (a checkpoint at 0.3 s) on ``before`` ranks, restarted
     from its checkpoint on ``after`` ranks: the serial run's results."""

@@ -24,6 +24,11 @@ SECTIONS = ("## Headline numbers", "## 1. Contact accuracy against cost",
 FIGURES = ("lcp_accuracy.png", "facets.png", "timestep.png", "scaling.png")
 
 
+#: the quick report runs the benchmarks' short versions (about 2.5 min on 2 cores): with the
+#: long runs (``pytest -m slow``), not in the default suite
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     if not SCRIPT.is_file():
