@@ -145,9 +145,9 @@ def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, h
     solved implicitly first; their solves, active-set rounds, CG iterations and cycles are
     added to ``solves`` (4,) int64; ``dashpot`` (K,) N gives them instead (solved over the
     whole network by the MPI ranks together: :meth:`~nurbsdem.parallel.domain.Domain.
-    implicit_dashpots`; empty: solved here).  Returns (force, torque (B,3), point, f_total, f_damp_n,
-    f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip work J,
-    the stored springs' keys and springs, whether a key repeats)."""
+    implicit_dashpots`; empty: solved here).  Returns (force, torque (B,3), point, f_total,
+    f_damp_n, f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip
+    work J, the stored springs' keys and springs, whether a key repeats)."""
     spring = match_history(hist_keys, hist_springs, key)
     given = implicit and h > 0.0 and a.shape[0] > 0
     if given and dashpot.shape[0] != a.shape[0]:
