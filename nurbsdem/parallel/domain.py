@@ -61,7 +61,6 @@ import numpy as np
 from ..contact.contactset import ContactSet
 from ..dynamics.energy import EnergyLedger
 from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, match_history, wall_loads
-from ..dynamics.implicit import dashpots_of_evaluation
 from ..dynamics.rigid import omega_world
 from ..dynamics.step import all_kinematics, book_kick
 from ..geometry.rotation import quats_to_matrices
@@ -335,7 +334,8 @@ class Domain:
         as the serial run solves it (collective, every internal step with ``Damping
         Implicit``): the counted contacts of all ranks merged in key order (the serial order)
         and every particle's state from its owner, then the serial kernel
-        (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`) on every rank, each
+        (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`, or its copy for laws
+        registered at run time: ``DemSystem._kernels``) on every rank, each
         taking its contacts' forces by key.  The solve's figures are added to ``solves``
         (solves, active-set rounds, CG iterations) as the serial run counts them."""
         s = self.system
@@ -354,7 +354,7 @@ class Domain:
         omega = omega_world(q, L, s._inv_I)
         pos, vel, omg = all_kinematics(x, v, omega, s.wall_d, s.wall_u)
         bc = s._bc
-        f, rounds, iterations = dashpots_of_evaluation(
+        f, rounds, iterations = s._kernels.dashpots_of_evaluation(   # laws added at run time too
             net["a"], net["b"], net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
             net["n"].reshape(-1, 3), net["d"], pos, vel, omg, bc.material, bc.table,
             net["s"].reshape(-1, 3), h, bc.inv_mass_all, net["r"], bc.mass, bc.gravity, q, L,
