@@ -21,7 +21,7 @@ import logging
 
 import numpy as np
 
-from .contact.curved_walls import MAX_PER_WALL
+from .contact.curved_walls import split_wall_contact_key, wall_contact_key
 from .dynamics.flow import InsertionRegion, Inlet, Outlet
 from .errors import InputError
 from .instant_steps import mechanical_energy
@@ -172,7 +172,8 @@ def remap_history(keys: np.ndarray, springs: np.ndarray, new_index: np.ndarray,
     particles and ``n_walls`` walls (the last ``n_curved`` of them mesh or surface walls)
     under the keys of a system of ``n_new`` particles and the same walls: particle i becomes
     ``new_index[i]`` (-1: removed, its springs dropped).  Pair keys are a·(N+W) + b (b >= N:
-    wall b − N); mesh and surface wall keys lie above (N+W)² (:mod:`nurbsdem.contact.curved_walls`).
+    wall b − N); mesh and surface wall keys lie above (N+W)²
+    (:func:`~nurbsdem.contact.curved_walls.wall_contact_key`).
     Returned sorted by key, as the systems keep them."""
     keys = np.asarray(keys, np.int64)
     springs = np.asarray(springs, float).reshape(-1, 3)
@@ -186,13 +187,11 @@ def remap_history(keys: np.ndarray, springs: np.ndarray, new_index: np.ndarray,
     ok = (a2 >= 0) & (b2 >= 0)
     out[np.flatnonzero(pair)[ok]] = a2[ok] * nb_new + b2[ok]
     if n_curved and np.any(~pair):
-        off = keys[~pair] - nb_old * nb_old
-        rank, rest = off % MAX_PER_WALL, off // MAX_PER_WALL
-        wall, owner = rest % n_curved, rest // n_curved
+        owner, wall, rank = split_wall_contact_key(keys[~pair], nb_old, n_curved)
         o2 = new_index[owner]
         ok = o2 >= 0
-        out[np.flatnonzero(~pair)[ok]] = (nb_new * nb_new + (o2[ok] * n_curved + wall[ok])
-                                          * MAX_PER_WALL + rank[ok])
+        out[np.flatnonzero(~pair)[ok]] = wall_contact_key(nb_new, o2[ok], wall[ok], n_curved,
+                                                          rank[ok])
     kept = out >= 0
     order = np.argsort(out[kept], kind="stable")
     return out[kept][order], springs[kept][order]

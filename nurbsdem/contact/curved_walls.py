@@ -42,6 +42,19 @@ from .surface_wall import SurfaceWall, sphere_surface_row
 MAX_PER_WALL = 8
 
 
+def wall_contact_key(nb: int, owner, wall, n_walls: int, rank):
+    """The key of the ``rank``-th contact of particle ``owner`` with curved wall ``wall`` (of
+    ``n_walls``) in a system of ``nb`` bodies: above ``nb²``, clear of the pair keys."""
+    return nb * nb + ((owner * n_walls + wall) * MAX_PER_WALL + rank)
+
+
+def split_wall_contact_key(key, nb: int, n_walls: int):
+    """(owner, wall, rank) of keys made by :func:`wall_contact_key`."""
+    off = key - nb * nb
+    rest = off // MAX_PER_WALL
+    return rest // n_walls, rest % n_walls, off % MAX_PER_WALL
+
+
 @dataclass(frozen=True)
 class WallPose:
     """A wall's pose in time: at rest (``omega`` = 0) or turning at the constant angular
@@ -200,7 +213,7 @@ class CurvedWallContacts:
             if len(owner) == 0:
                 continue
             body = N + self.first_wall + w_i
-            key = nb * nb + ((owner * len(self.walls) + w_i) * MAX_PER_WALL + rank)
+            key = wall_contact_key(nb, owner, w_i, len(self.walls), rank)
             parts.append((owner, np.full(len(owner), body, np.int64), rf, key))
         if not parts:
             return cs
