@@ -30,13 +30,33 @@ def test_a_nan_vertex_in_a_ply_is_refused(tmp_path):
         read_wall_mesh(path, where="deck.inp:4")
 
 
-def test_a_degenerate_triangle_is_refused(tmp_path):
-    mesh = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 1, 3]],
-                           process=False)
-    path = tmp_path / "flat.stl"
+def test_degenerate_triangles_are_dropped_with_their_count(tmp_path):
+    """A zero-area triangle adds no surface: dropped, the warning gives how many; its vertex
+    that no other triangle uses goes with it. A file of such triangles only is refused."""
+    mesh = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [3, 0, 0]],
+                           [[0, 1, 2], [0, 1, 3], [1, 2, 4]], process=False)
+    path = tmp_path / "flat.ply"
     mesh.export(path)
-    with pytest.raises(InputError, match="triangle 0 is degenerate"):
-        read_wall_mesh(path)
+    got = read_wall_mesh(path)
+    assert got.faces.shape == (1, 3) and got.vertices.shape == (3, 3)
+    assert got.warnings == ["flat.ply: 2 degenerate triangles (zero area, their vertices on a "
+                            "line) dropped"]
+    line = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], process=False)
+    line.export(tmp_path / "line.ply")
+    with pytest.raises(InputError, match=r"deck.inp:3: line.ply: all its 1 triangles are "
+                                         r"degenerate"):
+        read_wall_mesh(tmp_path / "line.ply", where="deck.inp:3")
+
+
+def test_duplicate_vertices_are_merged_without_a_warning(tmp_path):
+    """An OBJ whose two triangles each repeat the shared vertices: one square of 4 vertices,
+    its diagonal shared, no warning."""
+    path = tmp_path / "square.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 0 0\nv 1 1 0\nv 0 1 0\n"
+                    "f 1 2 3\nf 4 5 6\n")
+    got = read_wall_mesh(path)
+    assert got.vertices.shape == (4, 3) and got.warnings == []
+    assert len(set(map(int, got.faces[0])) & set(map(int, got.faces[1]))) == 2
 
 
 def test_non_manifold_and_duplicate_triangles_warn(tmp_path):
@@ -47,6 +67,21 @@ def test_non_manifold_and_duplicate_triangles_warn(tmp_path):
     got = read_wall_mesh(path)
     text = " ".join(got.warnings)
     assert "shared by more than two triangles" in text and "duplicate triangles" in text
+    with pytest.raises(InputError, match=r"deck.inp:9: fan.ply: 1 edges are shared by more "
+                                         r"than two triangles .*one-sided wall needs a front"):
+        read_wall_mesh(path, where="deck.inp:9", one_sided=True)
+
+
+def test_a_one_sided_mesh_whose_fronts_disagree_is_warned_of(tmp_path):
+    """Two triangles of a square whose vertex orders make their fronts face opposite ways:
+    a warning for a one-sided wall (part of it faces away), none for a two-sided shell."""
+    mesh = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+                           [[0, 1, 2], [0, 3, 2]], process=False)
+    path = tmp_path / "flipped.ply"
+    mesh.export(path)
+    assert read_wall_mesh(path).warnings == []
+    (text,) = read_wall_mesh(path, one_sided=True).warnings
+    assert text.startswith("flipped.ply: 1 edges join triangles whose fronts")
 
 
 @pytest.mark.parametrize("make, match", [

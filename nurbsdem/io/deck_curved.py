@@ -44,9 +44,11 @@ def surface_patches(spec: CurvedWallSpec, where: str) -> list:
 
 
 def mesh_triangles(spec: CurvedWallSpec, where: str):
-    """The placed :class:`~nurbsdem.io.meshfile.WallMesh` of a ``Mesh`` wall."""
+    """The placed :class:`~nurbsdem.io.meshfile.WallMesh` of a ``Mesh`` wall (one-sided as the
+    wall is: a non-manifold edge is an error then)."""
     from .meshfile import read_wall_mesh
-    return read_wall_mesh(spec.path, spec.scale, spec.position, spec.rotation, where=where)
+    return read_wall_mesh(spec.path, spec.scale, spec.position, spec.rotation, where=where,
+                          one_sided=spec.one_sided)
 
 
 def curved_wall_geometry(spec: CurvedWallSpec, where: str):

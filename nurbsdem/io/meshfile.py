@@ -7,10 +7,15 @@ the checks that a contact search needs:
 * the file exists, is a file, and trimesh reads one or more triangles from it;
 * every vertex is finite (trimesh drops a NaN vertex from a PLY silently: the raw file is
   checked here first);
-* no triangle is degenerate (its three vertices on a line: it has no normal);
-* an edge shared by more than two triangles (a non-manifold fold) and a mesh with
-  duplicate triangles are reported as warnings: each triangle still acts, but the file is
-  usually not what its author meant.
+* duplicate vertices are merged without a word (an STL repeats each vertex in every triangle
+  that has it; merged, neighbouring triangles share their edges);
+* degenerate triangles (area below 1e-12 of the squared bounding-box diagonal: their vertices
+  on a line, no normal) are dropped with a warning giving their count: they add no surface;
+* an edge shared by more than two triangles (a non-manifold fold) is an error for a one-sided
+  wall (``one_sided``: which side of the fold is the front is undefined there) and a warning
+  for a two-sided shell, where each triangle still acts; duplicate triangles are a warning,
+  and so, for a one-sided wall, are neighbouring triangles whose vertex orders make their
+  fronts face opposite ways.
 
 trimesh is the library here because it reads the three formats (binary and ASCII STL,
 OBJ with groups, PLY) robustly and is already a dependency (``nurbsdem fit``); its
@@ -67,27 +72,50 @@ def _load(path: Path, where: str):
     return obj
 
 
-def _topology_warnings(faces: np.ndarray, name: str) -> list[str]:
-    """Non-manifold edges and duplicate triangles, one line each."""
+def edge_use(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(edges (E,2) with the lower vertex first, how many triangles have each edge (E,),
+    how many of them run along it from the lower vertex to the higher (E,)) of triangles
+    ``faces`` (T,3): a closed, consistently oriented surface has every count 2 and every
+    forward count 1."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    forward = directed[:, 0] < directed[:, 1]
+    edges, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                                       return_counts=True)
+    return edges, counts, np.bincount(inverse.ravel(), weights=forward, minlength=len(edges))
+
+
+def _topology_warnings(faces: np.ndarray, name: str, one_sided: bool, where: str) -> list[str]:
+    """Non-manifold edges (an InputError for a one-sided wall), duplicate triangles and, for a
+    one-sided wall, neighbours whose fronts face opposite ways: one line each."""
     warnings = []
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                    axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    if np.any(counts > 2):
-        warnings.append(f"{name}: {int(np.sum(counts > 2))} edges are shared by more than two "
-                        f"triangles (a non-manifold fold); every triangle still acts")
+    _, counts, forward = edge_use(faces)
+    folds = int(np.sum(counts > 2))
+    if folds and one_sided:
+        raise InputError(f"{where}: {name}: {folds} edges are shared by more than two "
+                         f"triangles (a non-manifold fold): a one-sided wall needs a front side, "
+                         f"which such a fold does not have; repair the file or make the wall "
+                         f"two-sided (OneSided no)")
+    if folds:
+        warnings.append(f"{name}: {folds} edges are shared by more than two triangles (a "
+                        f"non-manifold fold); every triangle still acts")
     _, tri_counts = np.unique(np.sort(faces, axis=1), axis=0, return_counts=True)
     if np.any(tri_counts > 1):
         warnings.append(f"{name}: {int(np.sum(tri_counts - 1))} duplicate triangles; each "
                         f"acts once")
+    flipped = int(np.sum((counts == 2) & (forward != 1)))
+    if one_sided and flipped:
+        warnings.append(f"{name}: {flipped} edges join triangles whose fronts (vertex order) "
+                        f"face opposite ways; a one-sided wall acts on each triangle's front "
+                        f"only, so part of it faces away from the rest")
     return warnings
 
 
 def read_wall_mesh(path: str | Path, scale: float = 1.0, position=(0.0, 0.0, 0.0),
-                   rotation=(0.0, 0.0, 0.0), where: str | None = None) -> WallMesh:
-    """The triangles of the mesh file ``path``, placed (module docstring).  ``where`` names
-    the place that asked for the file in messages (a deck's ``file:line``); errors are
-    :class:`~nurbsdem.errors.InputError`."""
+                   rotation=(0.0, 0.0, 0.0), where: str | None = None,
+                   one_sided: bool = False) -> WallMesh:
+    """The triangles of the mesh file ``path``, placed (module docstring), for a one-sided
+    wall when ``one_sided``.  ``where`` names the place that asked for the file in messages
+    (a deck's ``file:line``); errors are :class:`~nurbsdem.errors.InputError`."""
     path = Path(path)
     where = where or str(path)
     if path.suffix.lower() not in MESH_SUFFIXES:
@@ -106,11 +134,21 @@ def read_wall_mesh(path: str | Path, scale: float = 1.0, position=(0.0, 0.0, 0.0
     size = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     twice_area = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                                          vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
-    tiny = np.flatnonzero(~(twice_area > 2e-12 * size * size))
-    if len(tiny):
-        raise InputError(f"{where}: {path.name}: triangle {int(tiny[0])} is degenerate (its "
-                         f"vertices are on a line); {len(tiny)} such triangles")
-    return WallMesh(vertices, faces, _topology_warnings(faces, path.name))
+    keep = twice_area > 2e-12 * size * size
+    warnings = []
+    if not keep.all():
+        if not keep.any():
+            raise InputError(f"{where}: {path.name}: all its {len(faces)} triangles are "
+                             f"degenerate (their vertices are on a line): no surface")
+        warnings.append(f"{path.name}: {int(np.sum(~keep))} degenerate triangles (zero area, "
+                        f"their vertices on a line) dropped")
+        faces = faces[keep]
+        used = np.unique(faces)
+        renumber = np.full(len(vertices), -1, np.int64)
+        renumber[used] = np.arange(len(used))
+        vertices, faces = vertices[used], renumber[faces]
+    warnings += _topology_warnings(faces, path.name, one_sided, where)
+    return WallMesh(vertices, faces, warnings)
 
 
 def size_mismatch(mesh_size: float, particle_size: float, where: str) -> str | None:
