@@ -13,7 +13,11 @@
 * **bodies against walls**: a body behind a wall (on the side its normal points away from;
   for a ``Box`` that means outside the box) or penetrating one deeper than the same rule
   allows (exact support point along the wall's normal, paper Eq. 8);
-* **walls**: finite control points and a finite, non-zero normal.
+* **walls**: finite control points and a finite, non-zero normal;
+* **mesh and surface walls** (:mod:`nurbsdem.wall_checks`): exact spheres crossing them
+  deeper than the same rule, behind a one-sided one, or inside the solid of a closed
+  one-sided mesh (in :func:`validate_scene`, with warnings of mesh sizes far from the
+  particles'); their ``MoveWall`` strokes (in :func:`check_model`).
 
 Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
 bodies are tested against each other; every body is tested against every wall.
@@ -537,7 +541,8 @@ def check_scale(model: "Model") -> None:
 def check_model(model: "Model") -> None:
     """Everything that can be judged before placing particles: something to solve, time
     steps, memory, explicit stability, contacts too soft for the weight, impacts, Replicate
-    spacing, scale."""
+    spacing, scale, wall strokes."""
+    from .wall_checks import check_curved_walls_model
     check_nothing_to_solve(model)
     check_time_steps(model)
     check_memory(model)
@@ -546,6 +551,7 @@ def check_model(model: "Model") -> None:
     check_random_fill(model)
     check_wall_moves(model)
     check_wall_strokes(model)
+    check_curved_walls_model(model)
     check_step_count(model)
     check_soft_contacts(model)
     check_impacts(model)
@@ -556,16 +562,18 @@ def check_model(model: "Model") -> None:
 
 
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
-    """Check the placed scene (default ``model.bodies``): walls, bodies against walls,
-    explicit bodies against each other. Raises :class:`InputError` (deck file and line)."""
+    """Check the placed scene (default ``model.bodies``): walls, bodies against walls (mesh
+    and surface walls too), explicit bodies against each other. Raises :class:`InputError`
+    (deck file and line)."""
+    from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
-    if bodies is None or not len(bodies):
-        return
-    explicit = {p.id for p in model.particles}
-    index = [i for i in range(len(bodies)) if int(bodies.id[i]) in explicit]
-    check_body_overlaps(model, bodies, index)
-    check_bodies_against_walls(model, bodies)
+    if bodies is not None and len(bodies):
+        explicit = {p.id for p in model.particles}
+        index = [i for i in range(len(bodies)) if int(bodies.id[i]) in explicit]
+        check_body_overlaps(model, bodies, index)
+        check_bodies_against_walls(model, bodies)
+    check_curved_walls_scene(model, bodies)
 
 
 __all__ = ["OVERLAP_TOLERANCE", "COINCIDENT_FRACTION", "RESTING_LOADS", "MAX_RESTING_FRACTION",
