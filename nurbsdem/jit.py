@@ -145,3 +145,101 @@ def pack_chunks(buf: np.ndarray, counts: np.ndarray) -> np.ndarray:
             buf[n + k] = buf[lo + k]
         n += counts[t]
     return buf[:n]
+
+
+class PointerKernel:
+    """A kernel that other kernels call through a function pointer instead of linking it.
+
+    numba finalises each compiled function with the machine code of every function it calls
+    linked in and optimised again (module docstring), so a large kernel called from several
+    entry points (the LCP of one pair, reached from the compiled loop, the Python path's
+    ``solve_due``, the threaded batch ...) is optimised once per caller and again per layer
+    between them.  Called through :attr:`call` instead, it is compiled once, for the one
+    signature ``argtypes``, and each caller holds only an indirect call: the address sits in
+    a process-wide slot (an LLVM global named :attr:`symbol`, registered with llvmlite when
+    this object is made, so that callers loaded from numba's cache link to it) that
+    :meth:`ensure` fills, compiling or loading the kernel.  A caller that runs before the
+    slot is filled raises ``RuntimeError`` (no jump to address 0).  The arithmetic is the
+    kernel's own: the same bits as a direct call.
+
+    ``kernel.call((a, b, ...))`` takes the arguments as one tuple whose types must equal
+    ``argtypes`` exactly (array layouts included): a caller passing other types fails to
+    compile, naming both.  With ``NUMBA_DISABLE_JIT=1`` :attr:`call` calls the Python
+    function.
+    """
+
+    def __init__(self, dispatcher, name: str, argtypes: tuple) -> None:
+        import ctypes
+
+        import llvmlite.binding as llb
+        from numba.core import config
+
+        self.dispatcher = dispatcher
+        self.argtypes = tuple(argtypes)
+        self.symbol = f"nurbsdem_kernel_{name}"
+        self._slot = ctypes.c_int64(0)
+        llb.add_symbol(self.symbol, ctypes.addressof(self._slot))
+        if config.DISABLE_JIT:
+            func = dispatcher
+            self.call = lambda args: func(*args)
+        else:
+            self.call = _pointer_call(self.symbol, self.argtypes, name)
+        _POINTER_KERNELS.append(self)
+        if _POINTERS_WANTED[0]:
+            self.ensure()
+
+    def ensure(self) -> None:
+        """Compile (or load from numba's cache) the kernel for :attr:`argtypes` and put its
+        address in the slot; nothing when it is there already."""
+        if self._slot.value or not hasattr(self.dispatcher, "overloads"):
+            return
+        self.dispatcher.compile(self.argtypes)
+        cres = self.dispatcher.overloads[self.argtypes]
+        self._slot.value = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+
+
+#: every :class:`PointerKernel` made, and whether :func:`ensure_pointer_kernels` was called
+#: (kernels made after it fill their slots at once)
+_POINTER_KERNELS: list[PointerKernel] = []
+_POINTERS_WANTED = [False]
+
+
+def ensure_pointer_kernels() -> None:
+    """Fill the slots of every :class:`PointerKernel` (compiling or loading them), now and
+    for those made later: called where a scene with NURBS bodies is set up
+    (:class:`~nurbsdem.contact.detect.ContactTable`), before any kernel that calls them
+    runs."""
+    _POINTERS_WANTED[0] = True
+    for k in _POINTER_KERNELS:
+        k.ensure()
+
+
+def _pointer_call(symbol: str, argtypes: tuple, name: str):
+    """The intrinsic that calls the kernel whose address the global ``symbol`` holds."""
+    from numba.core.errors import TypingError
+
+    @intrinsic
+    def call(typingctx, args):
+        if not isinstance(args, types.BaseTuple) or tuple(args.types) != argtypes:
+            raise TypingError(f"{name} takes {argtypes}, not {args}")
+        restype = types.none
+
+        def codegen(context, builder, signature, llargs):
+            fnty = context.call_conv.get_function_type(restype, argtypes)
+            slot = builder.module.globals.get(symbol)
+            if slot is None:
+                slot = ir.GlobalVariable(builder.module, ir.IntType(64), symbol)
+                slot.linkage = "external"
+            addr = builder.load(slot)
+            with builder.if_then(builder.icmp_unsigned("==", addr, ir.Constant(addr.type, 0)),
+                                 likely=False):
+                context.call_conv.return_user_exc(
+                    builder, RuntimeError, (f"compiled kernel {name} not loaded",))
+            values = [builder.extract_value(llargs[0], i) for i in range(len(argtypes))]
+            status, _ = context.call_conv.call_function(
+                builder, builder.inttoptr(addr, fnty.as_pointer()), restype, argtypes, values)
+            with cgutils.if_unlikely(builder, status.is_error):
+                context.call_conv.return_status_propagate(builder, status)
+            return context.get_dummy_value()
+        return restype(args), codegen
+    return call

@@ -249,7 +249,7 @@ def candidate_patch_pairs_batch_jit(boxes, box_offsets, body_shape, positions, r
                                     pairs, margin):
     """Compiled :func:`candidate_patch_pairs_batch` (no input checks)."""
     buf = np.empty((max(16, 4 * pairs.shape[0]), 3), dtype=np.int64)
-    n = 0
+    n = np.int64(0)
     for p in range(pairs.shape[0]):
         a = pairs[p, 0]
         b = pairs[p, 1]
@@ -296,7 +296,7 @@ def candidate_patch_pairs(shape_a, pose_a, shape_b, pose_b, margin: float = 0.0)
     bb = np.asarray(shape_b.patch_boxes, dtype=np.float64)
     boxes = np.ascontiguousarray(np.concatenate([ba, bb]))
     buf = np.empty((16, 3), dtype=np.int64)
-    buf, n = _pair_boxes(boxes, 0, len(ba), pa, Ra, len(ba), len(boxes), pb, Rb, margin,
+    buf, n = _pair_boxes(boxes, np.int64(0), len(ba), pa, Ra, len(ba), len(boxes), pb, Rb, margin,
                          0, buf, 0)
     return _sort_rows3(buf, n)[:, 1:].copy()
 

@@ -25,10 +25,11 @@ from numba import njit, prange
 
 from ..geometry.connectivity import POLE
 from ..geometry.kernel import make_workspace, power_form
-from ..jit import fetch_add, kernel
+from ..jit import ensure_pointer_kernels, fetch_add, kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
-                  I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, full_rows, make_work, solve_pair)
+                  I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, full_rows, make_work,
+                  solve_pair, solve_pair_ptr)
 from .stage1 import (CLASS_NAMES as S1_CLASS_NAMES, DELTA0 as S1_DELTA0, MAX_IT as S1_MAX_IT,
                      N_OUT as S1_N_OUT, O_F1, O_GL, O_LMIN, O_LREF, S1_PAW, S1_PBW, S1_ROW,
                      make_w4, stage1 as stage1_kernel)
@@ -175,6 +176,8 @@ class ContactTable:
         #: (saddle stalls, :func:`lcp.solve_pair`; 0 turns them off)
         self.nonconvexity = np.array([_nonconvexity(s) for s in shapes])
         self.shapes = shapes
+        if shapes:
+            ensure_pointer_kernels()         # the LCP kernels the batch kernels call
 
     def __len__(self) -> int:
         return len(self.shapes)
@@ -296,9 +299,10 @@ def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b
             prev_f[c] = res_f[j, c]
         for c in range(prev_i.shape[0]):
             prev_i[c] = res_i[j, c]
-        solve_pair(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
-                   pos[ia], rot[ia], pos[ib], rot[ib], prev_f, prev_i, mask_a[j], mask_b[j],
-                   seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j], nc[a] + nc[b])
+        solve_pair_ptr((tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
+                        pos[ia], rot[ia], pos[ib], rot[ib], prev_f, prev_i, mask_a[j],
+                        mask_b[j], seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j],
+                        nc[a] + nc[b]))
 
 
 @njit(cache=True, inline="always")

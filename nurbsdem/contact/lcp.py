@@ -72,9 +72,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
-from ..jit import kernel
+from ..jit import PointerKernel, kernel
 from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
                      S1_C, S1_G, S1_INTERSECTING, S1_NONE, S1_PAW, S1_PBW, S1_ROW, S1_ROWS,
                      S1_SEPARATED, W4_COLS, W4_ROWS, nearest_seed, outward_normal, stage1)
@@ -263,8 +263,8 @@ def _predicted_direction(prevF, posA, RA, posB, RB, d, wf):
     t2 = wf[_T2]
     _rot_t(RA, d, 1.0, eA)
     _rot_t(RB, d, -1.0, eB)
-    _model_point(prevF, 0, eA, pa)
-    _model_point(prevF, 1, eB, pb)
+    _model_point(prevF, np.int64(0), eA, pa)
+    _model_point(prevF, np.int64(1), eB, pb)
     _tangent_basis(d, t1, t2)
     phi = 0.0
     g1 = 0.0
@@ -275,9 +275,10 @@ def _predicted_direction(prevF, posA, RA, posB, RB, d, wf):
         phi += d[c] * gc
         g1 += t1[c] * gc
         g2 += t2[c] * gc
-    k11 = _model_quad(prevF, 0, RA, t1, t1) + _model_quad(prevF, 1, RB, t1, t1) - phi
-    k12 = _model_quad(prevF, 0, RA, t1, t2) + _model_quad(prevF, 1, RB, t1, t2)
-    k22 = _model_quad(prevF, 0, RA, t2, t2) + _model_quad(prevF, 1, RB, t2, t2) - phi
+    a, b = np.int64(0), np.int64(1)         # body rows of the stored models (not literals)
+    k11 = _model_quad(prevF, a, RA, t1, t1) + _model_quad(prevF, b, RB, t1, t1) - phi
+    k12 = _model_quad(prevF, a, RA, t1, t2) + _model_quad(prevF, b, RB, t1, t2)
+    k22 = _model_quad(prevF, a, RA, t2, t2) + _model_quad(prevF, b, RB, t2, t2) - phi
     det = k11 * k22 - k12 * k12
     if not (k11 > 0.0 and det > 0.0):
         return
@@ -429,8 +430,8 @@ def _stage2_start(mode, gl, nn, prev_sep, prevF, prevI, posA, RA, posB, RB, cA, 
         wi[1, 0] = infoB[0] + prevI[I_PB]
         _rot_t(RA, d, 1.0, wf[_EA])
         _rot_t(RB, d, -1.0, wf[_EB])
-        _predicted_params(prevF, 0, wf[_EA], wfs[0])
-        _predicted_params(prevF, 1, wf[_EB], wfs[1])
+        _predicted_params(prevF, np.int64(0), wf[_EA], wfs[0])
+        _predicted_params(prevF, np.int64(1), wf[_EB], wfs[1])
         delta = 0.1
     else:
         if mode == MODE_COLD:
@@ -472,10 +473,10 @@ def _write_solution(resF, d, phi, gnorm, posA, RA, posB, RB, wf, wfs):
     resF[F_GRAD] = gnorm
     _rot_t(RA, d, 1.0, wf[_EA])
     _rot_t(RB, d, -1.0, wf[_EB])
-    _store_prediction(resF, 0, wf[_EA], wf[_GA:_GA + 2])
-    _store_prediction(resF, 1, wf[_EB], wf[_GB:_GB + 2])
-    _store_model(resF, 0, wf[_PA], wf[_MA:_MA + 3])
-    _store_model(resF, 1, wf[_PB], wf[_MB:_MB + 3])
+    _store_prediction(resF, np.int64(0), wf[_EA], wf[_GA:_GA + 2])
+    _store_prediction(resF, np.int64(1), wf[_EB], wf[_GB:_GB + 2])
+    _store_model(resF, np.int64(0), wf[_PA], wf[_MA:_MA + 3])
+    _store_model(resF, np.int64(1), wf[_PB], wf[_MB:_MB + 3])
 
 
 @kernel(inline="always")
@@ -635,3 +636,18 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     _write_counts(resF, resI, wi, infoA, infoB, it, it1, nev)
     resI[I_STAGE] = _stage_of(mode, converged, it, phi, gl, scale, resF, wf)
     _finish_flags(resF, resI, prevF, prevI, converged, phi, cA, cB, scA, scB)
+
+
+_I1, _I2, _I3 = types.int64[::1], types.int64[:, ::1], types.int64[:, :, ::1]
+_F1, _F2, _B1 = types.float64[::1], types.float64[:, ::1], types.bool_[::1]
+#: a shape table (:class:`~nurbsdem.contact.detect.ContactTable` ``tab``) and its seeds as
+#: the compiled kernels take them
+TABLE = types.Tuple((_I2, _I2, _I2, _I1, _F1, _F2, _F2, _I3, _F2, _I1))
+SEEDS = types.Tuple((_F2, _I1, _F2))
+#: :func:`solve_pair` compiled once and called by the batch kernels through a pointer
+#: (:class:`~nurbsdem.jit.PointerKernel`): its callers do not compile the LCP again
+SOLVE_PAIR = PointerKernel(solve_pair, "solve_pair", (
+    TABLE, _I1, _F1, types.float64, TABLE, _I1, _F1, types.float64,
+    _F1, _F2, _F1, _F2, _F1, _I1, _B1, _B1, SEEDS, SEEDS,
+    _F2, _F2, _I2, _F2, _F2, _F1, _I1, types.float64))
+solve_pair_ptr = SOLVE_PAIR.call

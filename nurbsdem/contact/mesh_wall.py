@@ -345,7 +345,7 @@ def sphere_mesh_rows(x: np.ndarray, r: float, R: np.ndarray, t: np.ndarray,
     n = _triangle_candidates(xm, r, vertices, faces, normals, two_sided, tris, n, cand_q,
                              cand_d, cand_f)
     tie = TIE * size
-    out = 0
+    out = np.int64(0)
     for k in range(n):
         if not _is_local_minimum(k, faces, tris, cand_q, cand_d, cand_f, n, tie):
             continue

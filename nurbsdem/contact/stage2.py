@@ -314,8 +314,8 @@ def direction_search(tabA, tabB, posA, RA, scA, posB, RB, scB, d, delta, tol_nc,
     t1 = wf[_T1]
     t2 = wf[_T2]
     dt = wf[_DT]
-    phi, nev, _ = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs, 0,
-                                 ws, 0, 1)
+    phi, nev, _ = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, d, wf, wi, wfs,
+                                 np.int64(0), ws, np.int64(0), np.int64(1))
     converged = False
     it = 0
     gnorm = 0.0
@@ -355,7 +355,7 @@ def direction_search(tabA, tabB, posA, RA, scA, posB, RB, scB, d, delta, tol_nc,
             wi[3, c] = wi[1, c]
         _predict(wf, wfs, 0, 0, 1, 2, 3, RA, RB, dt)
         phin, ne, _ = _eval_supports(tabA, tabB, posA, RA, scA, posB, RB, scB, dt, wf, wi, wfs,
-                                     _TRIAL, ws, 2, 3)
+                                     np.int64(_TRIAL), ws, np.int64(2), np.int64(3))
         nev += ne
         rho = _ratio(phi, phin, mval, scale)
         if rho > 0.1 and phin == phin:

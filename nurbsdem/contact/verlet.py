@@ -59,7 +59,7 @@ def largest_displacements(x: np.ndarray, x0: np.ndarray, R: np.ndarray, R0: np.n
     if n >= THREADED_ROWS:
         _displacements_threads(x, x0, R, R0, radius, out)
     else:
-        _displacements_range(x, x0, R, R0, radius, out, 0, n)
+        _displacements_range(x, x0, R, R0, radius, out, np.int64(0), n)
     for w in range(wall.shape[0]):
         d0, d1, d2 = wall[w, 0] - wall0[w, 0], wall[w, 1] - wall0[w, 1], wall[w, 2] - wall0[w, 2]
         out[n + w] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
@@ -270,7 +270,7 @@ def renew_certificates(budget: np.ndarray, due: np.ndarray, rows_f: np.ndarray,
     if due.shape[0] >= THREADED_ROWS:
         _renew_threads(budget, due, rows_f, rows_i, reach)
     else:
-        _renew_range(budget, due, rows_f, rows_i, reach, 0, due.shape[0])
+        _renew_range(budget, due, rows_f, rows_i, reach, np.int64(0), due.shape[0])
 
 
 @njit(cache=True)
@@ -393,7 +393,7 @@ def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.n
                         depth, deg, patch_a, patch_b)
     else:
         _active_range(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, params, depth,
-                      deg, patch_a, patch_b, 0, K)
+                      deg, patch_a, patch_b, np.int64(0), K)
     return ca, cb, pa, pb, nrm, depth, key, deg, params, patch_a, patch_b
 
 

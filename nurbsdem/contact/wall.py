@@ -29,16 +29,16 @@ import math
 
 import numpy as np
 import numba
-from numba import njit, prange
+from numba import njit, prange, types
 
 from ..geometry.kernel import make_workspace
-from ..jit import kernel
+from ..jit import PointerKernel, kernel
 from .analytic import parallelogram_coordinates
 from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, next_chunk,
                      table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
-                  I_PA, I_PB, I_VALID, NF, NI, full_rows, make_work, _predicted_params,
-                  _store_prediction)
+                  I_PA, I_PB, I_VALID, NF, NI, SEEDS, TABLE, full_rows, make_work,
+                  _predicted_params, _store_prediction)
 from .stage2 import _EA, _EV, _EV2, _GA, _H, _MA, _PA, _TMP, _rot_t, _to_world
 from .support import CREASE, seed_start, support_map
 
@@ -84,7 +84,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     _rot_t(R, d, 1.0, e)
     if prevI[I_VALID] == 1:
         wi[0, 0] = p0 + prevI[I_PA]
-        _predicted_params(prevF, 0, e, wfs[0])
+        _predicted_params(prevF, np.int64(0), e, wfs[0])
     else:
         k = seed_start(seeds[0], seeds[1], seeds[2], info[2], info[3], no_mask, p0, e)
         wi[0, 0] = seeds[1][k]
@@ -93,7 +93,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     wfs[0, 2] = 0.0
     ok, nev = support_map(tab, e, wi[0], wfs[0], rad, ws, wf[_EV:_EV + 6], wf[_EV2:_EV2 + 6],
                           wf[_TMP], wf[_PA], wf[_MA:_MA + 3], wf[_GA:_GA + 2])
-    _store_prediction(resF, 0, e, wf[_GA:_GA + 2])
+    _store_prediction(resF, np.int64(0), e, wf[_GA:_GA + 2])
     pa = resF[F_PA:F_PA + 3]
     _to_world(pos, R, wf[_PA], pa)
     sd = n0 * (pa[0] - origin[0]) + n1 * (pa[1] - origin[1]) + n2 * (pa[2] - origin[2])
@@ -125,6 +125,16 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     if not inside:
         resI[I_BROAD] = 2
     resI[I_ACTIVE] = 1 if (finite and inside and sd < 0.0) else 0
+
+
+_F1, _F2 = types.float64[::1], types.float64[:, ::1]
+_I1, _I2 = types.int64[::1], types.int64[:, ::1]
+#: :func:`solve_wall` compiled once and called by the batch kernels through a pointer
+#: (:class:`~nurbsdem.jit.PointerKernel`)
+SOLVE_WALL = PointerKernel(solve_wall, "solve_wall", (
+    TABLE, _I1, _F1, types.float64, SEEDS, _F1, _F2, _F1, _F1, _F1, _F1, _F1, _I1,
+    _F2, _F2, _I2, _F2, types.bool_[::1], _F1, _I1))
+solve_wall_ptr = SOLVE_WALL.call
 
 
 def wall_frame(wall) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -192,9 +202,9 @@ def _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_ba
             prev_f[c] = res_f[j, c]
         for c in range(prev_i.shape[0]):
             prev_i[c] = res_i[j, c]
-        solve_wall(tab, info[s], cen[s], rad[s], seeds, pos[i], rot[i], origin[w], wa[w],
-                   wb[w], wdom[w], prev_f, prev_i, ws, wf, wi, wfs, no_mask, res_f[j],
-                   res_i[j])
+        solve_wall_ptr((tab, info[s], cen[s], rad[s], seeds, pos[i], rot[i], origin[w], wa[w],
+                        wb[w], wdom[w], prev_f, prev_i, ws, wf, wi, wfs, no_mask, res_f[j],
+                        res_i[j]))
 
 
 @njit(cache=True, inline="always")

@@ -309,7 +309,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
         _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
                             material, table, spring, h, inv_mass, radius, point, f_total,
                             f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
-                            dashpot_given, dashpot, slip, 0, K)
+                            dashpot_given, dashpot, slip, np.int64(0), K)
     _add_contact_loads(body_a, body_b, pos, point, f_total, force, torque)
     slip_work = 0.0
     for c in range(K):
@@ -406,7 +406,7 @@ def kick_work_terms(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
                       f_damp_n, f_damp_t, f_el_t, hk, out)
         return out
     _work_range(body_a, body_b, n_particles, w_before, w_after, wall_vel, f_total, f_damp_n,
-                f_damp_t, f_el_t, hk, out, 0, K)
+                f_damp_t, f_el_t, hk, out, np.int64(0), K)
     return out
 
 

@@ -96,7 +96,7 @@ def lever_arms(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.
     if body_a.shape[0] >= THREADED_ROWS:
         _lever_arms_threads(body_a, body_b, point, x, r_a, r_b)
     else:
-        _lever_arms_range(body_a, body_b, point, x, r_a, r_b, 0, body_a.shape[0])
+        _lever_arms_range(body_a, body_b, point, x, r_a, r_b, np.int64(0), body_a.shape[0])
 
 
 @njit(cache=True)
@@ -140,7 +140,7 @@ def normal_rows(body_a: np.ndarray, body_b: np.ndarray, r_a: np.ndarray, r_b: np
     if body_a.shape[0] >= THREADED_ROWS:
         _normal_rows_threads(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows)
     else:
-        _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows, 0,
+        _normal_rows_range(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows, np.int64(0),
                            body_a.shape[0])
 
 
@@ -189,7 +189,7 @@ def delassus_apply(f: np.ndarray, use: np.ndarray, body_a: np.ndarray, body_b: n
     if body_a.shape[0] >= THREADED_ROWS:
         _velocities_threads(body_a, body_b, rows, y, out)
     else:
-        _velocities_range(body_a, body_b, rows, y, out, 0, body_a.shape[0])
+        _velocities_range(body_a, body_b, rows, y, out, np.int64(0), body_a.shape[0])
 
 
 @njit(cache=True)

@@ -74,7 +74,7 @@ def half_kick(v: np.ndarray, L: np.ndarray, force: np.ndarray, torque: np.ndarra
     if v.shape[0] >= THREADED_ROWS:
         _half_kick_threads(v, L, force, torque, inv_mass, hk)
     else:
-        _half_kick_range(v, L, force, torque, inv_mass, hk, 0, v.shape[0])
+        _half_kick_range(v, L, force, torque, inv_mass, hk, np.int64(0), v.shape[0])
 
 
 @njit(cache=True)
@@ -142,7 +142,7 @@ def free_rotation(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, h: float) -> 
     """DLM symmetric splitting R1(h/2) R2(h/2) R3(h) R2(h/2) R1(h/2) for every body (in place),
     the exact rotation for a body with equal principal moments (:func:`_rotate_isotropic`);
     the quaternion is renormalised afterwards (round-off only)."""
-    _rotate_range(q, L, inv_I, h, 0, q.shape[0])
+    _rotate_range(q, L, inv_I, h, np.int64(0), q.shape[0])
 
 
 @njit(cache=True)
@@ -170,7 +170,7 @@ def drift(x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, inv_I: np.
     if x.shape[0] >= THREADED_ROWS:
         _drift_threads(x, v, q, L, inv_I, h)
     else:
-        _drift_range(x, v, q, L, inv_I, h, 0, x.shape[0])
+        _drift_range(x, v, q, L, inv_I, h, np.int64(0), x.shape[0])
 
 
 @njit(cache=True)
@@ -240,7 +240,7 @@ def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np
     if body_a.shape[0] >= THREADED_ROWS:
         _point_velocities_threads(body_a, body_b, point, x, v, omega, wall_u, out)
     else:
-        _point_velocities_range(body_a, body_b, point, x, v, omega, wall_u, out, 0,
+        _point_velocities_range(body_a, body_b, point, x, v, omega, wall_u, out, np.int64(0),
                                 body_a.shape[0])
 
 

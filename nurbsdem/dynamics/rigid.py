@@ -274,7 +274,7 @@ def body_poses(q: np.ndarray, P: np.ndarray, x: np.ndarray,
     if n >= THREADED_ROWS:
         _poses_threads(q, P, x, centroid_file, R, pos)
     else:
-        _poses_range(q, P, x, centroid_file, R, pos, 0, n)
+        _poses_range(q, P, x, centroid_file, R, pos, np.int64(0), n)
     return R, pos
 
 
@@ -308,7 +308,7 @@ def omega_world(q: np.ndarray, L: np.ndarray, inv_I: np.ndarray) -> np.ndarray:
     if n >= THREADED_ROWS:
         _omega_threads(q, L, inv_I, out)
     else:
-        _omega_range(q, L, inv_I, out, 0, n)
+        _omega_range(q, L, inv_I, out, np.int64(0), n)
     return out
 
 
