@@ -1,9 +1,12 @@
 """Inlets and outlets in a run (:class:`FlowRun`): a timed step of a model with inlets or
 outlets runs in segments of ``Every`` seconds (the smallest of its inlets' and outlets',
-rounded to a whole number of the step's TimeStep, at least one); at the end of each segment
-inside the step (:func:`exchange`) the solver's bodies lose the particles in an outlet and
-gain the particles an inlet owes (placed clear of the bounding spheres present,
-:meth:`nurbsdem.dynamics.flow.Inlet.insert`), and the system is built anew for the new set.
+rounded to a whole number of the step's TimeStep, at least one, counted from the step's
+start); at the end of each segment and at the end of the step (:func:`exchange`) the
+solver's bodies lose the particles in an outlet and gain the particles an inlet owes (placed
+clear of the bounding spheres present, :meth:`nurbsdem.dynamics.flow.Inlet.insert`), and
+the system is built anew for the new set.  An inlet's rate counts from the start of each
+timed step (:meth:`FlowRun.begin_step`): a step of T seconds owes floor(Rate × T) more
+particles, and those still waiting from before stay owed.
 
 Between two systems the step engine is of fixed size: the tangential springs of the
 surviving contacts go to the new system under their keys renumbered for the new particle
@@ -22,7 +25,7 @@ import logging
 import numpy as np
 
 from .contact.curved_walls import split_wall_contact_key, wall_contact_key
-from .dynamics.flow import InsertionRegion, Inlet, Outlet
+from .dynamics.flow import Inlet, Outlet
 from .errors import InputError
 from .instant_steps import mechanical_energy
 from .model import Bodies, Model
@@ -49,7 +52,7 @@ class FlowRun:
     def _inlet(self, spec) -> Inlet:
         rho = self.model.materials[spec.material_id].density
         entries = [self.model.shapes[s] for s in spec.shapes]
-        return Inlet(InsertionRegion(lo=spec.lo, hi=spec.hi), np.array(spec.shapes, np.int64),
+        return Inlet(spec.region(), np.array(spec.shapes, np.int64),
                      np.array(spec.fractions, float),
                      np.array([e.bounding_radius for e in entries], float),
                      np.array([e.mass(rho) for e in entries], float), spec.rate,
@@ -66,6 +69,12 @@ class FlowRun:
         if self.active and comm is not None and int(comm.size) > 1:
             raise InputError("inlets and outlets (block Flow) run on one MPI rank only; run "
                              "without mpiexec")
+
+    def begin_step(self, t: float) -> None:
+        """A timed step begins at t (s): each inlet's rate counts from t
+        (:meth:`~nurbsdem.dynamics.flow.Inlet.restart_clock`)."""
+        for inlet in self.inlets:
+            inlet.restart_clock(t)
 
     def segment_steps(self, dt: float) -> int:
         """Deck time steps of ``dt`` s in one segment."""
@@ -143,6 +152,7 @@ class FlowRun:
             "next_id": -1 if self.next_id is None else int(self.next_id),
             "inlets": [{"inserted": int(i.inserted), "inserted_mass": float(i.inserted_mass),
                         "waiting": int(i.waiting), "queue": np.asarray(i._queue, np.int64),
+                        "start": float(i.start), "base": int(i.base),
                         "rng": json.dumps(i._rng.bit_generator.state)} for i in self.inlets],
             "outlets": [{"count": int(o.count), "mass": float(o.mass),
                          "rows": np.array(o.rows, float).reshape(-1, 4)} for o in self.outlets],
@@ -157,6 +167,7 @@ class FlowRun:
         for inlet, s in zip(self.inlets, st["inlets"]):
             inlet.inserted, inlet.inserted_mass = int(s["inserted"]), float(s["inserted_mass"])
             inlet.waiting = int(s["waiting"])
+            inlet.start, inlet.base = float(s.get("start", 0.0)), int(s.get("base", 0))
             inlet._queue = np.asarray(s["queue"], np.int64)
             inlet._rng.bit_generator.state = json.loads(s["rng"])
         for outlet, s in zip(self.outlets, st["outlets"]):

@@ -13,7 +13,10 @@
 * **bodies against walls**: a body behind a wall (on the side its normal points away from;
   for a ``Box`` that means outside the box) or penetrating one deeper than the same rule
   allows (exact support point along the wall's normal, paper Eq. 8);
-* **walls**: finite control points and a finite, non-zero normal.
+* **walls**: finite control points and a finite, non-zero normal;
+* **inlets**: a region partly behind a flat wall, or too small for the particles of one
+  segment, is a warning (:func:`nurbsdem.flow_checks.warn_flow`; the errors of inlets and
+  outlets are the deck's and the API's own, :mod:`nurbsdem.io.deck_flow`).
 
 Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
 bodies are tested against each other; every body is tested against every wall.
@@ -687,9 +690,12 @@ def check_model(model: "Model") -> None:
 
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     """Check the placed scene (default ``model.bodies``): walls, bodies against walls,
-    explicit bodies against each other. Raises :class:`InputError` (deck file and line)."""
+    explicit bodies against each other; warn of inlets that reach behind a wall or cannot
+    hold a segment's particles. Raises :class:`InputError` (deck file and line)."""
+    from .flow_checks import warn_flow
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
+    warn_flow(model)
     if bodies is None or not len(bodies):
         return
     explicit = {p.id for p in model.particles}
