@@ -135,9 +135,9 @@ class Inlet:
     shapes: the mix's shape ids; fractions (same length, summing to 1) by number;
     radii, masses: each mix shape's bounding radius (m) and mass (kg); rate: particles/s
     (``rate_is_mass``: kg/s); limits: ``count``, ``mass`` (kg), ``until`` (s), any of them
-    None; ``start`` (s) when its rate clock starts, ``base`` the particles it owed then
-    (:meth:`restart_clock`); ``seed`` for its own random stream; ``max_attempts`` draws per
-    particle before it waits.
+    None; ``start`` (s) when its rate clock starts, ``base`` the particles (a real number)
+    it owed then (:meth:`restart_clock`); ``seed`` for its own random stream;
+    ``max_attempts`` draws per particle before it waits.
     """
 
     region: InsertionRegion
@@ -152,7 +152,7 @@ class Inlet:
     mass: float | None = None
     until: float | None = None
     start: float = 0.0
-    base: int = 0
+    base: float = 0.0
     seed: int = 0
     max_attempts: int = 50
     inserted: int = 0
@@ -172,20 +172,26 @@ class Inlet:
             return self.rate / float(np.dot(self.fractions, self.masses))
         return self.rate
 
-    def owed_total(self, t: float) -> int:
-        """The particles owed in all by time t (s): those owed when the rate clock started
-        plus rate × the time since, within the count and time limits."""
-        if t < self.start:
+    def _credit(self, t: float) -> float:
+        """Particles owed in all by time t (s), before rounding down: :attr:`base` plus rate ×
+        the time since :attr:`start` within the time limit."""
+        if t <= self.start:
             return self.base
         end = t if self.until is None else max(min(t, self.until), self.start)
-        total = self.base + int(math.floor(self.number_rate * (end - self.start) + 1e-9))
+        return self.base + self.number_rate * (end - self.start)
+
+    def owed_total(self, t: float) -> int:
+        """The particles owed in all by time t (s): the credit rounded down, within the
+        count."""
+        total = int(math.floor(self._credit(t) + 1e-9))
         return total if self.count is None else min(total, self.count)
 
     def restart_clock(self, t: float) -> None:
-        """Start the rate clock at t (s) (a timed step begins): what was owed by then stays
-        owed (:attr:`base`; a waiting particle still enters), and the rate counts on from t,
-        so a step of duration T owes floor(rate × T) more whatever came before it."""
-        self.base = self.owed_total(t)
+        """Start the rate clock at t (s) (a timed step begins): the credit owed by then, its
+        fraction of a particle included, stays owed (:attr:`base`; a waiting particle still
+        enters), and the rate counts on from t, so that a run of steps owes rate × the time
+        the inlet was open, rounded down once."""
+        self.base = self._credit(t)
         self.start = t
 
     def due(self, t: float) -> int:
