@@ -507,8 +507,10 @@ def _setup_logging(quiet: bool, verbose: bool) -> None:
 
 @main.command()
 @click.argument("deck", metavar="CASE.inp")
+@_warnings_to_stderr
 def check(deck: str) -> None:
-    """Parse and validate a deck without solving; print a model summary."""
+    """Parse and validate a deck without solving; print a model summary (warnings on
+    stderr, ``nurbsdem: warning: deck:line: ...``)."""
     from .io.deck import parse_deck
     model = parse_deck(deck)
     click.echo(model.summary())

@@ -1,17 +1,23 @@
 """Inlets and outlets in a run (:class:`FlowRun`): a timed step of a model with inlets or
 outlets runs in segments of ``Every`` seconds (the smallest of its inlets' and outlets',
-rounded to a whole number of the step's TimeStep, at least one); at the end of each segment
-inside the step (:func:`exchange`) the solver's bodies lose the particles in an outlet and
-gain the particles an inlet owes (placed clear of the bounding spheres present,
-:meth:`nurbsdem.dynamics.flow.Inlet.insert`), and the system is built anew for the new set.
+rounded to a whole number of the step's TimeStep, at least one, counted from the step's
+start); at the end of each segment and at the end of the step (:func:`exchange`) the
+solver's bodies lose the particles in an outlet and gain the particles an inlet owes (placed
+clear of the bounding spheres present, :meth:`nurbsdem.dynamics.flow.Inlet.insert`), and
+the system is built anew for the new set.  An inlet's rate counts from the start of each
+timed step (:meth:`FlowRun.begin_step`) on top of what it owed at that moment (waiting
+particles and the fraction of one included): by the end of a step of T seconds it has owed
+Rate × T more particles, and over several steps floor(Rate × their total time).
 
 Between two systems the step engine is of fixed size: the tangential springs of the
 surviving contacts go to the new system under their keys renumbered for the new particle
-count (:func:`remap_history`); the kinetic and potential energy the new particles bring in,
-less that of the particles removed, is booked as external work, so that the energy balance
-of ``monitors/energy.csv`` stays closed.  Monitors: ``monitors/inlet_<name>.csv`` (time,
-inserted, mass, waiting) and ``monitors/outlet_<name>.csv`` (time, count, mass, mass_rate),
-one row per segment end; cumulative counts and masses (kg), mass rate in kg/s.  The state of
+count (:func:`remap_history`); the mechanical energy of the new system less that of the
+last one (the kinetic and potential energy the new particles bring in, less that of the
+particles removed and the elastic energy of their contacts) is booked as external work, so
+that the energy balance of ``monitors/energy.csv`` stays closed.  Monitors:
+``monitors/inlet_<name>.csv`` (time, inserted, mass, waiting) and
+``monitors/outlet_<name>.csv`` (time, count, mass, mass_rate), one row per segment end and
+step end; cumulative counts and masses (kg), mass rate in kg/s.  The state of
 the inlets (counts, random streams, waiting particles) and outlets is kept in checkpoints.
 Units: SI."""
 from __future__ import annotations
@@ -22,9 +28,8 @@ import logging
 import numpy as np
 
 from .contact.curved_walls import split_wall_contact_key, wall_contact_key
-from .dynamics.flow import InsertionRegion, Inlet, Outlet
+from .dynamics.flow import Inlet, Outlet
 from .errors import InputError
-from .instant_steps import mechanical_energy
 from .model import Bodies, Model
 
 log = logging.getLogger("nurbsdem")
@@ -49,7 +54,7 @@ class FlowRun:
     def _inlet(self, spec) -> Inlet:
         rho = self.model.materials[spec.material_id].density
         entries = [self.model.shapes[s] for s in spec.shapes]
-        return Inlet(InsertionRegion(lo=spec.lo, hi=spec.hi), np.array(spec.shapes, np.int64),
+        return Inlet(spec.region(), np.array(spec.shapes, np.int64),
                      np.array(spec.fractions, float),
                      np.array([e.bounding_radius for e in entries], float),
                      np.array([e.mass(rho) for e in entries], float), spec.rate,
@@ -66,6 +71,12 @@ class FlowRun:
         if self.active and comm is not None and int(comm.size) > 1:
             raise InputError("inlets and outlets (block Flow) run on one MPI rank only; run "
                              "without mpiexec")
+
+    def begin_step(self, t: float) -> None:
+        """A timed step begins at t (s): each inlet's rate counts from t
+        (:meth:`~nurbsdem.dynamics.flow.Inlet.restart_clock`)."""
+        for inlet in self.inlets:
+            inlet.restart_clock(t)
 
     def segment_steps(self, dt: float) -> int:
         """Deck time steps of ``dt`` s in one segment."""
@@ -143,6 +154,7 @@ class FlowRun:
             "next_id": -1 if self.next_id is None else int(self.next_id),
             "inlets": [{"inserted": int(i.inserted), "inserted_mass": float(i.inserted_mass),
                         "waiting": int(i.waiting), "queue": np.asarray(i._queue, np.int64),
+                        "start": float(i.start), "base": float(i.base),
                         "rng": json.dumps(i._rng.bit_generator.state)} for i in self.inlets],
             "outlets": [{"count": int(o.count), "mass": float(o.mass),
                          "rows": np.array(o.rows, float).reshape(-1, 4)} for o in self.outlets],
@@ -157,6 +169,7 @@ class FlowRun:
         for inlet, s in zip(self.inlets, st["inlets"]):
             inlet.inserted, inlet.inserted_mass = int(s["inserted"]), float(s["inserted_mass"])
             inlet.waiting = int(s["waiting"])
+            inlet.start, inlet.base = float(s.get("start", 0.0)), float(s.get("base", 0.0))
             inlet._queue = np.asarray(s["queue"], np.int64)
             inlet._rng.bit_generator.state = json.loads(s["rng"])
         for outlet, s in zip(self.outlets, st["outlets"]):
@@ -198,9 +211,10 @@ def remap_history(keys: np.ndarray, springs: np.ndarray, new_index: np.ndarray,
 
 
 def exchange(solver, writers) -> None:
-    """The end of a segment: bodies out through the outlets and in through the inlets, their
-    energies booked, the monitor rows written, and the system built anew when the set
-    changed (:attr:`solver.rebuild <nurbsdem.solver.Solver.rebuild>`)."""
+    """The end of a segment or step: bodies out through the outlets and in through the
+    inlets, the monitor rows written, and the system built anew when the set changed
+    (:attr:`solver.rebuild <nurbsdem.solver.Solver.rebuild>`), the mechanical energy it
+    gained or lost booked as external work."""
     flow, t = solver.flow, solver.time
     solver._sync_bodies_from_system()
     bodies = solver.bodies
@@ -212,12 +226,11 @@ def exchange(solver, writers) -> None:
     if keep.all() and len(added) == 0:
         return
     model = solver.model
-    brought = mechanical_energy(model, added) - mechanical_energy(model, bodies.take(~keep))
     sysm = solver.system
+    before = sysm.energy().mechanical
     solver.summary.accuracy_repeats += sysm.accuracy_repeats
     clock = (sysm.t0, sysm.step_count, sysm._warned_heavy)
     solver._close_system()
-    solver.ledger.book_external(brought)
     new_index = np.full(len(bodies), -1, np.int64)
     new_index[keep] = np.arange(int(keep.sum()))
     n_new = len(survivors) + len(added)
@@ -228,5 +241,6 @@ def exchange(solver, writers) -> None:
     solver.bodies = Bodies.concatenate([survivors, added])
     solver.scene = None
     solver.rebuild(*clock)
+    solver.ledger.book_external(solver.system.energy().mechanical - before)
     log.debug("t = %.6g s: %d particle(s) out, %d in: %d particles", t,
               int((~keep).sum()), len(added), n_new)

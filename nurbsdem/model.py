@@ -724,8 +724,11 @@ def summary_text(model: Model) -> str:
         t += s.duration_s
     out.append(f"Total simulated time: {t:g} s")
     for i in model.inlets:
+        into = (f"the disc at {_vec(i.centre)} m, normal {_vec(i.normal)}, radius "
+                f"{i.radius:g} m, thickness {i.thickness:g} m" if i.is_disc else
+                f"the box {_vec(i.lo)} .. {_vec(i.hi)} m")
         out.append(f"Inlet {i.name}: {i.count} particles of shapes {list(i.shapes)} at "
-                   f"{i.rate:g} per s into the box {_vec(i.lo)} .. {_vec(i.hi)} m")
+                   f"{i.rate:g} per s into {into}")
     for o in model.outlets:
         where = (f"in the box {_vec(o.lo)} .. {_vec(o.hi)} m" if o.normal is None else
                  f"beyond the plane through {_vec(o.point)} m, normal {_vec(o.normal)}")

@@ -36,8 +36,8 @@ class Range:
 RANGES: dict[str, Range] = {
     **{k: Range(0.0, 1e6, "m", _COORD) for k in ("Position", "Region", "Min", "Max", "Point",
                                                   "Displacement", "Height", "Gap", "Center",
-                                                  "Box")},
-    **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size")},
+                                                  "Box", "Disc")},
+    **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size", "Thickness")},
     **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
        for k in ("Normal", "Axis", "Direction")},
     "Scale": Range(1e-9, 1e9, "", "a mesh drawn in micrometres or kilometres is read with a "

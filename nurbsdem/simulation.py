@@ -239,18 +239,24 @@ class Simulation:
         return self._scene.add_curved_wall("surface", name, file, 1.0, position, rotation,
                                            material, False)
 
-    def add_inlet(self, shapes: Sequence[Any], material: int, box: Sequence[float],
+    def add_inlet(self, shapes: Sequence[Any], material: int, box: Sequence[float] | None,
                   rate: float, count: int, fractions: Sequence[float] | None = None,
                   velocity: Sequence[float] = (0.0, 0.0, 0.0), seed: int = 0,
-                  every: float = DEFAULT_EVERY, name: str | None = None) -> str:
+                  every: float = DEFAULT_EVERY, name: str | None = None, *,
+                  disc: Sequence[float] | None = None, normal: Sequence[float] | None = None,
+                  radius: float | None = None, thickness: float = 0.0) -> str:
         """``Inlet`` (the deck's block ``Flow``): during every timed step, ``count`` particles
         of ``shapes`` (Shape objects, shape files or shape ids; by number ``fractions``,
-        summing to 1) and ``material`` enter the box (x0, y0, z0, x1, y1, z1) (m) at ``rate``
-        particles/s with ``velocity`` (m/s), clear of the particles present, at the end of
-        each ``every`` s; ``seed`` of its own random stream. Returns the name."""
+        summing to 1) and ``material`` enter the box (x0, y0, z0, x1, y1, z1) (m), or with
+        ``box=None`` the disc of centre ``disc`` (m), axis ``normal``, ``radius`` and
+        ``thickness`` (m; 0: the centroids lie in the disc's plane), at ``rate`` particles/s
+        counted from the start of each timed step, with ``velocity`` (m/s), clear of the
+        particles present, at the end of each ``every`` s and of each step; ``seed`` of its
+        own random stream. Returns the name."""
         self._editable("add_inlet")
         return add_inlet(self._scene, shapes, material, box, rate, count, fractions, velocity,
-                         seed, every, name)
+                         seed, every, name, disc, normal, radius,
+                         thickness if disc is not None or thickness else None)
 
     def add_outlet(self, box: Sequence[float] | None = None,
                    point: Sequence[float] | None = None,

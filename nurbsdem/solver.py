@@ -291,6 +291,8 @@ class Solver:
             raise self.model.error(f"Step {step.id}: Duration {duration} is not a whole number "
                                    f"of TimeStep {dt}", step.line)
         step_t0 = self.time - self.step_progress * dt
+        if self.step_progress == 0:
+            self.flow.begin_step(step_t0)     # a step restarted inside keeps the checkpoint's
         self._build = lambda: self._build_system(dt, motions, step.damping == "implicit",
                                                  getattr(step, "accuracy", None),
                                                  getattr(step, "safety", None))
@@ -341,8 +343,9 @@ class Solver:
     def _time_loop(self, writers: OutputWriters, n_total: int, step_t0: float,
                    dt: float) -> None:
         """The deck steps of a dynamic step, in compiled chunks up to the next checkpoint,
-        segment end (inlets and outlets) or the step's end; output of each chunk written
-        after it, a Ctrl-C obeyed between them (a checkpoint of that moment first)."""
+        segment end (inlets and outlets, which also exchange particles at the step's end) or
+        the step's end; output of each chunk written after it, a Ctrl-C obeyed between them
+        (a checkpoint of that moment first)."""
         ck_every = self.model.output.checkpoint_every
         flow = self.flow.active
         while self.step_progress < n_total:
@@ -364,9 +367,9 @@ class Solver:
             cs = self.scene.last
             tally = sysm.last_steps
             self._sample(writers, samples=tally.samples, states=tally.states)
-            if flow and self.step_progress < n_total and \
-                    self.step_progress % self.flow.segment_steps(dt) == 0:
-                exchange(self, writers)
+            if flow and (self.step_progress == n_total
+                         or self.step_progress % self.flow.segment_steps(dt) == 0):
+                exchange(self, writers)       # at each segment end and at the step's end
             if self.step_progress < n_total and (due(self.time, ck_every, dt)
                                                  or self.sigint.requested):
                 self._sync_bodies_from_system()

@@ -18,6 +18,9 @@
   deeper than the same rule, behind a one-sided one, or inside the solid of a closed
   one-sided mesh (in :func:`validate_scene`, with warnings of mesh sizes far from the
   particles'); their ``MoveWall`` strokes (in :func:`check_model`).
+* **inlets**: a region partly behind a flat wall, or too small for the particles of one
+  segment, is a warning (:func:`nurbsdem.flow_checks.warn_flow`; the errors of inlets and
+  outlets are the deck's and the API's own, :mod:`nurbsdem.io.deck_flow`).
 
 Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
 bodies are tested against each other; every body is tested against every wall.
@@ -563,11 +566,14 @@ def check_model(model: "Model") -> None:
 
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     """Check the placed scene (default ``model.bodies``): walls, bodies against walls (mesh
-    and surface walls too), explicit bodies against each other. Raises :class:`InputError`
-    (deck file and line)."""
+    and surface walls too), explicit bodies against each other; warn of inlets that reach
+    behind a wall or cannot hold a segment's particles. Raises :class:`InputError` (deck file
+    and line)."""
+    from .flow_checks import warn_flow
     from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
+    warn_flow(model)
     if bodies is not None and len(bodies):
         explicit = {p.id for p in model.particles}
         index = [i for i in range(len(bodies)) if int(bodies.id[i]) in explicit]

@@ -56,6 +56,7 @@ Steps
   Step 5 MoveWall lid Displacement 0 0 -0.004 Duration 0.1 TimeStep 1e-3
 Flow
   Inlet 3 Name feed Shapes 1 3 Fractions 0.25 0.75 Material 1 Box 0.02 0.02 0.26 0.18 0.18 0.33 Rate 500 Count 20 Velocity 0 0 -0.5 Seed 7 Every 0.02
+  Inlet 4 Shapes 1 Material 1 Disc 0.1 0.1 0.3 Normal 0.1 0 -1 Radius 0.05 Thickness 0.012 Rate 100 Count 5
   Outlet 1 Name bin Box -1 -1 -1 1 1 -0.1 Every 0.005
   Outlet 2 Point 0 0 -0.2 Normal 0 0 -1
 Output

@@ -120,8 +120,8 @@ def test_a_pour_deck_restarted_mid_pour_ends_bit_for_bit(tmp_path, monkeypatch):
 
 
 BAD = [
-    ("Box 0.005 0.005 0.01 0.055 0.055 0.05", "Box -0.02 0.005 0.01 0.055 0.055 0.05",
-     "Inlet 1: its Box lies outside the walls (behind wall 'x_min')"),
+    ("Box 0.005 0.005 0.01 0.055 0.055 0.05", "Box -0.06 0.005 0.01 -0.01 0.055 0.05",
+     "Inlet 1: its Box lies wholly outside the walls (behind wall 'x_min')"),
     ("Fractions 0.5 0.5", "Fractions 0.5 0.4", "Inlet 1: Fractions must sum to 1, got 0.9"),
     ("Shapes 1 2", "Shapes 1 7", "Inlet 1: unknown shape 7 (defined shapes: 1, 2)"),
 ]
@@ -150,14 +150,14 @@ def test_the_python_api_checks_as_the_deck_does():
     with pytest.raises(InputError, match="Fractions must sum to 1"):
         sim.add_inlet([ball, shapes.sphere(0.02)], 1, (0.1, 0.1, 0.1, 0.9, 0.9, 0.9), 10, 5,
                       fractions=(0.3, 0.3))
-    with pytest.raises(InputError, match="behind wall"):
-        sim.add_inlet([ball], 1, (0.1, 0.1, -0.5, 0.9, 0.9, 0.9), 10, 5)
+    with pytest.raises(InputError, match="wholly outside the walls .behind wall"):
+        sim.add_inlet([ball], 1, (0.1, 0.1, -0.5, 0.9, 0.9, -0.1), 10, 5)
     with pytest.raises(InputError, match="unknown material 2"):
         sim.add_inlet([ball], 2, (0.1, 0.1, 0.1, 0.9, 0.9, 0.9), 10, 5)
     with pytest.raises(InputError, match="either Box, or Point and Normal"):
         sim.add_outlet(box=(0, 0, 0, 1, 1, 1), point=(0, 0, 0), normal=(0, 0, -1))
     assert sim.add_inlet([ball], 1, (0.1, 0.1, 0.1, 0.9, 0.9, 0.9), 10, 5) == "inlet1"
-    assert sim.add_outlet(point=(0, 0, 0.5), normal=(0, 0, -1), name="low") == "low"
+    assert sim.add_outlet(point=(0, 0, 0.05), normal=(0, 0, -1), name="low") == "low"
     again = build_model(sim.deck_text, "scene.inp")
     assert [i.name for i in again.inlets] == ["inlet1"]
     assert [o.name for o in again.outlets] == ["low"]

@@ -9,7 +9,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..io.deck_flow import check_inlet, check_outlet, inlet_spec, outlet_spec
+from ..io.deck_flow import check_catch, check_inlet, check_outlet, inlet_spec, outlet_spec
 from .checks import entity_id, number, vector
 
 
@@ -21,11 +21,15 @@ def _next_id(specs: list) -> int:
     return max((s.id for s in specs), default=0) + 1
 
 
-def add_inlet(scene, shapes: Sequence[Any], material: int, box: Sequence[float], rate: float,
-              count: int, fractions: Sequence[float] | None, velocity: Sequence[float],
-              seed: int, every: float, name: str | None) -> str:
+def add_inlet(scene, shapes: Sequence[Any], material: int, box: Sequence[float] | None,
+              rate: float, count: int, fractions: Sequence[float] | None,
+              velocity: Sequence[float], seed: int, every: float, name: str | None,
+              disc: Sequence[float] | None = None, normal: Sequence[float] | None = None,
+              radius: float | None = None, thickness: float | None = None) -> str:
     """``Inlet`` of ``scene`` (a :class:`~nurbsdem.api.scene.SceneBuilder`): shapes are Shape
-    objects, shape files or the ids of shapes already in the scene; returns the name."""
+    objects, shape files or the ids of shapes already in the scene; the region a ``box``,
+    or a ``disc`` centre with its ``normal``, ``radius`` and ``thickness`` (m); returns the
+    name."""
     model = scene.model
     iid = _next_id(model.inlets)
     what = f"Inlet {iid}"
@@ -33,16 +37,28 @@ def add_inlet(scene, shapes: Sequence[Any], material: int, box: Sequence[float],
             else scene.shape_id(s) for s in shapes]
     values: dict[str, Any] = {
         "Shapes": sids, "Material": entity_id(material, f"{what}: material"),
-        "Box": vector("Box", box, what, n=6), "Rate": number("Rate", rate, what),
+        "Rate": number("Rate", rate, what),
         "Count": int(number("Count", count, what)), "Velocity": vector("Velocity", velocity, what),
         "Seed": int(number("Seed", seed, what, nonnegative=True)),
         "Every": number("Every", every, what)}
+    if box is not None:
+        values["Box"] = vector("Box", box, what, n=6)
+    if disc is not None:
+        values["Disc"] = vector("Disc", disc, what)
+    if normal is not None:
+        values["Normal"] = vector("Normal", normal, what)
+    if radius is not None:
+        values["Radius"] = number("Radius", radius, what)
+    if thickness is not None:
+        values["Thickness"] = number("Thickness", thickness, what)
     if fractions is not None:
         values["Fractions"] = [number("Fractions", f, what) for f in fractions]
     if name is not None:
         values["Name"] = name
     spec = inlet_spec(iid, values, None, _fail)
     check_inlet(model, spec, _fail)
+    for outlet in model.outlets:
+        check_catch(model, spec, outlet, _fail)
     model.inlets.append(spec)
     return spec.name
 

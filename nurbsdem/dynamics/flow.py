@@ -29,8 +29,8 @@ from ..geometry.rotation import random_quaternions
 
 @dataclass
 class InsertionRegion:
-    """A box [lo, hi] (m), or a disc (``centre``, unit ``axis``, ``radius``, ``thickness``
-    m) when ``radius`` > 0."""
+    """A box [lo, hi] (m), or a disc (``centre``, ``axis``, ``radius``, ``thickness`` m)
+    when ``axis`` is given."""
 
     lo: np.ndarray | None = None
     hi: np.ndarray | None = None
@@ -42,11 +42,8 @@ class InsertionRegion:
     def sample(self, rng: np.random.Generator, n: int, margin: np.ndarray) -> np.ndarray:
         """n points (n,3) drawn uniformly in the region shrunk by ``margin`` (n,) m (each new
         particle's bounding radius: it starts wholly inside)."""
-        if self.radius > 0:
-            e3 = self.axis / np.linalg.norm(self.axis)
-            e1 = np.cross(e3, np.eye(3)[int(np.argmin(np.abs(e3)))])
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(e3, e1)
+        if self.is_disc:
+            e1, e2, e3 = _frame(self.axis)
             rho = np.sqrt(rng.uniform(0, 1, n)) * np.maximum(self.radius - margin, 0.0)
             phi = rng.uniform(0, 2 * math.pi, n)
             h = rng.uniform(-0.5, 0.5, n) * np.maximum(self.thickness - 2 * margin, 0.0)
@@ -58,10 +55,66 @@ class InsertionRegion:
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The region's axis-aligned bounding box (m)."""
-        if self.radius > 0:
+        if self.is_disc:
             ext = np.full(3, self.radius + 0.5 * self.thickness)
             return self.centre - ext, self.centre + ext
         return self.lo, self.hi
+
+    @property
+    def is_disc(self) -> bool:
+        """Whether the region is a disc (it has an axis; else a box)."""
+        return self.axis is not None
+
+    def support(self, d: np.ndarray) -> float:
+        """max x·d over the region (m × |d|): the box's farthest corner along d; the disc's
+        centre plus its radius along d's part across the axis and half its thickness along
+        the axis."""
+        d = np.asarray(d, float)
+        if self.is_disc:
+            e3 = self.axis / np.linalg.norm(self.axis)
+            along = float(d @ e3)
+            across = float(np.linalg.norm(d - along * e3))
+            return float(self.centre @ d) + self.radius * across + 0.5 * self.thickness * abs(along)
+        return float(np.sum(np.maximum(self.lo * d, self.hi * d)))
+
+    def outline(self, k: int = 32) -> np.ndarray:
+        """Points (m, (n,3)) whose convex hull is the box (its 8 corners), or inscribed in the
+        disc (``k`` points on each rim circle and its centre)."""
+        if self.is_disc:
+            e1, e2, e3 = _frame(self.axis)
+            phi = np.linspace(0.0, 2 * math.pi, k, endpoint=False)
+            ring = self.radius * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
+            h = 0.5 * self.thickness * e3
+            return np.concatenate([self.centre + ring + h, self.centre + ring - h,
+                                   self.centre[None]])
+        return np.array([[x, y, z] for x in (self.lo[0], self.hi[0])
+                         for y in (self.lo[1], self.hi[1]) for z in (self.lo[2], self.hi[2])])
+
+    def volume(self, radius: float = 0.0) -> float:
+        """The volume (m^3) that bounding spheres of ``radius`` m placed in the region fill:
+        the box's, or the disc's radius² π times its thickness, at least the spheres'
+        diameter (a thin disc holds one layer of them)."""
+        if self.is_disc:
+            return math.pi * self.radius ** 2 * max(self.thickness, 2.0 * radius)
+        return float(np.prod(self.hi - self.lo))
+
+    def centres(self, margin: float) -> "InsertionRegion":
+        """The region in which :meth:`sample` places the centre of a particle of bounding
+        radius ``margin`` m (the region shrunk by it, as :meth:`sample` shrinks it)."""
+        if self.is_disc:
+            return InsertionRegion(centre=self.centre, axis=self.axis,
+                                   radius=max(self.radius - margin, 0.0),
+                                   thickness=max(self.thickness - 2 * margin, 0.0))
+        lo = self.lo + margin
+        return InsertionRegion(lo=lo, hi=np.maximum(self.hi - margin, lo))
+
+
+def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit vectors e1, e2 across ``axis`` and e3 along it (right-handed)."""
+    e3 = np.asarray(axis, float) / np.linalg.norm(axis)
+    e1 = np.cross(e3, np.eye(3)[int(np.argmin(np.abs(e3)))])
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(e3, e1), e3
 
 
 @dataclass
@@ -82,7 +135,8 @@ class Inlet:
     shapes: the mix's shape ids; fractions (same length, summing to 1) by number;
     radii, masses: each mix shape's bounding radius (m) and mass (kg); rate: particles/s
     (``rate_is_mass``: kg/s); limits: ``count``, ``mass`` (kg), ``until`` (s), any of them
-    None; ``start`` (s) when it opens; ``seed`` for its own random stream;
+    None; ``start`` (s) when its rate clock starts, ``base`` the particles (a real number)
+    it owed then (:meth:`restart_clock`); ``seed`` for its own random stream;
     ``max_attempts`` draws per particle before it waits.
     """
 
@@ -98,6 +152,7 @@ class Inlet:
     mass: float | None = None
     until: float | None = None
     start: float = 0.0
+    base: float = 0.0
     seed: int = 0
     max_attempts: int = 50
     inserted: int = 0
@@ -117,16 +172,32 @@ class Inlet:
             return self.rate / float(np.dot(self.fractions, self.masses))
         return self.rate
 
+    def _credit(self, t: float) -> float:
+        """Particles owed in all by time t (s), before rounding down: :attr:`base` plus rate ×
+        the time since :attr:`start` within the time limit."""
+        if t <= self.start:
+            return self.base
+        end = t if self.until is None else max(min(t, self.until), self.start)
+        return self.base + self.number_rate * (end - self.start)
+
+    def owed_total(self, t: float) -> int:
+        """The particles owed in all by time t (s): the credit rounded down, within the
+        count."""
+        total = int(math.floor(self._credit(t) + 1e-9))
+        return total if self.count is None else min(total, self.count)
+
+    def restart_clock(self, t: float) -> None:
+        """Start the rate clock at t (s) (a timed step begins): the credit owed by then, its
+        fraction of a particle included, stays owed (:attr:`base`; a waiting particle still
+        enters), and the rate counts on from t, so that a run of steps owes rate × the time
+        the inlet was open, rounded down once."""
+        self.base = self._credit(t)
+        self.start = t
+
     def due(self, t: float) -> int:
-        """How many particles the inlet owes by time t (s): rate × elapsed time, less those
-        inserted, within the count, mass and time limits."""
-        if t < self.start:
-            return 0
-        end = t if self.until is None else min(t, self.until)
-        total = int(math.floor(self.number_rate * (end - self.start) + 1e-9))
-        if self.count is not None:
-            total = min(total, self.count)
-        owed = max(total - self.inserted, 0)
+        """How many particles the inlet owes by time t (s): :meth:`owed_total` less those
+        inserted, none once the mass limit is reached."""
+        owed = max(self.owed_total(t) - self.inserted, 0)
         if self.mass is not None and self.inserted_mass >= self.mass:
             owed = 0
         return owed

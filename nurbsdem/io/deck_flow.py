@@ -1,7 +1,8 @@
 """The deck's block ``Flow`` (and :meth:`Simulation.add_inlet` / ``add_outlet``, which check
 by the same rules with the same messages): ``Inlet`` and ``Outlet`` entries to
 :class:`~nurbsdem.flow_spec.InletSpec` and :class:`~nurbsdem.flow_spec.OutletSpec`, and the
-checks against the rest of the model (shapes, material, walls, names).
+checks against the rest of the model (shapes, material, walls, names, outlets that catch an
+inlet: the rules of :mod:`nurbsdem.flow_checks`).
 
 Every function takes ``fail(message)``, which raises (the deck: at the entry's line; the
 API: an :class:`~nurbsdem.errors.InputError`)."""
@@ -11,6 +12,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ..flow_checks import outlet_catches_inlet, walls_behind
 from ..flow_spec import DEFAULT_EVERY, InletSpec, OutletSpec
 from .deck_schema import SCHEMA
 from .wallname import wall_name_problem
@@ -64,10 +66,39 @@ def _fractions(label: str, shapes: tuple, values: Mapping[str, Any], fail: Fail)
     return fr
 
 
+def _region(label: str, values: Mapping[str, Any], fail: Fail) -> dict[str, Any]:
+    """The inlet's region as :class:`~nurbsdem.flow_spec.InletSpec` fields: ``Box``, or
+    ``Disc`` (centre) with ``Normal`` (its axis), ``Radius`` and an optional ``Thickness``
+    (m, default 0: the centroids lie in the disc's plane)."""
+    disc_keys = ("Normal", "Radius", "Thickness")
+    if ("Box" in values) == ("Disc" in values):
+        fail(f"{label}: give either Box, or Disc with Normal and Radius")
+    if "Box" in values:
+        extra = [k for k in disc_keys if k in values]
+        if extra:
+            fail(f"{label}: {extra[0]} goes with Disc, not with Box")
+        lo, hi = _box(label, values["Box"], fail)
+        return {"lo": lo, "hi": hi}
+    for key in ("Normal", "Radius"):
+        if key not in values:
+            fail(f"{label}: Disc needs {key}")
+    normal = np.array(values["Normal"], float).reshape(3)
+    if not np.linalg.norm(normal) > 0:
+        fail(f"{label}: Normal must not be zero")
+    radius = float(values["Radius"])
+    if not radius > 0:
+        fail(f"{label}: Radius must be > 0, got {radius:g}")
+    thickness = float(values.get("Thickness", 0.0))
+    if not thickness >= 0:
+        fail(f"{label}: Thickness must be >= 0, got {thickness:g}")
+    return {"lo": None, "hi": None, "centre": np.array(values["Disc"], float).reshape(3),
+            "normal": normal, "radius": radius, "thickness": thickness}
+
+
 def inlet_spec(iid: int, values: Mapping[str, Any], line: int | None, fail: Fail) -> InletSpec:
     """An ``Inlet`` entry's spec from its key values (the deck's keys)."""
     label = f"Inlet {iid}"
-    for key in ("Shapes", "Material", "Box", "Rate", "Count"):
+    for key in ("Shapes", "Material", "Rate", "Count"):
         if key not in values:
             fail(f"{label}: missing {key}")
     shapes = tuple(int(s) for s in np.ravel(values["Shapes"]))
@@ -76,7 +107,7 @@ def inlet_spec(iid: int, values: Mapping[str, Any], line: int | None, fail: Fail
     if len(set(shapes)) != len(shapes):
         fail(f"{label}: Shapes lists a shape twice")
     fractions = _fractions(label, shapes, values, fail)
-    lo, hi = _box(label, values["Box"], fail)
+    region = _region(label, values, fail)
     rate = float(values["Rate"])
     if not rate > 0:
         fail(f"{label}: Rate must be > 0, got {rate:g}")
@@ -91,8 +122,9 @@ def inlet_spec(iid: int, values: Mapping[str, Any], line: int | None, fail: Fail
     if problem is not None:
         fail(f"{label}: {problem}")
     velocity = np.array(values.get("Velocity", np.zeros(3)), float).reshape(3)
+    lo, hi = region.pop("lo"), region.pop("hi")
     return InletSpec(iid, name, shapes, fractions, int(values["Material"]), lo, hi, rate,
-                     count, velocity, seed, _every(label, values, fail), line)
+                     count, velocity, seed, _every(label, values, fail), line, **region)
 
 
 def outlet_spec(oid: int, values: Mapping[str, Any], line: int | None,
@@ -123,7 +155,9 @@ def outlet_spec(oid: int, values: Mapping[str, Any], line: int | None,
 
 def check_inlet(model, spec: InletSpec, fail: Fail) -> None:
     """An inlet against the model: its shapes and material are defined, its name is not
-    taken, and its box lies on the particles' side of every flat wall it faces."""
+    taken, and its region does not lie wholly behind a flat wall
+    (:func:`~nurbsdem.flow_checks.walls_behind`).  The outlets are checked against it by
+    :func:`check_outlet` (the deck, at the outlet's line) or :func:`check_catch`."""
     label = f"Inlet {spec.id}"
     for sid in spec.shapes:
         if sid not in model.shapes:
@@ -132,14 +166,28 @@ def check_inlet(model, spec: InletSpec, fail: Fail) -> None:
         fail(f"{label}: unknown material {spec.material_id}"
              + _defined(model.materials, "materials"))
     _check_name(model, spec, label, fail)
-    wall = wall_behind(model, spec.lo, spec.hi)
-    if wall is not None:
-        fail(f"{label}: its Box lies outside the walls (behind wall {wall!r})")
+    wall, wholly = walls_behind(model, spec.region())
+    if wholly:
+        fail(f"{label}: its {spec.region_word} lies wholly outside the walls (behind wall "
+             f"{wall!r}): every particle would start outside them")
 
 
 def check_outlet(model, spec: OutletSpec, fail: Fail) -> None:
-    """An outlet against the model: its name is not taken."""
+    """An outlet against the model: its name is not taken and it catches no inlet present
+    (:func:`check_catch`)."""
     _check_name(model, spec, f"Outlet {spec.id}", fail)
+    for inlet in model.inlets:
+        if all(s in model.shapes for s in inlet.shapes):
+            check_catch(model, inlet, spec, fail)
+
+
+def check_catch(model, inlet: InletSpec, outlet: OutletSpec, fail: Fail) -> None:
+    """An outlet must not catch positions where an inlet places particles
+    (:func:`~nurbsdem.flow_checks.outlet_catches_inlet`); the same message whichever of the
+    two comes first."""
+    problem = outlet_catches_inlet(model, inlet, outlet)
+    if problem is not None:
+        fail(problem)
 
 
 def _check_name(model, spec, label: str, fail: Fail) -> None:
@@ -156,30 +204,18 @@ def _defined(table: dict, what: str) -> str:
             else f" (no {what} defined)")
 
 
-def wall_behind(model, lo: np.ndarray, hi: np.ndarray) -> str | None:
-    """The name of a flat wall with a corner of the box [lo, hi] (m) behind it (on the side
-    away from the particles) within its rectangle, or None."""
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])])
-    for w in model.walls:
-        n, c = w.normal, w.center
-        pts = np.asarray(w.patch.control_points, float).reshape(-1, 3)
-        tol = 1e-9 * (1.0 + float(np.abs(pts).max()))
-        depth = (corners - c) @ n
-        foot = corners - depth[:, None] * n[None]
-        inside = np.all((foot >= pts.min(axis=0) - tol) & (foot <= pts.max(axis=0) + tol),
-                        axis=1)
-        if np.any((depth < -tol) & inside):
-            return w.name
-    return None
-
-
 def inlet_values(spec: InletSpec) -> dict[str, Any]:
     """The deck keys of an inlet (:mod:`nurbsdem.io.deck_format`), every one written."""
-    return {"Name": spec.name, "Shapes": list(spec.shapes), "Fractions": list(spec.fractions),
-            "Material": spec.material_id, "Box": np.concatenate([spec.lo, spec.hi]),
-            "Rate": spec.rate, "Count": spec.count, "Velocity": spec.velocity,
-            "Seed": spec.seed, "Every": spec.every}
+    out: dict[str, Any] = {"Name": spec.name, "Shapes": list(spec.shapes),
+                           "Fractions": list(spec.fractions), "Material": spec.material_id}
+    if spec.is_disc:
+        out.update({"Disc": spec.centre, "Normal": spec.normal, "Radius": spec.radius,
+                    "Thickness": spec.thickness})
+    else:
+        out["Box"] = np.concatenate([spec.lo, spec.hi])
+    out.update({"Rate": spec.rate, "Count": spec.count, "Velocity": spec.velocity,
+                "Seed": spec.seed, "Every": spec.every})
+    return out
 
 
 def outlet_values(spec: OutletSpec) -> dict[str, Any]:

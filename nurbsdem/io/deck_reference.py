@@ -72,13 +72,16 @@ ENTRIES: dict[tuple[str, str], str] = {
         "step is split "
         "into internal sub-steps below the contact network's stability limit."),
     ("Flow", "Inlet"): (
-        "Particles created during every timed step in a box at a rate until a count: a mix "
-        "of shapes by number fractions, random orientations, a given velocity, never "
-        "overlapping the bounding spheres present (a full inlet waits). At the end of each "
-        "`Every` seconds the due particles enter and the system is built anew; "
-        "`monitors/inlet_<name>.csv` counts them."),
+        "Particles created during every timed step in a box or a disc at a rate (counted "
+        "from the start of each timed step) until a count: a mix of shapes by number "
+        "fractions, random orientations, a given velocity, never overlapping the bounding "
+        "spheres present (a full inlet waits). At the end of each `Every` seconds and of "
+        "each timed step the due particles enter and the system is built anew; "
+        "`monitors/inlet_<name>.csv` counts them. `check` refuses a region wholly behind a "
+        "flat wall or caught by an outlet, and warns of one partly behind a wall or too "
+        "small for the particles of one segment."),
     ("Flow", "Outlet"): (
-        "Particles removed at the end of each `Every` seconds of every timed step when "
+        "Particles removed at the end of each `Every` seconds and of every timed step when "
         "their centroid lies in a box or beyond a plane; `monitors/outlet_<name>.csv` "
         "counts them and their mass."),
     ("Output", "Directory"): "The results folder, relative to the deck.",
@@ -268,17 +271,29 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         ">= 0, summing to 1."),
     ("Flow", "Inlet", "Material"): KeyDoc("", "required", "Material id of the new particles."),
     ("Flow", "Inlet", "Box"): KeyDoc(
-        "m", "required", "x0 y0 z0 x1 y1 z1: the box the new particles lie wholly inside; "
-        "it may not reach behind a flat wall."),
-    ("Flow", "Inlet", "Rate"): KeyDoc("1/s", "required", "Particles per second."),
+        "m", "Disc", "x0 y0 z0 x1 y1 z1: the box the new particles lie wholly inside; "
+        "it may not lie wholly behind a flat wall (partly: a warning)."),
+    ("Flow", "Inlet", "Disc"): KeyDoc(
+        "m", "Box", "cx cy cz: the centre of the disc the new particles' centroids lie in "
+        "(with `Normal` and `Radius`), each bounding sphere within its rim."),
+    ("Flow", "Inlet", "Normal"): KeyDoc(
+        "-", "with Disc", "The disc's axis (only the direction matters)."),
+    ("Flow", "Inlet", "Radius"): KeyDoc("m", "with Disc", "The disc's radius."),
+    ("Flow", "Inlet", "Thickness"): KeyDoc(
+        "m", "0", "The disc's thickness along `Normal`: 0 puts the centroids in its plane."),
+    ("Flow", "Inlet", "Rate"): KeyDoc(
+        "1/s", "required", "Particles per second, counted from the start of each timed step; "
+        "a region that cannot hold one segment's particles at 30 % of its volume (random "
+        "loose packing of the bounding spheres) is a warning: the inlet waits."),
     ("Flow", "Inlet", "Count"): KeyDoc("", "required", "How many particles in all, >= 1."),
     ("Flow", "Inlet", "Velocity"): KeyDoc(
         "m/s", "0 0 0", "Velocity of every new particle, world frame."),
     ("Flow", "Inlet", "Seed"): KeyDoc(
         "", "0", "Seed of the inlet's own random shapes, positions and orientations."),
     ("Flow", "Inlet", "Every"): KeyDoc(
-        "s", "0.01", "Segment length: particles enter at the end of each; a timed step "
-        "takes the smallest `Every` of its inlets and outlets, rounded to whole TimeSteps."),
+        "s", "0.01", "Segment length: particles enter at the end of each and of the step; "
+        "a timed step takes the smallest `Every` of its inlets and outlets, rounded to whole "
+        "TimeSteps."),
     ("Flow", "Outlet", "Name"): KeyDoc(
         "", "outlet<ID>", "Names `monitors/outlet_<name>.csv` (the wall names' rule)."),
     ("Flow", "Outlet", "Box"): KeyDoc(
@@ -290,7 +305,8 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "-", "Box", "Points out of the scene: particles whose centroid is beyond the plane "
         "on this side leave."),
     ("Flow", "Outlet", "Every"): KeyDoc(
-        "s", "0.01", "Segment length: particles leave at the end of each (as the Inlet's)."),
+        "s", "0.01", "Segment length: particles leave at the end of each and of the step (as "
+        "the Inlet's)."),
 
     ("Output", "Directory", HEAD): KeyDoc("", "results", "Folder of the result files."),
     ("Output", "VTK", "Every"): KeyDoc("s", "0.01", "Interval of the ParaView samples."),

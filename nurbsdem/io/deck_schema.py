@@ -65,7 +65,8 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
         "Model": S1, "Restitution": F1})},
     "Flow": {
         "Inlet": EntrySpec(True, {"Name": S1, "Shapes": IN, "Fractions": FN, "Material": I1,
-                                  "Box": F6, "Rate": F1, "Count": I1, "Velocity": F3,
+                                  "Box": F6, "Disc": F3, "Normal": F3, "Radius": F1,
+                                  "Thickness": F1, "Rate": F1, "Count": I1, "Velocity": F3,
                                   "Seed": I1, "Every": F1}),
         "Outlet": EntrySpec(True, {"Name": S1, "Box": F6, "Point": F3, "Normal": F3,
                                    "Every": F1}),
