@@ -25,6 +25,7 @@ Both keep the arithmetic, so the same bits (docs/design-notes.md).
 """
 from __future__ import annotations
 
+import hashlib
 import platform
 import time
 from functools import lru_cache
@@ -147,6 +148,7 @@ def pack_chunks(buf: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return buf[:n]
 
 
+
 class PointerKernel:
     """A kernel that other kernels call through a function pointer instead of linking it.
 
@@ -154,92 +156,124 @@ class PointerKernel:
     linked in and optimised again (module docstring), so a large kernel called from several
     entry points (the LCP of one pair, reached from the compiled loop, the Python path's
     ``solve_due``, the threaded batch ...) is optimised once per caller and again per layer
-    between them.  Called through :attr:`call` instead, it is compiled once, for the one
-    signature ``argtypes``, and each caller holds only an indirect call: the address sits in
-    a process-wide slot (an LLVM global named :attr:`symbol`, registered with llvmlite when
-    this object is made, so that callers loaded from numba's cache link to it) that
-    :meth:`ensure` fills, compiling or loading the kernel.  A caller that runs before the
-    slot is filled raises ``RuntimeError`` (no jump to address 0).  The arithmetic is the
-    kernel's own: the same bits as a direct call.
+    between them.  Called through :attr:`call` instead, it is compiled once per signature and
+    each caller holds only an indirect call.  The address sits in a process-wide slot, an
+    LLVM global named after the kernel and a hash of its argument types
+    (:meth:`symbol`), which llvmlite resolves when a caller is linked: the slot is made and
+    filled (the kernel compiled or loaded from numba's cache) when a caller is typed, and,
+    for a caller loaded from numba's cache, before its machine code is linked (numba's
+    ``reload_init`` hooks of the caller's library).  The arithmetic is the kernel's own: the
+    same bits as a direct call.
 
-    ``kernel.call((a, b, ...))`` takes the arguments as one tuple whose types must equal
-    ``argtypes`` exactly (array layouts included): a caller passing other types fails to
-    compile, naming both.  With ``NUMBA_DISABLE_JIT=1`` :attr:`call` calls the Python
-    function.
+    ``kernel.call((a, b, ...))`` takes the arguments as one tuple and returns what the
+    kernel returns.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
     """
 
-    def __init__(self, dispatcher, name: str, argtypes: tuple) -> None:
-        import ctypes
-
-        import llvmlite.binding as llb
+    def __init__(self, dispatcher, name: str) -> None:
         from numba.core import config
 
         self.dispatcher = dispatcher
-        self.argtypes = tuple(argtypes)
-        self.symbol = f"nurbsdem_kernel_{name}"
-        self._slot = ctypes.c_int64(0)
-        llb.add_symbol(self.symbol, ctypes.addressof(self._slot))
+        self.name = name
+        self._slots: dict[tuple, tuple] = {}
+        _POINTER_KERNELS[name] = self
         if config.DISABLE_JIT:
             func = dispatcher
             self.call = lambda args: func(*args)
         else:
-            self.call = _pointer_call(self.symbol, self.argtypes, name)
-        _POINTER_KERNELS.append(self)
-        if _POINTERS_WANTED[0]:
-            self.ensure()
+            self.call = _pointer_call(self)
 
-    def ensure(self) -> None:
-        """Compile (or load from numba's cache) the kernel for :attr:`argtypes` and put its
-        address in the slot; nothing when it is there already."""
-        if self._slot.value or not hasattr(self.dispatcher, "overloads"):
-            return
-        self.dispatcher.compile(self.argtypes)
-        cres = self.dispatcher.overloads[self.argtypes]
-        self._slot.value = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+    def symbol(self, argtypes: tuple) -> str:
+        """The name of the slot of the kernel compiled for ``argtypes``."""
+        key = hashlib.sha1(str(tuple(argtypes)).encode()).hexdigest()[:16]
+        return f"nurbsdem_kernel_{self.name}_{key}"
 
+    def fill(self, argtypes: tuple):
+        """Compile (or load) the kernel for ``argtypes``, make its slot and put the address
+        in it (once per process); returns the kernel's return type."""
+        import ctypes
 
-#: every :class:`PointerKernel` made, and whether :func:`ensure_pointer_kernels` was called
-#: (kernels made after it fill their slots at once)
-_POINTER_KERNELS: list[PointerKernel] = []
-_POINTERS_WANTED = [False]
+        import llvmlite.binding as llb
 
-
-def ensure_pointer_kernels() -> None:
-    """Fill the slots of every :class:`PointerKernel` (compiling or loading them), now and
-    for those made later: called where a scene with NURBS bodies is set up
-    (:class:`~nurbsdem.contact.detect.ContactTable`), before any kernel that calls them
-    runs."""
-    _POINTERS_WANTED[0] = True
-    for k in _POINTER_KERNELS:
-        k.ensure()
+        argtypes = tuple(argtypes)
+        if argtypes not in self._slots:
+            self.dispatcher.compile(argtypes)
+            cres = self.dispatcher.overloads[argtypes]
+            slot = ctypes.c_int64(cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name))
+            llb.add_symbol(self.symbol(argtypes), ctypes.addressof(slot))
+            self._slots[argtypes] = (slot, cres.signature.return_type)
+        return self._slots[argtypes][1]
 
 
-def _pointer_call(symbol: str, argtypes: tuple, name: str):
-    """The intrinsic that calls the kernel whose address the global ``symbol`` holds."""
+#: every :class:`PointerKernel` by name
+_POINTER_KERNELS: dict[str, PointerKernel] = {}
+
+
+def _cached_libraries_keep_reload_hooks() -> None:
+    """Make numba's kernels loaded from its cache keep their ``reload_init`` hooks on their
+    code library, as freshly compiled ones do.  numba runs a cached kernel's hooks when it
+    loads it, but leaves its library's set empty; a caller compiled later links that library
+    and inherits its hooks from it, so without this a cached caller of a caller of a
+    :class:`PointerKernel` would be linked before the pointer's slot exists (``LLVM ERROR:
+    Symbol not found``)."""
+    from numba.core import compiler
+
+    rebuild = compiler.CompileResult._rebuild.__func__
+    if getattr(rebuild, "_keeps_reload_hooks", False):
+        return
+
+    def _rebuild(cls, target_context, libdata, fndesc, env, signature, objectmode, lifted,
+                 typeann, reload_init, referenced_envs):
+        cres = rebuild(cls, target_context, libdata, fndesc, env, signature, objectmode,
+                       lifted, typeann, reload_init, referenced_envs)
+        if reload_init:
+            cres.library._reload_init.update(reload_init)
+        return cres
+    _rebuild._keeps_reload_hooks = True
+    compiler.CompileResult._rebuild = classmethod(_rebuild)
+
+
+_cached_libraries_keep_reload_hooks()
+
+
+def _reload_pointer(module: str, name: str, argtypes: tuple) -> None:
+    """Fill the slot of kernel ``name`` of ``module`` for ``argtypes``: run by numba before it
+    links a cached caller's machine code."""
+    import importlib
+
+    importlib.import_module(module)
+    _POINTER_KERNELS[name].fill(argtypes)
+
+
+def _pointer_call(pk: PointerKernel):
+    """The intrinsic that calls ``pk``'s kernel through the address in its slot."""
+    import functools
+
     from numba.core.errors import TypingError
+
+    module = pk.dispatcher.py_func.__module__
 
     @intrinsic
     def call(typingctx, args):
-        if not isinstance(args, types.BaseTuple) or tuple(args.types) != argtypes:
-            raise TypingError(f"{name} takes {argtypes}, not {args}")
-        restype = types.none
+        if not isinstance(args, types.BaseTuple):
+            raise TypingError(f"{pk.name}.call takes the arguments as one tuple, not {args}")
+        argtypes = tuple(args.types)
+        restype = pk.fill(argtypes)
+        symbol = pk.symbol(argtypes)
 
         def codegen(context, builder, signature, llargs):
+            context.active_code_library._reload_init.add(
+                functools.partial(_reload_pointer, module, pk.name, argtypes))
             fnty = context.call_conv.get_function_type(restype, argtypes)
             slot = builder.module.globals.get(symbol)
             if slot is None:
                 slot = ir.GlobalVariable(builder.module, ir.IntType(64), symbol)
                 slot.linkage = "external"
             addr = builder.load(slot)
-            with builder.if_then(builder.icmp_unsigned("==", addr, ir.Constant(addr.type, 0)),
-                                 likely=False):
-                context.call_conv.return_user_exc(
-                    builder, RuntimeError, (f"compiled kernel {name} not loaded",))
             values = [builder.extract_value(llargs[0], i) for i in range(len(argtypes))]
-            status, _ = context.call_conv.call_function(
+            status, res = context.call_conv.call_function(
                 builder, builder.inttoptr(addr, fnty.as_pointer()), restype, argtypes, values)
             with cgutils.if_unlikely(builder, status.is_error):
                 context.call_conv.return_status_propagate(builder, status)
-            return context.get_dummy_value()
+            return res
         return restype(args), codegen
     return call

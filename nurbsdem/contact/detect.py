@@ -25,7 +25,7 @@ from numba import njit, prange
 
 from ..geometry.connectivity import POLE
 from ..geometry.kernel import make_workspace, power_form
-from ..jit import ensure_pointer_kernels, fetch_add, kernel
+from ..jit import fetch_add, kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
                   I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, full_rows, make_work,
@@ -176,8 +176,6 @@ class ContactTable:
         #: (saddle stalls, :func:`lcp.solve_pair`; 0 turns them off)
         self.nonconvexity = np.array([_nonconvexity(s) for s in shapes])
         self.shapes = shapes
-        if shapes:
-            ensure_pointer_kernels()         # the LCP kernels the batch kernels call
 
     def __len__(self) -> int:
         return len(self.shapes)

@@ -72,7 +72,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
+from numba import njit
 
 from ..jit import PointerKernel, kernel
 from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
@@ -638,16 +638,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     _finish_flags(resF, resI, prevF, prevI, converged, phi, cA, cB, scA, scB)
 
 
-_I1, _I2, _I3 = types.int64[::1], types.int64[:, ::1], types.int64[:, :, ::1]
-_F1, _F2, _B1 = types.float64[::1], types.float64[:, ::1], types.bool_[::1]
-#: a shape table (:class:`~nurbsdem.contact.detect.ContactTable` ``tab``) and its seeds as
-#: the compiled kernels take them
-TABLE = types.Tuple((_I2, _I2, _I2, _I1, _F1, _F2, _F2, _I3, _F2, _I1))
-SEEDS = types.Tuple((_F2, _I1, _F2))
+
 #: :func:`solve_pair` compiled once and called by the batch kernels through a pointer
 #: (:class:`~nurbsdem.jit.PointerKernel`): its callers do not compile the LCP again
-SOLVE_PAIR = PointerKernel(solve_pair, "solve_pair", (
-    TABLE, _I1, _F1, types.float64, TABLE, _I1, _F1, types.float64,
-    _F1, _F2, _F1, _F2, _F1, _I1, _B1, _B1, SEEDS, SEEDS,
-    _F2, _F2, _I2, _F2, _F2, _F1, _I1, types.float64))
-solve_pair_ptr = SOLVE_PAIR.call
+solve_pair_ptr = PointerKernel(solve_pair, "solve_pair").call

@@ -36,6 +36,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ..jit import PointerKernel
 from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
 from .broadphase import (ALL_PAIRS_MAX, sphere_pairs_jit, sphere_pairs_of,
@@ -376,7 +377,7 @@ def _point_rows(st, a, b, pos, R, prev_f, prev_i, rf, ri):
                              prev_f, prev_i, rf, ri)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, wall_d,
                    nt) -> tuple[int, bool]:
     """The rows of the listed pairs ``due`` (indices into the list: bodies list_a/list_b,
@@ -427,6 +428,12 @@ def solve_due(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, w
     (rows_f, rows_i, pairs solved by the point solver)."""
     rf, ri = rows_f[due], rows_i[due]
     D = due.shape[0]
-    points, _ = solve_due_into(st, list_a[due], list_b[due], mask_a[due], mask_b[due], rf, ri,
-                               np.arange(D), pos, R, wall_d, nt)
+    points, _ = solve_due_into_ptr((st, list_a[due], list_b[due], mask_a[due], mask_b[due], rf,
+                                    ri, np.arange(D), pos, R, wall_d, nt))
     return rf, ri, points
+
+
+#: :func:`scene_list` and :func:`solve_due_into` compiled once and called by the compiled
+#: loop and :func:`solve_due` through pointers (:class:`~nurbsdem.jit.PointerKernel`)
+scene_list_ptr = PointerKernel(scene_list, "scene_list").call
+solve_due_into_ptr = PointerKernel(solve_due_into, "solve_due_into").call

@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 import numba
-from numba import njit, prange, types
+from numba import njit, prange
 
 from ..geometry.kernel import make_workspace
 from ..jit import PointerKernel, kernel
@@ -37,7 +37,7 @@ from .analytic import parallelogram_coordinates
 from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, next_chunk,
                      table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
-                  I_PA, I_PB, I_VALID, NF, NI, SEEDS, TABLE, full_rows, make_work,
+                  I_PA, I_PB, I_VALID, NF, NI, full_rows, make_work,
                   _predicted_params, _store_prediction)
 from .stage2 import _EA, _EV, _EV2, _GA, _H, _MA, _PA, _TMP, _rot_t, _to_world
 from .support import CREASE, seed_start, support_map
@@ -127,14 +127,10 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
     resI[I_ACTIVE] = 1 if (finite and inside and sd < 0.0) else 0
 
 
-_F1, _F2 = types.float64[::1], types.float64[:, ::1]
-_I1, _I2 = types.int64[::1], types.int64[:, ::1]
+
 #: :func:`solve_wall` compiled once and called by the batch kernels through a pointer
 #: (:class:`~nurbsdem.jit.PointerKernel`)
-SOLVE_WALL = PointerKernel(solve_wall, "solve_wall", (
-    TABLE, _I1, _F1, types.float64, SEEDS, _F1, _F2, _F1, _F1, _F1, _F1, _F1, _I1,
-    _F2, _F2, _I2, _F2, types.bool_[::1], _F1, _I1))
-solve_wall_ptr = SOLVE_WALL.call
+solve_wall_ptr = PointerKernel(solve_wall, "solve_wall").call
 
 
 def wall_frame(wall) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -52,18 +52,19 @@ import numpy as np
 from numba import njit
 
 from ..contact.analytic import closed_form_into
-from ..contact.listed import scene_list, solve_due_into
+from ..contact.listed import scene_list_ptr, solve_due_into_ptr
 from ..contact.verlet import (active_arrays, active_rows, advance_odometers, carry_rows,
                               due_rows, list_is_stale, near_arrays, near_pairs, renew_certificates,
                               repose, reposed_bodies)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
-from ..jit import cycles, seconds_per_cycle
+from ..jit import PointerKernel, cycles, seconds_per_cycle
 from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
 from .monitor import record_row, row_width
-from .step import all_kinematics, contact_part, interfaces_defined, kick_part, step_start
+from .step import (all_kinematics, contact_part_ptr, interfaces_defined, kick_part_ptr,
+                   step_start_ptr)
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
@@ -143,9 +144,9 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
         fresh = reposed_bodies(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
         built_x, built_R, built_wall, built_pos = repose(built_x, built_R, built_wall, built_pos,
                                                          x, R, wall_d, pos, fresh)
-        a, b, keys, mask_a, mask_b = scene_list(sc.tables, built_x, built_pos, built_R,
-                                                built_wall, sc.owned, sc.margin + sc.skin,
-                                                pl.keys, pl.mask_a, pl.mask_b, fresh)
+        a, b, keys, mask_a, mask_b = scene_list_ptr((sc.tables, built_x, built_pos, built_R,
+                                                     built_wall, sc.owned, sc.margin + sc.skin,
+                                                     pl.keys, pl.mask_a, pl.mask_b, fresh))
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
         counters[BUILDS] += 1
@@ -160,8 +161,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
                          t.sphere_center, t.sphere_radius, t.wall_origin, t.wall_a, t.wall_b,
                          t.wall_dom)
     else:                   # in place: the loop owns these arrays
-        points, failed = solve_due_into(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i, due,
-                                        pos, R, wall_d, sc.threads)
+        points, failed = solve_due_into_ptr((sc.tables, a, b, mask_a, mask_b, rows_f, rows_i,
+                                             due, pos, R, wall_d, sc.threads))
         counters[POINT_SOLVES] += points
     c2 = cycles()
     renew_certificates(budget, due, rows_f, rows_i, reach)
@@ -215,9 +216,9 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     pos_all, vel_all, omg_all = all_kinematics(x, v, omega, wall_d, wall_u)
     solves = np.zeros(4, np.int64)
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
-     hist_springs, _) = contact_part(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
-                                     ev.hist_keys, ev.hist_springs, pos_all, vel_all, omg_all, q,
-                                     L, h, solves, np.zeros(0))
+     hist_springs, _) = contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                          ev.hist_keys, ev.hist_springs, pos_all, vel_all,
+                                          omg_all, q, L, h, solves, np.zeros(0)))
     counters[DASHPOT_SOLVES] += solves[0]
     counters[DASHPOT_SOLVES + 1] += solves[1]
     counters[DASHPOT_SOLVES + 2] += solves[2]
@@ -360,6 +361,12 @@ def _kept(j: int, x, q, v, L, wall_d, ev):
 
 
 # --------------------------------------------------------------------------- the loop
+#: the loop's large parts compiled once and called through pointers
+#: (:class:`~nurbsdem.jit.PointerKernel`): the loop does not compile them again
+_evaluate_ptr = PointerKernel(_evaluate, "deck_evaluate").call
+_step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
+
+
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
@@ -400,10 +407,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
-            omega, _, worst, run = step_start(
+            omega, _, worst, run = step_start_ptr((
                 bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force, ev.torque,
                 x, v, q, L, omega, ev.b, wall_d, u_mean, h, ledger, wall_work, alt_prev_v,
-                alt_prev_L, alt_count, cc.watch_period2, True)
+                alt_prev_L, alt_count, cc.watch_period2, np.bool_(True)))
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             wall_d, wall_u = d_new.copy(), u_new.copy()
@@ -416,14 +423,14 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             counters[EVALS] += 1
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
-            ok, ev = _evaluate(sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
-                               omega, R, wall_d, wall_u, h, counters)
+            ok, ev = _evaluate_ptr((sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
+                                    omega, R, wall_d, wall_u, h, counters))
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             c4 = cycles()
-            omega, _ = kick_part(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
-                                 ev.force, ev.torque, x, v, q, L, omega, ev.b, wall_d, u_mean,
-                                 0.5 * h, ledger, wall_work, True)
+            omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
+                                      ev.force, ev.torque, x, v, q, L, omega, ev.b, wall_d,
+                                      u_mean, 0.5 * h, ledger, wall_work, np.bool_(True)))
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -463,7 +470,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         if state_at[j]:
             states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         c0 = cycles()
-        stands = _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters, estimate)
+        stands = _step_control_ptr((bc, cc, ev, x, v, q, omega, wall_u, substeps, counters,
+                                    estimate))
         counters[CONTROL_CYCLES] += cycles() - c0
         if not stands:
             return CONTROL, j + 1, pl, ev, wall_d, wall_u, states

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from ..geometry.rotation import quats_to_matrices
-from ..jit import cycles
+from ..jit import PointerKernel, cycles
 from .forces import add_kick_work, contact_loads, match_history
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
@@ -167,3 +167,9 @@ def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, h
     return (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, keys,
             springs, repeated)
 
+
+#: the parts compiled once and called by the compiled deck steps through pointers
+#: (:class:`~nurbsdem.jit.PointerKernel`): the loop does not compile them again
+step_start_ptr = PointerKernel(step_start, "step_start").call
+kick_part_ptr = PointerKernel(kick_part, "kick_part").call
+contact_part_ptr = PointerKernel(contact_part, "contact_part").call
