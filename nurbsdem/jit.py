@@ -11,17 +11,19 @@ keeps plain ``njit`` (numba refuses to compile an allocation here: the error nam
 Compile time (the first run after an install, an upgrade or an edit of a kernel's sources
 compiles the kernels it calls; ``nurbsdem warmup`` does it ahead, :mod:`nurbsdem.warmup`).
 numba finalises the machine code of every compiled function with all the functions it calls
-linked in and optimised once more: each layer between the LCP and an entry point (the
-compiled loop, the Python path's ``solve_due``) compiles the whole contact problem again.
-Layers that only pass arrays on and are called from compiled code only are therefore
-``njit(inline="always")`` (numba inlines their IR: no machine code of their own), e.g.
-``listed._solve_into``, ``detect.solve_rows``, ``wall._wall_chunks``, ``deck_steps._search``;
-the loop's other helpers (``_evaluate``, ``_step_control``) stay separate: inlined too, they
-make the loop's one function so large that optimising it costs what the copies save.  A
-literal argument (``0``, ``False``, a module constant, also a counter's ``n = 0`` before the
-loop raises it) gives the callee a second specialisation, i.e. a second compilation of
-everything it calls: counters start as ``np.int64(0)``, flags go in as ``np.bool_(False)``.
-Both keep the arithmetic, so the same bits (docs/design-notes.md).
+linked in and optimised once more, so each layer between a large kernel and an entry point
+compiles that kernel again.  The large kernels reached from several entry points (the LCP
+of a pair and of a body against a wall, the neighbour list, the due rows, the step's parts,
+the loop's evaluation and step control) are therefore called through function pointers
+(:class:`PointerKernel`): compiled once per signature, and their callers hold an indirect
+call.  Layers that only pass arrays on are ``njit(inline="always")`` (numba inlines their
+IR: no machine code of their own), e.g. ``listed._solve_into``, ``detect.solve_rows``,
+``deck_steps._search``.  A literal argument (``0``, ``False``, a module constant, also a
+counter's ``n = 0`` before the loop raises it) gives the callee a second specialisation,
+i.e. a second compilation: range bounds, body rows and counters go in as ``np.int64(0)``,
+flags as ``np.bool_(False)`` (the derivative order of the NURBS evaluation stays literal:
+its specialisations unroll the loops of the hot LCP).  Both keep the arithmetic, so the
+same bits (docs/design-notes.md).
 """
 from __future__ import annotations
 
