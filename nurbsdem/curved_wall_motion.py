@@ -1,6 +1,7 @@
-"""Where a model's mesh and surface walls are in time: at rest where earlier ``MoveWall NAME
-Rotate`` steps left them, the one of the current Rotate step turning at its angular velocity
-about its centre (:class:`CurvedWallMotion`), and the contact provider that holds them
+"""Where a model's mesh and surface walls are in time: at rest where earlier ``MoveWall``
+steps left them, those the current step turns (``Rotate``: at an angular velocity about a
+centre; ``Table``: by interpolated rotation vectors) as their poses say
+(:class:`CurvedWallMotion`), and the contact provider that holds them
 (:mod:`nurbsdem.contact.curved_walls`)."""
 from __future__ import annotations
 
@@ -17,31 +18,30 @@ class CurvedWallMotion:
 
     def __init__(self, model) -> None:
         self.model = model
-        #: wall k -> (R (3,3), t (3,) m) where Rotate steps left it (absent: never turned)
+        #: wall k -> (R (3,3), t (3,) m) where earlier steps left it (absent: never turned)
         self.rest: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        #: (k, omega (3,) rad/s, centre (3,) m, t0 s) of the Rotate step running now, or None
-        self.rotation = None
+        #: wall k -> its pose in time (:class:`~nurbsdem.contact.curved_walls.WallPose` or
+        #: :class:`~nurbsdem.wall_tables.TablePose`) for the walls the running step turns
+        self.turning: dict = {}
         self._geometry = None
 
     @contextlib.contextmanager
-    def turning(self, k: int, omega, center, t_start: float):
-        """Wall k turns at ``omega`` about ``center`` (before its displacement: the pose adds
-        it) from ``t_start`` (s) while inside."""
-        self.rotation = (k, np.asarray(omega, float), np.asarray(center, float), t_start)
+    def moving(self, poses: dict):
+        """The walls of ``poses`` (k -> pose in time) turn as their poses say while inside."""
+        self.turning = dict(poses)
         try:
             yield
         finally:
-            self.rotation = None
+            self.turning = {}
 
     def pose(self, k: int):
-        """The pose in time of mesh or surface wall k: where earlier Rotate steps left it,
-        turning now when the current step rotates it (:attr:`rotation`)."""
+        """The pose in time of mesh or surface wall k: where earlier steps left it, or the
+        current step's pose of it when the step turns it (:attr:`turning`)."""
         from .contact.curved_walls import WallPose
+        if k in self.turning:
+            return self.turning[k]
         R0, shift0 = self.rest.get(k, (np.eye(3), np.zeros(3)))
-        rot = self.rotation
-        if rot is None or rot[0] != k:
-            return WallPose(R0=R0, shift0=shift0)
-        return WallPose(omega=rot[1], center=rot[2], t0=rot[3], R0=R0, shift0=shift0)
+        return WallPose(R0=R0, shift0=shift0)
 
     def poses(self, t: float, wall_d: np.ndarray) -> list | None:
         """(R, t) of each mesh or surface wall at time t (s) with the walls' displacements
@@ -52,14 +52,24 @@ class CurvedWallMotion:
         return [self.pose(k).at(t, wall_d[first + k])
                 for k in range(len(self.model.curved_walls))]
 
-    def spin(self, n_walls: int) -> np.ndarray:
-        """(W,6) angular velocity and centre of each of the system's ``n_walls`` walls (the one
-        a Rotate step turns; 0 for the others)."""
+    def spin(self, n_walls: int, t: float = 0.0) -> np.ndarray:
+        """(W,6) angular velocity (rad/s) and centre (m) at time t (s) of each of the system's
+        ``n_walls`` walls (0 for those that do not turn)."""
         spin = np.zeros((n_walls, 6))
-        rot = self.rotation
-        if rot is not None:
-            spin[len(self.model.walls) + rot[0]] = np.concatenate([rot[1], rot[2]])
+        first = len(self.model.walls)
+        for k, pose in self.turning.items():
+            omega = pose.angular_velocity(t) if hasattr(pose, "angular_velocity") else pose.omega
+            spin[first + k] = np.concatenate([omega, pose.center])
         return spin
+
+    def attach(self, sysm, provider) -> None:
+        """Give the system ``sysm`` the contact provider of the mesh and surface walls and
+        their spin (``wall_spin``); a wall turned by a table turns at a rate that changes in
+        time, so its spin is set anew at each force evaluation's time (:class:`_Spinning`)."""
+        sysm.wall_spin = self.spin(sysm.walls.n, sysm.time)
+        if any(hasattr(p, "angular_velocity") for p in self.turning.values()):
+            provider = _Spinning(provider, self, sysm)
+        sysm.set_contact_provider(provider)
 
     def contacts(self, scene, shape_ids: np.ndarray, comm):
         """The scene with the model's mesh and surface walls for particles of shapes
@@ -87,3 +97,21 @@ class CurvedWallMotion:
         """The rest poses of a checkpoint (:meth:`rest_state`)."""
         self.rest = {int(k): (np.asarray(v, float)[:9].reshape(3, 3), np.asarray(v, float)[9:12])
                      for k, v in dict(state or {}).items()}
+
+
+class _Spinning:
+    """A contact provider that first sets the system's ``wall_spin`` to the walls' spin at
+    the evaluation's time (walls turned by a table), then asks the wrapped one; any other
+    attribute is the wrapped provider's."""
+
+    def __init__(self, provider, motion: CurvedWallMotion, sysm) -> None:
+        self._provider, self._motion, self._sysm = provider, motion, sysm
+
+    def __call__(self, kin):
+        self._sysm.wall_spin[:] = self._motion.spin(self._sysm.walls.n, kin.t)
+        return self._provider(kin)
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name in ("_provider", "_motion", "_sysm"):
+            raise AttributeError(name)
+        return getattr(self._provider, name)

@@ -426,6 +426,13 @@ class MoveWallStep(Step):
     * ``Rotate AngularVelocity .. Center .. [Displacement ..] Duration T TimeStep DT``: a
       mesh or surface wall turns (``rotate`` below), translating by the displacement as
       well when one is given, its centre with it.
+    * ``Table FILE [Center ..] [Duration T] TimeStep DT``: the wall follows a CSV table of
+      displacements (and, mesh and surface walls, rotation vectors about the centre) in
+      time (:mod:`nurbsdem.wall_tables`); the duration defaults to the table's last time.
+
+    Further ``Step`` lines with the same id move more walls in the same step (``also``):
+    each names its wall and its motion (``Displacement``, ``Rotate ..`` or ``Table``), the
+    first line the timing.
     """
 
     wall: str = ""
@@ -445,7 +452,21 @@ class MoveWallStep(Step):
     rotate: bool = False
     angular_velocity: np.ndarray | None = None
     center: np.ndarray | None = None
+    #: the tabulated motion (:class:`~nurbsdem.wall_tables.WallTable`; None: none)
+    table: Any = None
+    #: the other walls moving in this step, each a MoveWallStep of one wall and its motion
+    #: (displacement, turn or table) whose timing is this step's
+    also: list = field(default_factory=list)
     kind = "movewall"
+
+    def moves(self) -> list["MoveWallStep"]:
+        """This step's wall motion, then those of the other walls it moves (:attr:`also`)."""
+        return [self, *self.also]
+
+    def net_displacement(self) -> np.ndarray:
+        """The wall's displacement by the step's end (m): the table's last or the step's."""
+        d = self.table.displacement[-1] if self.table is not None else self.displacement
+        return np.zeros(3) if d is None else np.asarray(d, float)
 
 
 @dataclass
@@ -712,8 +733,9 @@ def summary_text(model: Model) -> str:
             if s.to_contact:
                 desc = f"MoveWall {s.wall} to contact, gap {s.gap:g} m"
             else:
-                desc = (f"MoveWall {s.wall} by {_vec(s.displacement)} m in {s.duration:g} s, "
-                        f"time step {s.time_step:g} s")
+                from .wall_tables import describe_moves
+                desc = (f"MoveWall {describe_moves(s)} in {s.duration:g} s, time step "
+                        f"{s.time_step:g} s")
         if getattr(s, "damping", "explicit") == "implicit":
             desc += ", implicit dashpots"
         if getattr(s, "accuracy", None) is not None:

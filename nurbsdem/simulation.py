@@ -51,7 +51,8 @@ from .api.flow import add_inlet, add_outlet
 from .api.restart import check_restart_step, checkpoint_of_scene
 from .api.scene import SceneBuilder
 from .api.start import make_solver, start_solver
-from .api.steps import dynamic_step, move_wall_step, next_step_id, replicate_step
+from .api.steps import (dynamic_step, move_wall_step, move_walls_step, next_step_id,
+                        replicate_step)
 from .errors import InputError
 from .flow_spec import DEFAULT_EVERY
 from .model import Bodies, Model, MoveWallStep, Output, ReplicateStep, ShapeEntry, Step
@@ -286,25 +287,51 @@ class Simulation:
         ``height`` m upwards (velocities zeroed)."""
         self._run(replicate_step(next_step_id(self.model), layers, height))
 
-    def move_wall(self, name: str, displacement: Sequence[float] | None = None,
+    def move_wall(self, name: str | Sequence, displacement: Sequence[float] | None = None,
                   duration: float | None = None, time_step: float | None = None, *,
                   to_contact: bool = False, gap: float = 0.0,
                   direction: Sequence[float] | None = None, damping: str = "explicit",
                   accuracy: float | None = None, safety: float | None = None,
                   angular_velocity: Sequence[float] | None = None,
-                  center: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+                  center: Sequence[float] = (0.0, 0.0, 0.0), table=None) -> None:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
         particle is ``gap`` m away (no time passes; flat walls), or ``angular_velocity``
         (rad/s): a mesh or surface wall turns about ``center`` (m) over ``duration`` s
-        (``Rotate``), translating by ``displacement`` too when given (the centre with it).
-        ``damping``, ``accuracy``, ``safety``: as for :meth:`run_dynamic`."""
-        self._run(move_wall_step(
-            self.model, next_step_id(self.model), name, displacement, duration,
-            time_step, to_contact=to_contact, gap=gap, direction=direction,
-            damping_scheme=damping, accuracy=accuracy, safety=safety,
-            angular_velocity=angular_velocity, center=center))
+        (``Rotate``), translating by ``displacement`` too when given (the centre with it), or
+        ``table``: a CSV file or an array of rows t, x, y, z[, rx, ry, rz] (s, m, rad) the
+        wall follows (``Table``; ``duration`` default: the last time; an array is written to
+        ``<output>/tables/`` for the deck text when the simulation has an output folder).
+        ``damping``, ``accuracy``, ``safety``: as for :meth:`run_dynamic`.
+
+        Several walls in one step: ``name`` a list of ``(name, motion)`` pairs, ``motion`` a
+        dict of ``displacement``, ``table`` or ``angular_velocity`` (and ``center``), the
+        timing shared (``Step`` lines of one id in the deck)."""
+        if not isinstance(name, str):
+            if (displacement, table, angular_velocity) != (None, None, None) or to_contact:
+                raise InputError(f"Step {next_step_id(self.model)}: with a list of walls, "
+                                 f"each wall's motion is in its own dict")
+            step = move_walls_step(self.model, next_step_id(self.model), name, duration,
+                                   time_step, damping_scheme=damping, accuracy=accuracy,
+                                   safety=safety)
+        else:
+            step = move_wall_step(
+                self.model, next_step_id(self.model), name, displacement, duration,
+                time_step, to_contact=to_contact, gap=gap, direction=direction,
+                damping_scheme=damping, accuracy=accuracy, safety=safety,
+                angular_velocity=angular_velocity, center=center, table=table)
+        self._keep_tables(step)
+        self._run(step)
+
+    def _keep_tables(self, step: MoveWallStep) -> None:
+        """Write the tables given as arrays to ``<output>/tables/`` (the deck text names them)."""
+        from .wall_tables import keep_table
+        if self._output_dir is None or self.solver is not None and self.solver.rank > 0:
+            return
+        for m in step.moves():
+            if m.table is not None and m.table.file is None:
+                keep_table(m.table, self._output_dir / "tables" / f"step{m.id}_{m.wall}.csv")
 
     def run(self):
         """Run the steps not run yet (a deck's steps), then close the files; returns the

@@ -16,6 +16,9 @@ Steps (PyBaMM-like: an experiment is a list of steps):
   velocity; its reaction force, torque and work are monitored.
 * ``MoveWall … Rotate``: a dynamic step in which a mesh or surface wall turns about a centre
   (translating too, the centre with it, when the step gives a ``Displacement``).
+* ``MoveWall … Table``: a dynamic step in which a wall follows a table of displacements (and
+  turns, mesh and surface walls); a step moves several walls when its id repeats
+  (:mod:`nurbsdem.wall_moves`).
 
 Energies written to ``monitors/energy.csv`` are cumulative over the whole run.
 Checkpoints (``checkpoint.h5``, :mod:`nurbsdem.run_checkpoint`) are written every
@@ -42,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .contact.scene import SceneContacts
+from . import wall_moves
 from .curved_wall_motion import CurvedWallMotion
 from .dynamics import DemSystem, PrescribedMotion
 from .dynamics.monitor import MonitorSample, StateSample
@@ -175,11 +179,11 @@ class Solver:
                                     self.safety if safety is None else safety,
                                     self.compiled_steps, implicit_damping, accuracy)
         self.scene = self.assembly.scene(self.scene, self.bodies, self.contact_options)
-        sysm.set_contact_provider(
-            self.curved.contacts(self.scene, self.bodies.shape_id, self.comm)
-            if model.curved_walls else self.scene)
         if model.curved_walls:
-            sysm.wall_spin = self.curved.spin(sysm.walls.n)
+            self.curved.attach(sysm, self.curved.contacts(self.scene, self.bodies.shape_id,
+                                                          self.comm))
+        else:
+            sysm.set_contact_provider(self.scene)
         if self.comm is not None:
             self.domain = decompose(self.comm, sysm, self.scene)
         if self.carry_hist is not None:
@@ -407,39 +411,15 @@ class Solver:
         log.info("step %d: wall %s moved %.6g m to a gap of %g m", step.id, step.wall, travel,
                  step.gap)
 
-    def _run_rotation(self, step: MoveWallStep, writers: OutputWriters, restored) -> None:
-        """``MoveWall NAME Rotate``: a dynamic step in which mesh or surface wall NAME turns
-        at the step's angular velocity about its centre, translating with the centre when
-        the step has a displacement; it stays where it turned to."""
-        k = self.model.wall_names.index(step.wall) - len(self.model.walls)
-        motions = self._wall_motions(step, restored)
-        d0, t_start = self.motion_spec["d0"], self.motion_spec["t_start"]
-        # the centre before the wall's displacement (the pose adds it back: WallPose)
-        with self.curved.turning(k, step.angular_velocity, np.asarray(step.center, float) - d0,
-                                 t_start):
+    def _run_move(self, step: MoveWallStep, writers: OutputWriters, restored) -> None:
+        """``MoveWall`` over time: a dynamic step in which the step's walls translate and the
+        mesh and surface walls among them turn (:func:`nurbsdem.wall_moves.plan`); each
+        stays where its motion leaves it."""
+        motions, poses = wall_moves.plan(self, step, restored)
+        with self.curved.moving(poses):
             self._run_dynamic(step, writers, motions, restored)
-            end = self.curved.pose(k).at(self.time)
-        self.curved.rest[k] = end
-
-    def _wall_motions(self, step: MoveWallStep, restored) -> list[PrescribedMotion]:
-        """The walls' motions in a MoveWall step: the step's wall translates by its
-        ``displacement`` (if any) at constant velocity over the step, from where it is; the
-        others stay where they are.  Where the wall was (d0, m) and when the step started
-        (t_start, s) are kept for the checkpoint (``motion_spec``), so that a restart
-        continues from the same numbers."""
-        k = self.model.wall_names.index(step.wall)
-        spec = restored.get("motion") if restored else None
-        if spec:
-            d0, t_start = np.array(spec["d0"], float), float(spec["t_start"])
-        else:
-            d0 = self.wall_offset[k].copy()
-            t_start = self.time - self.step_progress * float(step.time_step)
-        self.motion_spec = {"d0": d0, "t_start": t_start}
-        motions = self._fixed_motions()
-        if step.displacement is not None:
-            motions[k] = PrescribedMotion.piecewise_linear(
-                [t_start, t_start + step.duration], [d0, d0 + step.displacement])
-        return motions
+            ends = {k: pose.at(self.time) for k, pose in poses.items()}
+        self.curved.rest.update(ends)
 
     def _run_step(self, step, writers: OutputWriters) -> None:
         restored = self._restored
@@ -450,10 +430,8 @@ class Solver:
             self._run_replicate(step, writers)
         elif isinstance(step, MoveWallStep) and step.to_contact:
             self._to_contact(step)
-        elif isinstance(step, MoveWallStep) and step.rotate:
-            self._run_rotation(step, writers, restored)
         elif isinstance(step, MoveWallStep):
-            self._run_dynamic(step, writers, self._wall_motions(step, restored), restored)
+            self._run_move(step, writers, restored)
         else:  # pragma: no cover - the parser knows no other steps
             raise InputError(f"unknown step kind {step.kind}")
         self._restored = None

@@ -511,19 +511,25 @@ def check_wall_strokes(model: "Model") -> None:
     planes = {w.name: wall_plane(w) for w in model.walls}
     travel: dict[str, float] = {}
     for s in model.steps:
-        if not (isinstance(s, MoveWallStep) and not s.to_contact and s.wall in planes):
+        if not (isinstance(s, MoveWallStep) and not s.to_contact):
             continue
-        o, _, _, n = planes[s.wall]
-        travel[s.wall] = travel.get(s.wall, 0.0) + float(np.asarray(s.displacement, float) @ n)
-        for other, (o2, _, _, n2) in planes.items():
-            if other == s.wall or float(n @ n2) > -0.9:
+        for m in s.moves():
+            if m.wall not in planes:
                 continue
-            gap = float((o2 - o) @ n)
-            if gap > 0 and travel[s.wall] >= gap:
-                raise model.error(
-                    f"Step {s.id}: wall {s.wall!r} would have moved {travel[s.wall]:.4g} m towards "
-                    f"the particles by the end of this step, past wall {other!r} that faces it "
-                    f"{gap:.4g} m away: the particles would be crushed through it", s.line)
+            o, _, _, n = planes[m.wall]
+            before = travel.get(m.wall, 0.0)
+            travel[m.wall] = before + float(m.net_displacement() @ n)
+            peak = (before + float(np.max(m.table.displacement @ n)) if m.table is not None
+                    else travel[m.wall])        # a table's farthest row
+            for other, (o2, _, _, n2) in planes.items():
+                if other == m.wall or float(n @ n2) > -0.9:
+                    continue
+                gap = float((o2 - o) @ n)
+                if gap > 0 and peak >= gap:
+                    raise model.error(
+                        f"Step {s.id}: wall {m.wall!r} would have moved {peak:.4g} m towards "
+                        f"the particles in this step, past wall {other!r} that faces it "
+                        f"{gap:.4g} m away: the particles would be crushed through it", m.line)
 
 
 def check_scale(model: "Model") -> None:

@@ -372,12 +372,14 @@ def warn_mesh_size(model: "Model", spec: "CurvedWallSpec", size: float,
 def _pose_after(step, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pose (R, t: x = R x_rest + t) after a MoveWall step that began at (R, t): turned by
     ω T about the centre (where it is at the step's start), then translated."""
-    d = np.zeros(3) if step.displacement is None else np.asarray(step.displacement, float)
-    if not step.rotate:
+    d = step.net_displacement()
+    table = step.table
+    if not step.rotate and (table is None or table.rotation is None):
         return R, t + d
     from scipy.spatial.transform import Rotation
-    rot = Rotation.from_rotvec(np.asarray(step.angular_velocity, float)
-                               * float(step.duration)).as_matrix()
+    turn = (table.rotation[-1] if table is not None else
+            np.asarray(step.angular_velocity, float) * float(step.duration))
+    rot = Rotation.from_rotvec(turn).as_matrix()
     c = np.asarray(step.center, float)
     return rot @ R, rot @ (t - c) + c + d
 
@@ -390,8 +392,10 @@ def check_curved_wall_strokes(model: "Model", points: dict) -> None:
     planes = [(w, *wall_plane(w)) for w in model.walls]
     curved = {w.name: w for w in model.curved_walls}
     pose: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for s in model.steps:
-        if not (isinstance(s, MoveWallStep) and s.wall in curved and not s.to_contact):
+    moves = [(s, m) for s in model.steps if isinstance(s, MoveWallStep) and not s.to_contact
+             for m in s.moves()]
+    for _, s in moves:
+        if s.wall not in curved:
             continue
         R, t = _pose_after(s, *pose.get(s.wall, (np.eye(3), np.zeros(3))))
         pose[s.wall] = (R, t)

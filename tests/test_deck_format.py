@@ -86,6 +86,11 @@ Contact
 Steps
   Step 1 Dynamic Duration 0.01 TimeStep 1e-3
   Step 2 MoveWall drum Rotate AngularVelocity 3 0 0 Center 0 0 1 Duration 0.01 TimeStep 1e-3 Damping Implicit Safety 0.4
+  Step 3 MoveWall drum Table "turn table.csv" Center 0 0 1 Duration 0.02 TimeStep 1e-3 Accuracy 1e-4
+  Step 3 MoveWall floor Displacement 0 0 0.001
+  Step 4 MoveWall floor Table lift.csv TimeStep 1e-3
+  Step 4 MoveWall drum Rotate AngularVelocity 1 0 0 Center 0 0 1 Displacement 0 0.001 0
+  Step 4 MoveWall top Table lift.csv
 """
 
 
@@ -148,6 +153,9 @@ def curved_deck(tmp_path):
     trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
                     [[0, 1, 2], [0, 2, 3]]).export(tmp_path / "floor.stl")
     save_shape(tmp_path / "drum.yaml", [cylinder_patch(0.1, 0.2, axis=(0, 0, 1))])
+    (tmp_path / "turn table.csv").write_text("t,x,y,z,rx,ry,rz\n0,0,0,0,0,0,0\n"
+                                             "0.01,0,0,0.001,0.01,0.02,0.03\n")
+    (tmp_path / "lift.csv").write_text("0,0,0,0\n0.005,0,0,1e-4\n0.01,0,0,1.5e-4\n")
     path = tmp_path / "curved.inp"
     path.write_text(CURVED_DECK)
     return path

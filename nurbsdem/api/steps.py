@@ -63,15 +63,21 @@ def move_wall_step(model: Model, sid: int, name: Any,
                    to_contact: bool, gap: Any, direction: Sequence[float] | None,
                    damping_scheme: Any, accuracy: Any, safety: Any,
                    angular_velocity: Sequence[float] | None,
-                   center: Sequence[float]) -> MoveWallStep:
+                   center: Sequence[float], table: Any = None) -> MoveWallStep:
     """``MoveWall`` (see :meth:`~nurbsdem.simulation.Simulation.move_wall`): a turn of a
     mesh or surface wall (with a displacement too, if given), a flat wall moved to contact,
-    or a wall's displacement."""
+    a wall's displacement, or a table of its motion (a CSV path or an array of rows)."""
     what = f"Step {sid}"
     if not isinstance(name, str) or name not in model.wall_names:
         names = ", ".join(model.wall_names) or "no walls defined"
         raise InputError(f"{what}: no wall named {name!r} (walls: {names})")
     curved = name in {w.name for w in model.curved_walls}
+    if table is not None:
+        if to_contact or displacement is not None or angular_velocity is not None:
+            raise InputError(f"{what}: table takes center, duration and time_step, not "
+                             f"displacement, angular_velocity or to_contact")
+        return _table_step(sid, name, curved, table, center, duration, time_step,
+                           damping_scheme, accuracy, safety)
     if angular_velocity is not None:
         if not curved:
             raise InputError(f"{what}: only mesh and surface walls turn (angular_velocity)")
@@ -112,6 +118,66 @@ def _turn(sid: int, name: str, angular_velocity: Any, center: Any, displacement:
     shift = None if displacement is None else vector("Displacement", displacement, what)
     return MoveWallStep(sid, 0, wall=name, rotate=True, angular_velocity=omega,
                         center=vector("Center", center, what), displacement=shift, duration=dur,
+                        time_step=dt, damping=damping(sid, damping_scheme),
+                        accuracy=optional_positive("Accuracy", sid, accuracy),
+                        safety=optional_positive("Safety", sid, safety))
+
+
+def move_walls_step(model: Model, sid: int, moves: Any, duration: Any, time_step: Any, *,
+                    damping_scheme: Any, accuracy: Any, safety: Any) -> MoveWallStep:
+    """Several walls in one ``MoveWall`` step (the deck's ``Step`` lines of one id):
+    ``moves`` a list of ``(name, motion)``, motion a dict of ``displacement``, ``table`` or
+    ``angular_velocity`` (and ``center``) as :func:`move_wall_step` takes them; the timing
+    (``duration``, default the first wall's table's; ``time_step``, ...) is the step's."""
+    what = f"Step {sid}"
+    keys = {"displacement", "table", "angular_velocity", "center"}
+    if not isinstance(moves, (list, tuple)) or not moves:
+        raise InputError(f"{what}: move_wall takes a wall name or a non-empty list of "
+                         f"(name, motion) pairs")
+    steps: list[MoveWallStep] = []
+    for item in moves:
+        pair = item if isinstance(item, (list, tuple)) and len(item) == 2 else (None, None)
+        name, motion = pair
+        if not isinstance(motion, dict) or not set(motion) <= keys or not (
+                {"displacement", "table", "angular_velocity"} & set(motion)):
+            raise InputError(f"{what}: each wall of the list is (name, motion), motion a dict "
+                             f"of displacement, table or angular_velocity (and center), got "
+                             f"{item!r}")
+        if name in {m.wall for m in steps}:
+            raise InputError(f"{what}: wall {name!r} moves twice in this step")
+        steps.append(move_wall_step(
+            model, sid, name, motion.get("displacement"),
+            steps[0].duration if steps else duration, time_step, to_contact=False, gap=0.0,
+            direction=None, damping_scheme=damping_scheme, accuracy=accuracy, safety=safety,
+            angular_velocity=motion.get("angular_velocity"),
+            center=motion.get("center", (0.0, 0.0, 0.0)), table=motion.get("table")))
+    first = steps[0]
+    first.also = steps[1:]
+    return first
+
+
+def _table_step(sid: int, name: str, curved: bool, table: Any, center: Any, duration: Any,
+                time_step: Any, damping_scheme: Any, accuracy: Any,
+                safety: Any) -> MoveWallStep:
+    """``MoveWall NAME Table``: the wall follows ``table``, a CSV file's path or an array of
+    rows t, x, y, z[, rx, ry, rz] (:mod:`nurbsdem.wall_tables`), over ``duration`` s
+    (None: the table's last time)."""
+    from pathlib import Path
+
+    from ..wall_tables import read_wall_table, table_from_array
+    what = f"Step {sid}"
+    if isinstance(table, (str, Path)):
+        tab = read_wall_table(Path(table), str(table))
+    else:
+        tab = table_from_array(table, what)
+    if tab.rotation is not None and not curved:
+        raise InputError(f"{what}: the table has rotation columns (rx, ry, rz) but wall "
+                         f"{name!r} is flat: only mesh and surface walls turn")
+    if time_step is None:
+        raise InputError(f"{what}: table needs time_step")
+    dur, dt = timing(sid, tab.duration if duration is None else duration, time_step)
+    centre = None if tab.rotation is None else vector("Center", center, what)
+    return MoveWallStep(sid, 0, wall=name, table=tab, center=centre, duration=dur,
                         time_step=dt, damping=damping(sid, damping_scheme),
                         accuracy=optional_positive("Accuracy", sid, accuracy),
                         safety=optional_positive("Safety", sid, safety))

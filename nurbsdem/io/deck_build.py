@@ -17,6 +17,7 @@ from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep
                      ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 from ..ranges import ASPECT_MAX
 from .deck_curved import check_curved_walls, curved_entry, rotate_step
+from .deck_moves import add_wall_move, check_moves, table_step
 from .deck_flow import check_inlet, check_outlet, inlet_spec, outlet_spec
 from .deck_schema import SCHEMA, Entry, LineError
 
@@ -280,6 +281,9 @@ class DeckBuilder:
 
     def step(self, e: Entry) -> None:
         steps = self.model.steps
+        if steps and e.id == steps[-1].id and isinstance(steps[-1], MoveWallStep):
+            add_wall_move(self, e, steps[-1])       # one more wall moving in the same step
+            return
         self.unique({s.id: s for s in steps}, e, "step")
         if steps and e.id < steps[-1].id:
             self.fail(f"step ids must increase (Step {e.id} after Step {steps[-1].id})", e.line)
@@ -314,15 +318,17 @@ class DeckBuilder:
         return dur, dt
 
     def move_wall(self, e: Entry) -> MoveWallStep:
-        modes = [k for k in ("ToContact", "Displacement", "Rotate") if e.has(k)]
+        modes = [k for k in ("ToContact", "Displacement", "Rotate", "Table") if e.has(k)]
         if e.has("Rotate") and modes == ["Displacement", "Rotate"]:
             modes = ["Rotate"]                       # a turn with a translation
         if len(modes) != 1:
             self.fail(f"Step {e.id}: MoveWall needs exactly one of ToContact, Displacement, "
-                      f"Rotate (Rotate may take a Displacement)", e.line)
+                      f"Rotate, Table (Rotate may take a Displacement)", e.line)
         name = e.get("MoveWall")
         if modes[0] == "Rotate":
             return rotate_step(self, e, name)
+        if modes[0] == "Table":
+            return table_step(self, e, name)
         if modes[0] == "ToContact":
             self.only(e, {"MoveWall", "ToContact", "Gap", "Direction"}, "MoveWall ToContact")
             gap = self.positive(e, "Gap", e.get("Gap", 0.0), strict=False)
@@ -406,11 +412,7 @@ class DeckBuilder:
             for mid in itf.materials or ():
                 if mid not in m.materials:
                     self.fail(f"Interface {itf.id}: unknown material {mid}", itf.line)
-        names = m.wall_names
-        for s in m.steps:
-            if isinstance(s, MoveWallStep) and s.wall not in names:
-                known = f" (walls: {', '.join(names)})" if names else " (no walls defined)"
-                self.fail(f"Step {s.id}: no wall named {s.wall!r}{known}", s.line)
+        check_moves(self, m)
         check_curved_walls(self, m)
         for inlet in m.inlets:
             check_inlet(m, inlet, lambda msg: self.fail(msg, inlet.line))

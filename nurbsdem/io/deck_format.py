@@ -27,7 +27,7 @@ from .deck_flow import inlet_values, outlet_values
 from .deck_schema import SCHEMA, Arg, Entry
 
 #: keys whose value is a path: always quoted (a path may hold blanks)
-PATH_KEYS = ("File", "Directory")
+PATH_KEYS = ("File", "Directory", "Table")
 #: the names :func:`~nurbsdem.geometry.generators.box_walls` gives a box's walls, in order
 BOX_NAMES = ("bottom", "x_min", "x_max", "y_min", "y_max", "top")
 
@@ -207,13 +207,27 @@ def step_entry(s: Step) -> Entry:
         if s.direction is not None:
             values["Direction"] = unit_preimage(s.direction)
         return _entry("Steps", "Step", s.id, **values)
+    return _entry("Steps", "Step", s.id, **_motion(s), **_timing(s))
+
+
+def _motion(s: MoveWallStep) -> dict[str, Any]:
+    """The keys of one wall's motion in a MoveWall step (no timing)."""
+    if s.table is not None:
+        centre = {} if s.center is None else {"Center": s.center}
+        return {"MoveWall": s.wall, "Table": s.table.file or f"step{s.id}_{s.wall}.csv",
+                **centre}
     if s.rotate:
         shift = {} if s.displacement is None else {"Displacement": s.displacement}
-        return _entry("Steps", "Step", s.id, MoveWall=s.wall, Rotate=True,
-                      AngularVelocity=s.angular_velocity, Center=s.center, **shift,
-                      **_timing(s))
-    return _entry("Steps", "Step", s.id, MoveWall=s.wall, Displacement=s.displacement,
-                  **_timing(s))
+        return {"MoveWall": s.wall, "Rotate": True, "AngularVelocity": s.angular_velocity,
+                "Center": s.center, **shift}
+    return {"MoveWall": s.wall, "Displacement": s.displacement}
+
+
+def step_entries(s: Step) -> list[Entry]:
+    """The ``Step`` entries of a step: one, and one more for each further wall a MoveWall
+    step moves (the same id, no timing)."""
+    more = [_entry("Steps", "Step", s.id, **_motion(m)) for m in getattr(s, "also", ())]
+    return [step_entry(s), *more]
 
 
 def output_entries(model: Model) -> list[Entry]:
@@ -356,7 +370,7 @@ def model_entries(model: Model, walls: list[Entry] | None = None,
     out += flat_wall_entries(model.walls) if walls is None else list(walls)
     out += [curved_wall_entry(w) for w in model.curved_walls]
     out += [interface_entry(i) for i in model.interfaces]
-    out += [step_entry(s) for s in model.steps]
+    out += [e for s in model.steps for e in step_entries(s)]
     out += [_entry("Flow", "Inlet", i.id, **inlet_values(i)) for i in model.inlets]
     out += [_entry("Flow", "Outlet", o.id, **outlet_values(o)) for o in model.outlets]
     return out + output_entries(model)

@@ -68,8 +68,10 @@ ENTRIES: dict[tuple[str, str], str] = {
     ("Steps", "Step"): (
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
         "with `ToContact` (instantaneous; flat walls), `Displacement` (timed; any wall) or "
-        "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`). A timed "
-        "step is split "
+        "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`) or "
+        "`Table` (timed; any wall). A `Step` line with the previous step's id moves one more "
+        "wall in that MoveWall step (`Step 3 MoveWall floor Displacement 0 0 0.01`): it names "
+        "the wall and its motion only, the first line gives the timing. A timed step is split "
         "into internal sub-steps below the contact network's stability limit."),
     ("Flow", "Inlet"): (
         "Particles created during every timed step in a box or a disc at a rate (counted "
@@ -227,14 +229,23 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "", "no", "With `MoveWall NAME`: the mesh or surface wall turns at `AngularVelocity` "
         "about `Center` for `Duration`, then stays where it turned to; with a `Displacement` "
         "it translates as well, the centre with it."),
+    ("Steps", "Step", "Table"): KeyDoc(
+        "", "-", "With `MoveWall NAME`: a CSV file (relative to the deck's folder) of rows "
+        "`t,x,y,z` or `t,x,y,z,rx,ry,rz` (an optional header of these names; `#` comments): "
+        "times (s, from 0, increasing), the wall's displacement (m) from where it is at the "
+        "step's start and, mesh and surface walls only, its rotation vector (rad, axis x "
+        "angle) about `Center`; interpolated linearly in time, the wall at each row's values "
+        "exactly at its time and still after the last row. `Duration` defaults to the last "
+        "time."),
     ("Steps", "Step", "AngularVelocity"): KeyDoc(
         "rad/s", "required with Rotate", "The wall's angular velocity, world frame."),
     ("Steps", "Step", "Center"): KeyDoc(
-        "m", "0 0 0", "A point of the rotation axis at the step's start (the wall's torque "
-        "in its monitor is about it while it turns)."),
+        "m", "0 0 0", "A point of the rotation axis at the step's start (`Rotate`), or the "
+        "centre a `Table` turns the wall about (the wall's torque in its monitor is about it "
+        "while it turns)."),
     ("Steps", "Step", "MoveWall"): KeyDoc(
-        "", "-", "The name of the wall to move (with `ToContact`, `Displacement` or "
-        "`Rotate`; `ToContact` moves flat walls only)."),
+        "", "-", "The name of the wall to move (with `ToContact`, `Displacement`, "
+        "`Rotate` or `Table`; `ToContact` moves flat walls only)."),
     ("Steps", "Step", "Duration"): KeyDoc(
         "s", "required by timed steps", "Simulated time; a whole number of `TimeStep`s."),
     ("Steps", "Step", "TimeStep"): KeyDoc(
