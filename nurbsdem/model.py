@@ -426,13 +426,9 @@ class MoveWallStep(Step):
     * ``Rotate AngularVelocity .. Center .. [Displacement ..] Duration T TimeStep DT``: a
       mesh or surface wall turns (``rotate`` below), translating by the displacement as
       well when one is given, its centre with it.
-    * ``Table FILE [Center ..] [Duration T] TimeStep DT``: the wall follows a CSV table of
-      displacements (and, mesh and surface walls, rotation vectors about the centre) in
-      time (:mod:`nurbsdem.wall_tables`); the duration defaults to the table's last time.
-
-    Further ``Step`` lines with the same id move more walls in the same step (``also``):
-    each names its wall and its motion (``Displacement``, ``Rotate ..`` or ``Table``), the
-    first line the timing.
+    * ``Table FILE [Center ..] [Duration T] TimeStep DT``: the wall follows a CSV table in
+      time (:mod:`nurbsdem.wall_tables`). Further ``Step`` lines of the id move more walls
+      (``also``; :mod:`nurbsdem.io.deck_moves`).
     """
 
     wall: str = ""
@@ -454,8 +450,7 @@ class MoveWallStep(Step):
     center: np.ndarray | None = None
     #: the tabulated motion (:class:`~nurbsdem.wall_tables.WallTable`; None: none)
     table: Any = None
-    #: the other walls moving in this step, each a MoveWallStep of one wall and its motion
-    #: (displacement, turn or table) whose timing is this step's
+    #: the other walls this step moves: MoveWallSteps of one wall and motion, this timing
     also: list = field(default_factory=list)
     kind = "movewall"
 
