@@ -419,8 +419,9 @@ def check_curved_wall_strokes(model: "Model", points: dict) -> None:
 def check_curved_walls_model(model: "Model") -> None:
     """The checks of mesh and surface walls that need no placed particles: the strokes of
     their MoveWall steps."""
-    if not any(getattr(s, "wall", None) in {w.name for w in model.curved_walls}
-               for s in model.steps):
+    curved = {w.name for w in model.curved_walls}
+    if not any(m.wall in curved for s in model.steps if hasattr(s, "moves")
+               for m in s.moves()):
         return
     check_curved_wall_strokes(model, {w.name: rest_points(model, w)
                                       for w in model.curved_walls})

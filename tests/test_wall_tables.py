@@ -195,3 +195,16 @@ def test_mesh_wall_table_with_rotation_is_the_rotate_step(tmp_path):
             for key in a:
                 assert a[key] == pytest.approx(b[key], rel=1e-9, abs=1e-13), (name, key)
     assert ref["wall_floor.csv"][-1]["reaction_z"] > 0.5 * WEIGHT     # the sphere stays on it
+
+
+def test_check_refuses_a_table_that_drives_a_wall_through_the_one_facing_it(tmp_path):
+    """A box's top that a table (the step's second wall) drives 1.2 m down and back: the
+    stroke check takes the table's farthest row, not its last, and names the step's line."""
+    (tmp_path / "lift.csv").write_text("0,0,0,0\n0.05,0,0,-1.2\n0.1,0,0,0\n")
+    deck = _deck(tmp_path, "  Step 1 MoveWall bottom Displacement 0 0 0 Duration 0.1 "
+                           "TimeStep 1e-3\n  Step 1 MoveWall top Table lift.csv",
+                 walls="  Box 1 Min -1 -1 0 Max 1 1 1 Top yes")
+    run = subprocess.run([sys.executable, "-m", "nurbsdem", "check", str(deck)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode != 0
+    assert f"{deck}:15: Step 1: wall 'top' would have moved 1.2 m" in run.stderr, run.stderr
