@@ -145,3 +145,20 @@ def test_restart_inside_a_step_of_two_walls_is_bit_for_bit(tmp_path, monkeypatch
     assert floor["time"] == 0.05
     assert floor["displacement_z"] == pytest.approx(0.00005 + 0.75 * 0.00015, rel=1e-12)
     assert _rows(ref / "monitors" / "wall_lid.csv")[-1]["displacement_z"] == -0.00025
+
+
+def test_a_wall_pushing_a_resting_sphere_without_gravity_runs(tmp_path):
+    """Without gravity or motion a scene's energy scale is ~0 J; the walls' work counts in the
+    guard's scale, so the round-off of the first push does not stop the run as unstable.  A
+    sphere at rest between a floor and a lid, both closing in on it: it is squeezed without
+    moving, and the energy balance closes to the guard's tolerance of the wall work."""
+    deck = _deck(tmp_path)
+    deck.write_text(deck.read_text().replace(" AngularVelocity 0 0 100", ""))
+    sim = Simulation.from_deck(deck)
+    sim.run()
+    lid = _rows(tmp_path / "results" / "monitors" / "wall_lid.csv")
+    assert lid[-1]["reaction_z"] == pytest.approx(-10.0, rel=1e-2)
+    np.testing.assert_allclose(sim.positions[0], [0, 0, 0], rtol=0, atol=1e-14)
+    energy = _rows(tmp_path / "results" / "monitors" / "energy.csv")[-1]
+    assert energy["external_work"] > 0
+    assert abs(energy["balance_error"]) <= 1e-6 * energy["external_work"]

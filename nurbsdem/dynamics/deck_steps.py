@@ -256,7 +256,7 @@ def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> tuple[bool, 
                                           ledger)
     ok = True
     if cc.check_energy:
-        tol = cc.energy_tolerance * max(peak[0], cc.scale_floor)
+        tol = cc.energy_tolerance * max(peak[0], abs(ledger[3]), cc.scale_floor)
         gain = mech - ledger[4] - ledger[3]
         ok = math.isfinite(mech) and math.isfinite(balance) and gain <= tol and abs(balance) <= tol
     if ok:

@@ -54,7 +54,7 @@ motion** (half-step velocities reversing at every internal step, which the full-
 energy of the monitors cannot see; :func:`~nurbsdem.dynamics.stepcontrol.alternation_update`);
 after every deck step the mechanical energy gain ``E_mech − E_mech(0) − W_ext`` and the balance
 error must stay below ``energy_tolerance × scale`` (scale = the largest kinetic + elastic energy
-seen so far, at least Σ m|g| r).  Otherwise the deck step is rolled back and **repeated with
+seen so far or the walls' work |W_ext| if larger, at least Σ m|g| r).  Otherwise the deck step is rolled back and **repeated with
 twice the sub-steps** (the refinement is kept, and halved again after
 ``REFINE_DECAY_STEPS`` quiet deck steps), up to ``max_refinements`` times; only then is the
 system left at the last good state (the start of that deck step, ``system.get_state()``) and
@@ -602,7 +602,9 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
     def _check_energy(self, e: EnergySample) -> None:
         if not self.check_energy:
             return
-        scale = max(self._peak, self._scale_floor)
+        # the work the walls did counts in the scale: without gravity and motion a scene's
+        # peak and floor are ~0 J, and the round-off of a wall's first push would trip it
+        scale = max(self._peak, abs(e.external_work), self._scale_floor)
         gain = e.mechanical - e.initial_mechanical - e.external_work
         tol = self.energy_tolerance * scale
         if not math.isfinite(e.mechanical) or not math.isfinite(e.balance_error):
