@@ -169,13 +169,19 @@ class PointerKernel:
 
     ``kernel.call((a, b, ...))`` takes the arguments as one tuple and returns what the
     kernel returns.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
+
+    ``lazy``: the kernel returns nothing and its slot stays empty until
+    :func:`fill_lazy_kernels` (a scene that needs it: the LCP kernels, which a scene of exact
+    spheres never calls, so that its first run does not compile them).  A call through an
+    empty slot raises ``RuntimeError`` naming the kernel.
     """
 
-    def __init__(self, dispatcher, name: str) -> None:
+    def __init__(self, dispatcher, name: str, lazy: bool = False) -> None:
         from numba.core import config
 
         self.dispatcher = dispatcher
         self.name = name
+        self.lazy = lazy
         self._slots: dict[tuple, tuple] = {}
         _POINTER_KERNELS[name] = self
         if config.DISABLE_JIT:
@@ -198,16 +204,42 @@ class PointerKernel:
 
         argtypes = tuple(argtypes)
         if argtypes not in self._slots:
+            slot = ctypes.c_int64(0)
+            llb.add_symbol(self.symbol(argtypes), ctypes.addressof(slot))
+            self._slots[argtypes] = (slot, types.none)
+        slot, restype = self._slots[argtypes]
+        if not slot.value and not (self.lazy and not _LAZY_WANTED[0]):
             self.dispatcher.compile(argtypes)
             cres = self.dispatcher.overloads[argtypes]
-            slot = ctypes.c_int64(cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name))
-            llb.add_symbol(self.symbol(argtypes), ctypes.addressof(slot))
-            self._slots[argtypes] = (slot, cres.signature.return_type)
-        return self._slots[argtypes][1]
+            restype = cres.signature.return_type
+            if self.lazy and restype != types.none:
+                raise TypeError(f"the lazy pointer kernel {self.name} returns {restype}")
+            slot.value = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+            self._slots[argtypes] = (slot, restype)
+        return restype
+
+    def fill_all(self) -> None:
+        """Fill the slot of every signature typed or loaded so far."""
+        for argtypes in list(self._slots):
+            self.fill(argtypes)
 
 
 #: every :class:`PointerKernel` by name
 _POINTER_KERNELS: dict[str, PointerKernel] = {}
+#: whether :func:`fill_lazy_kernels` was called in this process
+_LAZY_WANTED = [False]
+
+
+def fill_lazy_kernels() -> None:
+    """Fill the slots of the lazy :class:`PointerKernel` s (compiling or loading them), now
+    and, for callers typed or loaded later, at once: called where a scene with bodies other
+    than exact spheres is set up (:class:`~nurbsdem.contact.detect.ContactTable`)."""
+    if _LAZY_WANTED[0]:
+        return
+    _LAZY_WANTED[0] = True
+    for pk in list(_POINTER_KERNELS.values()):
+        if pk.lazy:
+            pk.fill_all()
 
 
 def _cached_libraries_keep_reload_hooks() -> None:
@@ -271,6 +303,10 @@ def _pointer_call(pk: PointerKernel):
                 slot = ir.GlobalVariable(builder.module, ir.IntType(64), symbol)
                 slot.linkage = "external"
             addr = builder.load(slot)
+            with builder.if_then(builder.icmp_unsigned("==", addr, ir.Constant(addr.type, 0)),
+                                 likely=False):
+                context.call_conv.return_user_exc(
+                    builder, RuntimeError, (f"compiled kernel {pk.name} not loaded",))
             values = [builder.extract_value(llargs[0], i) for i in range(len(argtypes))]
             status, res = context.call_conv.call_function(
                 builder, builder.inttoptr(addr, fnty.as_pointer()), restype, argtypes, values)

@@ -23,9 +23,10 @@ import numpy as np
 import numba
 from numba import njit, prange
 
+from ..geometry.analytic import exact_sphere
 from ..geometry.connectivity import POLE
 from ..geometry.kernel import make_workspace, power_form
-from ..jit import fetch_add, kernel
+from ..jit import fetch_add, fill_lazy_kernels, kernel
 from . import lcp
 from .lcp import (F_IT1, F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL,
                   I_IT, I_PA, I_PB, I_STAGE, I_VALID, NF, NI, full_rows, make_work,
@@ -176,6 +177,8 @@ class ContactTable:
         #: (saddle stalls, :func:`lcp.solve_pair`; 0 turns them off)
         self.nonconvexity = np.array([_nonconvexity(s) for s in shapes])
         self.shapes = shapes
+        if any(exact_sphere(s) is None for s in shapes):
+            fill_lazy_kernels()              # the LCP kernels: a scene of spheres needs none
 
     def __len__(self) -> int:
         return len(self.shapes)

@@ -641,4 +641,4 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
 
 #: :func:`solve_pair` compiled once and called by the batch kernels through a pointer
 #: (:class:`~nurbsdem.jit.PointerKernel`): its callers do not compile the LCP again
-solve_pair_ptr = PointerKernel(solve_pair, "solve_pair").call
+solve_pair_ptr = PointerKernel(solve_pair, "solve_pair", lazy=True).call

@@ -130,7 +130,7 @@ def solve_wall(tab, info, cen, rad, seeds, pos, R, origin, a, b, wdom, prevF, pr
 
 #: :func:`solve_wall` compiled once and called by the batch kernels through a pointer
 #: (:class:`~nurbsdem.jit.PointerKernel`)
-solve_wall_ptr = PointerKernel(solve_wall, "solve_wall").call
+solve_wall_ptr = PointerKernel(solve_wall, "solve_wall", lazy=True).call
 
 
 def wall_frame(wall) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
