@@ -151,3 +151,23 @@ def test_a_servo_on_a_mesh_wall_is_refused_at_its_line(tmp_path):
         with pytest.raises(InputError, match=message):
             sim.move_wall("lid", force=1, duration=0.01, time_step=1e-4, **bad)
     assert sim.model.steps == []
+
+
+def test_restart_inside_a_servo_step_is_bit_for_bit(tmp_path, monkeypatch):
+    """The lid servo-presses the sphere with F, then with 2 F: a run killed inside the
+    second servo step and restarted from its checkpoint (the lid's speed, where it is and
+    when its deck step began are in it) ends as the run straight through, monitors and
+    all."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent))
+    from runs import assert_same_final_state, killed_and_restarted
+    deck = _deck(tmp_path, SERVO.replace("0.08", "0.02") + "\n"
+                 + SERVO.replace("Step 1", "Step 2").replace(f"Force {F}", f"Force {2 * F}")
+                 .replace("0.08", "0.02"), "  Results Every 0.01\n  Checkpoint Every 0.01\n")
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    Simulation.from_deck(deck, output=ref).run()
+    killed_and_restarted(deck, out, 0.035, monkeypatch)
+    assert_same_final_state(out, ref, ("wall_lid.csv", "wall_floor.csv", "energy.csv"))
+    lid = _rows(ref / "monitors" / "wall_lid.csv")
+    assert lid[-1]["time"] == pytest.approx(0.04) and lid[-1]["displacement_z"] < 0
