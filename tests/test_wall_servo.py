@@ -171,3 +171,16 @@ def test_restart_inside_a_servo_step_is_bit_for_bit(tmp_path, monkeypatch):
     assert_same_final_state(out, ref, ("wall_lid.csv", "wall_floor.csv", "energy.csv"))
     lid = _rows(ref / "monitors" / "wall_lid.csv")
     assert lid[-1]["time"] == pytest.approx(0.04) and lid[-1]["displacement_z"] < 0
+
+
+def test_two_servo_walls_in_one_step_each_reach_their_force(tmp_path):
+    """A floor and a lid servo-controlled in one step (``Step`` lines of one id), the floor
+    to F plus the sphere's weight, the lid to F: each ends pushed with its own force (1 %)."""
+    weight = RHO * 4.0 / 3.0 * math.pi * R ** 3 * GRAV
+    deck = _deck(tmp_path, SERVO + f"\n  Step 1 MoveWall floor Force {F + weight} MaxSpeed {V} "
+                 f"Gain {G}")
+    Simulation.from_deck(deck).run()
+    mon = tmp_path / "results" / "monitors"
+    assert -_rows(mon / "wall_lid.csv")[-1]["reaction_z"] == pytest.approx(F, rel=1e-2)
+    assert _rows(mon / "wall_floor.csv")[-1]["reaction_z"] == pytest.approx(F + weight,
+                                                                            rel=1e-2)
