@@ -163,8 +163,9 @@ class Solver:
         #: the contact history (keys, springs) the last system left to the next one
         self.carry_hist = None
         self.sigint = SigintDeferral()
-        #: the translation of the wall of the running ``MoveWall … Displacement`` step
-        #: (``d0``, ``t_start``), kept in checkpoints
+        #: where the walls of the running ``MoveWall`` step started and when (``d0``,
+        #: ``offsets``, ``t_start``) and its servo walls' state (``servo``:
+        #: :mod:`nurbsdem.wall_servo`), kept in checkpoints
         self.motion_spec: dict = {}
         #: the servo walls of the running MoveWall step (:class:`~nurbsdem.wall_servo.Servo`;
         #: None: none), their speeds set after each deck step
