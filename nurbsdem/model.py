@@ -429,6 +429,8 @@ class MoveWallStep(Step):
     * ``Table FILE [Center ..] [Duration T] TimeStep DT``: the wall follows a CSV table in
       time (:mod:`nurbsdem.wall_tables`). Further ``Step`` lines of the id move more walls
       (``also``; :mod:`nurbsdem.io.deck_moves`).
+    * ``Force F MaxSpeed v Gain g Duration T TimeStep DT``: a flat wall servo-controlled
+      to the push F (N) of the particles along its normal (:mod:`nurbsdem.wall_servo`).
     """
 
     wall: str = ""
@@ -450,6 +452,12 @@ class MoveWallStep(Step):
     center: np.ndarray | None = None
     #: the tabulated motion (:class:`~nurbsdem.wall_tables.WallTable`; None: none)
     table: Any = None
+    #: ``Force``: the target push (N) of the particles on the wall along its normal (None:
+    #: no servo); the wall translates along its normal at a speed set each deck step from
+    #: the push's error, ``gain`` (m/(s N)) times it, at most ``max_speed`` (m/s)
+    force: float | None = None
+    max_speed: float = 0.0
+    gain: float = 0.0
     #: the other walls this step moves: MoveWallSteps of one wall and motion, this timing
     also: list = field(default_factory=list)
     kind = "movewall"

@@ -52,7 +52,7 @@ from .api.restart import check_restart_step, checkpoint_of_scene
 from .api.scene import SceneBuilder
 from .api.start import make_solver, start_solver
 from .api.steps import (dynamic_step, move_wall_step, move_walls_step, next_step_id,
-                        replicate_step)
+                        replicate_step, servo_of)
 from .errors import InputError
 from .flow_spec import DEFAULT_EVERY
 from .model import Bodies, Model, MoveWallStep, Output, ReplicateStep, ShapeEntry, Step
@@ -293,7 +293,9 @@ class Simulation:
                   direction: Sequence[float] | None = None, damping: str = "explicit",
                   accuracy: float | None = None, safety: float | None = None,
                   angular_velocity: Sequence[float] | None = None,
-                  center: Sequence[float] = (0.0, 0.0, 0.0), table=None) -> None:
+                  center: Sequence[float] = (0.0, 0.0, 0.0), table=None,
+                  force: float | None = None, max_speed: float | None = None,
+                  gain: float | None = None) -> None:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
@@ -303,16 +305,22 @@ class Simulation:
         ``table``: a CSV file or an array of rows t, x, y, z[, rx, ry, rz] (s, m, rad) the
         wall follows (``Table``; ``duration`` default: the last time; an array is written to
         ``<output>/tables/`` for the deck text when the simulation has an output folder).
+        ``force`` (N): a flat wall servo-controlled over ``duration`` s to that push of the
+        particles along its normal, its speed ``gain`` (m/(s N)) times the push's error, at
+        most ``max_speed`` (m/s) (``Force``; :mod:`nurbsdem.wall_servo`).
         ``damping``, ``accuracy``, ``safety``: as for :meth:`run_dynamic`.
 
         Several walls in one step: ``name`` a list of ``(name, motion)`` pairs, ``motion`` a
-        dict of ``displacement``, ``table`` or ``angular_velocity`` (and ``center``), the
-        timing shared (``Step`` lines of one id in the deck)."""
+        dict of ``displacement``, ``table`` or ``angular_velocity`` (and ``center``) or
+        ``force`` (and ``max_speed``, ``gain``), the timing shared (``Step`` lines of one id
+        in the deck)."""
+        sid = next_step_id(self.model)
         if not isinstance(name, str):
-            if (displacement, table, angular_velocity) != (None, None, None) or to_contact:
+            if ((displacement, table, angular_velocity, force) != (None, None, None, None)
+                    or to_contact):
                 raise InputError(f"Step {next_step_id(self.model)}: with a list of walls, "
                                  f"each wall's motion is in its own dict")
-            step = move_walls_step(self.model, next_step_id(self.model), name, duration,
+            step = move_walls_step(self.model, sid, name, duration,
                                    time_step, damping_scheme=damping, accuracy=accuracy,
                                    safety=safety)
         else:
@@ -320,7 +328,8 @@ class Simulation:
                 self.model, next_step_id(self.model), name, displacement, duration,
                 time_step, to_contact=to_contact, gap=gap, direction=direction,
                 damping_scheme=damping, accuracy=accuracy, safety=safety,
-                angular_velocity=angular_velocity, center=center, table=table)
+                angular_velocity=angular_velocity, center=center, table=table,
+                servo=servo_of(sid, force, max_speed, gain))
         self._keep_tables(step)
         self._run(step)
 

@@ -19,6 +19,8 @@ Steps (PyBaMM-like: an experiment is a list of steps):
 * ``MoveWall … Table``: a dynamic step in which a wall follows a table of displacements (and
   turns, mesh and surface walls); a step moves several walls when its id repeats
   (:mod:`nurbsdem.wall_moves`).
+* ``MoveWall … Force``: a dynamic step in which a flat wall is servo-controlled to a push of
+  the particles, its speed set after each deck step (:mod:`nurbsdem.wall_servo`).
 
 Energies written to ``monitors/energy.csv`` are cumulative over the whole run.
 Checkpoints (``checkpoint.h5``, :mod:`nurbsdem.run_checkpoint`) are written every
@@ -161,9 +163,13 @@ class Solver:
         #: the contact history (keys, springs) the last system left to the next one
         self.carry_hist = None
         self.sigint = SigintDeferral()
-        #: the translation of the wall of the running ``MoveWall … Displacement`` step
-        #: (``d0``, ``t_start``), kept in checkpoints
+        #: where the walls of the running ``MoveWall`` step started and when (``d0``,
+        #: ``offsets``, ``t_start``) and its servo walls' state (``servo``:
+        #: :mod:`nurbsdem.wall_servo`), kept in checkpoints
         self.motion_spec: dict = {}
+        #: the servo walls of the running MoveWall step (:class:`~nurbsdem.wall_servo.Servo`;
+        #: None: none), their speeds set after each deck step
+        self.servo = None
         self.end_energy: dict | None = None      # see _snapshot
         self.end_contacts: dict | None = None
 
@@ -352,10 +358,13 @@ class Solver:
         (a checkpoint of that moment first)."""
         ck_every = self.model.output.checkpoint_every
         flow = self.flow.active
+        servo = self.servo
+        if servo is not None and self.step_progress == 0:
+            servo.update(self.system)       # the first deck step's speeds: the push at t0
         while self.step_progress < n_total:
             sysm = self.system
             meter = ChunkMeter(self.scene, sysm)
-            left = n_total - self.step_progress
+            left = 1 if servo is not None else n_total - self.step_progress
             if flow:
                 left = min(left, self.flow.steps_to_segment_end(self.step_progress, dt))
             n, monitors_due, states_due = steps_to_event(sysm, self.model.output, left,
@@ -368,6 +377,8 @@ class Solver:
             meter.book(self.scene, sysm, done, self.timers, self.split, self.summary)
             self.step_progress += done
             self.time = sysm.time
+            if servo is not None:
+                servo.update(sysm)          # the next deck step's speeds
             cs = self.scene.last
             tally = sysm.last_steps
             self._sample(writers, samples=tally.samples, states=tally.states)
@@ -416,9 +427,12 @@ class Solver:
         mesh and surface walls among them turn (:func:`nurbsdem.wall_moves.plan`); each
         stays where its motion leaves it."""
         motions, poses = wall_moves.plan(self, step, restored)
-        with self.curved.moving(poses):
-            self._run_dynamic(step, writers, motions, restored)
-            ends = {k: pose.at(self.time) for k, pose in poses.items()}
+        try:
+            with self.curved.moving(poses):
+                self._run_dynamic(step, writers, motions, restored)
+                ends = {k: pose.at(self.time) for k, pose in poses.items()}
+        finally:
+            self.servo = None
         self.curved.rest.update(ends)
 
     def _run_step(self, step, writers: OutputWriters) -> None:

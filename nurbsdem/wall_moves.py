@@ -2,7 +2,8 @@
 (:meth:`~nurbsdem.model.MoveWallStep.moves`) translates by its displacement at constant
 velocity or by its table (:mod:`nurbsdem.wall_tables`) from where it is at the step's start,
 and a mesh or surface wall turns at its angular velocity or by its table's rotation vectors
-about its centre; the other walls stay where they are.
+about its centre; a flat wall with a ``Force`` is servo-controlled
+(:mod:`nurbsdem.wall_servo`, ``solver.servo``); the other walls stay where they are.
 
 Where the walls were at the step's start (``offsets`` (W,3) m; ``d0``: the first wall's) and
 when the step started (``t_start``, s) are kept in the solver's ``motion_spec`` for the
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import wall_servo
 from .dynamics import PrescribedMotion
 
 
@@ -57,4 +59,5 @@ def plan(solver, step, restored) -> tuple[list[PrescribedMotion], dict]:
         else:
             poses[c] = TablePose(center=centre, t0=t_start, R0=R0, shift0=shift0,
                                  knots=t_start + m.table.times, rotvecs=m.table.rotation)
+    solver.servo = wall_servo.plan(solver, step, motions, offsets, t_start, spec)
     return motions, poses

@@ -237,6 +237,9 @@ def describe_moves(step) -> str:
         return " ".join(f"{x + 0.0:g}" for x in np.asarray(v, float))  # + 0.0: no "-0"
 
     def one(m) -> str:
+        if m.force is not None:
+            return (f"{m.wall} servo-controlled to a push of {m.force:g} N (at most "
+                    f"{m.max_speed:g} m/s, gain {m.gain:g} m/(s N))")
         if m.table is not None:
             return f"{m.wall} by the table {m.table.file or '(array)'}"
         turn = f" turning at {_vec(m.angular_velocity)} rad/s" if m.rotate else ""

@@ -54,6 +54,7 @@ Steps
   Step 3 MoveWall lid ToContact Gap 0.002 Direction 1 1 -3
   Step 4 MoveWall shelf ToContact
   Step 5 MoveWall lid Displacement 0 0 -0.004 Duration 0.1 TimeStep 1e-3
+  Step 6 MoveWall lid Force 2.5 MaxSpeed 0.01 Gain 1e-4 Duration 0.1 TimeStep 1e-3 Safety 0.8
 Flow
   Inlet 3 Name feed Shapes 1 3 Fractions 0.25 0.75 Material 1 Box 0.02 0.02 0.26 0.18 0.18 0.33 Rate 500 Count 20 Velocity 0 0 -0.5 Seed 7 Every 0.02
   Inlet 4 Shapes 1 Material 1 Disc 0.1 0.1 0.3 Normal 0.1 0 -1 Radius 0.05 Thickness 0.012 Rate 100 Count 5

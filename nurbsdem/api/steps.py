@@ -63,15 +63,23 @@ def move_wall_step(model: Model, sid: int, name: Any,
                    to_contact: bool, gap: Any, direction: Sequence[float] | None,
                    damping_scheme: Any, accuracy: Any, safety: Any,
                    angular_velocity: Sequence[float] | None,
-                   center: Sequence[float], table: Any = None) -> MoveWallStep:
+                   center: Sequence[float], table: Any = None,
+                   servo: dict | None = None) -> MoveWallStep:
     """``MoveWall`` (see :meth:`~nurbsdem.simulation.Simulation.move_wall`): a turn of a
     mesh or surface wall (with a displacement too, if given), a flat wall moved to contact,
-    a wall's displacement, or a table of its motion (a CSV path or an array of rows)."""
+    a wall's displacement, a table of its motion (a CSV path or an array of rows), or a
+    servo (``servo``: a dict of force, max_speed and gain; the deck's ``Force``)."""
     what = f"Step {sid}"
     if not isinstance(name, str) or name not in model.wall_names:
         names = ", ".join(model.wall_names) or "no walls defined"
         raise InputError(f"{what}: no wall named {name!r} (walls: {names})")
     curved = name in {w.name for w in model.curved_walls}
+    if servo is not None:
+        if to_contact or (displacement, table, angular_velocity) != (None, None, None):
+            raise InputError(f"{what}: force takes max_speed, gain, duration and time_step, "
+                             f"not displacement, table, angular_velocity or to_contact")
+        return _servo_step(sid, name, curved, servo, duration, time_step, damping_scheme,
+                           accuracy, safety)
     if table is not None:
         if to_contact or displacement is not None or angular_velocity is not None:
             raise InputError(f"{what}: table takes center, duration and time_step, not "
@@ -130,7 +138,8 @@ def move_walls_step(model: Model, sid: int, moves: Any, duration: Any, time_step
     ``angular_velocity`` (and ``center``) as :func:`move_wall_step` takes them; the timing
     (``duration``, default the first wall's table's; ``time_step``, ...) is the step's."""
     what = f"Step {sid}"
-    keys = {"displacement", "table", "angular_velocity", "center"}
+    keys = {"displacement", "table", "angular_velocity", "center", "force", "max_speed",
+            "gain"}
     if not isinstance(moves, (list, tuple)) or not moves:
         raise InputError(f"{what}: move_wall takes a wall name or a non-empty list of "
                          f"(name, motion) pairs")
@@ -139,10 +148,10 @@ def move_walls_step(model: Model, sid: int, moves: Any, duration: Any, time_step
         pair = item if isinstance(item, (list, tuple)) and len(item) == 2 else (None, None)
         name, motion = pair
         if not isinstance(motion, dict) or not set(motion) <= keys or not (
-                {"displacement", "table", "angular_velocity"} & set(motion)):
+                {"displacement", "table", "angular_velocity", "force"} & set(motion)):
             raise InputError(f"{what}: each wall of the list is (name, motion), motion a dict "
-                             f"of displacement, table or angular_velocity (and center), got "
-                             f"{item!r}")
+                             f"of displacement, table, angular_velocity (and center) or force "
+                             f"(with max_speed and gain), got {item!r}")
         if name in {m.wall for m in steps}:
             raise InputError(f"{what}: wall {name!r} moves twice in this step")
         steps.append(move_wall_step(
@@ -150,10 +159,43 @@ def move_walls_step(model: Model, sid: int, moves: Any, duration: Any, time_step
             steps[0].duration if steps else duration, time_step, to_contact=False, gap=0.0,
             direction=None, damping_scheme=damping_scheme, accuracy=accuracy, safety=safety,
             angular_velocity=motion.get("angular_velocity"),
-            center=motion.get("center", (0.0, 0.0, 0.0)), table=motion.get("table")))
+            center=motion.get("center", (0.0, 0.0, 0.0)), table=motion.get("table"),
+            servo=servo_of(sid, motion.get("force"), motion.get("max_speed"),
+                           motion.get("gain"))))
     first = steps[0]
     first.also = steps[1:]
     return first
+
+
+def servo_of(sid: int, force: Any, max_speed: Any, gain: Any) -> dict | None:
+    """The servo of ``move_wall(force=, max_speed=, gain=)`` (None: no ``force``)."""
+    if force is None:
+        if (max_speed, gain) != (None, None):
+            raise InputError(f"Step {sid}: max_speed and gain go with force")
+        return None
+    if max_speed is None or gain is None:
+        raise InputError(f"Step {sid}: force needs max_speed and gain")
+    return dict(force=force, max_speed=max_speed, gain=gain)
+
+
+def _servo_step(sid: int, name: str, curved: bool, servo: dict, duration: Any,
+                time_step: Any, damping_scheme: Any, accuracy: Any,
+                safety: Any) -> MoveWallStep:
+    """``MoveWall NAME Force F MaxSpeed v Gain g``: a flat wall servo-controlled to the
+    particles' push F (N) at most v m/s (> 0), gain g m/(s N) (>= 0)."""
+    what = f"Step {sid}"
+    if curved:
+        raise InputError(f"{what}: force: only flat walls are servo-controlled ({name!r} is "
+                         f"a mesh or surface wall)")
+    if duration is None or time_step is None:
+        raise InputError(f"{what}: force needs duration and time_step")
+    dur, dt = timing(sid, duration, time_step)
+    return MoveWallStep(sid, 0, wall=name, force=number("Force", servo["force"], what),
+                        max_speed=number("MaxSpeed", servo["max_speed"], what, positive=True),
+                        gain=number("Gain", servo["gain"], what, nonnegative=True),
+                        duration=dur, time_step=dt, damping=damping(sid, damping_scheme),
+                        accuracy=optional_positive("Accuracy", sid, accuracy),
+                        safety=optional_positive("Safety", sid, safety))
 
 
 def _table_step(sid: int, name: str, curved: bool, table: Any, center: Any, duration: Any,

@@ -17,7 +17,7 @@ from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep
                      ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 from ..ranges import ASPECT_MAX
 from .deck_curved import check_curved_walls, curved_entry, rotate_step
-from .deck_moves import add_wall_move, check_moves, table_step
+from .deck_moves import MODES, add_wall_move, check_moves, force_step, table_step
 from .deck_flow import check_inlet, check_outlet, inlet_spec, outlet_spec
 from .deck_schema import SCHEMA, Entry, LineError
 
@@ -318,13 +318,15 @@ class DeckBuilder:
         return dur, dt
 
     def move_wall(self, e: Entry) -> MoveWallStep:
-        modes = [k for k in ("ToContact", "Displacement", "Rotate", "Table") if e.has(k)]
+        modes = [k for k in MODES if e.has(k)]
         if e.has("Rotate") and modes == ["Displacement", "Rotate"]:
             modes = ["Rotate"]                       # a turn with a translation
         if len(modes) != 1:
             self.fail(f"Step {e.id}: MoveWall needs exactly one of ToContact, Displacement, "
-                      f"Rotate, Table (Rotate may take a Displacement)", e.line)
+                      f"Rotate, Table, Force (Rotate may take a Displacement)", e.line)
         name = e.get("MoveWall")
+        if modes[0] == "Force":
+            return force_step(self, e, name)
         if modes[0] == "Rotate":
             return rotate_step(self, e, name)
         if modes[0] == "Table":

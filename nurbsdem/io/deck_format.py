@@ -212,6 +212,8 @@ def step_entry(s: Step) -> Entry:
 
 def _motion(s: MoveWallStep) -> dict[str, Any]:
     """The keys of one wall's motion in a MoveWall step (no timing)."""
+    if s.force is not None:
+        return {"MoveWall": s.wall, "Force": s.force, "MaxSpeed": s.max_speed, "Gain": s.gain}
     if s.table is not None:
         centre = {} if s.center is None else {"Center": s.center}
         return {"MoveWall": s.wall, "Table": s.table.file or f"step{s.id}_{s.wall}.csv",

@@ -1,8 +1,13 @@
-"""The deck's ``MoveWall … Table`` steps and the steps that move several walls.
+"""The deck's ``MoveWall … Table`` and ``MoveWall … Force`` steps and the steps that move
+several walls.
 
 ``Step ID MoveWall NAME Table FILE [Center cx cy cz] [Duration T] TimeStep DT [Damping ..]
 [Accuracy ..] [Safety ..]``: the wall follows the CSV table FILE (resolved against the deck's
 folder; :mod:`nurbsdem.wall_tables`), the step lasting T s (default: the table's last time).
+
+``Step ID MoveWall NAME Force F MaxSpeed v Gain g Duration T TimeStep DT [Damping ..]
+[Accuracy ..] [Safety ..]``: the flat wall NAME is servo-controlled to a push of F N of the
+particles along its normal, at most v m/s, with gain g m/(s N) (:mod:`nurbsdem.wall_servo`).
 
 A ``Step`` line whose id is the previous step's adds a wall to that MoveWall step:
 ``Step ID MoveWall NAME2 Displacement ..`` (or ``Rotate ..``, or ``Table ..``) with no timing
@@ -20,6 +25,10 @@ from ..model import MoveWallStep
 
 #: the keys of a step's timing, on the first of its lines only
 TIMING = ("Duration", "TimeStep", "Damping", "Accuracy", "Safety")
+#: the keys of a servo wall's motion
+SERVO = ("Force", "MaxSpeed", "Gain")
+#: the keys that choose a wall's motion
+MODES = ("ToContact", "Displacement", "Rotate", "Table", "Force")
 
 
 def read_table(builder, e, file: str):
@@ -45,6 +54,26 @@ def table_step(builder, e, name: str) -> MoveWallStep:
     dur, dt = builder.timing(e)
     return MoveWallStep(e.id, e.line, wall=name, table=table,
                         center=_center(e, table), duration=dur, time_step=dt,
+                        damping=builder.damping(e),
+                        accuracy=builder.optional_positive(e, "Accuracy"),
+                        safety=builder.optional_positive(e, "Safety"))
+
+
+def servo(builder, e, name: str) -> dict:
+    """The keys of ``MoveWall NAME Force F MaxSpeed v Gain g``: F (N) any number, v > 0
+    (m/s), g >= 0 (m/(s N))."""
+    builder.require(e, "MaxSpeed", "Gain")
+    return dict(wall=name, force=float(e.get("Force")),
+                max_speed=builder.positive(e, "MaxSpeed", e.get("MaxSpeed")),
+                gain=builder.positive(e, "Gain", e.get("Gain"), strict=False))
+
+
+def force_step(builder, e, name: str) -> MoveWallStep:
+    """``MoveWall NAME Force F MaxSpeed v Gain g Duration T TimeStep DT ..``."""
+    builder.only(e, {"MoveWall", *SERVO, *TIMING}, "MoveWall Force")
+    builder.require(e, "Duration", "TimeStep")
+    dur, dt = builder.timing(e)
+    return MoveWallStep(e.id, e.line, **servo(builder, e, name), duration=dur, time_step=dt,
                         damping=builder.damping(e),
                         accuracy=builder.optional_positive(e, "Accuracy"),
                         safety=builder.optional_positive(e, "Safety"))
@@ -80,12 +109,12 @@ def add_wall_move(builder, e, first: MoveWallStep) -> None:
     name = e.get("MoveWall")
     if name in {m.wall for m in first.moves()}:
         builder.fail(f"{label}: wall {name!r} moves twice in this step", e.line)
-    modes = [k for k in ("ToContact", "Displacement", "Rotate", "Table") if e.has(k)]
+    modes = [k for k in MODES if e.has(k)]
     if e.has("Rotate") and modes == ["Displacement", "Rotate"]:
         modes = ["Rotate"]
     if len(modes) != 1 or modes[0] == "ToContact":
         builder.fail(f"{label}: MoveWall {name} needs exactly one of Displacement, Rotate, "
-                     f"Table (Rotate may take a Displacement)", e.line)
+                     f"Table, Force (Rotate may take a Displacement)", e.line)
     common = dict(duration=first.duration, time_step=first.time_step, damping=first.damping,
                   accuracy=first.accuracy, safety=first.safety)
     if modes[0] == "Displacement":
@@ -102,6 +131,9 @@ def add_wall_move(builder, e, first: MoveWallStep) -> None:
                             angular_velocity=np.asarray(e.get("AngularVelocity"), float),
                             center=np.asarray(e.get("Center", np.zeros(3)), float),
                             displacement=e.get("Displacement"), **common)
+    elif modes[0] == "Force":
+        builder.only(e, {"MoveWall", *SERVO}, "MoveWall Force")
+        move = MoveWallStep(e.id, e.line, **servo(builder, e, name), **common)
     else:
         builder.only(e, {"MoveWall", "Table", "Center"}, "MoveWall Table")
         table = read_table(builder, e, e.get("Table"))
@@ -111,7 +143,8 @@ def add_wall_move(builder, e, first: MoveWallStep) -> None:
 
 
 def check_moves(builder, model) -> None:
-    """Each moved wall exists; a table with rotation columns turns a mesh or surface wall."""
+    """Each moved wall exists; a table with rotation columns turns a mesh or surface wall; a
+    servo (``Force``) moves a flat wall."""
     names = model.wall_names
     curved = {w.name for w in model.curved_walls}
     for s in model.steps:
@@ -123,6 +156,9 @@ def check_moves(builder, model) -> None:
                 builder.fail(f"Step {s.id}: the table {m.table.file} has rotation columns "
                              f"(rx, ry, rz) but wall {m.wall!r} is flat: only mesh and surface "
                              f"walls turn", m.line)
+            if m.force is not None and m.wall in curved:
+                builder.fail(f"Step {s.id}: MoveWall {m.wall} Force: only flat walls are "
+                             f"servo-controlled ({m.wall!r} is a mesh or surface wall)", m.line)
             if m is not s and m.rotate and m.wall not in curved:
                 builder.fail(f"Step {s.id}: MoveWall {m.wall} Rotate: only mesh and surface "
                              f"walls turn (flat walls translate: Displacement)", m.line)

@@ -69,7 +69,7 @@ ENTRIES: dict[tuple[str, str], str] = {
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
         "with `ToContact` (instantaneous; flat walls), `Displacement` (timed; any wall) or "
         "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`) or "
-        "`Table` (timed; any wall). A `Step` line with the previous step's id moves one more "
+        "`Table` (timed; any wall) or `Force` (timed; flat walls: a servo). A `Step` line with the previous step's id moves one more "
         "wall in that MoveWall step (`Step 3 MoveWall floor Displacement 0 0 0.01`): it names "
         "the wall and its motion only, the first line gives the timing. A timed step is split "
         "into internal sub-steps below the contact network's stability limit."),
@@ -237,6 +237,18 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "angle) about `Center`; interpolated linearly in time, the wall at each row's values "
         "exactly at its time and still after the last row. `Duration` defaults to the last "
         "time."),
+    ("Steps", "Step", "Force"): KeyDoc(
+        "N", "-", "With `MoveWall NAME`: a servo. The flat wall translates along its normal "
+        "so that the particles push it with F along it: once per deck step its velocity is "
+        "set to `Gain` x (F - the push at the end of the deck step before; the reaction of "
+        "`monitors/wall_NAME.csv` along the normal), towards the particles while they push "
+        "less, at most `MaxSpeed`."),
+    ("Steps", "Step", "MaxSpeed"): KeyDoc(
+        "m/s", "required with Force", "The servo wall's greatest speed, > 0."),
+    ("Steps", "Step", "Gain"): KeyDoc(
+        "m/(s N)", "required with Force", "The servo's speed per newton of force error, >= 0; "
+        "1 / (N k DT) closes the error in about N deck steps DT against a contact stiffness "
+        "k (N/m) (N ~ 100: smooth; N below ~2 oscillates)."),
     ("Steps", "Step", "AngularVelocity"): KeyDoc(
         "rad/s", "required with Rotate", "The wall's angular velocity, world frame."),
     ("Steps", "Step", "Center"): KeyDoc(
@@ -245,7 +257,7 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "while it turns)."),
     ("Steps", "Step", "MoveWall"): KeyDoc(
         "", "-", "The name of the wall to move (with `ToContact`, `Displacement`, "
-        "`Rotate` or `Table`; `ToContact` moves flat walls only)."),
+        "`Rotate`, `Table` or `Force`; `ToContact` and `Force` move flat walls only)."),
     ("Steps", "Step", "Duration"): KeyDoc(
         "s", "required by timed steps", "Simulated time; a whole number of `TimeStep`s."),
     ("Steps", "Step", "TimeStep"): KeyDoc(

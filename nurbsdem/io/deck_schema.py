@@ -75,7 +75,8 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
         "Dynamic": FLAG, "Replicate": FLAG, "MoveWall": S1, "Duration": F1, "TimeStep": F1,
         "Layers": I1, "Height": F1, "ToContact": FLAG, "Gap": F1, "Direction": F3,
         "Displacement": F3, "Damping": S1, "Accuracy": F1, "Safety": F1, "Rotate": FLAG,
-        "AngularVelocity": F3, "Center": F3, "Table": S1})},
+        "AngularVelocity": F3, "Center": F3, "Table": S1, "Force": F1, "MaxSpeed": F1,
+        "Gain": F1})},
     "Output": {
         "Directory": EntrySpec(False, head=S1),
         "VTK": EntrySpec(False, {"Every": F1, "Resolution": I1}),
