@@ -51,8 +51,7 @@ from .api.flow import add_inlet, add_outlet
 from .api.restart import check_restart_step, checkpoint_of_scene
 from .api.scene import SceneBuilder
 from .api.start import make_solver, start_solver
-from .api.steps import (dynamic_step, move_wall_step, move_walls_step, next_step_id,
-                        replicate_step, servo_of)
+from .api.steps import dynamic_step, keep_tables, move_wall_of, next_step_id, replicate_step
 from .errors import InputError
 from .flow_spec import DEFAULT_EVERY
 from .model import Bodies, Model, MoveWallStep, Output, ReplicateStep, ShapeEntry, Step
@@ -314,33 +313,14 @@ class Simulation:
         dict of ``displacement``, ``table`` or ``angular_velocity`` (and ``center``) or
         ``force`` (and ``max_speed``, ``gain``), the timing shared (``Step`` lines of one id
         in the deck)."""
-        sid = next_step_id(self.model)
-        if not isinstance(name, str):
-            if ((displacement, table, angular_velocity, force) != (None, None, None, None)
-                    or to_contact):
-                raise InputError(f"Step {next_step_id(self.model)}: with a list of walls, "
-                                 f"each wall's motion is in its own dict")
-            step = move_walls_step(self.model, sid, name, duration,
-                                   time_step, damping_scheme=damping, accuracy=accuracy,
-                                   safety=safety)
-        else:
-            step = move_wall_step(
-                self.model, next_step_id(self.model), name, displacement, duration,
-                time_step, to_contact=to_contact, gap=gap, direction=direction,
-                damping_scheme=damping, accuracy=accuracy, safety=safety,
-                angular_velocity=angular_velocity, center=center, table=table,
-                servo=servo_of(sid, force, max_speed, gain))
-        self._keep_tables(step)
+        step = move_wall_of(self.model, name, displacement, duration, time_step,
+                            to_contact=to_contact, gap=gap, direction=direction,
+                            damping=damping, accuracy=accuracy, safety=safety,
+                            angular_velocity=angular_velocity, center=center, table=table,
+                            force=force, max_speed=max_speed, gain=gain)
+        if self._output_dir is not None and (self.solver is None or self.solver.rank == 0):
+            keep_tables(step, self._output_dir)
         self._run(step)
-
-    def _keep_tables(self, step: MoveWallStep) -> None:
-        """Write the tables given as arrays to ``<output>/tables/`` (the deck text names them)."""
-        from .wall_tables import keep_table
-        if self._output_dir is None or self.solver is not None and self.solver.rank > 0:
-            return
-        for m in step.moves():
-            if m.table is not None and m.table.file is None:
-                keep_table(m.table, self._output_dir / "tables" / f"step{m.id}_{m.wall}.csv")
 
     def run(self):
         """Run the steps not run yet (a deck's steps), then close the files; returns the

@@ -237,3 +237,32 @@ def _to_contact(sid: int, name: str, gap: Any, direction: Any) -> MoveWallStep:
             raise InputError(f"{what}: direction must not be zero")
         d = d / np.linalg.norm(d)
     return MoveWallStep(sid, 0, wall=name, to_contact=True, gap=g, direction=d)
+
+
+def move_wall_of(model: Model, name: Any, displacement: Any, duration: Any, time_step: Any, *,
+                 to_contact: bool, gap: float, direction: Any, damping: str, accuracy: Any,
+                 safety: Any, angular_velocity: Any, center: Any, table: Any, force: Any,
+                 max_speed: Any, gain: Any) -> MoveWallStep:
+    """The step of :meth:`~nurbsdem.simulation.Simulation.move_wall` (its arguments; ``name``
+    a wall's name or a list of ``(name, motion dict)`` pairs)."""
+    sid = next_step_id(model)
+    if not isinstance(name, str):
+        if (displacement, table, angular_velocity, force) != (None, None, None, None) or to_contact:
+            raise InputError(f"Step {sid}: with a list of walls, each wall's motion is in its "
+                             f"own dict")
+        return move_walls_step(model, sid, name, duration, time_step, damping_scheme=damping,
+                               accuracy=accuracy, safety=safety)
+    return move_wall_step(model, sid, name, displacement, duration, time_step,
+                          to_contact=to_contact, gap=gap, direction=direction,
+                          damping_scheme=damping, accuracy=accuracy, safety=safety,
+                          angular_velocity=angular_velocity, center=center, table=table,
+                          servo=servo_of(sid, force, max_speed, gain))
+
+
+def keep_tables(step: MoveWallStep, output_dir) -> None:
+    """Write the motion tables given as arrays to ``<output_dir>/tables/`` (the deck text
+    names them)."""
+    from ..wall_tables import keep_table
+    for m in step.moves():
+        if m.table is not None and m.table.file is None:
+            keep_table(m.table, output_dir / "tables" / f"step{m.id}_{m.wall}.csv")
