@@ -21,9 +21,9 @@ IR: no machine code of their own), e.g. ``listed._solve_into``, ``detect.solve_r
 ``deck_steps._search``.  A literal argument (``0``, ``False``, a module constant, also a
 counter's ``n = 0`` before the loop raises it) gives the callee a second specialisation,
 i.e. a second compilation: range bounds, body rows and counters go in as ``np.int64(0)``,
-flags as ``np.bool_(False)`` (the derivative order of the NURBS evaluation stays literal:
-its specialisations unroll the loops of the hot LCP).  Both keep the arithmetic, so the
-same bits (docs/design-notes.md).
+flags as ``np.bool_(False)``; the derivative order of the NURBS evaluation stays a literal
+(each order compiles its own evaluation code).  Both keep the arithmetic, so the same bits
+(docs/design-notes.md).
 """
 from __future__ import annotations
 
