@@ -249,16 +249,18 @@ def _cached_libraries_keep_reload_hooks() -> None:
     and inherits its hooks from it, so without this a cached caller of a caller of a
     :class:`PointerKernel` would be linked before the pointer's slot exists (``LLVM ERROR:
     Symbol not found``)."""
+    import inspect
+
     from numba.core import compiler
 
     rebuild = compiler.CompileResult._rebuild.__func__
     if getattr(rebuild, "_keeps_reload_hooks", False):
         return
+    params = inspect.signature(rebuild)
 
-    def _rebuild(cls, target_context, libdata, fndesc, env, signature, objectmode, lifted,
-                 typeann, reload_init, referenced_envs):
-        cres = rebuild(cls, target_context, libdata, fndesc, env, signature, objectmode,
-                       lifted, typeann, reload_init, referenced_envs)
+    def _rebuild(cls, *args, **kwargs):
+        cres = rebuild(cls, *args, **kwargs)
+        reload_init = params.bind(cls, *args, **kwargs).arguments.get("reload_init")
         if reload_init:
             cres.library._reload_init.update(reload_init)
         return cres
