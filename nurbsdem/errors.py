@@ -1,6 +1,8 @@
 """Error types that the command line turns into one-line messages (no traceback)."""
 from __future__ import annotations
 
+import numpy as np
+
 
 class NurbsdemError(Exception):
     """Base class of every error that is the user's input's fault.
@@ -39,3 +41,9 @@ class InputError(NurbsdemError):
 
 class GeometryError(InputError):
     """A shape that is not a valid closed, outward-oriented, convex NURBS particle."""
+
+
+def vector_text(v) -> str:
+    """A vector as messages and summaries write it: each component to 6 significant digits,
+    separated by spaces, without "-0"."""
+    return " ".join(f"{float(x) + 0.0:g}" for x in np.asarray(v, float))

@@ -196,8 +196,9 @@ class PointerKernel:
         return f"nurbsdem_kernel_{self.name}_{key}"
 
     def fill(self, argtypes: tuple):
-        """Compile (or load) the kernel for ``argtypes``, make its slot and put the address
-        in it (once per process); returns the kernel's return type."""
+        """Make the slot for ``argtypes`` (once per process) and, unless the kernel is lazy and
+        no scene asked for lazy kernels yet, compile (or load) the kernel and put its address
+        in it; returns the kernel's return type (none for a lazy kernel not compiled)."""
         import ctypes
 
         import llvmlite.binding as llb

@@ -5,10 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
-def _vec(v) -> str:
-    return " ".join(f"{x + 0.0:g}" for x in np.asarray(v, float))  # + 0.0: no "-0"
+from .errors import vector_text as _vec
 
 
 def summary_text(model: Any) -> str:

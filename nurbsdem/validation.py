@@ -37,7 +37,7 @@ from .check_rules import (MAX_RESTING_FRACTION, OVERLAP_TOLERANCE, RESTING_LOADS
                           _inside_rectangle, _warn_deep, allowed_overlap, static_overlap,
                           wall_plane)
 from .dynamics.stepcontrol import critical_step
-from .errors import InputError
+from .errors import InputError, vector_text as _vec
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.shape import Shape
@@ -218,10 +218,6 @@ def check_bodies_against_walls(model: "Model", bodies: "Bodies",
                     f"it at least {-sd - tol:.3g} m along the wall's normal {_vec(n)}", at)
             _warn_deep(model, at, f"{label}particle {bodies.id[i]} penetrates wall {w.name!r}",
                        -sd, radii[k], resting)
-
-
-def _vec(v) -> str:
-    return " ".join(f"{float(x) + 0.0:.6g}" for x in np.asarray(v, float))
 
 
 # ---------------------------------------------------------------------------- the model

@@ -36,6 +36,8 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from .errors import vector_text as _vec
+
 if TYPE_CHECKING:  # pragma: no cover
     from .model import Bodies, CurvedWallSpec, Model
 
@@ -53,10 +55,6 @@ def _where(model: "Model", spec: "CurvedWallSpec") -> str:
 
 def _title(spec: "CurvedWallSpec") -> str:
     return f"{spec.kind} wall {spec.name!r}"
-
-
-def _vec(v) -> str:
-    return " ".join(f"{float(x) + 0.0:.6g}" for x in np.asarray(v, float))
 
 
 # ---------------------------------------------------------------------------- winding numbers

@@ -35,7 +35,7 @@ def plan(solver, step, restored) -> tuple[list[PrescribedMotion], dict]:
     else:
         t_start = solver.time - solver.step_progress * float(step.time_step)
     solver.motion_spec = {"d0": offsets[k0].copy(), "t_start": t_start, "offsets": offsets}
-    motions = [PrescribedMotion.fixed(d) for d in solver.wall_offset]
+    motions = solver._fixed_motions()
     poses = {}
     first_curved = len(model.walls)
     for m in step.moves():

@@ -42,6 +42,10 @@ class ServoMotion:
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         return self.d0 + (self.speed * (t - self.t0)) * self.normal, self.speed * self.normal
 
+    def state(self) -> dict:
+        """(d_k, t_k, u) of the present deck step, as checkpoints keep them."""
+        return {"d": self.d0.copy(), "t": self.t0, "u": self.speed}
+
 
 class Servo:
     """The servo walls of one MoveWall step: ``moves`` the step's wall moves with a
@@ -64,7 +68,7 @@ class Servo:
             push = float(r[k] @ mo.normal)
             mo.speed = float(np.clip(m.gain * (m.force - push), -m.max_speed, m.max_speed))
             mo.d0, mo.t0 = d[k].copy(), t_k
-            self.spec["servo"][m.wall] = {"d": mo.d0.copy(), "t": mo.t0, "u": mo.speed}
+            self.spec["servo"][m.wall] = mo.state()
 
 
 def plan(solver, step, motions: list[PrescribedMotion], offsets: np.ndarray,
@@ -87,8 +91,7 @@ def plan(solver, step, motions: list[PrescribedMotion], offsets: np.ndarray,
             s = kept[m.wall]
             mo.d0 = np.array(s["d"], float).reshape(3)
             mo.t0, mo.speed = float(s["t"]), float(s["u"])
-            solver.motion_spec["servo"][m.wall] = {"d": mo.d0.copy(), "t": mo.t0,
-                                                   "u": mo.speed}
+            solver.motion_spec["servo"][m.wall] = mo.state()
         motions[k] = PrescribedMotion(mo)
         index.append(k)
         ms.append(mo)

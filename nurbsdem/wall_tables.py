@@ -24,7 +24,7 @@ import numpy as np
 
 from .contact.curved_walls import WallPose
 from .dynamics import PrescribedMotion
-from .errors import InputError
+from .errors import InputError, vector_text as _vec
 
 #: the column names of a header line: translation only, or translation and rotation
 COLUMNS = (("t", "x", "y", "z"), ("t", "x", "y", "z", "rx", "ry", "rz"))
@@ -233,9 +233,6 @@ class TablePose(WallPose):
 
 def describe_moves(step) -> str:
     """The walls a MoveWall step moves and how, for the model's summary."""
-    def _vec(v) -> str:
-        return " ".join(f"{x + 0.0:g}" for x in np.asarray(v, float))  # + 0.0: no "-0"
-
     def one(m) -> str:
         if m.force is not None:
             return (f"{m.wall} servo-controlled to a push of {m.force:g} N (at most "

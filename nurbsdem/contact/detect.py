@@ -177,7 +177,10 @@ class ContactTable:
         #: (saddle stalls, :func:`lcp.solve_pair`; 0 turns them off)
         self.nonconvexity = np.array([_nonconvexity(s) for s in shapes])
         self.shapes = shapes
-        if any(exact_sphere(s) is None for s in shapes):
+        #: per shape: (centre (3,) m, radius m) of an exact sphere, None for other shapes
+        #: (:func:`~nurbsdem.geometry.analytic.exact_sphere`)
+        self.spheres = [exact_sphere(s) for s in shapes]
+        if any(sp is None for sp in self.spheres):
             fill_lazy_kernels()              # the LCP kernels: a scene of spheres needs none
 
     def __len__(self) -> int:

@@ -638,7 +638,6 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     _finish_flags(resF, resI, prevF, prevI, converged, phi, cA, cB, scA, scB)
 
 
-
 #: :func:`solve_pair` compiled once and called by the batch kernels through a pointer
 #: (:class:`~nurbsdem.jit.PointerKernel`): its callers do not compile the LCP again
 solve_pair_ptr = PointerKernel(solve_pair, "solve_pair", lazy=True).call

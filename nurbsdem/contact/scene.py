@@ -74,7 +74,6 @@ import numba
 import numpy as np
 
 from .contactset import ContactSet
-from ..geometry.analytic import exact_sphere
 from .boxes import pack_boxes
 from .broadphase import wall_geometry
 from .detect import ContactTable
@@ -160,7 +159,7 @@ class SceneContacts:
             self.wall_origin[k], self.wall_a[k], self.wall_b[k], self.wall_dom[k] = wall_frame(w)
         self.depth_wall = 2.0 * float(self.radius.max()) if self.n else 0.0
         # exact spheres take the closed forms of .analytic (module docstring)
-        spheres = [exact_sphere(sh) for sh in self.shapes]
+        spheres = self.table.spheres
         self.sphere_center = np.array([c if c is not None else np.zeros(3)
                                        for c, _ in (sp or (None, None) for sp in spheres)]).reshape(-1, 3)
         self.sphere_radius = np.array([sp[1] if sp is not None else np.nan for sp in spheres])

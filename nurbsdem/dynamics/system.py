@@ -54,12 +54,13 @@ motion** (half-step velocities reversing at every internal step, which the full-
 energy of the monitors cannot see; :func:`~nurbsdem.dynamics.stepcontrol.alternation_update`);
 after every deck step the mechanical energy gain ``E_mech − E_mech(0) − W_ext`` and the balance
 error must stay below ``energy_tolerance × scale`` (scale = the largest kinetic + elastic energy
-seen so far or the walls' work |W_ext| if larger, at least Σ m|g| r).  Otherwise the deck step is rolled back and **repeated with
-twice the sub-steps** (the refinement is kept, and halved again after
-``REFINE_DECAY_STEPS`` quiet deck steps), up to ``max_refinements`` times; only then is the
-system left at the last good state (the start of that deck step, ``system.get_state()``) and
-:class:`InstabilityError` raised, with a diagnosis (failed contact problems, penetration
-depth) instead of advice to reduce a time step that was already refined.
+seen so far or the walls' work |W_ext| if larger, at least Σ m|g| r).  Otherwise the deck step
+is rolled back and **repeated with twice the sub-steps** (the refinement is kept, and halved
+again after ``REFINE_DECAY_STEPS`` quiet deck steps), up to ``max_refinements`` times; only
+then is the system left at the last good state (the start of that deck step,
+``system.get_state()``) and :class:`InstabilityError` raised, with a diagnosis (failed contact
+problems, penetration depth) instead of advice to reduce a time step that was already
+refined.
 Runs are deterministic: the same inputs give bit-for-bit the same results.
 """
 from __future__ import annotations

@@ -66,6 +66,14 @@ def _fractions(label: str, shapes: tuple, values: Mapping[str, Any], fail: Fail)
     return fr
 
 
+def _normal(label: str, values: Mapping[str, Any], fail: Fail) -> np.ndarray:
+    """The entry's ``Normal`` (3,), refused when zero (only its direction is used)."""
+    normal = np.array(values["Normal"], float).reshape(3)
+    if not np.linalg.norm(normal) > 0:
+        fail(f"{label}: Normal must not be zero")
+    return normal
+
+
 def _region(label: str, values: Mapping[str, Any], fail: Fail) -> dict[str, Any]:
     """The inlet's region as :class:`~nurbsdem.flow_spec.InletSpec` fields: ``Box``, or
     ``Disc`` (centre) with ``Normal`` (its axis), ``Radius`` and an optional ``Thickness``
@@ -82,9 +90,7 @@ def _region(label: str, values: Mapping[str, Any], fail: Fail) -> dict[str, Any]
     for key in ("Normal", "Radius"):
         if key not in values:
             fail(f"{label}: Disc needs {key}")
-    normal = np.array(values["Normal"], float).reshape(3)
-    if not np.linalg.norm(normal) > 0:
-        fail(f"{label}: Normal must not be zero")
+    normal = _normal(label, values, fail)
     radius = float(values["Radius"])
     if not radius > 0:
         fail(f"{label}: Radius must be > 0, got {radius:g}")
@@ -146,9 +152,7 @@ def outlet_spec(oid: int, values: Mapping[str, Any], line: int | None,
     for key in ("Point", "Normal"):
         if key not in values:
             fail(f"{label}: missing {key}")
-    normal = np.array(values["Normal"], float).reshape(3)
-    if not np.linalg.norm(normal) > 0:
-        fail(f"{label}: Normal must not be zero")
+    normal = _normal(label, values, fail)
     return OutletSpec(oid, name, point=np.array(values["Point"], float).reshape(3),
                       normal=normal, every=every, line=line)
 
