@@ -73,12 +73,15 @@ class WallPose:
         """(R (3,3), t (3,) m): ``x_world = R x_wall + t`` at time t (s): the rest pose turned
         by the rotation vector ω (t − t0) about the centre (Rodrigues, by scipy), then
         translated by the wall's displacement d (3,) m at t (None: none)."""
-        from scipy.spatial.transform import Rotation
-        rot = Rotation.from_rotvec(np.asarray(self.omega, float)
-                                   * max(float(t) - self.t0, 0.0)).as_matrix()
         c = np.asarray(self.center, float)
-        R = rot @ self.R0
-        shift = rot @ (self.shift0 - c) + c
+        if not np.any(self.omega):                # at rest: the rest pose (no turn to build)
+            R, shift = self.R0, (self.shift0 - c) + c
+        else:
+            from scipy.spatial.transform import Rotation
+            rot = Rotation.from_rotvec(np.asarray(self.omega, float)
+                                       * max(float(t) - self.t0, 0.0)).as_matrix()
+            R = rot @ self.R0
+            shift = rot @ (self.shift0 - c) + c
         return R, (shift if d is None else shift + np.asarray(d, float))
 
 
@@ -130,6 +133,28 @@ def _mesh_rows_of(idx, x, r, R, t, vertices, faces, normals, two_sided, size, gr
             rows_i[n, :] = one_i[j, :]
             owner[n] = i
             rank[n] = j
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def _surface_rows_of(idx, x, r, R, t, deg, ncp, koff, knots, pw, poff, dom, periodic, seed_x,
+                     seed_p, seed_uv, spacing, size, rows_f, owner):
+    """The active contact rows of spheres ``idx`` (centres x, radii r) with one surface wall
+    at (R, t) into rows_f from row 0, each row's sphere in ``owner``; returns the count (one
+    row per sphere at most: the closest point of :func:`sphere_surface_row`)."""
+    n = 0
+    ev = np.zeros((6, 3))
+    one_f = np.zeros(NF)
+    one_i = np.zeros(NI, np.int64)
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        ok = sphere_surface_row(x[i], r[i], R, t, deg, ncp, koff, knots, pw, poff, dom,
+                                periodic, seed_x, seed_p, seed_uv, spacing, size, ev, one_f,
+                                one_i)
+        if ok and one_i[I_ACTIVE]:
+            rows_f[n, :] = one_f
+            owner[n] = i
             n += 1
     return n
 
@@ -187,19 +212,11 @@ class CurvedWallContacts:
             self._mark += len(idx)
             keep = rf[:n, F_SD] < 0.0
             return rf[:n][keep], owner[:n][keep], rank[:n][keep]
-        rows, owners = [], []
-        ev = np.zeros((6, 3))
-        for i in idx.tolist():
-            f, ii = np.zeros(NF), np.zeros(NI, np.int64)
-            ok = sphere_surface_row(x[i], self.radii[i], R, tv, g.deg, g.ncp, g.koff, g.knots,
-                                    g.pw, g.poff, g.dom, g.periodic, g.seed_x, g.seed_p,
-                                    g.seed_uv, g.spacing, g.size, ev, f, ii)
-            if ok and ii[I_ACTIVE]:
-                rows.append(f)
-                owners.append(i)
-        rf = np.array(rows).reshape(-1, NF)
-        owner = np.array(owners, np.int64)
-        return rf, owner, np.zeros(len(owner), np.int64)
+        rf, owner = np.zeros((len(idx), NF)), np.zeros(len(idx), np.int64)
+        n = _surface_rows_of(idx, x, self.radii, R, tv, g.deg, g.ncp, g.koff, g.knots, g.pw,
+                             g.poff, g.dom, g.periodic, g.seed_x, g.seed_p, g.seed_uv,
+                             g.spacing, g.size, rf, owner)
+        return rf[:n], owner[:n], np.zeros(n, np.int64)
 
     def __call__(self, kin) -> ContactSet:
         cs = self.base(self._base_kinematics(kin)) if self.base is not None else None
