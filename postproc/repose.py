@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""The angle of repose of a heap, measured from particle positions.
+"""Angles of repose measured from particle positions: a heap's, and a rotating drum's bed.
 
 A heap poured onto a floor around a vertical axis has a conical flank.  Its free surface is
 sampled by the highest particle top (centroid height + bounding radius) in each ring of the
@@ -12,6 +12,12 @@ angle of repose is the slope of the straight line fitted to the ring tops there,
 with its standard error from the fit's residuals.  The axis is the horizontal centroid of the
 particles unless given; the foot radius is the largest r of a particle resting near the floor
 (within ``foot_band`` of the lowest particle top).
+
+In a drum turning about a horizontal axis the bed is a circular segment whose free surface
+(the chord) tilts by the dynamic angle of repose.  By symmetry the chord is the direction of
+the major principal axis of the segment's cross-section, so :func:`bed_angle` takes the
+angle of that axis of the particles' centroids projected onto the plane normal to the drum's
+axis (their covariance), measured from the horizontal.
 
 Usage::
 
@@ -76,6 +82,21 @@ def angle_of_repose(x, radius, axis=None, rings: int = 12, inner: float = 0.25,
     angle = float(np.degrees(np.arctan(-slope)))
     error = float(np.degrees(err / (1.0 + slope ** 2)))
     return Repose(angle, error, r, tops)
+
+
+def bed_angle(x, axis: int = 0, up: int = 2) -> float:
+    """The dynamic angle of repose (degrees, in (−90, 90]) of the bed of centroids x (N,3) m
+    in a drum turning about the coordinate axis ``axis`` with ``up`` the vertical (module
+    docstring): the angle of the major principal axis of the cross-section's centroids from
+    the horizontal, positive when the surface rises along the third coordinate axis."""
+    x = np.asarray(x, float)
+    side = 3 - axis - up
+    yz = np.column_stack([x[:, side], x[:, up]])
+    w, v = np.linalg.eigh(np.cov(yz.T))
+    major = v[:, np.argmax(w)]
+    if major[0] < 0.0:
+        major = -major
+    return float(np.degrees(np.arctan2(major[1], major[0])))
 
 
 def main(argv=None) -> int:

@@ -37,6 +37,7 @@ from .kinds import MESH_ROWS, SPHERE, SURFACE_POINT, pair_solver
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
 from .mesh_wall import MeshWall, make_workspace, sphere_mesh_rows
 from .surface_wall import SurfaceWall, sphere_surface_row
+from .wall_skin import WallSkin, sample_gap
 
 #: most contacts one sphere keeps with one mesh wall per evaluation (faces of a concave fold)
 MAX_PER_WALL = 8
@@ -139,23 +140,32 @@ def _mesh_rows_of(idx, x, r, R, t, vertices, faces, normals, two_sided, size, gr
 
 @njit(cache=True)
 def _surface_rows_of(idx, x, r, R, t, deg, ncp, koff, knots, pw, poff, dom, periodic, seed_x,
-                     seed_p, seed_uv, spacing, size, rows_f, owner):
+                     seed_p, seed_uv, spacing, size, rows_f, owner, gap):
     """The active contact rows of spheres ``idx`` (centres x, radii r) with one surface wall
     at (R, t) into rows_f from row 0, each row's sphere in ``owner``; returns the count (one
-    row per sphere at most: the closest point of :func:`sphere_surface_row`)."""
+    row per sphere at most: the closest point of :func:`sphere_surface_row`).  ``gap`` (m)
+    gets, for each sphere of idx, a lower bound of its distance to the wall less its radius
+    where it is apart, else 0 (:mod:`nurbsdem.contact.wall_skin`)."""
     n = 0
     ev = np.zeros((6, 3))
     one_f = np.zeros(NF)
     one_i = np.zeros(NI, np.int64)
+    c = np.empty(3)
     for m in range(idx.shape[0]):
         i = idx[m]
         ok = sphere_surface_row(x[i], r[i], R, t, deg, ncp, koff, knots, pw, poff, dom,
                                 periodic, seed_x, seed_p, seed_uv, spacing, size, ev, one_f,
                                 one_i)
+        gap[m] = 0.0
         if ok and one_i[I_ACTIVE]:
             rows_f[n, :] = one_f
             owner[n] = i
             n += 1
+        elif ok and one_f[F_SD] > 0.0:
+            for a in range(3):
+                c[a] = (R[0, a] * (x[i, 0] - t[0]) + R[1, a] * (x[i, 1] - t[1])
+                        + R[2, a] * (x[i, 2] - t[2]))
+            gap[m] = max(sample_gap(c, r[i], seed_x, spacing), 0.0)
     return n
 
 
@@ -171,6 +181,7 @@ class CurvedWallContacts:
         self.walls = list(walls)
         self.first_wall = int(first_wall)
         self._mark = 0
+        self._skins: dict[int, WallSkin] = {}
         for w in self.walls:
             if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
                 raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
@@ -212,11 +223,23 @@ class CurvedWallContacts:
             self._mark += len(idx)
             keep = rf[:n, F_SD] < 0.0
             return rf[:n][keep], owner[:n][keep], rank[:n][keep]
+        skin = self._skin(w, g)
+        skin.advance(R, tv)
+        idx = skin.due(idx, x)
         rf, owner = np.zeros((len(idx), NF)), np.zeros(len(idx), np.int64)
+        gap = np.zeros(len(idx))
         n = _surface_rows_of(idx, x, self.radii, R, tv, g.deg, g.ncp, g.koff, g.knots, g.pw,
                              g.poff, g.dom, g.periodic, g.seed_x, g.seed_p, g.seed_uv,
-                             g.spacing, g.size, rf, owner)
+                             g.spacing, g.size, rf, owner, gap)
+        skin.certify(idx, x, gap)
         return rf[:n], owner[:n], np.zeros(n, np.int64)
+
+    def _skin(self, w: CurvedWall, g: SurfaceWall) -> WallSkin:
+        """The gap certificates of the spheres against surface wall w."""
+        skin = self._skins.get(id(w))
+        if skin is None or len(skin.gap) != len(self.radii):
+            skin = self._skins[id(w)] = WallSkin(len(self.radii), g.seed_x, g.spacing)
+        return skin
 
     def __call__(self, kin) -> ContactSet:
         cs = self.base(self._base_kinematics(kin)) if self.base is not None else None

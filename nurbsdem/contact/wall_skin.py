@@ -1,0 +1,88 @@
+"""Gap certificates of exact spheres against one NURBS surface wall: which spheres need their
+closest point solved at an evaluation.
+
+A sphere found apart from the wall keeps a lower bound ``gap`` (m) of its distance to the
+wall's surface less its radius, with its centre ``x0`` and the wall's odometer ``odo0`` at
+that time.  The distance from a point to a surface changes by at most the point's
+displacement plus the largest displacement of a surface point, so while
+
+    |x − x0| + (odo − odo0) < gap
+
+the sphere is still apart and its closest point is not solved (its row would be inactive).
+The odometer ``odo`` (m) adds up, at each evaluation, a bound of the largest displacement of
+any wall point since the previous one: for the pose change (R₀, t₀) → (R, t) of points
+within ``extent`` of the wall-frame centre c,
+
+    ‖R − R₀‖_F · extent + |(R − R₀) c + t − t₀|.
+
+The lower bound of a sphere apart comes from the wall's samples: every surface point lies
+within the samples' largest gap ``spacing`` of a sample, so the distance is at least the
+nearest sample's distance less ``spacing``.  Certificates only skip work: the rows are those
+of solving every sphere at every evaluation, bit for bit.  Lengths in metres.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+class WallSkin:
+    """The certificates of the spheres (N of them) against one surface wall whose samples
+    ``seed_x`` (S,3) (wall frame) are at most ``spacing`` (m) apart."""
+
+    def __init__(self, n: int, seed_x: np.ndarray, spacing: float) -> None:
+        self.gap = np.full(n, -1.0)                 # no certificate yet
+        self.x0 = np.zeros((n, 3))
+        self.odo0 = np.zeros(n)
+        self.odo = 0.0
+        self.centre = 0.5 * (seed_x.min(axis=0) + seed_x.max(axis=0))
+        self.extent = float(np.linalg.norm(seed_x - self.centre, axis=1).max()) + spacing
+        self.pose: tuple[np.ndarray, np.ndarray] | None = None
+
+    def advance(self, R: np.ndarray, t: np.ndarray) -> None:
+        """The odometer moved on by the wall's motion to pose (R, t) (module docstring)."""
+        if self.pose is not None:
+            dR = R - self.pose[0]
+            self.odo += (float(np.linalg.norm(dR)) * self.extent
+                         + float(np.linalg.norm(dR @ self.centre + t - self.pose[1])))
+        self.pose = (R.copy(), np.asarray(t, float).copy())
+
+    def due(self, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The spheres of ``idx`` (centres x (N,3) m) whose certificate does not hold."""
+        out = np.empty(len(idx), np.int64)
+        return out[:_due(idx, x, self.gap, self.x0, self.odo0, self.odo, out)]
+
+    def certify(self, idx: np.ndarray, x: np.ndarray, gap: np.ndarray) -> None:
+        """Spheres ``idx`` found at least ``gap`` (m, ≤ 0: touching, no certificate) apart
+        with centres x (N,3) now."""
+        self.gap[idx] = gap
+        self.x0[idx] = x[idx]
+        self.odo0[idx] = self.odo
+
+
+@njit(cache=True)
+def _due(idx, x, gap, x0, odo0, odo, out) -> int:
+    """The spheres of idx whose certificate (module docstring) fails, into out; their count."""
+    n = 0
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        moved = math.sqrt((x[i, 0] - x0[i, 0]) ** 2 + (x[i, 1] - x0[i, 1]) ** 2
+                          + (x[i, 2] - x0[i, 2]) ** 2)
+        if gap[i] <= 0.0 or moved + (odo - odo0[i]) >= gap[i]:
+            out[n] = i
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def sample_gap(c, r, seed_x, spacing) -> float:
+    """A lower bound (m) of the distance from the sphere (wall-frame centre c (3,), radius r
+    m) to the wall's surface less r: the nearest sample's distance less ``spacing`` and r."""
+    best = 1e300
+    for k in range(seed_x.shape[0]):
+        d = (seed_x[k, 0] - c[0]) ** 2 + (seed_x[k, 1] - c[1]) ** 2 + (seed_x[k, 2] - c[2]) ** 2
+        if d < best:
+            best = d
+    return math.sqrt(best) - spacing - r
