@@ -37,7 +37,7 @@ from .kinds import MESH_ROWS, SPHERE, SURFACE_POINT, pair_solver
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
 from .mesh_wall import MeshWall, make_workspace, sphere_mesh_rows
 from .surface_wall import SurfaceWall, sphere_surface_row
-from .wall_skin import WallSkin, sample_gap
+from .wall_skin import WallSkin
 
 #: most contacts one sphere keeps with one mesh wall per evaluation (faces of a concave fold)
 MAX_PER_WALL = 8
@@ -144,13 +144,12 @@ def _surface_rows_of(idx, x, r, R, t, deg, ncp, koff, knots, pw, poff, dom, peri
     """The active contact rows of spheres ``idx`` (centres x, radii r) with one surface wall
     at (R, t) into rows_f from row 0, each row's sphere in ``owner``; returns the count (one
     row per sphere at most: the closest point of :func:`sphere_surface_row`).  ``gap`` (m)
-    gets, for each sphere of idx, a lower bound of its distance to the wall less its radius
-    where it is apart, else 0 (:mod:`nurbsdem.contact.wall_skin`)."""
+    gets, for each sphere of idx, its distance to the wall less its radius where it is
+    apart, else 0 (the certificates of :mod:`nurbsdem.contact.wall_skin`)."""
     n = 0
     ev = np.zeros((6, 3))
     one_f = np.zeros(NF)
     one_i = np.zeros(NI, np.int64)
-    c = np.empty(3)
     for m in range(idx.shape[0]):
         i = idx[m]
         ok = sphere_surface_row(x[i], r[i], R, t, deg, ncp, koff, knots, pw, poff, dom,
@@ -162,10 +161,7 @@ def _surface_rows_of(idx, x, r, R, t, deg, ncp, koff, knots, pw, poff, dom, peri
             owner[n] = i
             n += 1
         elif ok and one_f[F_SD] > 0.0:
-            for a in range(3):
-                c[a] = (R[0, a] * (x[i, 0] - t[0]) + R[1, a] * (x[i, 1] - t[1])
-                        + R[2, a] * (x[i, 2] - t[2]))
-            gap[m] = max(sample_gap(c, r[i], seed_x, spacing), 0.0)
+            gap[m] = one_f[F_SD]
     return n
 
 

@@ -1,9 +1,8 @@
 """Gap certificates of exact spheres against one NURBS surface wall: which spheres need their
 closest point solved at an evaluation.
 
-A sphere found apart from the wall keeps a lower bound ``gap`` (m) of its distance to the
-wall's surface less its radius, with its centre ``x0`` and the wall's odometer ``odo0`` at
-that time.  The distance from a point to a surface changes by at most the point's
+A sphere found apart from the wall keeps its distance to the wall's surface less its radius,
+``gap`` (m), with its centre ``x0`` and the wall's odometer ``odo0`` at that time.  The distance from a point to a surface changes by at most the point's
 displacement plus the largest displacement of a surface point, so while
 
     |x − x0| + (odo − odo0) < gap
@@ -15,10 +14,11 @@ within ``extent`` of the wall-frame centre c,
 
     ‖R − R₀‖_F · extent + |(R − R₀) c + t − t₀|.
 
-The lower bound of a sphere apart comes from the wall's samples: every surface point lies
-within the samples' largest gap ``spacing`` of a sample, so the distance is at least the
-nearest sample's distance less ``spacing``.  Certificates only skip work: the rows are those
-of solving every sphere at every evaluation, bit for bit.  Lengths in metres.
+The distance is that of the closest point the wall kernel finds
+(:func:`~nurbsdem.contact.surface_wall.sphere_surface_row`), the kernel's own premise: the
+nearest point, unique where the wall's radius of curvature exceeds the distance.
+Certificates only skip work: the rows are those of solving every sphere at every
+evaluation, bit for bit.  Lengths in metres.
 """
 from __future__ import annotations
 
@@ -30,7 +30,8 @@ from numba import njit
 
 class WallSkin:
     """The certificates of the spheres (N of them) against one surface wall whose samples
-    ``seed_x`` (S,3) (wall frame) are at most ``spacing`` (m) apart."""
+    ``seed_x`` (S,3) (wall frame) are at most ``spacing`` (m) apart (their extent bounds the
+    wall's)."""
 
     def __init__(self, n: int, seed_x: np.ndarray, spacing: float) -> None:
         self.gap = np.full(n, -1.0)                 # no certificate yet
@@ -74,15 +75,3 @@ def _due(idx, x, gap, x0, odo0, odo, out) -> int:
             out[n] = i
             n += 1
     return n
-
-
-@njit(cache=True)
-def sample_gap(c, r, seed_x, spacing) -> float:
-    """A lower bound (m) of the distance from the sphere (wall-frame centre c (3,), radius r
-    m) to the wall's surface less r: the nearest sample's distance less ``spacing`` and r."""
-    best = 1e300
-    for k in range(seed_x.shape[0]):
-        d = (seed_x[k, 0] - c[0]) ** 2 + (seed_x[k, 1] - c[1]) ** 2 + (seed_x[k, 2] - c[2]) ** 2
-        if d < best:
-            best = d
-    return math.sqrt(best) - spacing - r
