@@ -27,11 +27,13 @@ Units: metres, seconds, radians.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
 
+from ..geometry.rotation import quat_matrix
 from .contactset import ContactSet
 from .kinds import MESH_ROWS, SPHERE, SURFACE_POINT, pair_solver
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
@@ -43,6 +45,7 @@ from .wall_skin import WallSkin
 MAX_PER_WALL = 8
 
 
+@njit(cache=True)
 def wall_contact_key(nb: int, owner, wall, n_walls: int, rank):
     """The key of the ``rank``-th contact of particle ``owner`` with curved wall ``wall`` (of
     ``n_walls``) in a system of ``nb`` bodies: above ``nb²``, clear of the pair keys."""
@@ -54,6 +57,40 @@ def split_wall_contact_key(key, nb: int, n_walls: int):
     off = key - nb * nb
     rest = off // MAX_PER_WALL
     return rest // n_walls, rest % n_walls, off % MAX_PER_WALL
+
+
+@njit(cache=True)
+def wall_pose_at(omega, center, t0, R0, shift0, t, d):
+    """(R (3,3), t (3,) m) of a wall at time t (s): its rest pose (R0, shift0 m) turned by the
+    rotation vector ω (t − t0) (rad; ω (3,) rad/s, none before t0) about ``center`` (3,) m
+    (the rotation's matrix from its unit quaternion), then translated by d (3,) m.  Loops,
+    not BLAS: the Python and compiled callers get the same bits."""
+    rv = omega * max(t - t0, 0.0)
+    angle = math.sqrt(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2])
+    k = math.sin(0.5 * angle) / angle if angle > 1e-8 else 0.5 - angle * angle / 48.0
+    m = quat_matrix(math.cos(0.5 * angle), k * rv[0], k * rv[1], k * rv[2])
+    R = np.empty((3, 3))
+    shift = np.empty(3)
+    for r in range(3):
+        for c in range(3):
+            R[r, c] = (m[3 * r] * R0[0, c] + m[3 * r + 1] * R0[1, c]
+                       + m[3 * r + 2] * R0[2, c])
+        shift[r] = (m[3 * r] * (shift0[0] - center[0]) + m[3 * r + 1] * (shift0[1] - center[1])
+                    + m[3 * r + 2] * (shift0[2] - center[2])) + center[r] + d[r]
+    return R, shift
+
+
+@njit(cache=True)
+def world_box(corners, R, t):
+    """(lo, hi) of the world box of the wall-frame box ``corners`` (8,3) at pose (R, t)."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for c in range(8):
+        for a in range(3):
+            w = R[a, 0] * corners[c, 0] + R[a, 1] * corners[c, 1] + R[a, 2] * corners[c, 2] + t[a]
+            lo[a] = min(lo[a], w)
+            hi[a] = max(hi[a], w)
+    return lo, hi
 
 
 @dataclass(frozen=True)
@@ -72,18 +109,13 @@ class WallPose:
 
     def at(self, t: float, d: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(R (3,3), t (3,) m): ``x_world = R x_wall + t`` at time t (s): the rest pose turned
-        by the rotation vector ω (t − t0) about the centre (Rodrigues, by scipy), then
-        translated by the wall's displacement d (3,) m at t (None: none)."""
-        c = np.asarray(self.center, float)
-        if not np.any(self.omega):                # at rest: the rest pose (no turn to build)
-            R, shift = self.R0, (self.shift0 - c) + c
-        else:
-            from scipy.spatial.transform import Rotation
-            rot = Rotation.from_rotvec(np.asarray(self.omega, float)
-                                       * max(float(t) - self.t0, 0.0)).as_matrix()
-            R = rot @ self.R0
-            shift = rot @ (self.shift0 - c) + c
-        return R, (shift if d is None else shift + np.asarray(d, float))
+        by the rotation vector ω (t − t0) about the centre, then translated by the wall's
+        displacement d (3,) m at t (None: none) (:func:`wall_pose_at`, which the compiled
+        deck steps call too)."""
+        return wall_pose_at(np.asarray(self.omega, float), np.asarray(self.center, float),
+                            float(self.t0), np.asarray(self.R0, float),
+                            np.asarray(self.shift0, float), float(t),
+                            np.zeros(3) if d is None else np.asarray(d, float))
 
 
 @dataclass
@@ -109,8 +141,8 @@ class CurvedWall:
 
     def world_box(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The world box (lo, hi) of the wall's bounding box at pose (R, t)."""
-        w = self.corners @ R.T + t
-        return w.min(axis=0), w.max(axis=0)
+        return world_box(self.corners, np.ascontiguousarray(R, float),
+                         np.ascontiguousarray(t, float))
 
 
 @njit(cache=True)

@@ -52,6 +52,7 @@ import numpy as np
 from numba import njit
 
 from ..contact.analytic import closed_form_into
+from ..contact.curved_compiled import curved_contacts, pack_curved, with_curved_contacts
 from ..contact.listed import scene_list_ptr, solve_due_into_ptr
 from ..contact.verlet import (active_arrays, active_rows, advance_odometers, carry_rows,
                               due_rows, list_is_stale, near_arrays, near_pairs, renew_certificates,
@@ -64,7 +65,7 @@ from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
 from .monitor import record_row, row_width
 from .step import (all_kinematics, contact_part_ptr, interfaces_defined, kick_part_ptr,
-                   step_start_ptr)
+                   spun_contacts, step_start_ptr)
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
@@ -79,9 +80,12 @@ DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 
 #: the scene's constants: the tables of :mod:`nurbsdem.contact.listed`, the skin, margin and
 #: certificates, the contact law (Hertz), the first patch of each shape (curvature radii);
-#: ``owned`` (N,) all True (one rank)
+#: ``owned`` (N,) all True (one rank); the mesh and surface walls
+#: (:data:`~nurbsdem.contact.curved_compiled.CurvedConst`, none: zero walls) and the walls'
+#: spin (W,6): angular velocity (rad/s) and centre (m) of each wall (zeros: not turning)
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
-                        "first_patch body_shape sphere_radius owned threads all_spheres")
+                        "first_patch body_shape sphere_radius owned threads all_spheres curved "
+                        "spin")
 #: the neighbour list and its per-pair arrays, odometers, the poses it was built at and the
 #: previous poses
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
@@ -190,21 +194,46 @@ def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
 
 
 @njit(cache=True)
+def _with_curved(sc, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
+                 patch_b):
+    """The scene's active contact arrays followed by those of the spheres with the mesh and
+    surface walls (:func:`~nurbsdem.contact.curved_compiled.curved_contacts`; no surface
+    parameters: closed forms, patch −1), as the Python driver's provider merges them."""
+    ca, cb, cpa, cpb, cn, cd, ck = curved_contacts(sc.curved, cwork, time, x, wall_d)
+    k = ca.shape[0]
+    return (np.concatenate((a, ca)), np.concatenate((b, cb)), np.concatenate((pa, cpa)),
+            np.concatenate((pb, cpb)), np.concatenate((nrm, cn)), np.concatenate((dep, cd)),
+            np.concatenate((key, ck)), np.concatenate((deg, np.zeros(k, deg.dtype))),
+            np.concatenate((params, np.zeros((k, 4)))),
+            np.concatenate((patch_a, np.full(k, -1, patch_a.dtype))),
+            np.concatenate((patch_b, np.full(k, -1, patch_b.dtype))))
+
+
+@njit(cache=True)
 def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev,
               x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray,
               R: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float,
-              counters: np.ndarray):
+              counters: np.ndarray, cwork, time: float):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
     gravity (omega (N,3): the particles' angular velocities, rad/s; implicit dashpots when
     ``cc.implicit``).  The active pairs are found among the rows just solved (``due``, list
     positions: :func:`~nurbsdem.contact.verlet.active_rows`); the separated pairs, which only
     the time-step control at the end of a deck step takes, with ``full`` only (else none).
-    Returns (True, the new Evaluation), or (False, ev) when a contact has no interface (the
-    Python path raises the error)."""
+    The contacts of the spheres with mesh and surface walls at ``time`` (s) follow the
+    scene's (:func:`_with_curved`; ``cwork``: their workspaces).  Returns (True, the new
+    Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
+    error)."""
     (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
      patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys,
                               active_rows(pl.rows_i, due))
+    monitored = due.shape[0]
+    if sc.curved.n_walls:          # the provider counts the curved walls' contacts monitored
+        K0 = a.shape[0]
+        (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
+         patch_b) = _with_curved(sc, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg,
+                                 params, patch_a, patch_b)
+        monitored += a.shape[0] - K0
     if full:
         near, gap = near_pairs(pl.rows_f, pl.rows_i, pl.budget, reach)
     else:
@@ -214,6 +243,12 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
         return False, ev
     radius, n_fall = _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R)
     pos_all, vel_all, omg_all = all_kinematics(x, v, omega, wall_d, wall_u)
+    if sc.curved.n_walls:          # a wall turns about its centre: u + ω × (p − c − d)
+        n = x.shape[0]
+        for w in range(wall_d.shape[0]):
+            for k in range(3):
+                pos_all[n + w, k] += sc.spin[w, 3 + k]
+                omg_all[n + w, k] = sc.spin[w, k]
     solves = np.zeros(4, np.int64)
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
      hist_springs, _) = contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
@@ -225,7 +260,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     counters[DASHPOT_CYCLES] += solves[3]
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
                             radius, n_fall, hist_keys, hist_springs, force, torque, slip,
-                            near_a, near_b, near_point, near_normal, gap, reach, due.shape[0],
+                            near_a, near_b, near_point, near_normal, gap, reach, monitored,
                             np.count_nonzero(deg), dep, deg)
 
 
@@ -360,6 +395,16 @@ def _kept(j: int, x, q, v, L, wall_d, ev):
             ev.deg, ev.coeffs, ev.radius)
 
 
+@njit(cache=True)
+def _kick_walls(sc, ev, n: int, wall_d, u_mean):
+    """(body_b, wall_d, u_mean) of the stored contacts for a half kick's work terms: as they
+    are, or with turning walls each contact with one at its point velocity
+    (:func:`spun_contacts`; the Python driver's ``_kick_walls``)."""
+    if sc.curved.n_walls and ev.a.shape[0]:
+        return spun_contacts(ev.a, ev.b, ev.point, n, sc.spin, wall_d, u_mean)
+    return ev.b, wall_d, u_mean
+
+
 # --------------------------------------------------------------------------- the loop
 #: the loop's large parts compiled once and called through pointers
 #: (:class:`~nurbsdem.jit.PointerKernel`): the loop does not compile them again
@@ -370,7 +415,8 @@ _step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                   counters, peak, acc_growth, estimate, sample_at, rows, state_at):
+                   counters, peak, acc_growth, estimate, sample_at, rows, state_at, times,
+                   cwork):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
 
@@ -381,7 +427,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     Evaluation's a, b, point, ftot, fn, normal, depth, deg, coeffs, radius).
 
     walls_d, walls_u (n_deck·n_run, W, 3): the walls' displacements (m) and velocities
-    (m/s) at the end of each internal step.  Body state (x, v, q, L), ledger (5,) J, wall_work
+    (m/s) at the end of each internal step, times (n_deck·n_run,) s those ends (the mesh and
+    surface walls' poses; ``cwork``: their workspaces,
+    :data:`~nurbsdem.contact.curved_compiled.CurvedWork`).  Body state (x, v, q, L), ledger (5,) J, wall_work
     (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy
@@ -407,9 +455,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
+            kick_b, kick_d, kick_u = _kick_walls(sc, ev, x.shape[0], wall_d, u_mean)
             omega, _, worst, run = step_start_ptr((
                 bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force, ev.torque,
-                x, v, q, L, omega, ev.b, wall_d, u_mean, h, ledger, wall_work, alt_prev_v,
+                x, v, q, L, omega, kick_b, kick_d, kick_u, h, ledger, wall_work, alt_prev_v,
                 alt_prev_L, alt_count, cc.watch_period2, np.bool_(True)))
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
@@ -417,20 +466,22 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c1 = cycles()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
             c2 = cycles()
-            pl, reach, due, failed = _search(sc, pl, x.copy(), R, pos, wall_d, counters)
+            pl, reach, due, failed = _search(sc, pl, x.copy(), R, pos,   # the flat walls
+                                             wall_d[:sc.curved.first].copy(), counters)
             if failed:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             counters[EVALS] += 1
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
             ok, ev = _evaluate_ptr((sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
-                                    omega, R, wall_d, wall_u, h, counters))
+                                    omega, R, wall_d, wall_u, h, counters, cwork, times[t]))
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             c4 = cycles()
+            kick_b, kick_d, kick_u = _kick_walls(sc, ev, x.shape[0], wall_d, u_mean)
             omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
-                                      ev.force, ev.torque, x, v, q, L, omega, ev.b, wall_d,
-                                      u_mean, 0.5 * h, ledger, wall_work, np.bool_(True)))
+                                      ev.force, ev.torque, x, v, q, L, omega, kick_b, kick_d,
+                                      kick_u, 0.5 * h, ledger, wall_work, np.bool_(True)))
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -480,22 +531,39 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     return DONE, n_deck, pl, ev, wall_d, wall_u, states
 
 
+def _curved_provider(provider):
+    """``provider`` when it is a mesh- and surface-wall provider
+    (:class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`) the compiled loop takes:
+    every particle an exact sphere, every wall at rest or turning at a constant rate
+    (:class:`~nurbsdem.contact.curved_walls.WallPose`); else None."""
+    from ..contact.curved_walls import CurvedWallContacts, WallPose
+    if type(provider) is not CurvedWallContacts or not np.all(provider.spheres):
+        return None
+    if not all(isinstance(w.pose, WallPose) for w in provider.walls):
+        return None
+    return provider
+
+
 # --------------------------------------------------------------------------- the Python side
 class DeckSteps:
     """Compiled deck steps of a :class:`~nurbsdem.dynamics.system.DemSystem` whose contact
     provider is a :class:`~nurbsdem.contact.scene.SceneContacts` (see the module docstring);
     :meth:`for_system` says whether a system qualifies."""
 
-    def __init__(self, system, scene) -> None:
+    def __init__(self, system, scene, curved=None) -> None:
         import numba
         self.system, self.scene = system, scene
         s = system
+        W = s.walls.n
+        packed, self.cwork = pack_curved(curved, W)
+        spin = (np.zeros((W, 6)) if s.wall_spin is None
+                else np.ascontiguousarray(s.wall_spin, float))
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
                              scene.certificates, s.uses_hertz, scene.table.tab[:7],
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
                              np.ones(scene.n, np.bool_), numba.get_num_threads(),
-                             bool(scene.is_sphere.all()))
+                             bool(scene.is_sphere.all()), packed, spin)
         self.bc = s._bc
 
     @staticmethod
@@ -503,23 +571,27 @@ class DeckSteps:
         """The compiled stepper when the provider is a scene on one rank that has been called
         once (any contact law: the Hertz radii of NURBS contacts come from the curvature
         kernel the Python path calls, :func:`_hertz_radii`) whose laws are all built in
-        (:func:`~nurbsdem.dynamics.laws.builtin_only`); else None."""
+        (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with mesh and surface
+        walls met by exact spheres only, at rest or turning at constant rates
+        (:func:`_curved_provider`); else None."""
         from ..contact.scene import SceneContacts
-        scene = system.provider
+        scene, curved = system.provider, _curved_provider(system.provider)
+        if curved is not None:
+            scene = curved.base
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
                 or scene.prev_pose is None or scene.built_pose is None
                 or not builtin_only(system._table)):    # a law registered at run time
             return None
-        return DeckSteps(system, scene)
+        return DeckSteps(system, scene, curved)
 
-    def _wall_tables(self, n_deck: int, n_sub: int) -> tuple[np.ndarray, np.ndarray]:
+    def _wall_tables(self, n_deck: int, n_sub: int) -> tuple[np.ndarray, ...]:
         """(n_deck·n_sub, W, 3) wall displacements and velocities at the ends of the internal
-        steps, at the times the Python path uses: t_start + Δt·k/n."""
+        steps, at the times the Python path uses: t_start + Δt·k/n, and those times (s)."""
         s = self.system
         j = np.repeat(np.arange(n_deck), n_sub)             # the same operations, on arrays
         k = np.tile(np.arange(1, n_sub + 1), n_deck)
         times = s.t0 + (s.step_count + j) * s.dt + s.dt * k / n_sub
-        return s.walls.kinematics_at(times)
+        return (*s.walls.kinematics_at(times), np.ascontiguousarray(times, float))
 
     def _pair_list(self) -> PairList:
         sc = self.scene
@@ -570,16 +642,16 @@ class DeckSteps:
         nothing.  The solver calls it with its set-up, so that the time loop's figures hold
         the loop alone."""
         s = self.system
-        walls_d, walls_u = self._wall_tables(0, 1)
+        walls_d, walls_u, times = self._wall_tables(0, 1)
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[ACC_REFINE] = 1            # the loop divides the deck step by the count
         self._loop(0, max(int(s.substeps), 1), walls_d, walls_u, s.ledger.to_array(), counters,
                    np.array([s._peak]), np.array([s.acc_last_growth]), self._estimate(),
                    np.zeros(0, np.bool_), np.zeros((0, row_width(s.walls.n))),
-                   np.zeros(0, np.bool_))
+                   np.zeros(0, np.bool_), times)
 
     def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, ledger, counters, peak,
-              acc_growth, estimate, sample_at, rows, state_at):
+              acc_growth, estimate, sample_at, rows, state_at, times):
         """:func:`run_deck_steps` on the system's state (the one call of the loop, so that
         :meth:`load` and :meth:`run` pass the same argument types)."""
         s, b = self.system, self.system.bodies
@@ -587,7 +659,7 @@ class DeckSteps:
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
             s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
-            estimate, sample_at, rows, state_at)
+            estimate, sample_at, rows, state_at, times, self.cwork)
 
     def run(self, n_deck: int, sample_at: np.ndarray,
             state_at: np.ndarray | None = None) -> tuple[int, int, np.ndarray, np.ndarray, list]:
@@ -596,7 +668,7 @@ class DeckSteps:
         kept at the deck steps ``state_at`` (n_deck,) bool (:func:`run_deck_steps`)).  On
         GUARD the system and scene are left in an undefined state: the caller restores them."""
         s = self.system
-        walls_d, walls_u = self._wall_tables(n_deck, s.substeps * s.acc_refine)
+        walls_d, walls_u, times = self._wall_tables(n_deck, s.substeps * s.acc_refine)
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[STEP_COUNT], counters[REFINE], counters[CALM] = s.step_count, s.refine, s.calm_steps
         counters[ACC_REFINE], counters[ACC_CALM] = s.acc_refine, s.acc_calm
@@ -610,7 +682,7 @@ class DeckSteps:
         rows = np.zeros((n_deck, row_width(s.walls.n)))
         status, done, pl, ev, wall_d, wall_u, states = self._loop(
             n_deck, s.substeps, walls_d, walls_u, ledger, counters, peak, acc_growth, estimate,
-            sample_at, rows, state_at)
+            sample_at, rows, state_at, times)
         if status == GUARD:
             return status, done, counters, rows, []
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
@@ -634,8 +706,10 @@ class DeckSteps:
         sc.point_solves += int(counters[POINT_SOLVES])
         sc.timers.global_search += float(counters[SEARCH_CYCLES]) * seconds_per_cycle()
         sc.timers.lcp += float(counters[ROW_CYCLES]) * seconds_per_cycle()
-        sc.last = sc.contact_set(ev.reach, monitored=int(ev.monitored))
-        s.last_contacts = sc.last
+        curved = int(self.cwork.last_n[0]) if self.sc.curved.n_walls else 0
+        sc.last = sc.contact_set(ev.reach, monitored=int(ev.monitored) - curved)
+        s.last_contacts = (with_curved_contacts(sc.last, self.cwork, ev.a, ev.b, ev.normal,
+                                                ev.depth, ev.key) if curved else sc.last)
         s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot = ev.a, ev.b, ev.point, ev.normal, ev.ftot
         s.c_fdn, s.c_fdt, s.c_fet, s.c_fn, s.c_eel = ev.fdn, ev.fdt, ev.fet, ev.fn, ev.eel
         s.c_stick, s.c_key, s.c_coeffs = ev.stick, ev.key, ev.coeffs

@@ -22,7 +22,7 @@ from ..jit import seconds_per_cycle
 from .energy import EnergyLedger, EnergySample
 from .integrator import state_is_finite
 from .rigid import body_poses, omega_world
-from .step import interfaces_defined, kick_part, step_start
+from .step import interfaces_defined, kick_part, spun_contacts, step_start
 from .stepcontrol import ALTERNATION_STEPS
 
 
@@ -105,21 +105,10 @@ class InternalSteps:
     def _spun_contacts(self, wall_u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body_b, wall_d, wall_u) for the kick's work terms when walls turn: each contact
         with a turning wall gets a wall of its own (index W + j) that moves at that wall's
-        point velocity u + ω × (p − c − d) (m/s) at the contact point p, c + d the wall's
-        rotation centre carried by its displacement d (``wall_spin`` holds ω and c)."""
-        n, W = self.bodies.n, self.walls.n
-        w = self.c_b - n
-        idx = np.flatnonzero(w >= 0)
-        idx = idx[np.any(self.wall_spin[w[idx], :3] != 0.0, axis=1)]
-        if idx.size == 0:
-            return self.c_b, self.wall_d, wall_u
-        ws = w[idx]
-        arm = self.c_point[idx] - self.wall_spin[ws, 3:] - self.wall_d[ws]
-        u_point = wall_u[ws] + np.cross(self.wall_spin[ws, :3], arm)
-        body_b = self.c_b.copy()
-        body_b[idx] = n + W + np.arange(idx.size)
-        return (body_b, np.concatenate([self.wall_d, self.wall_d[ws]]),
-                np.ascontiguousarray(np.concatenate([wall_u, u_point])))
+        point velocity (:func:`~nurbsdem.dynamics.step.spun_contacts`)."""
+        return spun_contacts(self.c_a, self.c_b, np.ascontiguousarray(self.c_point, float),
+                             self.bodies.n, np.ascontiguousarray(self.wall_spin, float),
+                             np.ascontiguousarray(self.wall_d, float), wall_u)
 
     def _evaluate(self, t: float, h: float) -> None:
         """Walls to time t, contact detection by the provider, then the internal step's contact

@@ -116,6 +116,44 @@ def all_kinematics(x, v, omega, wall_d, wall_u):
 
 
 @njit(cache=True)
+def spun_contacts(a, b, point, n: int, spin, wall_d, u_mean):
+    """(body_b, wall_d, u_mean) for a half kick's work terms with turning walls: each contact
+    with a turning wall gets a wall of its own (index W + j) moving at that wall's point
+    velocity u + ω × (p − c − d) at the contact point p (``spin`` (W,6): ω rad/s, c m;
+    both drivers call it)."""
+    W = wall_d.shape[0]
+    turning = np.zeros(b.shape[0], np.bool_)
+    count = 0
+    for c in range(b.shape[0]):
+        w = b[c] - n
+        if w >= 0 and (spin[w, 0] != 0.0 or spin[w, 1] != 0.0 or spin[w, 2] != 0.0):
+            turning[c] = True
+            count += 1
+    if count == 0:
+        return b, wall_d, u_mean
+    body_b = b.copy()
+    d_out = np.empty((W + count, 3))
+    u_out = np.empty((W + count, 3))
+    d_out[:W] = wall_d
+    u_out[:W] = u_mean
+    j = 0
+    for c in range(b.shape[0]):
+        if not turning[c]:
+            continue
+        w = b[c] - n
+        arm0 = point[c, 0] - spin[w, 3] - wall_d[w, 0]
+        arm1 = point[c, 1] - spin[w, 4] - wall_d[w, 1]
+        arm2 = point[c, 2] - spin[w, 5] - wall_d[w, 2]
+        d_out[W + j] = wall_d[w]
+        u_out[W + j, 0] = u_mean[w, 0] + (spin[w, 1] * arm2 - spin[w, 2] * arm1)
+        u_out[W + j, 1] = u_mean[w, 1] + (spin[w, 2] * arm0 - spin[w, 0] * arm2)
+        u_out[W + j, 2] = u_mean[w, 2] + (spin[w, 0] * arm1 - spin[w, 1] * arm0)
+        body_b[c] = n + W + j
+        j += 1
+    return body_b, d_out, u_out
+
+
+@njit(cache=True)
 def stored_history(key: np.ndarray, spring: np.ndarray):
     """The tangential springs (K,3) of the contacts by ascending key: (keys, springs, whether
     a key repeats).  Keys already ascending (a scene's) are copied as they are."""

@@ -1,0 +1,319 @@
+"""Mesh and NURBS-surface walls inside the compiled deck steps: the contacts of exact spheres
+with them, as the provider of :mod:`nurbsdem.contact.curved_walls` finds them, from packed
+arrays.
+
+The compiled loop (:mod:`nurbsdem.dynamics.deck_steps`) cannot hold a list of wall objects,
+so :func:`pack_curved` packs the walls of a
+:class:`~nurbsdem.contact.curved_walls.CurvedWallContacts` into one :data:`CurvedConst` of
+flat arrays whose types do not depend on how many walls there are (each wall's share is a
+slice given by offsets): the meshes' vertices, faces, normals and grids; the surfaces' patch
+pools (knot and power-form offsets shifted into the joint arrays) and samples; each wall's
+pose in time (:func:`~nurbsdem.contact.curved_walls.wall_pose_at`) and bounding-box corners.
+:data:`CurvedWork` holds what changes: the mesh kernels' workspaces and the surfaces' gap
+certificates (:mod:`nurbsdem.contact.wall_skin`).
+
+:func:`curved_contacts` then gives, at time t, the contacts of the spheres with every wall in
+the provider's order, keys and rows (wall by wall; spheres in index order; a mesh's rows in
+the kernel's order, those touching kept with their rank), so that the loop's contact part
+sees the arrays the Python driver sees, bit for bit.  Units: metres, seconds, radians;
+global body indices (particles 0..N-1, walls N..N+W-1).
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .curved_walls import MAX_PER_WALL, wall_contact_key, wall_pose_at, world_box
+from .kinds import MESH_WALL
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
+from .mesh_wall import MeshWall, sphere_mesh_rows
+from .surface_wall import sphere_surface_row
+
+#: the packed walls (W curved walls, N particles): n, first (the first curved wall's index
+#: among the system's W_all walls), nb = N + W_all, radius (N,) the spheres' radii; per wall
+#: kind (W,), the pose in time (omega, center (W,3), t0 (W,), R0 (W,3,3), shift0 (W,3)) and
+#: corners (W,8,3) of its wall-frame box; meshes: offsets (W+1,) into vertices, faces, cell
+#: starts and cell triangles, the arrays, per-wall two_sided, size, grid origin, cell and
+#: dims; surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
+#: per-wall spacing and size
+CurvedConst = namedtuple(
+    "CurvedConst", "n_walls first nb radius kind omega center t0 R0 shift0 corners "
+    "vo fo co to vertices faces normals two_sided msize grid_origin grid_cell grid_dims "
+    "cell_start cell_tris po so deg ncp koff knots pw poff dom periodic seed_x seed_p "
+    "seed_uv spacing ssize")
+#: what the search changes: the mesh kernels' workspaces over all meshes' triangles (stamp,
+#: tris, cand_q, cand_d, cand_f) and the query mark (1,); the surfaces' certificates per
+#: wall: gap (W,N) m, x0 (W,N,3), odo0 (W,N), the odometer (W,) m and the pose it was last
+#: advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces' extents (W,) m and
+#: centres (W,3) m (wall frame); the points on the sphere and on the wall (last_pa, last_pb
+#: (W·N·MAX_PER_WALL, 3) m) of the last call's last_n (1,) contacts
+CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f mark gap x0 odo0 odo "
+                        "prev_R prev_t posed extent centre last_pa last_pb last_n")
+
+
+def _offsets(sizes) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
+
+def _joined(parts, empty_shape, dtype=float) -> np.ndarray:
+    return (np.ascontiguousarray(np.concatenate(parts), dtype) if parts
+            else np.zeros(empty_shape, dtype))
+
+
+def pack_curved(provider, n_all_walls: int) -> tuple:
+    """(:data:`CurvedConst`, :data:`CurvedWork`) of the walls of ``provider`` (a
+    :class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`; None: no walls) in a system
+    of ``n_all_walls`` walls; the poses are those the walls hold now."""
+    walls = [] if provider is None else provider.walls
+    radius = (np.zeros(0) if provider is None else np.ascontiguousarray(provider.radii, float))
+    n = len(radius)
+    meshes = [w.geometry for w in walls if isinstance(w.geometry, MeshWall)]
+    surfs = [w.geometry for w in walls if not isinstance(w.geometry, MeshWall)]
+    msizes = [(len(g.vertices), len(g.faces), len(g.cell_start), len(g.cell_tris))
+              if isinstance(g, MeshWall) else (0, 0, 0, 0) for g in (w.geometry for w in walls)]
+    ssizes = [(0, 0) if isinstance(g, MeshWall) else (len(g.dom), len(g.seed_x))
+              for g in (w.geometry for w in walls)]
+    knots, pw, koff, poff = [], [], [], []
+    k0 = p0 = 0
+    for g in surfs:
+        koff.append(g.koff + k0)
+        poff.append(g.poff + p0)
+        knots.append(g.knots)
+        pw.append(g.pw)
+        k0 += len(g.knots)
+        p0 += len(g.pw)
+    W = len(walls)
+    geo = [w.geometry for w in walls]
+
+    def mesh_value(get, dtype=float):          # per wall: the mesh's figure, 0 for a surface
+        return np.array([get(g) if isinstance(g, MeshWall) else 0 for g in geo], dtype)
+
+    def surface_value(get):                    # per wall: the surface's figure, 0 for a mesh
+        return np.array([0.0 if isinstance(g, MeshWall) else get(g) for g in geo], float)
+    cc = CurvedConst(
+        W, n_all_walls - W, n + n_all_walls, radius,
+        np.array([w.kind for w in walls], np.int64),
+        _joined([w.pose.omega for w in walls], (0, 3)).reshape(W, 3),
+        _joined([w.pose.center for w in walls], (0, 3)).reshape(W, 3),
+        np.array([w.pose.t0 for w in walls], float),
+        _joined([w.pose.R0 for w in walls], (0, 3)).reshape(W, 3, 3),
+        _joined([w.pose.shift0 for w in walls], (0, 3)).reshape(W, 3),
+        _joined([w.corners for w in walls], (0, 3)).reshape(W, 8, 3),
+        _offsets([s[0] for s in msizes]), _offsets([s[1] for s in msizes]),
+        _offsets([s[2] for s in msizes]), _offsets([s[3] for s in msizes]),
+        _joined([g.vertices for g in meshes], (0, 3)),
+        _joined([g.faces for g in meshes], (0, 3), np.int64),
+        _joined([g.normals for g in meshes], (0, 3)),
+        mesh_value(lambda g: g.two_sided, np.bool_), mesh_value(lambda g: g.size),
+        _joined([g.grid_origin if isinstance(g, MeshWall) else np.zeros(3) for g in geo],
+                (0, 3)).reshape(W, 3),
+        mesh_value(lambda g: g.grid_cell),
+        _joined([g.grid_dims if isinstance(g, MeshWall) else np.zeros(3, np.int64)
+                 for g in geo], (0, 3), np.int64).reshape(W, 3),
+        _joined([g.cell_start for g in meshes], (0,), np.int64),
+        _joined([g.cell_tris for g in meshes], (0,), np.int64),
+        _offsets([s[0] for s in ssizes]), _offsets([s[1] for s in ssizes]),
+        _joined([g.deg for g in surfs], (0, 2), np.int64),
+        _joined([g.ncp for g in surfs], (0, 2), np.int64),
+        _joined(koff, (0, 2), np.int64), _joined(knots, (0,)), _joined(pw, (0, 4)),
+        _joined(poff, (0,), np.int64), _joined([g.dom for g in surfs], (0, 4)),
+        _joined([g.periodic for g in surfs], (0, 2), np.bool_),
+        _joined([g.seed_x for g in surfs], (0, 3)),
+        _joined([g.seed_p for g in surfs], (0,), np.int64),
+        _joined([g.seed_uv for g in surfs], (0, 2)),
+        surface_value(lambda g: g.spacing), surface_value(lambda g: g.size))
+    T = len(cc.faces)
+    extent, centre = np.zeros(W), np.zeros((W, 3))
+    for k, g in enumerate(geo):
+        if not isinstance(g, MeshWall):
+            centre[k] = 0.5 * (g.seed_x.min(axis=0) + g.seed_x.max(axis=0))
+            extent[k] = float(np.linalg.norm(g.seed_x - centre[k], axis=1).max()) + g.spacing
+    work = CurvedWork(np.full(T, -1, np.int64), np.empty(T, np.int64), np.empty((T, 3)),
+                      np.empty(T), np.empty(T, np.int64), np.zeros(1, np.int64),
+                      np.full((W, n), -1.0), np.zeros((W, n, 3)), np.zeros((W, n)),
+                      np.zeros(W), np.zeros((W, 3, 3)), np.zeros((W, 3)),
+                      np.zeros(W, np.bool_), extent, centre,
+                      np.zeros((W * n * MAX_PER_WALL, 3)), np.zeros((W * n * MAX_PER_WALL, 3)),
+                      np.zeros(1, np.int64))
+    return cc, work
+
+
+@njit(cache=True)
+def _candidates(x, r, lo, hi):
+    """The spheres (ascending) whose bounding boxes (centre ± radius) meet the box [lo, hi]."""
+    out = np.empty(x.shape[0], np.int64)
+    n = 0
+    for i in range(x.shape[0]):
+        inside = True
+        for a in range(3):
+            if x[i, a] + r[i] < lo[a] or x[i, a] - r[i] > hi[a]:
+                inside = False
+        if inside:
+            out[n] = i
+            n += 1
+    return out[:n]
+
+
+@njit(cache=True)
+def _advance(wk, w, R, t):
+    """Surface wall w's odometer moved on by its motion to pose (R, t) (wall_skin)."""
+    if wk.posed[w]:
+        fro, lin = 0.0, 0.0
+        for a in range(3):
+            s = t[a] - wk.prev_t[w, a]
+            for c in range(3):
+                d = R[a, c] - wk.prev_R[w, a, c]
+                fro += d * d
+                s += d * wk.centre[w, c]
+            lin += s * s
+        wk.odo[w] += math.sqrt(fro) * wk.extent[w] + math.sqrt(lin)
+    wk.prev_R[w] = R
+    wk.prev_t[w] = t
+    wk.posed[w] = True
+
+
+@njit(cache=True)
+def _surface_due(wk, w, idx, x):
+    """The spheres of idx whose certificate against surface wall w fails."""
+    out = np.empty(idx.shape[0], np.int64)
+    n = 0
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        moved = math.sqrt((x[i, 0] - wk.x0[w, i, 0]) ** 2 + (x[i, 1] - wk.x0[w, i, 1]) ** 2
+                          + (x[i, 2] - wk.x0[w, i, 2]) ** 2)
+        if wk.gap[w, i] <= 0.0 or moved + (wk.odo[w] - wk.odo0[w, i]) >= wk.gap[w, i]:
+            out[n] = i
+            n += 1
+    return out[:n]
+
+
+@njit(cache=True)
+def _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, n):
+    """Append the touching rows of spheres idx with mesh wall w (as the provider keeps them:
+    the kernel's rows with negative signed distance, each with its rank among the sphere's
+    rows) from row n; returns the new count."""
+    v0, v1, f0, f1 = cc.vo[w], cc.vo[w + 1], cc.fo[w], cc.fo[w + 1]
+    one_f = np.zeros((MAX_PER_WALL, NF))
+    one_i = np.zeros((MAX_PER_WALL, NI), np.int64)
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        wk.mark[0] += 1
+        k = sphere_mesh_rows(x[i], cc.radius[i], R, t, cc.vertices[v0:v1], cc.faces[f0:f1],
+                             cc.normals[f0:f1], cc.two_sided[w], cc.msize[w],
+                             cc.grid_origin[w], cc.grid_cell[w], cc.grid_dims[w],
+                             cc.cell_start[cc.co[w]:cc.co[w + 1]],
+                             cc.cell_tris[cc.to[w]:cc.to[w + 1]], wk.stamp[f0:f1], wk.mark[0],
+                             wk.tris[f0:f1], wk.cand_q[f0:f1], wk.cand_d[f0:f1],
+                             wk.cand_f[f0:f1], one_f, one_i)
+        for j in range(min(k, MAX_PER_WALL)):
+            if one_f[j, F_SD] < 0.0:
+                rows_f[n, :] = one_f[j, :]
+                owner[n] = i
+                rank[n] = j
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, n):
+    """Append the active rows of the spheres idx not certified apart from surface wall w
+    from row n (their certificates renewed); returns the new count."""
+    p0, p1, s0, s1 = cc.po[w], cc.po[w + 1], cc.so[w], cc.so[w + 1]
+    _advance(wk, w, R, t)
+    due = _surface_due(wk, w, idx, x)
+    ev = np.zeros((6, 3))
+    one_f = np.zeros(NF)
+    one_i = np.zeros(NI, np.int64)
+    for m in range(due.shape[0]):
+        i = due[m]
+        ok = sphere_surface_row(x[i], cc.radius[i], R, t, cc.deg[p0:p1], cc.ncp[p0:p1],
+                                cc.koff[p0:p1], cc.knots, cc.pw, cc.poff[p0:p1],
+                                cc.dom[p0:p1], cc.periodic[p0:p1], cc.seed_x[s0:s1],
+                                cc.seed_p[s0:s1], cc.seed_uv[s0:s1], cc.spacing[w],
+                                cc.ssize[w], ev, one_f, one_i)
+        gap = 0.0
+        if ok and one_i[I_ACTIVE]:
+            rows_f[n, :] = one_f
+            owner[n] = i
+            rank[n] = 0
+            n += 1
+        elif ok and one_f[F_SD] > 0.0:
+            gap = one_f[F_SD]
+        wk.gap[w, i] = gap
+        wk.x0[w, i, 0], wk.x0[w, i, 1], wk.x0[w, i, 2] = x[i, 0], x[i, 1], x[i, 2]
+        wk.odo0[w, i] = wk.odo[w]
+    return n
+
+
+@njit(cache=True)
+def curved_contacts(cc, wk, time, x, wall_d):
+    """The spheres' contacts with the curved walls at time (s), the walls displaced by
+    wall_d (W_all,3) m: (a, b, point_a, point_b, normal, depth, key), wall by wall in the
+    provider's order (module docstring); the points are kept in ``wk`` too."""
+    N = x.shape[0]
+    cap = MAX_PER_WALL * N + 1
+    a_parts, rows_parts, key_parts = [], [], []
+    total = 0
+    for w in range(cc.n_walls):
+        R, t = wall_pose_at(cc.omega[w], cc.center[w], cc.t0[w], cc.R0[w], cc.shift0[w],
+                            time, wall_d[cc.first + w])
+        lo, hi = world_box(cc.corners[w], R, t)
+        idx = _candidates(x, cc.radius, lo, hi)
+        rows_f = np.zeros((min(cap, MAX_PER_WALL * idx.shape[0] + 1), NF))
+        owner = np.zeros(rows_f.shape[0], np.int64)
+        rank = np.zeros(rows_f.shape[0], np.int64)
+        if cc.kind[w] == MESH_WALL:
+            n = _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, 0)
+        else:
+            n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, 0)
+        keys = np.empty(n, np.int64)
+        for c in range(n):
+            keys[c] = wall_contact_key(cc.nb, owner[c], w, cc.n_walls, rank[c])
+        a_parts.append(owner[:n].copy())
+        rows_parts.append(rows_f[:n].copy())
+        key_parts.append(keys)
+        total += n
+    a = np.empty(total, np.int64)
+    b = np.empty(total, np.int64)
+    pa = np.empty((total, 3))
+    pb = np.empty((total, 3))
+    nrm = np.empty((total, 3))
+    dep = np.empty(total)
+    key = np.empty(total, np.int64)
+    c = 0
+    for w in range(cc.n_walls):
+        rows = rows_parts[w]
+        for r in range(rows.shape[0]):
+            a[c] = a_parts[w][r]
+            b[c] = N + cc.first + w
+            for k in range(3):
+                pa[c, k] = rows[r, F_PA + k]
+                pb[c, k] = rows[r, F_PB + k]
+                nrm[c, k] = rows[r, F_N + k]
+            dep[c] = -rows[r, F_SD]
+            key[c] = key_parts[w][r]
+            c += 1
+    wk.last_pa[:total] = pa
+    wk.last_pb[:total] = pb
+    wk.last_n[0] = total
+    return a, b, pa, pb, nrm, dep, key
+
+
+def with_curved_contacts(cs, wk, a, b, normal, depth, key):
+    """The ContactSet ``cs`` of the scene followed by the last ``wk.last_n`` contacts with
+    the curved walls (their bodies, normals, depths and keys the last entries of the loop's
+    arrays a, b, normal, depth, key), as the provider of
+    :mod:`nurbsdem.contact.curved_walls` merges them."""
+    from .curved_walls import _merged
+    k = int(wk.last_n[0])
+    if k == 0:
+        return cs
+    rows = np.zeros((k, NF))
+    rows[:, F_PA:F_PA + 3] = wk.last_pa[:k]
+    rows[:, F_PB:F_PB + 3] = wk.last_pb[:k]
+    rows[:, F_N:F_N + 3] = normal[-k:]
+    rows[:, F_SD] = -depth[-k:]
+    return _merged(cs, [(a[-k:], b[-k:], rows, key[-k:])])
