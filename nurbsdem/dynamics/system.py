@@ -343,6 +343,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         self.ledger = EnergyLedger()
         self.c_a = self.c_key = np.zeros(0, np.int64)     # no previous evaluation
         self.c_eel = np.zeros((0, 2))
+        self.c_image = np.zeros((0, 3))       # periodic images of the contacts' B (.images)
         self._initialized = True
         self._evaluate(self.time, 0.0)
         if self.domain is not None:
