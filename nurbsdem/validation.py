@@ -546,7 +546,8 @@ def check_scale(model: "Model") -> None:
 def check_model(model: "Model") -> None:
     """Everything that can be judged before placing particles: something to solve, time
     steps, memory, explicit stability, contacts too soft for the weight, impacts, Replicate
-    spacing, scale, wall strokes."""
+    spacing, scale, wall strokes, the periodic cell."""
+    from .periodic_checks import check_periodic
     from .wall_checks import check_curved_walls_model
     check_nothing_to_solve(model)
     check_time_steps(model)
@@ -561,6 +562,7 @@ def check_model(model: "Model") -> None:
     check_soft_contacts(model)
     check_impacts(model)
     check_replicate_spacing(model)
+    check_periodic(model)
 
 
 # ---------------------------------------------------------------------------- the scene

@@ -50,6 +50,8 @@ class ContactSet:
     #: (m) of the image of body B it touches (zeros: B itself; the points are in that image);
     #: empty: no periodic cell
     image: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: the same for the separated pairs (``near_*``)
+    near_image: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     #: the translation (N,3) (m) taken off each particle's centroid by the wrap into the cell
     #: at this evaluation's list build (empty: no wrap); the system applies it to its state
     wrap: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))

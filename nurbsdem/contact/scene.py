@@ -418,9 +418,11 @@ class SceneContacts:
         (a, b, pa, pb, nrm, depth, key, deg, params, patch_a, patch_b, near_a, near_b,
          near_point, near_normal, gap) = contact_arrays(ps.rows_f, ps.rows_i, ps.a, ps.b,
                                                         ps.keys, ps.budget, reach)
-        image = np.zeros((0, 3))
+        image, near_image = np.zeros((0, 3)), np.zeros((0, 3))
         if self.cell is not None:
             image = self.pair_shift[np.searchsorted(ps.keys, key)] * self.cell.length
+            near_image = (self.pair_shift[np.searchsorted(ps.keys, near_a * self.nb + near_b)]
+                          * self.cell.length)
         return ContactSet(body_a=a, body_b=b, point_a=pa, point_b=pb, normal=nrm, depth=depth,
                           key=key, degenerated=deg, monitored=monitored, active=int(a.shape[0]),
                           degenerated_count=int(np.count_nonzero(deg)), failed=failed,
@@ -430,7 +432,8 @@ class SceneContacts:
                                       else self.domain.counted(dropped // self.nb).sum()),
                           dropped_keys=dropped, near_a=near_a, near_b=near_b,
                           near_point=near_point, near_normal=near_normal, near_gap=gap,
-                          params=params, patch_a=patch_a, patch_b=patch_b, image=image)
+                          params=params, patch_a=patch_a, patch_b=patch_b, image=image,
+                          near_image=near_image)
 
     def _moved(self, row_f: np.ndarray, row_i: np.ndarray, a: int, b: int, pose):
         """A previous LCP row moved rigidly from the previous call's poses to ``pose``: the
