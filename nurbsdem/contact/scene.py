@@ -301,15 +301,21 @@ class SceneContacts:
         d = shift * self.cell.length
         return (pos - d, R, wall, x - d), d
 
-    def _build_periodic(self, pose) -> None:
+    def _build_periodic(self, pose, moved: np.ndarray) -> None:
         """The neighbour list through the periodic cell at the wrapped ``pose``: a full build
         (:func:`~nurbsdem.contact.periodic_scene.periodic_list`), the per-pair arrays carried
-        over by key."""
+        over by key, their points moved with body A by the wrap (``moved`` (N,3) m taken off
+        the centroids): a row's points lie in A's frame (a certified pair's row is not solved
+        again, and its closest points feed the time-step control)."""
         pos, R, wall, x = pose
         a, b, keys, mask_a, mask_b, shift = periodic_list(
             self.tables(), self.cell, np.ascontiguousarray(x), np.ascontiguousarray(pos),
             np.ascontiguousarray(R), np.ascontiguousarray(wall), self.margin + self.skin)
-        self.pairs = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
+        ps = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
+        rows_f = ps.rows_f.copy()
+        rows_f[:, F_PA:F_PA + 3] -= moved[ps.a]
+        rows_f[:, F_PB:F_PB + 3] -= moved[ps.a]
+        self.pairs = ps.replaced(rows_f, ps.rows_i, ps.budget, ps.reused)
         self.pair_shift = shift            # periodic_list gives them sorted by key already
         self.built_pose = (x.copy(), np.array(R, float), wall.copy(), pos.copy())
         self.builds += 1
@@ -333,7 +339,7 @@ class SceneContacts:
         if stale and self.cell is not None:      # wrapped into the cell, then built
             pose, wrap_shift = self._wrapped(pose)
             pos = pose[0]
-            self._build_periodic(pose)
+            self._build_periodic(pose, wrap_shift)
         elif stale:
             if dom is not None:
                 kin = dom.sync_for_build(kin)        # every particle's state from its owner
