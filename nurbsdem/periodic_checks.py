@@ -77,7 +77,7 @@ def _check_walls(model: "Model") -> None:
     docstring)."""
     p = model.periodic
     rmax, rmin = _radii(model)
-    beyond = periodic_reach(model) - rmax - rmin       # the largest radius plus the skin
+    beyond = periodic_reach(model) - rmax       # the largest bounding radius plus the skin
     for w in model.walls:
         o, a, b, n = wall_plane(w)
         corners = np.array([o, o + a, o + b, o + a + b])
