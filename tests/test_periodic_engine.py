@@ -5,7 +5,6 @@ closed when particles wrap along gravity."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from nurbsdem.contact.periodic import make_cell
 from nurbsdem.contact.scene import SceneContacts
