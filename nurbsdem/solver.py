@@ -319,6 +319,8 @@ class Solver:
                 self.scene.set_state(scene_state)
         elif self.ledger.mech0 is None:
             self._sample(writers, force=True)
+        else:       # a wrap into the periodic cell at the first evaluation (internal_step)
+            self.ledger.book_external(self.system.initial_wrap_work)
         sysm = self.system
         log.info("step %d: %s, %d time steps of %g s (%d sub-step(s) of %.3g s each)",
                  step.id, step.kind, n_total, dt, sysm.substeps, sysm.dt_internal)
@@ -349,6 +351,7 @@ class Solver:
         self.system._warned_heavy = warned
         t0 = time.perf_counter()
         self.system.initialize()
+        self.ledger.book_external(self.system.initial_wrap_work)
         self.system.load_compiled()
         self.timers["setup"] += time.perf_counter() - t0
 

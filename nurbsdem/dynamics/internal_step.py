@@ -182,8 +182,11 @@ class InternalSteps:
     def _apply_wrap(self, cs: Any) -> None:
         """The wrap into the periodic cell that the provider's list build made (its
         ``wrap`` (N,3) m, :class:`~nurbsdem.contact.contactset.ContactSet`), applied to the
-        centroids; the potential's jump −Σ m g·Δx is booked in the initial mechanical energy,
-        the potential's reference moving with the wrap, so that the balance stays closed."""
+        centroids.  The potential's jump Σ m g·Δx (J; Δx the translation taken off) is booked
+        as external work, as an inlet's particles are (:mod:`nurbsdem.flow_run`), so that the
+        balance stays closed; at the first evaluation, before the initial mechanical energy
+        is taken, it is kept in ``initial_wrap_work`` for the run's ledger
+        (:meth:`~nurbsdem.energy_ledger.EnergyLedger.book_external`)."""
         shift = getattr(cs, "wrap", None)
         if shift is None or len(shift) == 0 or not np.any(shift != 0.0):
             return
@@ -191,7 +194,9 @@ class InternalSteps:
         jump = float(np.sum(b.mass * (shift @ self.gravity)))
         b.x -= shift
         if self.ledger.initial_mechanical == self.ledger.initial_mechanical:   # not NaN
-            self.ledger.initial_mechanical += jump
+            self.ledger.external_work += jump
+        else:
+            self.initial_wrap_work += jump
 
     def _images(self) -> "ImageBodies | None":
         """The image bodies of the stored contacts (:mod:`nurbsdem.dynamics.images`)."""
