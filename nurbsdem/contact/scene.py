@@ -57,6 +57,12 @@ Besides the active contacts, each ContactSet reports the separated listed pairs 
 their closest points, normal and gap — for a certified pair a lower bound of it) so that the
 time-step control can see the contacts about to close.
 
+In a **periodic cell** (``cell``, :mod:`nurbsdem.contact.periodic`) each build wraps the
+centroids into the cell and lists every pair with the image of its body B that it touches
+(:mod:`nurbsdem.contact.periodic_scene`); the rows are solved with B's image as an extra
+particle, and the ContactSet carries each pair's image translation (``image``) and the
+build's wrap (``wrap``), which the system applies to its state.
+
 On several MPI ranks (``domain``, :mod:`nurbsdem.parallel.domain`) the list holds the pairs
 with a particle the rank owns, a rebuild is decided by all ranks together and starts from every
 particle's state sent by its owner, and the counters count the pairs whose body A it owns.
