@@ -10,6 +10,8 @@ PeriodicSpec`) against the rest of a model: one-line errors naming the deck line
   plus the skin, so that a particle near a face (wrapped into the cell at list builds only,
   it strays up to half the skin out) finds the wall under it.  A floor with normal z under a
   cell periodic in x and y is the usual case.  Checked at the walls' deck positions.
+* Each particle starts inside the cell, clear of its periodic faces: the placement does not
+  see overlaps through a face (:func:`check_periodic_bodies`).
 * Inlets and outlets, mesh and surface walls, ``Damping Implicit`` and several MPI ranks are
   refused with a periodic cell.
 
@@ -94,6 +96,37 @@ def _check_walls(model: "Model") -> None:
                     f"{axis}: it must cover the cell ({p.lo[k]:.6g} .. {p.hi[k]:.6g} m, line "
                     f"{p.line}) and {beyond:.6g} m beyond each face (the largest bounding "
                     f"radius plus the skin)", w.line)
+
+
+def check_periodic_bodies(model: "Model", bodies) -> None:
+    """Each particle starts inside the cell and clear of its periodic faces (its exact
+    extent, to the overlap tolerance of :mod:`nurbsdem.check_rules`): two particles inside it
+    cannot then overlap through a face, which the placement does not see.  A ``Random``
+    group's Region lies inside the cell, inset by the particles' size."""
+    from .check_rules import OVERLAP_TOLERANCE
+    from .validation import plane_support_distance
+    p = model.periodic
+    if p is None or bodies is None or not len(bodies):
+        return
+    R = bodies.rotation_matrices()
+    for i in range(len(bodies)):
+        shape = model.shapes[int(bodies.shape_id[i])].shape
+        x, r = bodies.position[i], float(shape.bounding_radius)
+        for k in np.flatnonzero(p.axes):
+            for face, sign in ((p.lo[k], 1.0), (p.hi[k], -1.0)):
+                if sign * (x[k] - face) >= r:
+                    continue
+                n = np.zeros(3)
+                n[k] = sign
+                point = np.zeros(3)
+                point[k] = face
+                sd = plane_support_distance(shape, x, R[i], point, n)
+                if sd < -OVERLAP_TOLERANCE * r:
+                    raise model.error(
+                        f"particle {bodies.id[i]} (centroid {vector_text(x)} m) reaches "
+                        f"{-sd:.3g} m across the periodic face {'xyz'[k]} = {face:g} m "
+                        f"(Periodic, line {p.line}): particles start inside the cell, clear "
+                        f"of its faces", int(bodies.line[i]))
 
 
 def refuse_periodic_ranks(model: "Model", comm) -> None:

@@ -569,14 +569,16 @@ def check_model(model: "Model") -> None:
 
 
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
-    """Check the placed scene (default ``model.bodies``): walls, bodies against walls (mesh
-    and surface walls too), explicit bodies against each other; warn of inlets that reach
+    """Check the placed scene (default ``model.bodies``): walls, bodies in the periodic cell,
+    bodies against walls (mesh and surface walls too), explicit bodies against each other; warn of inlets that reach
     behind a wall or cannot hold a segment's particles. Raises :class:`InputError` (deck file
     and line)."""
     from .flow_checks import warn_flow
+    from .periodic_checks import check_periodic_bodies
     from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
+    check_periodic_bodies(model, bodies)
     warn_flow(model)
     if bodies is not None and len(bodies):
         explicit = {p.id for p in model.particles}

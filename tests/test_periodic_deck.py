@@ -43,11 +43,15 @@ BAD = [
      "wall floor spans 0 .. 0.06 m along the periodic axis x: it must cover the cell (0 .. "
      "0.06 m, line 6) and 0.007679 m beyond each face (the largest bounding radius plus the "
      "skin)"),
+    ("Random 1 Shapes 1 Counts 36 Material 1 Region 0 0 0.005 0.06 0.06 0.05 Seed 3",
+     "Particle 1 Shape 1 Material 1 Position 0.002 0.03 0.02", "Particle 1",
+     "particle 1 (centroid 0.002 0.03 0.02 m) reaches 0.003 m across the periodic face x = 0 "
+     "m (Periodic, line 6): particles start inside the cell, clear of its faces"),
 ]
 
 
 @pytest.mark.parametrize("old, new, where, message", BAD,
-                         ids=["order", "empty", "short", "across", "narrow"])
+                         ids=["order", "empty", "short", "across", "narrow", "outside"])
 def test_bad_periodic_cells_are_one_line_errors_at_their_line(tmp_path, old, new, where,
                                                              message):
     deck = tmp_path / "bad.inp"
