@@ -98,13 +98,14 @@ def _check_walls(model: "Model") -> None:
                     f"radius plus the skin)", w.line)
 
 
-def check_periodic_bodies(model: "Model", bodies) -> None:
+def check_periodic_bodies(model: "Model", bodies, support) -> None:
     """Each particle starts inside the cell and clear of its periodic faces (its exact
     extent, to the overlap tolerance of :mod:`nurbsdem.check_rules`): two particles inside it
     cannot then overlap through a face, which the placement does not see.  A ``Random``
-    group's Region lies inside the cell, inset by the particles' size."""
+    group's Region lies inside the cell, inset by the particles' size.  ``support``: the
+    distance from a plane to a body's deepest point
+    (:func:`~nurbsdem.validation.plane_support_distance`)."""
     from .check_rules import OVERLAP_TOLERANCE
-    from .validation import plane_support_distance
     p = model.periodic
     if p is None or bodies is None or not len(bodies):
         return
@@ -120,7 +121,7 @@ def check_periodic_bodies(model: "Model", bodies) -> None:
                 n[k] = sign
                 point = np.zeros(3)
                 point[k] = face
-                sd = plane_support_distance(shape, x, R[i], point, n)
+                sd = support(shape, x, R[i], point, n)
                 if sd < -OVERLAP_TOLERANCE * r:
                     raise model.error(
                         f"particle {bodies.id[i]} (centroid {vector_text(x)} m) reaches "

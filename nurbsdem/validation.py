@@ -578,7 +578,7 @@ def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
-    check_periodic_bodies(model, bodies)
+    check_periodic_bodies(model, bodies, plane_support_distance)
     warn_flow(model)
     if bodies is not None and len(bodies):
         explicit = {p.id for p in model.particles}
