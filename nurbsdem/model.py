@@ -201,6 +201,26 @@ class WallSpec:
 
 
 @dataclass
+class PeriodicSpec:
+    """A periodic cell, ``Periodic [X lo hi] [Y lo hi] [Z lo hi]`` (block Environment): the
+    box [lo, hi) (m) repeats along the axes given (``axes`` (3,) bool; lo and hi are 0 on
+    the others).  Particles leaving through a face come back through the opposite one and
+    touch the particles near it (:mod:`nurbsdem.contact.periodic`)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    axes: np.ndarray
+    line: int = 0
+
+    def cell(self):
+        """The :class:`~nurbsdem.contact.periodic.PeriodicCell` (the axes that do not repeat
+        take a unit placeholder interval, unused)."""
+        from .contact.periodic import make_cell
+        return make_cell(np.where(self.axes, self.lo, 0.0), np.where(self.axes, self.hi, 1.0),
+                         self.axes)
+
+
+@dataclass
 class CurvedWallSpec:
     """A wall of triangles or of NURBS patches, placed in the world, for exact spheres.
 
@@ -575,6 +595,7 @@ class Model:
     path: the deck as the user named it (used in error messages).
     text: the deck's text (stored as an attribute of results.h5).
     gravity: (3,) m/s^2.
+    periodic: the periodic cell (:class:`PeriodicSpec`; None: none).
     materials, shapes: dicts id -> entry.
     random_groups, particles: particle definitions (ids do not overlap).
     walls: list of :class:`WallSpec` in id order.
@@ -592,6 +613,7 @@ class Model:
     path: str
     text: str
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    periodic: PeriodicSpec | None = None
     materials: dict[int, Material] = field(default_factory=dict)
     shapes: dict[int, ShapeEntry] = field(default_factory=dict)
     random_groups: list[RandomGroup] = field(default_factory=list)
@@ -694,7 +716,7 @@ def _canonical(x: Any) -> Any:
 
 
 #: The parts of a model compared by :func:`model_differences`, with their names.
-MODEL_PARTS = (("gravity", "Environment"), ("materials", "Materials"), ("shapes", "Shapes"),
+MODEL_PARTS = (("gravity", "Environment"), ("periodic", "Environment (Periodic)"), ("materials", "Materials"), ("shapes", "Shapes"),
                ("random_groups", "Particles (Random)"), ("particles", "Particles (Particle)"),
                ("walls", "Walls"), ("interfaces", "Contact"), ("steps", "Steps"))
 

@@ -10,7 +10,12 @@ from .errors import vector_text as _vec
 
 def summary_text(model: Any) -> str:
     """The text of :meth:`Model.summary`."""
-    out = [f"Deck: {model.path}", f"Gravity: {_vec(model.gravity)} m/s^2", "Materials:"]
+    out = [f"Deck: {model.path}", f"Gravity: {_vec(model.gravity)} m/s^2"]
+    p = model.periodic
+    if p is not None:
+        out.append("Periodic: " + ", ".join(f"{'xyz'[k]} {p.lo[k]:g} .. {p.hi[k]:g} m"
+                                             for k in range(3) if p.axes[k]))
+    out.append("Materials:")
     for mat in model.materials.values():
         out.append(f"  {mat.id}: density {mat.density:g} kg/m^3"
                    + (f", E {mat.young_modulus:g} Pa, nu {mat.poisson_ratio:g}"

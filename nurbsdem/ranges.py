@@ -36,7 +36,7 @@ class Range:
 RANGES: dict[str, Range] = {
     **{k: Range(0.0, 1e6, "m", _COORD) for k in ("Position", "Region", "Min", "Max", "Point",
                                                   "Displacement", "Height", "Gap", "Center",
-                                                  "Box", "Disc")},
+                                                  "Box", "Disc", "X", "Y", "Z")},
     **{k: Range(1e-9, 1e6, "m", _SIZE) for k in ("Radius", "SemiAxes", "Size", "Thickness")},
     **{k: Range(0.0, 1e6, "", "only the direction matters; keep its components moderate")
        for k in ("Normal", "Axis", "Direction")},

@@ -203,6 +203,14 @@ class Simulation:
         return self._scene.add_particle(shape, material, position, rotation, velocity,
                                         angular_velocity)
 
+    def set_periodic(self, x: Sequence[float] | None = None, y: Sequence[float] | None = None,
+                     z: Sequence[float] | None = None) -> None:
+        """``Periodic [X lo hi] [Y lo hi] [Z lo hi]`` (block Environment): the box [lo, hi)
+        (m) repeats along each axis given as (lo, hi); flat walls lie along those axes and
+        cover the cell (docs/user-guide.md, Periodic cells)."""
+        self._editable("set_periodic")
+        self.model.periodic = checks.periodic(x, y, z)
+
     def add_box(self, min: Sequence[float], max: Sequence[float], top: bool = False,
                 material: int | None = None) -> list[str]:
         """``Box``: the walls of the box [min, max] (m), normals inwards; returns their names

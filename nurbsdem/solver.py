@@ -55,6 +55,7 @@ from .dynamics.system import SPLIT_PARTS, InstabilityError
 from .energy_ledger import EnergyLedger
 from .errors import InputError
 from .flow_run import FlowRun, exchange
+from .periodic_checks import refuse_periodic_ranks
 from .instant_steps import mechanical_energy, to_contact
 from .io.intervals import due
 from .io.writers import OutputWriters
@@ -120,6 +121,7 @@ class Solver:
         #: the inlets and outlets (:mod:`nurbsdem.flow_run`)
         self.flow = FlowRun(model)
         self.flow.refuse_ranks(self.comm)
+        refuse_periodic_ranks(model, self.comm)
         if self.comm is not None:
             _share_cores(self.comm)
             quiet = quiet or self.rank > 0      # one progress line: rank 0's
@@ -317,6 +319,8 @@ class Solver:
                 self.scene.set_state(scene_state)
         elif self.ledger.mech0 is None:
             self._sample(writers, force=True)
+        else:       # a wrap into the periodic cell at the first evaluation (internal_step)
+            self.ledger.book_external(self.system.initial_wrap_work)
         sysm = self.system
         log.info("step %d: %s, %d time steps of %g s (%d sub-step(s) of %.3g s each)",
                  step.id, step.kind, n_total, dt, sysm.substeps, sysm.dt_internal)
@@ -347,6 +351,7 @@ class Solver:
         self.system._warned_heavy = warned
         t0 = time.perf_counter()
         self.system.initialize()
+        self.ledger.book_external(self.system.initial_wrap_work)
         self.system.load_compiled()
         self.timers["setup"] += time.perf_counter() - t0
 

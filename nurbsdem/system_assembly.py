@@ -10,6 +10,7 @@ from .dynamics import DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.laws import law_named
 from .dynamics.stepcontrol import shape_compliance
 from .model import Bodies, Model, material_pair
+from .periodic_checks import check_cell_reach
 
 
 class SystemAssembly:
@@ -105,12 +106,19 @@ class SystemAssembly:
               contact_options: dict) -> SceneContacts:
         """The contact scene of ``bodies``: ``previous`` (its search structures and history
         carried on) while it has as many bodies, else a new one with ``contact_options``
-        (keywords of :class:`~nurbsdem.contact.scene.SceneContacts`)."""
+        (keywords of :class:`~nurbsdem.contact.scene.SceneContacts`), through the model's
+        periodic cell if it has one."""
         if previous is not None and previous.n == len(bodies):
             return previous
         body_shape = np.array([self.shape_index[int(s)] for s in bodies.shape_id], np.int64)
-        return SceneContacts(self.shapes, body_shape, [w.patch for w in self.model.walls],
-                             **contact_options)
+        periodic = self.model.periodic
+        scene = SceneContacts(self.shapes, body_shape, [w.patch for w in self.model.walls],
+                              cell=None if periodic is None else periodic.cell(),
+                              **contact_options)
+        if periodic is not None and scene.n:       # the reach with the scene's skin and margin
+            check_cell_reach(self.model, 2.0 * float(scene.radius.max()) + scene.margin
+                             + scene.skin)
+        return scene
 
 
 def decompose(comm, sysm: DemSystem, scene: SceneContacts):

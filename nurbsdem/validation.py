@@ -546,7 +546,8 @@ def check_scale(model: "Model") -> None:
 def check_model(model: "Model") -> None:
     """Everything that can be judged before placing particles: something to solve, time
     steps, memory, explicit stability, contacts too soft for the weight, impacts, Replicate
-    spacing, scale, wall strokes."""
+    spacing, scale, wall strokes, the periodic cell."""
+    from .periodic_checks import check_periodic
     from .wall_checks import check_curved_walls_model
     check_nothing_to_solve(model)
     check_time_steps(model)
@@ -561,20 +562,23 @@ def check_model(model: "Model") -> None:
     check_soft_contacts(model)
     check_impacts(model)
     check_replicate_spacing(model)
+    check_periodic(model)
 
 
 # ---------------------------------------------------------------------------- the scene
 
 
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
-    """Check the placed scene (default ``model.bodies``): walls, bodies against walls (mesh
-    and surface walls too), explicit bodies against each other; warn of inlets that reach
+    """Check the placed scene (default ``model.bodies``): walls, bodies in the periodic cell,
+    bodies against walls (mesh and surface walls too), explicit bodies against each other; warn of inlets that reach
     behind a wall or cannot hold a segment's particles. Raises :class:`InputError` (deck file
     and line)."""
     from .flow_checks import warn_flow
+    from .periodic_checks import check_periodic_bodies
     from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
+    check_periodic_bodies(model, bodies, plane_support_distance)
     warn_flow(model)
     if bodies is not None and len(bodies):
         explicit = {p.id for p in model.particles}

@@ -28,6 +28,7 @@ DECKS = sorted(p for folder in ("inputs", "tests/data") for p in (ROOT / folder)
 NURBS_DECK = """\
 Environment
   Gravity 0.3 -0.1 -9.81
+  Periodic X -0.5 0.5 Y 0 2 Z 0.1 0.25
 Materials
   Material 1 Density 2700 YoungModulus 7e10 PoissonRatio 0.33
   Material 3 Density 1150.5 PoissonRatio 0.25

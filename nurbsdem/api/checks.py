@@ -81,6 +81,23 @@ def vector(key: str, value: Any, what: str, n: int = 3) -> np.ndarray:
     return v
 
 
+def periodic(x: Any, y: Any, z: Any, what: str = "set_periodic"):
+    """The :class:`~nurbsdem.model.PeriodicSpec` of the intervals (lo, hi) (m) given per axis
+    (None: the axis does not repeat), checked as the deck's ``Periodic`` entry."""
+    from ..model import PeriodicSpec
+    lo, hi, axes = np.zeros(3), np.zeros(3), np.zeros(3, bool)
+    for k, (name, v) in enumerate(zip("XYZ", (x, y, z))):
+        if v is None:
+            continue
+        lo[k], hi[k] = vector(name, v, what, n=2)
+        axes[k] = True
+        if not lo[k] < hi[k]:
+            raise InputError(f"{what}: {name} needs lo < hi, got {lo[k]:g} {hi[k]:g}")
+    if not axes.any():
+        raise InputError(f"{what}: give at least one axis (x, y or z as (lo, hi))")
+    return PeriodicSpec(lo, hi, axes)
+
+
 def entity_id(value: Any, what: str) -> int:
     """An entry's id: an integer from 1 to the deck's largest id."""
     from ..io.deck import ID_MAX

@@ -46,6 +46,15 @@ class ContactSet:
     params: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     patch_a: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     patch_b: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: periodic cells (:mod:`nurbsdem.contact.periodic`): per active contact the translation
+    #: (m) of the image of body B it touches (zeros: B itself; the points are in that image);
+    #: empty: no periodic cell
+    image: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: the same for the separated pairs (``near_*``)
+    near_image: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: the translation (N,3) (m) taken off each particle's centroid by the wrap into the cell
+    #: at this evaluation's list build (empty: no wrap); the system applies it to its state
+    wrap: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @classmethod
     def empty(cls) -> "ContactSet":

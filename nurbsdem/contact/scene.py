@@ -57,6 +57,12 @@ Besides the active contacts, each ContactSet reports the separated listed pairs 
 their closest points, normal and gap — for a certified pair a lower bound of it) so that the
 time-step control can see the contacts about to close.
 
+In a **periodic cell** (``cell``, :mod:`nurbsdem.contact.periodic`) each build wraps the
+centroids into the cell and lists every pair with the image of its body B that it touches
+(:mod:`nurbsdem.contact.periodic_scene`); the rows are solved with B's image as an extra
+particle, and the ContactSet carries each pair's image translation (``image``) and the
+build's wrap (``wrap``), which the system applies to its state.
+
 On several MPI ranks (``domain``, :mod:`nurbsdem.parallel.domain`) the list holds the pairs
 with a particle the rank owns, a rebuild is decided by all ranks together and starts from every
 particle's state sent by its owner, and the counters count the pairs whose body A it owns.
@@ -79,6 +85,8 @@ from .broadphase import wall_geometry
 from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
+from .periodic import PeriodicCell, minimum_image, wrap
+from .periodic_scene import image_scene, periodic_list
 from .verlet import (advance_odometers, carry_rows, contact_arrays, due_rows, list_is_stale,
                      renew_certificates, repose, reposed_bodies)
 from .wall import wall_frame
@@ -126,11 +134,14 @@ class SceneContacts:
     certificates: skip the LCPs of pairs certified apart (module docstring).
     point_surface: solve an exact sphere against a NURBS particle as a point-to-surface
         problem (module docstring); False: by the LCP.
+    cell: a periodic cell (:class:`~nurbsdem.contact.periodic.PeriodicCell`): the list is
+        built over the bodies and their images through its faces, the centroids wrapped into
+        it at each build (:mod:`nurbsdem.contact.periodic_scene`); None: none.
     """
 
     def __init__(self, shapes: Sequence, body_shape: np.ndarray, walls: Sequence = (),
                  margin: float = 0.0, skin: float | None = None, certificates: bool = True,
-                 point_surface: bool = True) -> None:
+                 point_surface: bool = True, cell: PeriodicCell | None = None) -> None:
         self.shapes = list(shapes)
         self.table = ContactTable(self.shapes)
         self.boxes, self.box_offsets = pack_boxes(self.shapes)
@@ -184,6 +195,10 @@ class SceneContacts:
         self.domain = None
         #: the constant tables of the compiled dispatch (:mod:`nurbsdem.contact.listed`)
         self._tables: SceneTables | None = None
+        #: the periodic cell (None: none) and, aligned with the list, the image (L,3) int of
+        #: each pair's body B (:mod:`nurbsdem.contact.periodic_scene`)
+        self.cell = cell
+        self.pair_shift = np.zeros((0, 3), np.int64)
 
     # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
@@ -210,6 +225,8 @@ class SceneContacts:
         if self.prev_pose is not None:
             st.update(prev_pos=self.prev_pose[0], prev_R=self.prev_pose[1],
                       prev_wall=self.prev_pose[2], prev_x=self.prev_pose[3])
+        if self.cell is not None:
+            st["pair_shift"] = self.pair_shift
         return st
 
     def set_local_state(self, st: dict) -> None:
@@ -223,16 +240,21 @@ class SceneContacts:
         self.prev_pose = ((np.array(st["prev_pos"]), np.array(st["prev_R"]),
                            np.array(st["prev_wall"]), np.array(st["prev_x"]))
                           if "prev_x" in st else None)
+        if self.cell is not None:
+            self.pair_shift = np.array(st.get("pair_shift", np.zeros((len(self.pairs.a), 3))),
+                                       np.int64).reshape(-1, 3)
 
     def snapshot(self):
         """What a rolled-back time step must restore (cheap: a call replaces these objects,
         never mutates them)."""
         plan = self.domain.plan if self.domain is not None else None
-        return self.pairs, self.odo, self.built_pose, self.prev_pose, self.last, plan
+        return (self.pairs, self.odo, self.built_pose, self.prev_pose, self.last, plan,
+                self.pair_shift)
 
     def restore(self, snap) -> None:
         """Undo the calls made since :meth:`snapshot`."""
-        self.pairs, self.odo, self.built_pose, self.prev_pose, self.last, plan = snap
+        (self.pairs, self.odo, self.built_pose, self.prev_pose, self.last, plan,
+         self.pair_shift) = snap
         if self.domain is not None:
             self.domain.plan = plan
 
@@ -277,6 +299,33 @@ class SceneContacts:
         self.built_pose = built
         self.builds += 1
 
+    def _wrapped(self, pose):
+        """The pose (pose positions, rotations, walls, centroids) with the centroids wrapped
+        into the periodic cell, and the translation (N,3) m taken off them."""
+        pos, R, wall, x = pose
+        _, shift = wrap(x, self.cell)
+        d = shift * self.cell.length
+        return (pos - d, R, wall, x - d), d
+
+    def _build_periodic(self, pose, moved: np.ndarray) -> None:
+        """The neighbour list through the periodic cell at the wrapped ``pose``: a full build
+        (:func:`~nurbsdem.contact.periodic_scene.periodic_list`), the per-pair arrays carried
+        over by key, their points moved with body A by the wrap (``moved`` (N,3) m taken off
+        the centroids): a row's points lie in A's frame (a certified pair's row is not solved
+        again, and its closest points feed the time-step control)."""
+        pos, R, wall, x = pose
+        a, b, keys, mask_a, mask_b, shift = periodic_list(
+            self.tables(), self.cell, np.ascontiguousarray(x), np.ascontiguousarray(pos),
+            np.ascontiguousarray(R), np.ascontiguousarray(wall), self.margin + self.skin)
+        ps = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
+        rows_f = ps.rows_f.copy()
+        rows_f[:, F_PA:F_PA + 3] -= moved[ps.a]
+        rows_f[:, F_PB:F_PB + 3] -= moved[ps.a]
+        self.pairs = ps.replaced(rows_f, ps.rows_i, ps.budget, ps.reused)
+        self.pair_shift = shift            # periodic_list gives them sorted by key already
+        self.built_pose = (x.copy(), np.array(R, float), wall.copy(), pos.copy())
+        self.builds += 1
+
     def tables(self) -> SceneTables:
         """The scene's constant tables for the compiled list and dispatch."""
         if self._tables is None:
@@ -292,7 +341,12 @@ class SceneContacts:
         self._advance_odometers(pose)
         dom = self.domain
         stale = self._list_is_stale(pose) if dom is None else dom.any(self._list_is_stale(pose))
-        if stale:
+        wrap_shift = np.zeros((0, 3))
+        if stale and self.cell is not None:      # wrapped into the cell, then built
+            pose, wrap_shift = self._wrapped(pose)
+            pos = pose[0]
+            self._build_periodic(pose, wrap_shift)
+        elif stale:
             if dom is not None:
                 kin = dom.sync_for_build(kin)        # every particle's state from its owner
                 pos, R = np.ascontiguousarray(kin.pose_origin), np.ascontiguousarray(kin.R)
@@ -306,6 +360,7 @@ class SceneContacts:
         rf, ri = self._solve(due, pos, R, pose[2])
         t2 = time.perf_counter()
         cs = self._assemble(due, rf, ri, reach, pose)
+        cs.wrap = wrap_shift
         self.timers.global_search += t1 - t0
         self.timers.lcp += t2 - t1
         self.timers.calls += 1
@@ -321,7 +376,10 @@ class SceneContacts:
         """LCP rows of the listed pairs ``due``, each by what its shapes are, warm-started,
         failed warm starts retried cold (:func:`~nurbsdem.contact.listed.solve_due`)."""
         ps = self.pairs
-        rf, ri, points = solve_due(self.tables(), ps.a, ps.b, ps.mask_a, ps.mask_b, ps.rows_f,
+        st, list_b = self.tables(), ps.b
+        if self.cell is not None:          # images of B as extra particles (periodic_scene)
+            st, list_b, pos, R = image_scene(st, self.cell, ps.b, self.pair_shift, pos, R)
+        rf, ri, points = solve_due(st, ps.a, list_b, ps.mask_a, ps.mask_b, ps.rows_f,
                                    ps.rows_i, np.ascontiguousarray(due, np.int64), pos, R,
                                    np.ascontiguousarray(wall_d, float), numba.get_num_threads())
         self.point_solves += points
@@ -372,6 +430,11 @@ class SceneContacts:
         (a, b, pa, pb, nrm, depth, key, deg, params, patch_a, patch_b, near_a, near_b,
          near_point, near_normal, gap) = contact_arrays(ps.rows_f, ps.rows_i, ps.a, ps.b,
                                                         ps.keys, ps.budget, reach)
+        image, near_image = np.zeros((0, 3)), np.zeros((0, 3))
+        if self.cell is not None:
+            image = self.pair_shift[np.searchsorted(ps.keys, key)] * self.cell.length
+            near_image = (self.pair_shift[np.searchsorted(ps.keys, near_a * self.nb + near_b)]
+                          * self.cell.length)
         return ContactSet(body_a=a, body_b=b, point_a=pa, point_b=pb, normal=nrm, depth=depth,
                           key=key, degenerated=deg, monitored=monitored, active=int(a.shape[0]),
                           degenerated_count=int(np.count_nonzero(deg)), failed=failed,
@@ -381,7 +444,8 @@ class SceneContacts:
                                       else self.domain.counted(dropped // self.nb).sum()),
                           dropped_keys=dropped, near_a=near_a, near_b=near_b,
                           near_point=near_point, near_normal=near_normal, near_gap=gap,
-                          params=params, patch_a=patch_a, patch_b=patch_b)
+                          params=params, patch_a=patch_a, patch_b=patch_b, image=image,
+                          near_image=near_image)
 
     def _moved(self, row_f: np.ndarray, row_i: np.ndarray, a: int, b: int, pose):
         """A previous LCP row moved rigidly from the previous call's poses to ``pose``: the
@@ -391,13 +455,20 @@ class SceneContacts:
         pos, R, wall, _ = pose
         ppos, pR, pwall, _ = self.prev_pose
 
-        def move(i: int, p: np.ndarray) -> np.ndarray:
+        def move(i: int, p: np.ndarray, image: np.ndarray) -> np.ndarray:
             if i < N:
-                return R[i] @ (pR[i].T @ (p - ppos[i])) + pos[i]
+                arm = p - ppos[i]
+                if self.cell is not None:      # a point of an image, or a body since wrapped
+                    arm = minimum_image(arm, self.cell)
+                return R[i] @ (pR[i].T @ arm) + pos[i] + image
             return p + (wall[i - N] - pwall[i - N])
+        image = np.zeros(3)
+        if self.cell is not None:
+            image = self.pair_shift[np.searchsorted(self.pairs.keys, a * self.nb + b)] \
+                * self.cell.length
         f, iv = row_f.copy(), row_i.copy()
-        f[F_PA:F_PA + 3] = move(a, row_f[F_PA:F_PA + 3])
-        f[F_PB:F_PB + 3] = move(b, row_f[F_PB:F_PB + 3])
+        f[F_PA:F_PA + 3] = move(a, row_f[F_PA:F_PA + 3], np.zeros(3))
+        f[F_PB:F_PB + 3] = move(b, row_f[F_PB:F_PB + 3], image)
         n = row_f[F_N:F_N + 3]
         f[F_N:F_N + 3] = R[a] @ (pR[a].T @ n) if a < N else n
         f[F_SD] = float((f[F_PB:F_PB + 3] - f[F_PA:F_PA + 3]) @ f[F_N:F_N + 3])

@@ -568,8 +568,8 @@ class DeckSteps:
 
     @staticmethod
     def for_system(system) -> "DeckSteps | None":
-        """The compiled stepper when the provider is a scene on one rank that has been called
-        once (any contact law: the Hertz radii of NURBS contacts come from the curvature
+        """The compiled stepper when the provider is a scene on one rank, without a periodic
+        cell, that has been called once (any contact law: the Hertz radii of NURBS contacts come from the curvature
         kernel the Python path calls, :func:`_hertz_radii`) whose laws are all built in
         (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with mesh and surface
         walls met by exact spheres only, at rest or turning at constant rates
@@ -579,6 +579,7 @@ class DeckSteps:
         if curved is not None:
             scene = curved.base
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
+                or scene.cell is not None           # periodic cells: the Python driver
                 or scene.prev_pose is None or scene.built_pose is None
                 or not builtin_only(system._table)):    # a law registered at run time
             return None

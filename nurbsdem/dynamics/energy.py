@@ -13,7 +13,9 @@ Per sample (:class:`EnergySample`):
   the tangential springs minus the tangential elastic energy still stored (slip of the Coulomb
   return mapping, and springs dropped loaded when a contact ends; see
   :mod:`nurbsdem.dynamics.forces`);
-* ``external_work``: work done on the particles by the prescribed-motion walls, ∫ reaction·u dt;
+* ``external_work``: work done on the particles by the prescribed-motion walls, ∫ reaction·u dt,
+  and the potential energy Σ m g·Δx a wrap into a periodic cell takes off (Δx the
+  translation, :mod:`nurbsdem.contact.periodic`);
 * ``mechanical`` = kinetic + potential + elastic;
 * ``balance_error`` = mechanical − mechanical(0) − external_work + dissipated (→ 0).
 

@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..jit import seconds_per_cycle
 from .energy import EnergyLedger, EnergySample
+from .images import ImageBodies
 from .integrator import state_is_finite
 from .rigid import body_poses, omega_world
 from .step import interfaces_defined, kick_part, spun_contacts, step_start
@@ -123,6 +124,7 @@ class InternalSteps:
         t2 = time.perf_counter()
         self.last_contacts = cs
         self._book_dropped(cs)
+        self._apply_wrap(cs)
         a, bb, pa, pb, nrm, dep, key = _unpack(cs, self.n_bodies)
         K = a.shape[0]
         if K and not interfaces_defined(self._bc, a, bb):
@@ -138,10 +140,20 @@ class InternalSteps:
         if self.implicit_damping and h > 0.0 and self.domain is not None:
             dashpot = self.domain.implicit_dashpots(a, bb, pa, pb, nrm, dep, key, self.c_radius,
                                                     h, solves)
+        image = getattr(cs, "image", None)
+        self.c_image = (np.ascontiguousarray(image, float) if image is not None
+                        and len(image) == K else np.zeros((K, 3)))
+        im = ImageBodies.of(b.n, bb, self.c_image)
+        bc, b_part, q, L = self._bc, bb, b.q, b.L
+        if im is not None:                   # contacts with periodic images (.images)
+            bc, b_part, q, L = im.const(bc), im.b, im.particles(q), im.particles(L)
+            pos, vel, omg = im.bodies(pos, True), im.bodies(vel), im.bodies(omg)
         (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
          self.last_slip_work, keys, springs, repeated) = self._kernels.contact_part(
-             self._bc, self.implicit_damping, a, bb, pa, pb, nrm, dep, key, self.c_radius,
-             self.hist_keys, self.hist_springs, pos, vel, omg, b.q, b.L, h, solves, dashpot)
+             bc, self.implicit_damping, a, b_part, pa, pb, nrm, dep, key, self.c_radius,
+             self.hist_keys, self.hist_springs, pos, vel, omg, q, L, h, solves, dashpot)
+        if im is not None:
+            force, torque = im.fold(force), im.fold(torque)
         if repeated:
             raise ValueError("ContactSet has duplicate keys: one contact per body pair expected")
         self.hist_keys, self.hist_springs = keys, springs
@@ -155,6 +167,29 @@ class InternalSteps:
         self.c_fet = fet
         self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
         self.split["contact forces"] += (t1 - t0) + (time.perf_counter() - t2) - dashpots
+
+    def _apply_wrap(self, cs: Any) -> None:
+        """The wrap into the periodic cell that the provider's list build made (its
+        ``wrap`` (N,3) m, :class:`~nurbsdem.contact.contactset.ContactSet`), applied to the
+        centroids.  The potential's jump Σ m g·Δx (J; Δx the translation taken off) is booked
+        as external work, as an inlet's particles are (:mod:`nurbsdem.flow_run`), so that the
+        balance stays closed; at the first evaluation, before the initial mechanical energy
+        is taken, it is kept in ``initial_wrap_work`` for the run's ledger
+        (:meth:`~nurbsdem.energy_ledger.EnergyLedger.book_external`)."""
+        shift = getattr(cs, "wrap", None)
+        if shift is None or len(shift) == 0 or not np.any(shift != 0.0):
+            return
+        b = self.bodies
+        jump = float(np.sum(b.mass * (shift @ self.gravity)))
+        b.x -= shift
+        if self.ledger.initial_mechanical == self.ledger.initial_mechanical:   # not NaN
+            self.ledger.external_work += jump
+        else:
+            self.initial_wrap_work += jump
+
+    def _images(self) -> "ImageBodies | None":
+        """The image bodies of the stored contacts (:mod:`nurbsdem.dynamics.images`)."""
+        return ImageBodies.of(self.bodies.n, self.c_b, getattr(self, "c_image", np.zeros((0, 3))))
 
     def _book_dropped(self, cs: Any) -> None:
         """A pair the provider left out after a failed contact problem takes its normal elastic
@@ -178,8 +213,12 @@ class InternalSteps:
             return self._spun_contacts(np.ascontiguousarray(u_mean))
         return self.c_b, self.wall_d, np.ascontiguousarray(u_mean)
 
-    def _kick_arguments(self) -> tuple:
-        """The stored contacts' arrays and loads as the step's parts take them."""
+    def _kick_arguments(self, im: "ImageBodies | None" = None) -> tuple:
+        """The stored contacts' arrays and loads as the step's parts take them (with image
+        bodies ``im``: theirs too, each image loaded as its owner)."""
+        if im is not None:
+            return (im.const(self._bc), self.c_a, im.b, self.c_point, self.c_ftot, self.c_fdn,
+                    self.c_fdt, self.c_fet, im.bodies(self.force), im.bodies(self.torque))
         return (self._bc, self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_fdn, self.c_fdt,
                 self.c_fet, self.force, self.torque)
 
@@ -199,22 +238,56 @@ class InternalSteps:
         u_mean = (d_new - self.wall_d) / h
         t0 = time.perf_counter()
         ledger = self.ledger.to_array()
-        _, terms, worst, run = step_start(
-            *self._kick_arguments(), b.x, b.v, b.q, b.L, omega_world(b.q, b.L, self._inv_I),
-            *self._kick_walls(u_mean), h, ledger, self.wall_work, self.alt_prev_v,
-            self.alt_prev_L, self.alt_count, self.watch_period2, self.domain is None)
+        im = self._images()
+        if im is not None:
+            worst, run, terms = self._step_start_images(im, u_mean, h, ledger)
+        else:
+            _, terms, worst, run = step_start(
+                *self._kick_arguments(), b.x, b.v, b.q, b.L, omega_world(b.q, b.L, self._inv_I),
+                *self._kick_walls(u_mean), h, ledger, self.wall_work, self.alt_prev_v,
+                self.alt_prev_L, self.alt_count, self.watch_period2, self.domain is None)
         self._booked(ledger, terms)
         self._watch_alternation(int(worst), int(run), h)
         t1 = time.perf_counter()
         self._evaluate(t_new, h)
         t2 = time.perf_counter()
         ledger = self.ledger.to_array()
-        _, terms = kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
-                             omega_world(b.q, b.L, self._inv_I),   # ghosts may be re-synced
-                             *self._kick_walls(u_mean), 0.5 * h, ledger, self.wall_work,
-                             self.domain is None)
+        im = self._images()
+        if im is not None:
+            v, L = im.particles(b.v), im.particles(b.L)
+            _, terms = kick_part(*self._kick_arguments(im), im.positions(b.x), v,
+                                 im.particles(b.q), L, omega_world(im.particles(b.q), L,
+                                                                   im.particles(self._inv_I)),
+                                 im.b, self.wall_d, np.ascontiguousarray(u_mean), 0.5 * h,
+                                 ledger, self.wall_work, True)
+            b.v[:], b.L[:] = v[:b.n], L[:b.n]
+        else:
+            _, terms = kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
+                                 omega_world(b.q, b.L, self._inv_I),   # ghosts may be re-synced
+                                 *self._kick_walls(u_mean), 0.5 * h, ledger, self.wall_work,
+                                 self.domain is None)
         self._booked(ledger, terms)
         self.split["integration"] += (t1 - t0) + (time.perf_counter() - t2)
+
+    def _step_start_images(self, im: "ImageBodies", u_mean: np.ndarray, h: float,
+                           ledger: np.ndarray) -> tuple[int, int, np.ndarray]:
+        """:func:`~nurbsdem.dynamics.step.step_start` with the stored contacts' image bodies
+        (one rank, walls that do not turn): the particles and their images kicked, watched and
+        drifted together, the particles' rows kept.  Returns (worst, run, terms) as
+        step_start does, ``worst`` an owner."""
+        b, n = self.bodies, self.bodies.n
+        x, v, q, L = (im.positions(b.x), im.particles(b.v), im.particles(b.q),
+                      im.particles(b.L))
+        pv, pL, count = (im.particles(a) for a in (self.alt_prev_v, self.alt_prev_L,
+                                                     self.alt_count))
+        _, terms, worst, run = step_start(
+            *self._kick_arguments(im), x, v, q, L, omega_world(q, L, im.particles(self._inv_I)),
+            im.b, self.wall_d, np.ascontiguousarray(u_mean), h, ledger, self.wall_work, pv, pL,
+            count, self.watch_period2, True)
+        b.x[:], b.v[:], b.q[:], b.L[:] = x[:n], v[:n], q[:n], L[:n]
+        self.alt_prev_v[:], self.alt_prev_L[:], self.alt_count[:] = pv[:n], pL[:n], count[:n]
+        worst = int(worst)
+        return (int(im.own[worst - n]) if worst >= n else worst), int(run), terms
 
     def _watch_alternation(self, worst: int, run: int, h: float) -> None:
         """The period-2 guard (:mod:`nurbsdem.dynamics.system`) on the watch of the step's start:

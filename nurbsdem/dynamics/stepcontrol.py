@@ -141,14 +141,16 @@ def shape_compliance(shape, mass: float, inertia: np.ndarray, centroid: np.ndarr
 # --------------------------------------------------------------------------- network operator
 @njit(cache=True)
 def network_blocks(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x: np.ndarray,
-                   Q: np.ndarray, sq_m: np.ndarray,
-                   sq_I: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                   Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray,
+                   image=None) -> tuple[np.ndarray, np.ndarray]:
     """The contacts' rows of J in Eq. (2), formed once per estimate so that each product
     :func:`apply_blocks` is multiply–adds only: s (K,2) 1/√m and C (K,2,3,3) the map
     −[r]× Q diag(1/√I) of a body's scaled rotation to the displacement of the contact point
     (both 1/√kg: metres per unit of the scaled coordinates), for B (side 0) and A (side 1);
     walls (index ≥ N) get zeros.  The relative displacement of B w.r.t. A is
-    J_c y = Σ_side ±(s y_trans + C y_rot)."""
+    J_c y = Σ_side ±(s y_trans + C y_rot).  ``image`` (K,3) m: the translation of the
+    periodic image of B each contact touches (:mod:`nurbsdem.contact.periodic`; None: none),
+    B's lever arm taken from that image."""
     K, n_part = body_a.shape[0], x.shape[0]
     s = np.zeros((K, 2))
     C = np.zeros((K, 2, 3, 3))
@@ -158,6 +160,8 @@ def network_blocks(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x:
             if i >= n_part:
                 continue
             r0, r1, r2 = point[c, 0] - x[i, 0], point[c, 1] - x[i, 1], point[c, 2] - x[i, 2]
+            if image is not None and side == 0:
+                r0, r1, r2 = r0 - image[c, 0], r1 - image[c, 1], r2 - image[c, 2]
             s[c, side] = 1.0 / sq_m[i]
             for j in range(3):      # column j: the displacement Q e_j / √I_j × r
                 w0, w1, w2 = (Q[i, 0, j] / sq_I[i, j], Q[i, 1, j] / sq_I[i, j],
@@ -301,14 +305,15 @@ COARSE_INFLATION = 1.0 + 1e-9
 def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                        normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
                        inv_m: np.ndarray, inv_I: np.ndarray,
-                       coarse: bool = False) -> tuple[float, float]:
+                       coarse: bool = False, image=None) -> tuple[float, float]:
     """Upper bounds (ω² 1/s², γ 1/s) of λmax of Eq. (2)'s stiffness and damping operators:
     the largest block-Gershgorin row sum Σ_c k_c |ĵ_c,i| (|ĵ_c,i| + |ĵ_c,j|) over the bodies,
     normal and tangential parts with their own point compliances.  O(K), no iteration: cheap
     enough for every deck step (the Lanczos value is needed only when this bound calls for
     more sub-steps).  coeffs (K,4): εn, cn, εt, ct.  ``coarse``: the point compliances bounded
     by :func:`_side_norms_coarse` (no body frames; larger bounds, by COARSE_INFLATION at least,
-    equal to round-off for spheres), about three times cheaper."""
+    equal to round-off for spheres), about three times cheaper.  ``image``: as
+    :func:`network_blocks`."""
     n_part = x.shape[0]
     rk = np.zeros(n_part)
     rc = np.zeros(n_part)
@@ -326,6 +331,8 @@ def network_gershgorin(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray
             if i < n_part:
                 for k in range(3):
                     r[k] = point[c, k] - x[i, k]
+                    if image is not None and side == 1:
+                        r[k] -= image[c, k]
             if coarse:
                 jn, jt = _side_norms_coarse(i, n_part, r, n, inv_m, inv_I)
             else:
@@ -381,14 +388,14 @@ def network_count_stands(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarr
                          normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
                          inv_m: np.ndarray, inv_I: np.ndarray, dt: float, safety: float,
                          dt_apriori: float, dt_bound: float, slack: float, refine: int,
-                         substeps: int) -> bool:
+                         substeps: int, image=None) -> bool:
     """:func:`count_stands` for the network (a, b, point, normal, coeffs) of a deck step dt
     (s): decided by the coarse Gershgorin bound when that suffices (a coarse bound is never
     below the exact one, so where it lets the count stand the exact one does too), else by the
     exact bound; the decision is the exact bound's either way."""
     for coarse in (True, False):
         wk, wc = network_gershgorin(body_a, body_b, point, normal, coeffs, x, Q, inv_m, inv_I,
-                                    coarse)
+                                    coarse, image)
         bound = critical_step_from_rates(wk, wc) if body_a.shape[0] else math.inf
         need = needed_substeps(dt, safety * min(dt_apriori, bound))
         if count_stands(bound, dt_bound, slack, need, refine, substeps):
@@ -555,21 +562,25 @@ def lanczos_blocks(body_a: np.ndarray, body_b: np.ndarray, normal: np.ndarray,
 
 def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                   normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
-                  mass: np.ndarray, I: np.ndarray) -> tuple[float, float, int]:
+                  mass: np.ndarray, I: np.ndarray, image=None) -> tuple[float, float, int]:
     """(ω² 1/s², γ 1/s, dominant body) of the contact network: λmax of Eq. (2)'s stiffness and
     damping operators, and the particle with the largest share of the stiffest mode (−1 when
     there is no contact).  coeffs (K,4): εn, cn, εt, ct of each contact; mass (N,) kg, I (N,3)
-    principal inertias kg m² (:func:`network_rates_scaled` with their square roots)."""
+    principal inertias kg m² (:func:`network_rates_scaled` with their square roots); image
+    (K,3) m: as :func:`network_blocks` (passed on only when given: the compiled loop's call
+    types stay those of the calls without it)."""
+    extra = () if image is None else (image,)
     omega2, gamma, body = network_rates_scaled(body_a, body_b, point, normal,
                                                np.ascontiguousarray(coeffs, float), x, Q,
-                                               np.sqrt(mass), np.sqrt(I))
+                                               np.sqrt(mass), np.sqrt(I), *extra)
     return float(omega2), float(gamma), int(body)
 
 
 @njit(cache=True)
 def network_rates_scaled(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                          normal: np.ndarray, coeffs: np.ndarray, x: np.ndarray, Q: np.ndarray,
-                         sq_m: np.ndarray, sq_I: np.ndarray) -> tuple[float, float, int]:
+                         sq_m: np.ndarray, sq_I: np.ndarray,
+                         image=None) -> tuple[float, float, int]:
     """:func:`network_rates` given sq_m (N,) = √mass (√kg) and sq_I (N,3) = √I (√(kg m²)):
     compiled, so that the deck steps' loop takes the exact estimate without returning to
     Python (:mod:`nurbsdem.dynamics.deck_steps`)."""
@@ -578,7 +589,7 @@ def network_rates_scaled(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarr
         return 0.0, 0.0, -1
     kn, cn = coeffs[:, 0].copy(), coeffs[:, 1].copy()
     kt, ct = coeffs[:, 2].copy(), coeffs[:, 3].copy()
-    s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
+    s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I, image)
     steps = np.int64(LANCZOS_STEPS)     # the types of network_lanczos' call: one compilation
     omega2, vec = lanczos_blocks(body_a, body_b, normal, kn, kt, s, C, 6 * N, steps, LANCZOS_RTOL)
     gamma = 0.0

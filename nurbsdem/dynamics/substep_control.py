@@ -140,9 +140,28 @@ class SubstepControl:
         speed = body_speeds(b.v, omega_world(b.q, b.L, self._inv_I), self._ell, self.wall_u)
         net = contact_network(a, bb, self.c_point, self.c_normal, coeffs, *near, speed, self.dt,
                               self._g_norm, self._table, self._mat_all)
+        self._net_image = self._network_images(net, cs)
         if self.implicit_damping:
             net[4][:, 1] = 0.0      # implicit normal dashpots do not limit the step
         return net if net[0].shape[0] else None
+
+    def _network_images(self, net, cs) -> tuple:
+        """() or (image,): the translation (K,3) m of the periodic image of B for each pair of
+        the network (:mod:`nurbsdem.contact.periodic`), as the network's kernels take it (an
+        extra argument only where a pair touches an image: the other calls keep their
+        compiled types)."""
+        near_image = getattr(cs, "near_image", None)
+        image = getattr(self, "c_image", None)
+        if image is None or near_image is None or not (np.any(image != 0.0)
+                                                       or np.any(near_image != 0.0)):
+            return ()
+        nb = self.n_bodies
+        keys = np.concatenate([self.c_a * nb + self.c_b,
+                               np.asarray(cs.near_a, np.int64) * nb + np.asarray(cs.near_b)])
+        table = np.concatenate([image, near_image])
+        order = np.argsort(keys)
+        rows = order[np.searchsorted(keys[order], net[0] * nb + net[1])]
+        return (np.ascontiguousarray(table[rows]),)
 
     def _network_bound(self, net) -> float:
         """A lower bound (s) of the network's critical step, from the Gershgorin bounds of its
@@ -151,7 +170,8 @@ class SubstepControl:
             return math.inf
         b = self.bodies
         omega2, gamma = network_gershgorin(*net, b.x, b.principal_rotations(), self._inv_mass,
-                                           self._inv_I, False)   # the compiled loop's types
+                                           self._inv_I, False,   # the compiled loop's types
+                                           *self._net_image)
         return critical_step_from_rates(omega2, gamma)
 
     def _count_stands(self, net) -> bool:
@@ -163,7 +183,7 @@ class SubstepControl:
         return bool(network_count_stands(*net, b.x, b.principal_rotations(), self._inv_mass,
                                          self._inv_I, self.dt, self.safety, self.dt_apriori,
                                          self.dt_bound, NETWORK_BOUND_SLACK, self.refine,
-                                         self.substeps))
+                                         self.substeps, *self._net_image))
 
     def _network_limit(self, net) -> tuple[float, str]:
         """Critical step (s) of the network ``net`` (:meth:`_network`) by Lanczos, and why."""
@@ -171,7 +191,8 @@ class SubstepControl:
             return math.inf, "no contacts"
         b = self.bodies
         a, bb, p, n, coeffs = net
-        args = (a, bb, p, n, coeffs, b.x, b.principal_rotations(), b.mass, b.I)
+        args = (a, bb, p, n, coeffs, b.x, b.principal_rotations(), b.mass, b.I,
+                *self._net_image)
         omega2, gamma, body = (network_rates(*args) if self.domain is None
                                else self.domain.on_root(network_rates, *args))
         dt = critical_step_from_rates(omega2, gamma)

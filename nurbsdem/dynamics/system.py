@@ -343,6 +343,10 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         self.ledger = EnergyLedger()
         self.c_a = self.c_key = np.zeros(0, np.int64)     # no previous evaluation
         self.c_eel = np.zeros((0, 2))
+        self.c_image = np.zeros((0, 3))       # periodic images of the contacts' B (.images)
+        #: the potential energy (J) a wrap into the periodic cell changed at the first
+        #: evaluation (:meth:`_apply_wrap`)
+        self.initial_wrap_work = 0.0
         self._initialized = True
         self._evaluate(self.time, 0.0)
         if self.domain is not None:

@@ -18,7 +18,7 @@ from .rigid import body_poses, omega_world
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
                "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
                "c_eel", "c_stick", "c_key", "wall_d", "wall_u", "wall_work", "ledger",
-               "alt_count", "alt_prev_v", "alt_prev_L", "c_coeffs", "c_radius")
+               "alt_count", "alt_prev_v", "alt_prev_L", "c_coeffs", "c_radius", "c_image")
 
 
 class SystemState:

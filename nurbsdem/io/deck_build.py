@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep, Output,
-                     ParticleSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
+                     ParticleSpec, PeriodicSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 from ..ranges import ASPECT_MAX
 from .deck_curved import check_curved_walls, curved_entry, rotate_step
 from .deck_moves import MODES, add_wall_move, check_moves, force_step, table_step
@@ -74,6 +74,20 @@ class DeckBuilder:
     def environment(self, e: Entry) -> None:
         self.setting_once(e)
         self.model.gravity = np.asarray(e.head, float)
+
+    def periodic(self, e: Entry) -> None:
+        """``Periodic [X lo hi] [Y lo hi] [Z lo hi]``: the periodic cell (lo < hi, m)."""
+        self.setting_once(e)
+        lo, hi, axes = np.zeros(3), np.zeros(3), np.zeros(3, bool)
+        for k, name in enumerate("XYZ"):
+            if e.has(name):
+                lo[k], hi[k] = e.get(name)
+                axes[k] = True
+                if not lo[k] < hi[k]:
+                    self.fail(f"Periodic: {name} needs lo < hi, got {lo[k]:g} {hi[k]:g}", e.line)
+        if not axes.any():
+            self.fail("Periodic: give at least one axis (X lo hi, Y lo hi or Z lo hi)", e.line)
+        self.model.periodic = PeriodicSpec(lo, hi, axes, e.line)
 
     def material(self, e: Entry) -> None:
         self.unique(self.model.materials, e, "material")
@@ -458,6 +472,7 @@ class DeckBuilder:
 
 _HANDLERS: dict[tuple[str, str], Callable[[DeckBuilder, Entry], None]] = {
     ("Environment", "Gravity"): DeckBuilder.environment,
+    ("Environment", "Periodic"): DeckBuilder.periodic,
     ("Materials", "Material"): DeckBuilder.material,
     ("Shapes", "Shape"): DeckBuilder.shape,
     ("Particles", "Random"): DeckBuilder.random,

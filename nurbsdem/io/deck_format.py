@@ -364,6 +364,10 @@ def model_entries(model: Model, walls: list[Entry] | None = None,
     ``model.walls`` (default: :func:`flat_wall_entries`); ``shape``: the entry of a shape
     with no deck spelling (default: ValueError)."""
     out = [_entry("Environment", "Gravity", head=model.gravity)]
+    if model.periodic is not None:
+        p = model.periodic
+        out.append(_entry("Environment", "Periodic", **{
+            name: np.array([p.lo[k], p.hi[k]]) for k, name in enumerate("XYZ") if p.axes[k]}))
     out += material_entries(model)
     for e in model.shapes.values():
         out.append(shape(e) if shape is not None and e.kind not in

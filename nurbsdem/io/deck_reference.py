@@ -40,6 +40,15 @@ class KeyDoc:
 #: What each entry is, by (block, entry).
 ENTRIES: dict[tuple[str, str], str] = {
     ("Environment", "Gravity"): "The gravitational acceleration, a vector in the world frame.",
+    ("Environment", "Periodic"): (
+        "A periodic cell: the box [lo, hi) repeats along each axis given (at least one). A "
+        "particle leaving through a face comes back through the opposite one and touches the "
+        "particles near it; positions are wrapped into the cell. Each periodic length is at "
+        "least twice the contact reach (the largest sum of two bounding radii plus the skin). "
+        "Flat walls lie along every periodic axis and cover the cell along it, plus the "
+        "largest bounding radius and the skin beyond each face (a floor with normal z under "
+        "a cell periodic in x and y). Not with inlets and outlets, mesh or surface walls, "
+        "`Damping Implicit` or several MPI ranks."),
     ("Materials", "Material"): "A material; particles, walls and interfaces name it by its id.",
     ("Shapes", "Shape"): (
         "A particle shape: exactly one of `File`, `Sphere`, `Ellipsoid`. Mass and inertia "
@@ -101,6 +110,12 @@ _DAMPING = ("`Explicit` (the dashpots act at the half-step velocity) or `Implici
 #: Units, default and meaning of each key, by (block, entry, key).
 KEYS: dict[tuple[str, str, str], KeyDoc] = {
     ("Environment", "Gravity", HEAD): KeyDoc("m/s^2", "0 0 0", "gx gy gz."),
+    ("Environment", "Periodic", "X"): KeyDoc("m", "not periodic",
+                                             "lo hi: the cell along x, lo < hi."),
+    ("Environment", "Periodic", "Y"): KeyDoc("m", "not periodic",
+                                             "lo hi: the cell along y, lo < hi."),
+    ("Environment", "Periodic", "Z"): KeyDoc("m", "not periodic",
+                                             "lo hi: the cell along z, lo < hi."),
 
     ("Materials", "Material", "Density"): KeyDoc("kg/m^3", "required", "Mass density."),
     ("Materials", "Material", "YoungModulus"): KeyDoc(

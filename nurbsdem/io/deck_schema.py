@@ -38,7 +38,8 @@ class EntrySpec:
 
 
 SCHEMA: dict[str, dict[str, EntrySpec]] = {
-    "Environment": {"Gravity": EntrySpec(False, head=F3)},
+    "Environment": {"Gravity": EntrySpec(False, head=F3),
+                    "Periodic": EntrySpec(False, {"X": F2, "Y": F2, "Z": F2})},
     "Materials": {"Material": EntrySpec(True, {"Density": F1, "YoungModulus": F1,
                                                "PoissonRatio": F1})},
     "Shapes": {"Shape": EntrySpec(True, {

@@ -1,0 +1,137 @@
+"""The checks of a periodic cell (``Periodic`` in block Environment, :class:`~nurbsdem.model.
+PeriodicSpec`) against the rest of a model: one-line errors naming the deck line.
+
+* The cell is at least twice the contact reach along each periodic axis, the reach being the
+  largest sum of two bounding radii plus the default skin (:func:`~nurbsdem.contact.periodic.
+  check_cell`): a particle would otherwise touch its own image, or a partner twice.
+* A flat wall lies along every periodic axis (its normal has no component along one): a
+  wall across a periodic direction would cut the cell, and its images are not modelled.  It
+  covers the cell along those axes and, beyond each periodic face, the largest bounding radius
+  plus the skin, so that a particle near a face (wrapped into the cell at list builds only,
+  it strays up to half the skin out) finds the wall under it.  A floor with normal z under a
+  cell periodic in x and y is the usual case.  Checked at the walls' deck positions.
+* Each particle starts inside the cell, clear of its periodic faces: the placement does not
+  see overlaps through a face (:func:`check_periodic_bodies`).
+* Inlets and outlets, mesh and surface walls, ``Damping Implicit`` and several MPI ranks are
+  refused with a periodic cell.
+
+Lengths in metres.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .check_rules import wall_plane
+from .errors import vector_text
+
+if TYPE_CHECKING:
+    from .model import Model
+
+
+def _radii(model: "Model") -> tuple[float, float]:
+    """The largest and smallest bounding radius of the model's shapes (m)."""
+    r = [float(e.bounding_radius) for e in model.shapes.values()]
+    return (max(r), min(r)) if r else (0.0, 0.0)
+
+
+def periodic_reach(model: "Model", margin: float = 0.0, skin: float | None = None) -> float:
+    """The contact reach of the model's particles: the largest sum of two bounding radii plus
+    the margin and the skin (default: the scene's, a fraction of the smallest radius), m."""
+    from .contact.scene import SKIN_FRACTION
+    rmax, rmin = _radii(model)
+    return 2.0 * rmax + margin + (SKIN_FRACTION * rmin if skin is None else skin)
+
+
+def check_cell_reach(model: "Model", reach: float) -> None:
+    """The cell at least twice ``reach`` (m) along each periodic axis."""
+    from .contact.periodic import check_cell
+    p = model.periodic
+    try:
+        check_cell(p.cell(), reach)
+    except ValueError as exc:
+        raise model.error(f"Periodic: {exc}", p.line) from None
+
+
+def check_periodic(model: "Model") -> None:
+    """The module's checks of a model with a periodic cell (nothing without one)."""
+    p = model.periodic
+    if p is None:
+        return
+    if model.inlets or model.outlets:
+        raise model.error("Periodic: a periodic cell cannot be combined with inlets and "
+                          "outlets (block Flow)", p.line)
+    if model.curved_walls:
+        w = model.curved_walls[0]
+        raise model.error(f"wall {w.name}: mesh and surface walls cannot be combined with a "
+                          f"periodic cell (line {p.line}); flat walls can", w.line)
+    for s in model.steps:
+        if getattr(s, "damping", "explicit") == "implicit":
+            raise model.error(f"Step {s.id}: Damping Implicit cannot be combined with a "
+                              f"periodic cell (line {p.line})", s.line)
+    check_cell_reach(model, periodic_reach(model))
+    _check_walls(model)
+
+
+def _check_walls(model: "Model") -> None:
+    """Each flat wall along every periodic axis, covering the cell along it (module
+    docstring)."""
+    p = model.periodic
+    rmax, rmin = _radii(model)
+    beyond = periodic_reach(model) - rmax       # the largest bounding radius plus the skin
+    for w in model.walls:
+        o, a, b, n = wall_plane(w)
+        corners = np.array([o, o + a, o + b, o + a + b])
+        for k in np.flatnonzero(p.axes):
+            axis = "xyz"[k]
+            if abs(n[k]) > 1e-9:
+                raise model.error(f"wall {w.name}: its normal {vector_text(n)} has a component "
+                                  f"along the periodic axis {axis} (Periodic, line {p.line}): "
+                                  f"a flat wall must lie along every periodic axis", w.line)
+            w_lo, w_hi = corners[:, k].min(), corners[:, k].max()
+            if w_lo > p.lo[k] - beyond or w_hi < p.hi[k] + beyond:
+                raise model.error(
+                    f"wall {w.name} spans {w_lo:.6g} .. {w_hi:.6g} m along the periodic axis "
+                    f"{axis}: it must cover the cell ({p.lo[k]:.6g} .. {p.hi[k]:.6g} m, line "
+                    f"{p.line}) and {beyond:.6g} m beyond each face (the largest bounding "
+                    f"radius plus the skin)", w.line)
+
+
+def check_periodic_bodies(model: "Model", bodies, support) -> None:
+    """Each particle starts inside the cell and clear of its periodic faces (its exact
+    extent, to the overlap tolerance of :mod:`nurbsdem.check_rules`): two particles inside it
+    cannot then overlap through a face, which the placement does not see.  A ``Random``
+    group's Region lies inside the cell, inset by the particles' size.  ``support``: the
+    distance from a plane to a body's deepest point
+    (:func:`~nurbsdem.validation.plane_support_distance`)."""
+    from .check_rules import OVERLAP_TOLERANCE
+    p = model.periodic
+    if p is None or bodies is None or not len(bodies):
+        return
+    R = bodies.rotation_matrices()
+    for i in range(len(bodies)):
+        shape = model.shapes[int(bodies.shape_id[i])].shape
+        x, r = bodies.position[i], float(shape.bounding_radius)
+        for k in np.flatnonzero(p.axes):
+            for face, sign in ((p.lo[k], 1.0), (p.hi[k], -1.0)):
+                if sign * (x[k] - face) >= r:
+                    continue
+                n = np.zeros(3)
+                n[k] = sign
+                point = np.zeros(3)
+                point[k] = face
+                sd = support(shape, x, R[i], point, n)
+                if sd < -OVERLAP_TOLERANCE * r:
+                    raise model.error(
+                        f"particle {bodies.id[i]} (centroid {vector_text(x)} m) reaches "
+                        f"{-sd:.3g} m across the periodic face {'xyz'[k]} = {face:g} m "
+                        f"(Periodic, line {p.line}): particles start inside the cell, clear "
+                        f"of its faces", int(bodies.line[i]))
+
+
+def refuse_periodic_ranks(model: "Model", comm) -> None:
+    """A periodic cell runs on one MPI rank only."""
+    if model.periodic is not None and comm is not None and int(comm.size) > 1:
+        raise model.error("Periodic: a periodic cell runs on one MPI rank only; run without "
+                          "mpiexec", model.periodic.line)
