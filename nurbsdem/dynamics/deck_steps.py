@@ -569,10 +569,10 @@ class DeckSteps:
     @staticmethod
     def for_system(system) -> "DeckSteps | None":
         """The compiled stepper when the provider is a scene on one rank, without a periodic
-        cell, that has been called once (any contact law: the Hertz radii of NURBS contacts come from the curvature
-        kernel the Python path calls, :func:`_hertz_radii`) whose laws are all built in
-        (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with mesh and surface
-        walls met by exact spheres only, at rest or turning at constant rates
+        cell, that has been called once (any contact law: the Hertz radii of NURBS contacts
+        come from the curvature kernel the Python path calls, :func:`_hertz_radii`) whose laws
+        are all built in (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with
+        mesh and surface walls met by exact spheres only, at rest or turning at constant rates
         (:func:`_curved_provider`); else None."""
         from ..contact.scene import SceneContacts
         scene, curved = system.provider, _curved_provider(system.provider)
