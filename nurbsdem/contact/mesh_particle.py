@@ -79,7 +79,7 @@ def _near_triangles(mesh: MeshWall, c: np.ndarray, reach: float, work) -> np.nda
     """The triangles within ``reach`` (m) of the point c (mesh frame): the grid broad phase
     and the exact closest point of each (:mod:`nurbsdem.contact.mesh_wall`)."""
     stamp, tris, cand_q, cand_d, cand_f = work
-    mark = int(stamp.max()) + 1
+    mark = min(int(stamp.min()), -1) - 1     # below the sphere kernel's marks (from 0 up)
     n = triangles_near(c, reach, mesh.grid_origin, mesh.grid_cell, mesh.grid_dims,
                        mesh.cell_start, mesh.cell_tris, stamp, mark, tris)
     n = _triangle_candidates(c, reach, mesh.vertices, mesh.faces, mesh.normals, True, tris,
