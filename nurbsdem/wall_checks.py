@@ -3,7 +3,7 @@ every run and every Python step refuse or warn of about them, called from
 :mod:`nurbsdem.validation` (so the deck and the Python API share the rules and the messages).
 
 * **particles against the walls** (:func:`check_curved_walls_scene`, in
-  :func:`~nurbsdem.validation.validate_scene`).  The depth by which an exact sphere crosses
+  :func:`~nurbsdem.validation.validate_scene`).  The depth by which a particle crosses
   a wall's surface is the contact law's own: the solver's kernels at the wall's rest pose (the
   mesh's closest triangles, :mod:`nurbsdem.contact.mesh_wall`; the surface's projected
   Newton closest point, :mod:`nurbsdem.contact.surface_wall`), signed distance d − r.  A
