@@ -95,6 +95,35 @@ def _near_triangles(mesh: MeshWall, c: np.ndarray, reach: float, work) -> np.nda
 # ---------------------------------------------------------------------------- features
 
 
+def _may_hold(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray) -> np.ndarray:
+    """(T,) bool: whether the deepest point below each triangle's plane may project into it:
+    the support point along its normal facing the particle (one per distinct normal, within
+    1e-9) projects within 1e-8 of the mesh size of the triangle (the face contact is then
+    solved exactly, :func:`_face`)."""
+    tri = mesh.vertices[mesh.faces[near]]                          # (T, 3, 3)
+    n = mesh.normals[near]
+    n = n * np.where(np.einsum("ij,ij->i", oracle.centroid - tri[:, 0], n) >= 0.0,
+                     1.0, -1.0)[:, None]
+    keys, inverse = np.unique(np.round(n * 1e9), axis=0, return_inverse=True)
+    deepest = np.array([oracle.point(-n[np.flatnonzero(inverse.ravel() == k)[0]])[0]
+                        for k in range(len(keys))])
+    p = deepest[inverse.ravel()]
+    margin = 1e-8 * mesh.size
+    ok = np.ones(len(near), bool)
+    for k in range(3):
+        x, y, z = tri[:, k], tri[:, (k + 1) % 3], tri[:, (k + 2) % 3]
+        w = np.cross(n, y - x)                  # in-plane, normal to edge (x, y)
+        w *= np.where(np.einsum("ij,ij->i", w, z - x) > 0.0, 1.0, -1.0)[:, None]
+        ok &= np.einsum("ij,ij->i", p - x, w) >= -margin * np.linalg.norm(w, axis=1)
+    return ok
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b for 3-vectors (without numpy's general-axis overhead)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
 def _face(oracle: SupportOracle, mesh: MeshWall, tri: int):
     """(sd, p, q, d) of the face contact of triangle ``tri`` (module docstring), None when
     the deepest point projects outside it."""
@@ -117,7 +146,7 @@ def _edge_arc(t: np.ndarray, inward: list) -> tuple[np.ndarray, np.ndarray, floa
     [lo, hi] (rad) of the directions d = cos θ e1 + sin θ e2 with d · w ≥ 0 for each in-plane
     inward normal w of ``inward`` (the edge's normal cone)."""
     e1 = inward[0]
-    e2 = np.cross(t, e1)
+    e2 = _cross(t, e1)
     lo, hi = -0.5 * math.pi, 0.5 * math.pi
     for w in inward[1:]:
         phi = math.atan2(float(w @ e2), float(w @ e1))
@@ -183,7 +212,7 @@ def _tangent_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     e[k] = 1.0
     u1 = e - d * d[k]
     u1 /= np.linalg.norm(u1)
-    return u1, np.cross(d, u1)
+    return u1, _cross(d, u1)
 
 
 def _vertex(oracle: SupportOracle, V: np.ndarray, d0: np.ndarray):
@@ -217,17 +246,50 @@ def _vertex(oracle: SupportOracle, V: np.ndarray, d0: np.ndarray):
 # ---------------------------------------------------------------------------- the mesh
 
 
-def _features(mesh: MeshWall, near: np.ndarray):
-    """The edges {(i, j) i < j: [triangles]} and vertices {i: [triangles]} of the triangles
-    ``near``."""
+#: per mesh (by id, with the mesh itself): its edges and vertices that are not flat
+_TOPOLOGY: dict = {}
+
+
+def _topology(mesh: MeshWall) -> tuple[dict, dict, list, list]:
+    """(edges {(i, j) i < j: [triangles]}, vertices {i: [triangles]}, per triangle its keys
+    of both) of the mesh's edges and vertices that are not flat: an edge whose two triangles
+    lie in one plane on either side of it, and a vertex all of whose edges are such, have the
+    plane's normal only as their normal cone, where the faces hold every contact (computed
+    once per mesh)."""
+    hit = _TOPOLOGY.get(id(mesh))
+    if hit is not None and hit[0] is mesh:
+        return hit[1]
     edges: dict = {}
     verts: dict = {}
-    for tri in near.tolist():
-        f = mesh.faces[tri]
+    for tri, f in enumerate(mesh.faces.tolist()):
         for k in range(3):
-            i, j = int(f[k]), int(f[(k + 1) % 3])
+            i, j = f[k], f[(k + 1) % 3]
             edges.setdefault((min(i, j), max(i, j)), []).append(tri)
-            verts.setdefault(int(f[k]), []).append(tri)
+            verts.setdefault(f[k], []).append(tri)
+    sharp = {e: tris for e, tris in edges.items()
+             if not (len(tris) == 2 and float(_inward(mesh, tris[0], *e)
+                                              @ _inward(mesh, tris[1], *e)) <= -1.0 + 1e-12)}
+    bent = {i for e in sharp for i in e}
+    corners = {v: tris for v, tris in verts.items() if v in bent}
+    tri_edges: list = [[] for _ in range(len(mesh.faces))]
+    tri_verts: list = [[] for _ in range(len(mesh.faces))]
+    for e, tris in sharp.items():
+        for tri in tris:
+            tri_edges[tri].append(e)
+    for v, tris in corners.items():
+        for tri in tris:
+            tri_verts[tri].append(v)
+    data = (sharp, corners, tri_edges, tri_verts)
+    _TOPOLOGY[id(mesh)] = (mesh, data)
+    return data
+
+
+def _features(mesh: MeshWall, near: np.ndarray) -> tuple[dict, dict]:
+    """The edges {(i, j): [triangles]} and vertices {i: [triangles]} of the triangles
+    ``near`` that are not flat (:func:`_topology`)."""
+    sharp, corners, tri_edges, tri_verts = _topology(mesh)
+    edges = {e: sharp[e] for tri in near.tolist() for e in tri_edges[tri]}
+    verts = {v: corners[v] for tri in near.tolist() for v in tri_verts[tri]}
     return edges, verts
 
 
@@ -266,16 +328,6 @@ def _segment_distance(c: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> float:
     return float(np.linalg.norm(c - p0 - s * e))
 
 
-def _flat_interior(mesh: MeshWall, v: int, tris: list, edges: dict) -> bool:
-    """Whether vertex v lies inside a flat region: every triangle around it in one plane and
-    every edge at it shared by two of them (its normal cone is the plane's normal only, where
-    the faces hold every contact)."""
-    n0 = mesh.normals[tris[0]]
-    if any(abs(float(mesh.normals[tri] @ n0)) < 1.0 - 1e-12 for tri in tris):
-        return False
-    return all(len(ts) == 2 for (i, j), ts in edges.items() if v in (i, j))
-
-
 def _separated(oracle: SupportOracle, d: np.ndarray, points) -> bool:
     """Whether the plane of the particle's support point along the unit d has all ``points``
     beyond it (then none of them is inside the particle)."""
@@ -290,7 +342,7 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
     triangles ``near`` (module docstring), before the ties; ``active_only``: features the
     particle does not reach (a support plane separates them) are left out."""
     out = []
-    for tri in near.tolist():
+    for tri in near[_may_hold(oracle, mesh, near)].tolist():
         face = _face(oracle, mesh, tri)
         if face is not None:
             out.append(face + (FACE, tri, 1))
@@ -306,7 +358,7 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
             out.append(e[:4] + (EDGE_AB, tris[0], e[4]))
     for v, tris in verts.items():
         V = mesh.vertices[v]
-        if np.linalg.norm(V - c) > reach or _flat_interior(mesh, v, tris, edges):
+        if np.linalg.norm(V - c) > reach:
             continue
         d0 = -sum(_facing(oracle, mesh, tri) for tri in tris)
         if not np.linalg.norm(d0) > 1e-9:
