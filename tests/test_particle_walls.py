@@ -110,7 +110,7 @@ def _vertex_reference(c, M, V):
         return c @ d + math.sqrt(d @ M @ d) - d @ V
     best = min((minimize(f, [a, b], method="Nelder-Mead",
                          options=dict(xatol=1e-13, fatol=1e-17, maxiter=4000))
-                for a in np.linspace(0.2, 2.9, 6) for b in np.linspace(0, 6, 7)),
+                for a in np.linspace(0.3, 2.8, 3) for b in np.linspace(0, 5, 3)),
                key=lambda r: r.fun)
     return -best.fun
 
@@ -199,3 +199,45 @@ def test_a_pocket_narrower_than_the_particle_is_refused():
     wide = build_surface_wall([cylinder_patch(0.03, 0.2, base=(0, 0, -0.1), axis=(0, 0, 1))])
     f, i, ok = particle_surface_row(TABLE, 0, *_pose([0.0, 0.0155, 0.0], R), wide)
     assert ok and f[F_SD] == pytest.approx(-5e-4, abs=1e-15)
+
+
+def _fold(z_ridge: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two 0.2 x 0.1 m faces meeting along the y axis, their outer edges at height 0 and x =
+    ±0.1, the fold at height z_ridge (> 0 a ridge: convex; < 0 a valley: concave)."""
+    v = np.array([[-0.1, -0.1, 0], [-0.1, 0.1, 0], [0, -0.1, z_ridge], [0, 0.1, z_ridge],
+                  [0.1, -0.1, 0], [0.1, 0.1, 0]], float)
+    f = np.array([[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]])
+    return v, f
+
+
+def test_convex_fold_gives_one_continuous_contact_and_a_concave_fold_one_per_face():
+    """Over a ridge: one contact as the ellipsoid crosses it, a face's, then the edge's
+    (against the support function), then the other face's, its depth continuous.  In a
+    valley: one contact per face, each the flat wall's of that face's plane."""
+    R = _rotation([0.4, 0.2, -0.3])
+    M = _support_matrix(R)
+    ridge = build_mesh_wall(*_fold(0.01))
+    sds, feats = [], []
+    for x in np.linspace(-0.02, 0.02, 41):                 # along the faces, 1 mm deep
+        c = np.array([x, 0.0, 0.01 - 0.1 * abs(x) + math.sqrt(M[2, 2]) - 1e-3])
+        rf, ri = particle_mesh_contacts(TABLE, 0, *_pose(c, R), ridge)
+        assert len(rf) == 1
+        sds.append(rf[0, F_SD])
+        on_edge = abs(rf[0, F_PB]) < 1e-12
+        feats.append(on_edge)
+        if on_edge:
+            ref = _edge_reference(c, M, np.array([0, -0.1, 0.01]), np.array([0, 0.1, 0.01]))
+            assert rf[0, F_SD] == pytest.approx(ref, abs=1e-11 * max(AXES))
+    assert any(feats) and not all(feats)
+    assert np.max(np.abs(np.diff(sds))) < 2e-4              # no jump between the regions
+    valley = build_mesh_wall(*_fold(-0.01))
+    pos, R = _pose([0.0, 0.0, -0.01 + AXES[2] - 1e-3], np.eye(3))
+    rf, ri = particle_mesh_contacts(TABLE, 0, pos, R, valley)
+    assert len(rf) == 2
+    for row in rf:
+        nb = -row[F_N:F_N + 3]                              # the face's normal
+        ref = detect_wall(ELLIPSOID, (pos, R), (np.array([0, -0.1, -0.01]),
+                                                 *((np.array([0.1, 0, 0.01]), [0, 0.2, 0])
+                                                   if nb[0] < 0 else
+                                                   ([0, 0.2, 0], np.array([-0.1, 0, 0.01])))))
+        assert row[F_SD] == pytest.approx(ref.signed_distance, abs=1e-16)

@@ -34,10 +34,11 @@ own region of normals, in which the minimum is a contact of that feature:
 
 **One contact per flat or convex region** (the rule of :mod:`nurbsdem.contact.mesh_wall`): a
 face contact always counts; an edge or vertex contact counts only with its normal in the
-feature's normal cone over all triangles around it (so a convex fold gives one edge contact
-between the two face regions and a concave fold none: one per face there); contacts at the
-same point (within 1e-12 of the mesh size, or 1e-9 for an edge or vertex contact, whose
-point comes from an iteration) are one, the face's first.  The cone and the face tests
+feature's normal cone over all triangles around it, on the particle's side (against the sum
+of its triangles' normals facing the particle's centroid), so a convex fold gives one edge
+contact between the two face regions and a concave fold none (one per face there).
+Contacts at the same point (within 1e-12 of the mesh size, or 1e-9 for an edge or vertex
+contact, whose point comes from an iteration) are one, the face's first.  The cone and the face tests
 meet at their borders (the deepest point projecting onto an edge or vertex), where the two
 contacts are the same: the contact passes from one feature to the next continuously.
 
@@ -328,6 +329,16 @@ def _segment_distance(c: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> float:
     return float(np.linalg.norm(c - p0 - s * e))
 
 
+def _on_particle_side(oracle: SupportOracle, mesh: MeshWall, tris: list,
+                      d: np.ndarray) -> bool:
+    """Whether the contact normal d (from the particle to the wall) of an edge or vertex
+    contact points against the sum of its triangles' normals facing the particle: the
+    feature's normal cone on the particle's side (a fold concave towards the particle has its
+    cone on the other side of a two-sided mesh, where the fold is convex)."""
+    facing = sum(_facing(oracle, mesh, tri) for tri in tris)
+    return float(d @ facing) < 0.0
+
+
 def _separated(oracle: SupportOracle, d: np.ndarray, points) -> bool:
     """Whether the plane of the particle's support point along the unit d has all ``points``
     beyond it (then none of them is inside the particle)."""
@@ -354,7 +365,7 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
             continue
         inward = [_inward(mesh, tri, i, j) for tri in tris]
         e = _edge(oracle, p0, p1, inward, active_only)
-        if e is not None:
+        if e is not None and _on_particle_side(oracle, mesh, tris, e[3]):
             out.append(e[:4] + (EDGE_AB, tris[0], e[4]))
     for v, tris in verts.items():
         V = mesh.vertices[v]
@@ -367,7 +378,8 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
         if active_only and _separated(oracle, d0, [V]):
             continue
         hit = _vertex(oracle, V, d0)
-        if hit is not None and _in_vertex_cone(mesh, v, tris, hit[3]):
+        if (hit is not None and _in_vertex_cone(mesh, v, tris, hit[3])
+                and _on_particle_side(oracle, mesh, tris, hit[3])):
             out.append(hit[:4] + (VERTEX_A, tris[0], hit[4]))
     return out
 
