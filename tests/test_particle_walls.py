@@ -1,9 +1,10 @@
 """NURBS particles against mesh and NURBS-surface walls (nurbsdem.contact.mesh_particle,
 nurbsdem.contact.surface_particle): an exact ellipsoid on a two-triangle floor and over a
 tessellated plane against the flat wall's kernel, edge and vertex contacts against the
-ellipsoid's analytic support function, the ellipsoid inside an exact cylinder against the
-analytic contact and the same cylinder as a mesh (chord error), a wall pocket narrower than
-the particle refused, and a drop into the drum with its energy balance."""
+ellipsoid's analytic support function, convex and concave folds, the ellipsoid inside an
+exact cylinder against the analytic contact and the same cylinder as a mesh (chord error), a
+wall pocket narrower than the particle refused, and moved walls.  (Runs: test_mesh_walls_deck,
+test_wall_checks.)"""
 from __future__ import annotations
 
 import math
@@ -241,3 +242,27 @@ def test_convex_fold_gives_one_continuous_contact_and_a_concave_fold_one_per_fac
                                                    if nb[0] < 0 else
                                                    ([0, 0.2, 0], np.array([-0.1, 0, 0.01])))))
         assert row[F_SD] == pytest.approx(ref.signed_distance, abs=1e-16)
+
+
+def test_a_moved_wall_gives_the_contacts_of_the_particle_moved_back():
+    """A mesh and a surface wall at a pose (R, t): the contact of a particle equals that of
+    the particle brought into the wall's frame, turned and shifted back."""
+    Rw, tw = _rotation([0.2, -0.7, 0.4]), np.array([0.3, -0.1, 0.2])
+    R = _rotation([0.4, 0.2, -0.3])
+    drum = build_surface_wall([cylinder_patch(RADIUS, LENGTH)])
+    floor = build_mesh_wall(*plane_mesh(4, half=0.1))
+    M = _support_matrix(R)
+    for wall, c in ((drum, [RADIUS - math.sqrt(M[0, 0]) + 5e-4, 0.0, 0.2]),
+                    (floor, [0.01, 0.02, math.sqrt(M[2, 2]) - 5e-4])):
+        pos, Rb = _pose(c, R)
+        if wall is drum:
+            f0 = particle_surface_row(TABLE, 0, pos, Rb, wall)[0][None]
+            f1 = particle_surface_row(TABLE, 0, Rw @ pos + tw, Rw @ Rb, wall, Rw, tw)[0][None]
+        else:
+            f0 = particle_mesh_contacts(TABLE, 0, pos, Rb, wall)[0]
+            f1 = particle_mesh_contacts(TABLE, 0, Rw @ pos + tw, Rw @ Rb, wall, Rw, tw)[0]
+        assert len(f0) == len(f1) == 1 and f0[0, F_SD] < 0
+        assert f1[0, F_SD] == pytest.approx(f0[0, F_SD], abs=1e-15)
+        np.testing.assert_allclose(f1[0, F_N:F_N + 3], Rw @ f0[0, F_N:F_N + 3], atol=1e-12)
+        np.testing.assert_allclose(f1[0, F_PA:F_PA + 3], Rw @ f0[0, F_PA:F_PA + 3] + tw,
+                                   atol=1e-14)
