@@ -85,7 +85,7 @@ class CurvedWallMotion:
             self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
                               for w in model.curved_walls]
         radius, spheres = sphere_radii(model, shape_ids)
-        walls = [CurvedWall(kind, geom, self.pose(k))
+        walls = [CurvedWall(kind, geom, self.pose(k), name=model.curved_walls[k].name)
                  for k, (kind, geom) in enumerate(self._geometry)]
         return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls),
                                   table=getattr(scene, "table", None),

@@ -91,11 +91,14 @@ class WallPose:
 @dataclass
 class CurvedWall:
     """One mesh or surface wall: its kind (:data:`~nurbsdem.contact.kinds.MESH_WALL` or
-    ``SURFACE_WALL``), geometry (:class:`MeshWall` or :class:`SurfaceWall`) and pose."""
+    ``SURFACE_WALL``), geometry (:class:`MeshWall` or :class:`SurfaceWall`), pose and
+    name."""
 
     kind: int
     geometry: MeshWall | SurfaceWall
     pose: WallPose = field(default_factory=WallPose)
+    #: the wall's name (in messages; empty: its index)
+    name: str = ""
     corners: np.ndarray = field(init=False)
     work: tuple = field(init=False, default=())
 
@@ -203,7 +206,8 @@ class CurvedWallContacts:
                 rf = rf[:MAX_PER_WALL]
             else:
                 f, ii, ok = particle_surface_row(self.table, s, kin.pose_origin[i], kin.R[i],
-                                                 g, R, tv, where=f"surface wall {w_i}")
+                                                 g, R, tv, where=f"surface wall "
+                                                 f"{w.name or w_i!r}")
                 rf = f[None] if (ok and ii[I_ACTIVE]) else np.zeros((0, NF))
             rows.append(rf)
             owners.append(np.full(len(rf), i, np.int64))

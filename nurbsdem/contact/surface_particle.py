@@ -29,7 +29,8 @@ negative definite (its eigenvalues negative): on every convex or flat wall, and 
 wall whose radius of curvature exceeds the particle's (a particle inside a drum wider than
 it).  Where the wall curves more tightly than the particle (a pocket narrower than the
 particle: two contact points, or a ring) the formulation has no unique solution: the solve
-reports it (:class:`ContactNotUnique`), as it reports a Newton that does not converge.
+reports it (:class:`ContactNotUnique`) for a particle that crosses the wall, as it reports a
+Newton that does not converge there.
 
 The wall is one-sided: a particle whose centroid is behind the surface makes no contact.
 Lengths in metres; rows in the layout of :mod:`nurbsdem.contact.lcp` (``I_PB``: the wall's
@@ -109,8 +110,8 @@ def _step_in(x: float, dx: float, lo: float, hi: float, wrap: bool) -> float:
 
 
 def _solve_patch(oracle: SupportOracle, wall: SurfaceWall, ip: int, u: float, v: float):
-    """Projected Newton on patch ip from (u, v): (sd, p, S, n, u, v, iterations, unique)
-    or None when it does not converge."""
+    """Projected Newton on patch ip from (u, v): (sd, p, S, n, u, v, iterations, unique),
+    or (sd,) of the last iterate when it does not converge (None: no support point)."""
     u0, u1, v0, v1 = wall.dom[ip]
     wrap_u, wrap_v = bool(wall.periodic[ip, 0]), bool(wall.periodic[ip, 1])
     ev = np.zeros((6, 3))
@@ -123,7 +124,7 @@ def _solve_patch(oracle: SupportOracle, wall: SurfaceWall, ip: int, u: float, v:
         try:
             step = -np.linalg.solve(J, F)
         except np.linalg.LinAlgError:
-            return None
+            return (sd,)
         fix_u = not wrap_u and ((u <= u0 and step[0] < 0.0) or (u >= u1 and step[0] > 0.0))
         fix_v = not wrap_v and ((v <= v0 and step[1] < 0.0) or (v >= v1 and step[1] > 0.0))
         if fix_u and fix_v:
@@ -140,7 +141,7 @@ def _solve_patch(oracle: SupportOracle, wall: SurfaceWall, ip: int, u: float, v:
         step[1] = max(min(step[1], MAX_STEP * (v1 - v0)), -MAX_STEP * (v1 - v0))
         u = _step_in(u, step[0], u0, u1, wrap_u)
         v = _step_in(v, step[1], v0, v1, wrap_v)
-    return None
+    return (sd,)
 
 
 def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
@@ -153,7 +154,8 @@ def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
     world frame, normal from the particle to the wall.  Each patch whose sample nearest to
     the centroid lies within the samples' spacing of the nearest overall is solved; the
     deepest converged contact wins.  Raises :class:`ContactNotUnique` (naming ``where``)
-    when a patch within reach has no converged or no unique contact (module docstring)."""
+    when the particle crosses a patch (sd < 0) whose contact does not converge or is not
+    unique (module docstring); apart from the wall, neither matters."""
     R = np.eye(3) if R is None else np.asarray(R, float)
     t = np.zeros(3) if t is None else np.asarray(t, float)
     oracle = SupportOracle(table, shape, R.T @ (np.asarray(pos, float) - t),
@@ -173,11 +175,13 @@ def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
             continue                         # the particle does not reach this patch
         k = best_k[ip]
         hit = _solve_patch(oracle, wall, ip, wall.seed_uv[k, 0], wall.seed_uv[k, 1])
-        if hit is None:
+        if hit is None or (len(hit) == 1 and not hit[0] < 0.0):
+            continue                         # no support point, or clear of the wall
+        if len(hit) == 1:
             raise ContactNotUnique(f"{where}: the contact of a particle (centroid "
                                    f"{np.round(R @ c + t, 6).tolist()} m) with patch {ip} "
                                    f"did not converge")
-        if not hit[7]:
+        if not hit[7] and hit[0] < 0.0:
             raise ContactNotUnique(f"{where}: the contact of a particle (centroid "
                                    f"{np.round(R @ c + t, 6).tolist()} m) with patch {ip} is "
                                    f"not unique: the wall curves more tightly than the "
