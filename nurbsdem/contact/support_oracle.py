@@ -15,11 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from .detect import _work
-from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_FAIL, I_VALID, NF, NI
+from .lcp import F_PA, I_FAIL, I_VALID, NF, NI
 from .stage2 import _MA
 from .wall import solve_wall
 
-__all__ = ["SupportOracle", "F_N", "F_PA", "F_PAR", "F_PB", "F_SD"]
+__all__ = ["SupportOracle"]
 
 #: the parameter rectangle of the query planes: (u_min, u_max, v_min, v_max)
 UNIT_DOMAIN = np.array([0.0, 1.0, 0.0, 1.0])
@@ -54,6 +54,7 @@ class SupportOracle:
         self.res_f = np.zeros(NF)
         self.res_i = np.zeros(NI, np.int64)
         self.no_mask = np.zeros(0, np.bool_)
+        self._M = np.zeros((3, 3))
         self.calls = 0
 
     def plane(self, origin: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray,
