@@ -266,3 +266,32 @@ def test_a_moved_wall_gives_the_contacts_of_the_particle_moved_back():
         np.testing.assert_allclose(f1[0, F_N:F_N + 3], Rw @ f0[0, F_N:F_N + 3], atol=1e-12)
         np.testing.assert_allclose(f1[0, F_PA:F_PA + 3], Rw @ f0[0, F_PA:F_PA + 3] + tw,
                                    atol=1e-14)
+
+
+def test_over_the_corner_of_a_cube_one_contact_passes_face_edge_vertex():
+    """The ellipsoid carried diagonally over a corner of a 0.2 m cube (a closed convex mesh)
+    at a constant height: one contact while it touches, from the top face through the edges'
+    and the corner's regions (the vertex's against the support function), continuous."""
+    import trimesh
+    box = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    cube = build_mesh_wall(box.vertices, box.faces)
+    corner = np.array([0.1, 0.1, 0.1])
+    R = _rotation([0.4, 0.2, -0.3])
+    M = _support_matrix(R)
+    sds, seen = [], set()
+    low = -M[:, 2] / math.sqrt(M[2, 2])               # the lowest point, from the centre
+    for s in np.linspace(-0.01, 0.01, 41):             # lowest point over the corner at s = 0
+        c = corner - low + np.array([s + 0.002, 0.8 * s, -1e-3])
+        rf, _ = particle_mesh_contacts(TABLE, 0, *_pose(c, R), cube)
+        assert len(rf) <= 1
+        if len(rf) == 0:
+            break
+        sds.append(rf[0, F_SD])
+        q = rf[0, F_PB:F_PB + 3]
+        on = tuple(bool(abs(q[k] - 0.1) < 1e-12) for k in range(3))
+        if sum(on) == 3 and 3 not in seen:
+            assert rf[0, F_SD] == pytest.approx(_vertex_reference(c, M, corner),
+                                                abs=1e-11 * max(AXES))
+        seen.add(sum(on))
+    assert seen == {1, 2, 3}                        # a face, an edge and the corner
+    assert np.max(np.abs(np.diff(sds, 2))) < 3e-5     # its slope changes smoothly: no jump
