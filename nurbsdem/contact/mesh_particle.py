@@ -49,6 +49,7 @@ of the feature; ``I_PA``: −1).
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 
@@ -247,7 +248,8 @@ def _vertex(oracle: SupportOracle, V: np.ndarray, d0: np.ndarray):
 # ---------------------------------------------------------------------------- the mesh
 
 
-#: per mesh (by id, with the mesh itself): its edges and vertices that are not flat
+#: per mesh (by id, with a weak reference to it; dropped with the mesh): its edges and
+#: vertices that are not flat
 _TOPOLOGY: dict = {}
 
 
@@ -258,7 +260,7 @@ def _topology(mesh: MeshWall) -> tuple[dict, dict, list, list]:
     plane's normal only as their normal cone, where the faces hold every contact (computed
     once per mesh)."""
     hit = _TOPOLOGY.get(id(mesh))
-    if hit is not None and hit[0] is mesh:
+    if hit is not None and hit[0]() is mesh:
         return hit[1]
     edges: dict = {}
     verts: dict = {}
@@ -281,7 +283,8 @@ def _topology(mesh: MeshWall) -> tuple[dict, dict, list, list]:
         for tri in tris:
             tri_verts[tri].append(v)
     data = (sharp, corners, tri_edges, tri_verts)
-    _TOPOLOGY[id(mesh)] = (mesh, data)
+    _TOPOLOGY[id(mesh)] = (weakref.ref(mesh), data)
+    weakref.finalize(mesh, _TOPOLOGY.pop, id(mesh), None)
     return data
 
 
