@@ -6,8 +6,12 @@ Where each kind's pieces live today (docs/extending.md): the exact sphere in
 :mod:`nurbsdem.geometry.analytic` and :mod:`nurbsdem.contact.analytic` (closed forms), the
 NURBS particle in :mod:`nurbsdem.geometry` and :mod:`nurbsdem.contact.detect` (the LCP of
 paper Sec. 3.2) and :mod:`nurbsdem.contact.point_surface` (against a sphere), the flat wall
-in :mod:`nurbsdem.contact.wall` and :mod:`nurbsdem.contact.broadphase`; the dispatch of a
-scene's due pairs is :func:`nurbsdem.contact.listed.solve_due_into`.
+in :mod:`nurbsdem.contact.wall` and :mod:`nurbsdem.contact.broadphase`, the mesh and surface
+walls in :mod:`nurbsdem.contact.mesh_wall` and :mod:`nurbsdem.contact.surface_wall` (against
+spheres) and :mod:`nurbsdem.contact.mesh_particle` and
+:mod:`nurbsdem.contact.surface_particle` (against NURBS particles); the dispatch of a scene's
+due pairs is :func:`nurbsdem.contact.listed.solve_due_into`, that of the mesh and surface
+walls :class:`nurbsdem.contact.curved_walls.CurvedWallContacts`.
 """
 from __future__ import annotations
 
