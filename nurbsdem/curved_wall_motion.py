@@ -73,21 +73,23 @@ class CurvedWallMotion:
 
     def contacts(self, scene, shape_ids: np.ndarray, comm):
         """The scene with the model's mesh and surface walls for particles of shapes
-        ``shape_ids`` (exact spheres only; the Python path of the deck steps:
+        ``shape_ids`` (exact spheres by closed forms, NURBS particles by their support
+        mapping through the scene's contact table; the Python path of the deck steps:
         :mod:`nurbsdem.contact.curved_walls`); refused on several MPI ranks (``comm``)."""
         from .contact.curved_walls import CurvedWall, CurvedWallContacts
-        from .io.deck_curved import curved_wall_geometry, refuse_nurbs_particles, sphere_radii
+        from .io.deck_curved import curved_wall_geometry, sphere_radii
         model = self.model
-        refuse_nurbs_particles(model, shape_ids)
         if comm is not None:
             raise InputError("mesh and surface walls run on one MPI rank only")
         if self._geometry is None:
             self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
                               for w in model.curved_walls]
         radius, spheres = sphere_radii(model, shape_ids)
-        walls = [CurvedWall(kind, geom, self.pose(k))
+        walls = [CurvedWall(kind, geom, self.pose(k), name=model.curved_walls[k].name)
                  for k, (kind, geom) in enumerate(self._geometry)]
-        return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls))
+        return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls),
+                                  table=getattr(scene, "table", None),
+                                  body_shape=getattr(scene, "body_shape", None))
 
     def rest_state(self) -> dict:
         """The rest poses for a checkpoint: R (9,) then t (3,) per wall, keyed by str(k)."""

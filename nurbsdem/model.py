@@ -222,7 +222,8 @@ class PeriodicSpec:
 
 @dataclass
 class CurvedWallSpec:
-    """A wall of triangles or of NURBS patches, placed in the world, for exact spheres.
+    """A wall of triangles or of NURBS patches, placed in the world (for exact spheres and
+    NURBS particles).
 
     Made by ``Mesh ID Name n File f.stl [Scale s] [Position x y z] [Rotation rx ry rz]
     [Material m] [OneSided yes|no]`` (kind ``"mesh"``: an STL, OBJ or PLY surface, read by

@@ -3,7 +3,7 @@ every run and every Python step refuse or warn of about them, called from
 :mod:`nurbsdem.validation` (so the deck and the Python API share the rules and the messages).
 
 * **particles against the walls** (:func:`check_curved_walls_scene`, in
-  :func:`~nurbsdem.validation.validate_scene`).  The depth by which an exact sphere crosses
+  :func:`~nurbsdem.validation.validate_scene`).  The depth by which a particle crosses
   a wall's surface is the contact law's own: the solver's kernels at the wall's rest pose (the
   mesh's closest triangles, :mod:`nurbsdem.contact.mesh_wall`; the surface's projected
   Newton closest point, :mod:`nurbsdem.contact.surface_wall`), signed distance d − r.  A
@@ -26,8 +26,10 @@ every run and every Python step refuse or warn of about them, called from
   at the end of each step by the steps' poses so far; a point in front of a flat wall at the
   start that ends behind it, within the wall's rectangle, is an error at the step's line.
 
-Only exact spheres meet these walls (a NURBS particle against them is refused), so only
-they are checked.  Lengths in metres, angles in radians.
+A NURBS particle is checked as a sphere is, its depth the solver's NURBS kernels' at its
+pose (:mod:`nurbsdem.contact.mesh_particle`, :mod:`nurbsdem.contact.surface_particle`), the
+accepted overlap that of its bounding radius (as against a flat wall).  Lengths in metres,
+angles in radians.
 """
 from __future__ import annotations
 
@@ -231,6 +233,36 @@ def surface_crossings(geometry, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarra
     return front, back
 
 
+def nurbs_crossings(geometry, shapes: Sequence, x: np.ndarray,
+                    R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(front (N,), back (N,)) as :func:`mesh_crossings`, for NURBS particles (``shapes``
+    (N,), centroids x (N,3) m, rotations R (N,3,3)) against a mesh or surface wall at rest:
+    the deepest contact of the solver's kernels, in front of the wall or (a one-sided wall)
+    behind it."""
+    from .contact.detect import table_of
+    from .contact.lcp import F_N, F_SD, I_ACTIVE, I_PB
+    from .contact.mesh_particle import particle_mesh_contacts
+    from .contact.mesh_wall import MeshWall
+    from .contact.surface_particle import particle_surface_row
+    front, back = np.zeros(len(x)), np.zeros(len(x))
+    for k, shape in enumerate(shapes):
+        pos = x[k] - R[k] @ np.asarray(shape.centroid, float)
+        if isinstance(geometry, MeshWall):
+            rf, _ = particle_mesh_contacts(table_of(shape), 0, pos, R[k], geometry)
+            front[k] = max(0.0, -rf[:, F_SD].min()) if len(rf) else 0.0
+            if not geometry.two_sided:
+                rf, ri = particle_mesh_contacts(table_of(shape), 0, pos, R[k],
+                                                replace(geometry, two_sided=True))
+                behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3],
+                                   geometry.normals[ri[:, I_PB]]) > 0
+                back[k] = max(0.0, -rf[behind, F_SD].min()) if behind.any() else 0.0
+            continue
+        res_f, res_i, ok = particle_surface_row(table_of(shape), 0, pos, R[k], geometry)
+        if ok and res_f[F_SD] < 0:
+            (front if res_i[I_ACTIVE] else back)[k] = -res_f[F_SD]
+    return front, back
+
+
 def _solid_side(spec: "CurvedWallSpec", geometry, x: np.ndarray) -> tuple[np.ndarray, bool]:
     """(on the solid side (N,) bool, fronts face out) of the centres x for a closed,
     consistently oriented one-sided mesh (its back: inside when its fronts face out, outside
@@ -249,8 +281,9 @@ def _solid_side(spec: "CurvedWallSpec", geometry, x: np.ndarray) -> tuple[np.nda
 def check_curved_walls_scene(model: "Model", bodies: "Bodies | None",
                              index: Sequence[int] | None = None) -> None:
     """Each mesh and surface wall read once: its size against the particles' (warnings,
-    :func:`warn_mesh_size`), then the exact spheres of ``bodies`` (of ``index``, default all;
-    None: none) against it (:func:`check_bodies_against_curved_wall`)."""
+    :func:`warn_mesh_size`), then the particles of ``bodies`` (of ``index``, default all;
+    None: none) against it (:func:`check_bodies_against_curved_wall`): the exact spheres,
+    then the NURBS particles (:func:`nurbs_crossings`)."""
     if not model.curved_walls:
         return
     from .io.deck_curved import curved_wall_geometry, sphere_radii
@@ -258,9 +291,10 @@ def check_curved_walls_scene(model: "Model", bodies: "Bodies | None",
     if bodies is not None and len(bodies):
         idx = np.arange(len(bodies)) if index is None else np.asarray(index, np.int64)
     r = np.zeros(0)
+    nurbs = np.zeros(0, np.int64)
     if len(idx):
         radius, sphere = sphere_radii(model, bodies.shape_id[idx])
-        idx, r = idx[sphere], radius[sphere]
+        idx, r, nurbs = idx[sphere], radius[sphere], idx[~sphere]
     x = np.ascontiguousarray(bodies.position[idx], float) if len(idx) else np.zeros((0, 3))
     sizes = _particle_sizes(model)
     for spec in model.curved_walls:
@@ -269,22 +303,51 @@ def check_curved_walls_scene(model: "Model", bodies: "Bodies | None",
             warn_mesh_size(model, spec, geometry.size, sizes)
         if len(idx):
             check_bodies_against_curved_wall(model, bodies, idx, x, r, spec, geometry)
+        if len(nurbs):
+            _check_nurbs_against_curved_wall(model, bodies, nurbs, spec, geometry)
+
+
+def _check_nurbs_against_curved_wall(model: "Model", bodies: "Bodies", idx: np.ndarray,
+                                     spec: "CurvedWallSpec", geometry) -> None:
+    """:func:`check_bodies_against_curved_wall` for the NURBS particles ``idx``: their depths
+    by :func:`nurbs_crossings`, their accepted overlap that of their bounding radii."""
+    shapes = [model.shapes[int(bodies.shape_id[i])].shape for i in idx]
+    r = np.array([float(s.bounding_radius) for s in shapes])
+    x = np.ascontiguousarray(bodies.position[idx], float)
+    R = bodies.rotation_matrices()[idx]
+    depths = _box_filtered(geometry, x, r, lambda k: nurbs_crossings(
+        geometry, [shapes[j] for j in k], x[k], R[k]))
+    check_bodies_against_curved_wall(model, bodies, idx, x, r, spec, geometry, depths)
+
+
+def _box_filtered(geometry, x: np.ndarray, r: np.ndarray, crossings):
+    """(front, back) (N,) of ``crossings`` (of the indices into x) for the particles whose
+    bounding boxes (x ± r) meet the wall's box, 0 for the others."""
+    from .contact.mesh_wall import MeshWall
+    pts, pad = ((geometry.vertices, 0.0) if isinstance(geometry, MeshWall)
+                else (geometry.seed_x, geometry.spacing))
+    near = _near_box(x, r, pts, pad)
+    front, back = np.zeros(len(x)), np.zeros(len(x))
+    if len(near):
+        front[near], back[near] = crossings(near)
+    return front, back
 
 
 def check_bodies_against_curved_wall(model: "Model", bodies: "Bodies", idx: np.ndarray,
                                      x: np.ndarray, r: np.ndarray, spec: "CurvedWallSpec",
-                                     geometry) -> None:
+                                     geometry, depths=None) -> None:
     """Raise at the deck line of the first exact sphere (bodies ``idx``, centres x (N,3) m,
     radii r (N,) m) that lies on the solid side of the closed one-sided mesh ``geometry``,
     crosses the wall from behind, or crosses it deeper than the resting overlap (module
-    docstring); warn of an accepted deep crossing."""
+    docstring); warn of an accepted deep crossing.  ``depths``: the (front, back) crossings
+    when given (NURBS particles, x their centroids), else the spheres'."""
     solid, outward = _solid_side(spec, geometry, x)
     if solid.any():
         k = int(np.flatnonzero(solid)[0])
         raise model.error(_solid_text(bodies, int(idx[k]), x[k], spec, outward),
                           int(bodies.line[idx[k]]))
     crossings = mesh_crossings if spec.kind == "mesh" else surface_crossings
-    front, back = crossings(geometry, x, r)
+    front, back = crossings(geometry, x, r) if depths is None else depths
     for k in np.flatnonzero((front > 0) | (back > 0)).tolist():
         _judge(model, bodies, int(idx[k]), x[k], float(r[k]), spec, float(front[k]),
                float(back[k]))

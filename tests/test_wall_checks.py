@@ -153,6 +153,22 @@ def test_a_sphere_crossing_a_surface_wall(files):
     assert len(parse_deck(_deck(files, ["0.1 0 -0.089"], walls)).bodies) == 1
 
 
+def test_an_ellipsoid_crossing_a_mesh_floor_or_the_drum_is_refused(files):
+    """An ellipsoid (semi-axis 0.02 m up) 1 mm into the floor and 5 mm into the drum's
+    mantle: refused with the depths of the solver's NURBS kernels; clear of them, accepted."""
+    def deck(position, walls):
+        d = _deck(files, [position], walls)
+        d.write_text(d.read_text().replace("Sphere Radius 0.01",
+                                           "Ellipsoid SemiAxes 0.01 0.015 0.02"))
+        return d
+    err = _refusal(deck("0.1 0.2 0.019", "  Mesh 7 Name floor File floor.stl"))
+    assert err.line == PARTICLE_LINE
+    assert "particle 1 (centre 0.1 0.2 0.019 m) penetrates mesh wall 'floor' by 0.001 m" in str(err)
+    err = _refusal(deck("0.1 0 -0.085", "  Surface 8 Name drum File drum.yaml"))
+    assert "penetrates surface wall 'drum' by 0.005 m" in str(err)
+    assert len(parse_deck(deck("0.1 0 -0.079", "  Surface 8 Name drum File drum.yaml")).bodies) == 1
+
+
 def test_a_random_group_across_a_mesh_wall_is_refused_at_its_line(files):
     deck = _deck(files, [], "  Mesh 7 Name floor File floor.stl")
     text = deck.read_text().replace("Particles\n", "Particles\n  Random 1 Shapes 1 Counts 40 "

@@ -1,24 +1,27 @@
-"""Mesh and NURBS-surface walls in the step: a contact provider that adds the contacts of exact
-spheres with triangle-mesh walls (:mod:`nurbsdem.contact.mesh_wall`) and open NURBS surface
-walls (:mod:`nurbsdem.contact.surface_wall`) to those of another provider (the scene of the
-particles and the flat walls, :class:`~nurbsdem.contact.scene.SceneContacts`).
+"""Mesh and NURBS-surface walls in the step: a contact provider that adds the contacts of the
+particles with triangle-mesh walls and open NURBS surface walls to those of another provider
+(the scene of the particles and the flat walls, :class:`~nurbsdem.contact.scene.SceneContacts`):
+exact spheres by :mod:`nurbsdem.contact.mesh_wall` and :mod:`nurbsdem.contact.surface_wall`,
+NURBS particles by their support mapping (:mod:`nurbsdem.contact.mesh_particle`,
+:mod:`nurbsdem.contact.surface_particle`).
 
 Each curved wall is a body of the system (global index ``N + first_wall + w``) held in its own
 frame and placed by a pose ``x_world = R(t) x_wall + t(t) + d(t)`` (:class:`WallPose`: fixed,
 or a rotation at a constant angular velocity about a centre, plus the body's prescribed
 displacement d(t) (m) from :class:`~nurbsdem.dynamics.rigid.Walls`, which carries the centre
-with it); the kernels bring the sphere's centre into the wall frame, so the wall's own
+with it); the kernels bring the particle's pose into the wall frame, so the wall's own
 broad-phase grid stays valid as it moves.
 
 Per evaluation and wall: the world box of the wall's points at its pose is tested against
-each sphere's bounding box (centre ± radius); a sphere that overlaps it is handed to the
-wall's kernel (the mesh's triangle grid, or the surface's nearest samples and projected
-Newton).  The pair solver of each (sphere, wall kind) comes from
-:data:`nurbsdem.contact.kinds.PAIR_SOLVER`; only exact spheres meet these walls.
+each particle's bounding box (centroid ± bounding radius; a sphere's own radius); a particle
+that overlaps it is handed to the wall's kernel (the mesh's triangle grid, or the surface's
+nearest samples and projected Newton).  The pair solver of each (particle kind, wall kind)
+comes from :data:`nurbsdem.contact.kinds.PAIR_SOLVER`.
 
-**Keys (tangential history).**  A sphere has one contact with a wall across a flat or convex
-region (the mesh kernel's rule), so the contact is keyed by the pair (body, wall), not by the
-triangle: a sphere sliding from one triangle to the next of a flat region keeps its spring.
+**Keys (tangential history).**  A particle has one contact with a wall across a flat or
+convex region (the mesh kernels' rule), so the contact is keyed by the pair (body, wall), not
+by the triangle: a particle sliding from one triangle to the next of a flat region keeps its
+spring.
 Where it has several (a concave fold: one per face) the k-th (in triangle order) takes its
 own key.  The keys lie above ``(N+W)^2``, clear of the ``a·(N+W) + b`` keys of the other
 provider.
@@ -35,9 +38,12 @@ from numba import njit
 
 from ..geometry.rotation import quat_matrix
 from .contactset import ContactSet
-from .kinds import MESH_ROWS, SPHERE, SURFACE_POINT, pair_solver
+from .kinds import (MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE, SURFACE_POINT,
+                    SURFACE_SUPPORT, pair_solver)
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
+from .mesh_particle import particle_mesh_contacts
 from .mesh_wall import MeshWall, make_workspace, sphere_mesh_rows
+from .surface_particle import particle_surface_row
 from .surface_wall import SurfaceWall, sphere_surface_row
 from .wall_skin import WallSkin
 
@@ -121,11 +127,14 @@ class WallPose:
 @dataclass
 class CurvedWall:
     """One mesh or surface wall: its kind (:data:`~nurbsdem.contact.kinds.MESH_WALL` or
-    ``SURFACE_WALL``), geometry (:class:`MeshWall` or :class:`SurfaceWall`) and pose."""
+    ``SURFACE_WALL``), geometry (:class:`MeshWall` or :class:`SurfaceWall`), pose and
+    name."""
 
     kind: int
     geometry: MeshWall | SurfaceWall
     pose: WallPose = field(default_factory=WallPose)
+    #: the wall's name (in messages; empty: its index)
+    name: str = ""
     corners: np.ndarray = field(init=False)
     work: tuple = field(init=False, default=())
 
@@ -198,21 +207,35 @@ def _surface_rows_of(idx, x, r, R, t, deg, ncp, koff, knots, pw, poff, dom, peri
 
 
 class CurvedWallContacts:
-    """A contact provider: ``base``'s contacts (None: none) and those of the spheres (radii
-    (N,) m, centred on the centroids; ``spheres`` (N,) bool: which particles are exact spheres)
-    with ``walls`` (:class:`CurvedWall`), the walls being bodies ``N + first_wall + w``."""
+    """A contact provider: ``base``'s contacts (None: none) and those of the particles with
+    ``walls`` (:class:`CurvedWall`), the walls being bodies ``N + first_wall + w``: the exact
+    spheres (``spheres`` (N,) bool; radii (N,) m, centred on the centroids) and, given
+    ``table`` (the :class:`~nurbsdem.contact.detect.ContactTable` of the particles' shapes)
+    and ``body_shape`` (N,) (each particle's shape in it), the NURBS particles (the others);
+    without a table only the spheres meet the walls."""
 
-    def __init__(self, base, radii, spheres, walls: list[CurvedWall], first_wall: int) -> None:
+    def __init__(self, base, radii, spheres, walls: list[CurvedWall], first_wall: int,
+                 table=None, body_shape=None) -> None:
         self.base = base
         self.radii = np.ascontiguousarray(radii, float)
         self.spheres = np.asarray(spheres, bool)
         self.walls = list(walls)
         self.first_wall = int(first_wall)
+        self.table = table
+        self.body_shape = None if body_shape is None else np.asarray(body_shape, np.int64)
+        #: the radius (m) of each particle's bounding sphere about its centroid (the broad
+        #: phase); 0 for a NURBS particle without a table (it meets no wall)
+        self.reach = self.radii.copy()
+        self.nurbs = ~self.spheres if table is not None else np.zeros_like(self.spheres)
+        if table is not None:
+            self.reach[self.nurbs] = np.asarray(table.radius, float)[self.body_shape[self.nurbs]]
         self._mark = 0
         self._skins: dict[int, WallSkin] = {}
         for w in self.walls:
             if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
                 raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
+            if pair_solver(NURBS_PARTICLE, w.kind, True) not in (MESH_SUPPORT, SURFACE_SUPPORT):
+                raise ValueError(f"no pair solver for a NURBS particle and wall kind {w.kind}")
 
     def __getattr__(self, name):               # the base scene's counters, timers and state
         base = self.__dict__.get("base")
@@ -230,15 +253,48 @@ class CurvedWallContacts:
                        n_bodies=kin.n_particles + first)
 
     def _candidates(self, x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        r = self.radii[:, None]
-        near = np.all((x + r >= lo) & (x - r <= hi), axis=1) & self.spheres
+        r = self.reach[:, None]
+        near = np.all((x + r >= lo) & (x - r <= hi), axis=1) & (self.spheres | self.nurbs)
         return np.flatnonzero(near).astype(np.int64)
 
-    def _wall_rows(self, w: CurvedWall, x: np.ndarray, t: float, d: np.ndarray):
-        """(rows_f, rows_i, owner, rank) of the spheres' contacts with wall w at time t (s),
-        displaced by d (3,) m."""
-        R, tv = w.pose.at(t, d)
-        idx = self._candidates(x, *w.world_box(R, tv))
+    def _nurbs_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
+        """(rows_f, owner, rank) of the NURBS particles ``idx``' contacts with wall w at the
+        pose (R, tv)."""
+        rows, owners, ranks = [], [], []
+        g = w.geometry
+        for i in idx.tolist():
+            s = int(self.body_shape[i])
+            if isinstance(g, MeshWall):
+                rf, _ = particle_mesh_contacts(self.table, s, kin.pose_origin[i], kin.R[i], g,
+                                               R, tv, w.work)
+                rf = rf[:MAX_PER_WALL]
+            else:
+                f, ii, ok = particle_surface_row(self.table, s, kin.pose_origin[i], kin.R[i],
+                                                 g, R, tv, where=f"surface wall "
+                                                 f"{w.name or w_i!r}")
+                rf = f[None] if (ok and ii[I_ACTIVE]) else np.zeros((0, NF))
+            rows.append(rf)
+            owners.append(np.full(len(rf), i, np.int64))
+            ranks.append(np.arange(len(rf), dtype=np.int64))
+        if not rows:
+            return np.zeros((0, NF)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(rows), np.concatenate(owners), np.concatenate(ranks)
+
+    def _wall_rows(self, w: CurvedWall, kin, w_i: int, d: np.ndarray):
+        """(rows_f, owner, rank) of the particles' contacts with wall ``w`` (the w_i-th) at
+        the time of ``kin``, displaced by d (3,) m."""
+        x = np.ascontiguousarray(kin.x, float)
+        R, tv = w.pose.at(kin.t, d)
+        near = self._candidates(x, *w.world_box(R, tv))
+        sphere_rows = self._sphere_rows(w, near[self.spheres[near]], x, R, tv)
+        if not self.nurbs[near].any():
+            return sphere_rows
+        nurbs_rows = self._nurbs_rows(w, near[self.nurbs[near]], kin, R, tv, w_i)
+        return tuple(np.concatenate([a, b]) for a, b in zip(sphere_rows, nurbs_rows))
+
+    def _sphere_rows(self, w: CurvedWall, idx: np.ndarray, x: np.ndarray, R, tv):
+        """(rows_f, owner, rank) of the spheres ``idx``' contacts with wall w at the pose
+        (R, tv)."""
         g = w.geometry
         if isinstance(g, MeshWall):
             cap = MAX_PER_WALL * len(idx)
@@ -272,12 +328,11 @@ class CurvedWallContacts:
     def __call__(self, kin) -> ContactSet:
         cs = self.base(self._base_kinematics(kin)) if self.base is not None else None
         cs = ContactSet.empty() if cs is None else cs
-        x = np.ascontiguousarray(kin.x, float)
         N, nb = kin.n_particles, kin.n_bodies
         parts = []
         for w_i, w in enumerate(self.walls):
             d = kin.wall_displacement[self.first_wall + w_i]
-            rf, owner, rank = self._wall_rows(w, x, kin.t, d)
+            rf, owner, rank = self._wall_rows(w, kin, w_i, d)
             if len(owner) == 0:
                 continue
             body = N + self.first_wall + w_i

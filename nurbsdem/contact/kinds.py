@@ -6,8 +6,12 @@ Where each kind's pieces live today (docs/extending.md): the exact sphere in
 :mod:`nurbsdem.geometry.analytic` and :mod:`nurbsdem.contact.analytic` (closed forms), the
 NURBS particle in :mod:`nurbsdem.geometry` and :mod:`nurbsdem.contact.detect` (the LCP of
 paper Sec. 3.2) and :mod:`nurbsdem.contact.point_surface` (against a sphere), the flat wall
-in :mod:`nurbsdem.contact.wall` and :mod:`nurbsdem.contact.broadphase`; the dispatch of a
-scene's due pairs is :func:`nurbsdem.contact.listed.solve_due_into`.
+in :mod:`nurbsdem.contact.wall` and :mod:`nurbsdem.contact.broadphase`, the mesh and surface
+walls in :mod:`nurbsdem.contact.mesh_wall` and :mod:`nurbsdem.contact.surface_wall` (against
+spheres) and :mod:`nurbsdem.contact.mesh_particle` and
+:mod:`nurbsdem.contact.surface_particle` (against NURBS particles); the dispatch of a scene's
+due pairs is :func:`nurbsdem.contact.listed.solve_due_into`, that of the mesh and surface
+walls :class:`nurbsdem.contact.curved_walls.CurvedWallContacts`.
 """
 from __future__ import annotations
 
@@ -23,14 +27,18 @@ N_KINDS = 5
 #: pair solvers: the closed forms of :mod:`nurbsdem.contact.analytic`, the point-to-surface
 #: problem of :mod:`nurbsdem.contact.point_surface`, the LCP batch of
 #: :mod:`nurbsdem.contact.detect`, the support-mapping kernel of :mod:`nurbsdem.contact.wall`;
-#: NO_SOLVER: the two kinds never meet (two walls; a NURBS particle and a mesh or surface
-#: wall, not built yet)
+#: NO_SOLVER: the two kinds never meet (two walls)
 CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT = 0, 1, 2, 3
 #: a sphere against a mesh wall: per triangle in closed form, one contact per flat or convex
 #: region (:func:`~nurbsdem.contact.mesh_wall.sphere_mesh_rows`); against a surface wall: its
 #: closest point by projected Newton (:func:`~nurbsdem.contact.surface_wall.sphere_surface_row`);
 #: both run by :class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`
 MESH_ROWS, SURFACE_POINT = 4, 5
+#: a NURBS particle against a mesh wall: per face, edge and vertex by its support mapping
+#: (:func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts`); against a surface wall:
+#: Newton over the wall's parameters on the support point along the wall's normal
+#: (:func:`~nurbsdem.contact.surface_particle.particle_surface_row`); run by the same provider
+MESH_SUPPORT, SURFACE_SUPPORT = 6, 7
 NO_SOLVER = -1
 
 #: (kind, kind) -> pair solver (symmetric).  A sphere against a NURBS particle takes the LCP
@@ -40,7 +48,9 @@ for _a, _b, _solver in ((SPHERE, SPHERE, CLOSED_FORM), (SPHERE, FLAT_WALL, CLOSE
                         (SPHERE, NURBS_PARTICLE, POINT_SURFACE),
                         (NURBS_PARTICLE, NURBS_PARTICLE, LCP),
                         (NURBS_PARTICLE, FLAT_WALL, WALL_SUPPORT),
-                        (SPHERE, MESH_WALL, MESH_ROWS), (SPHERE, SURFACE_WALL, SURFACE_POINT)):
+                        (SPHERE, MESH_WALL, MESH_ROWS), (SPHERE, SURFACE_WALL, SURFACE_POINT),
+                        (NURBS_PARTICLE, MESH_WALL, MESH_SUPPORT),
+                        (NURBS_PARTICLE, SURFACE_WALL, SURFACE_SUPPORT)):
     PAIR_SOLVER[_a, _b] = PAIR_SOLVER[_b, _a] = _solver
 del _a, _b, _solver
 

@@ -16,8 +16,9 @@ A warm start begins at the previous support point moved to first order by the bo
 since (its du/de and body-frame direction are kept in the row: ``lcp._predicted_params``),
 so that the support mapping usually ends after one evaluation.
 
-Curved walls: use the general :func:`nurbsdem.contact.detect` with the wall as a closed
-convex body; a single open curved patch is not supported as body B.
+Curved walls: a triangle mesh takes this kernel per face
+(:mod:`nurbsdem.contact.mesh_particle`), an open NURBS surface wall its support mapping along
+the wall's normal (:mod:`nurbsdem.contact.surface_particle`).
 
 Lengths in metres. Result rows use the column constants of :mod:`nurbsdem.contact.lcp`;
 ``I_BROAD`` = 1 when the bounding sphere does not reach the plane, 2 when the deepest point

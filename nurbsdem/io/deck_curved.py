@@ -113,23 +113,9 @@ def sphere_radii(model, shape_ids) -> tuple[np.ndarray, np.ndarray]:
     return radius, spheres
 
 
-def refuse_nurbs_particles(model, shape_ids) -> None:
-    """InputError at the first mesh or surface wall's line when a particle is not an exact
-    sphere: a NURBS particle against these walls is not built yet."""
-    if not model.curved_walls or len(shape_ids) == 0:
-        return
-    _, spheres = sphere_radii(model, shape_ids)
-    if not spheres.all():
-        w = model.curved_walls[0]
-        sid = int(np.asarray(shape_ids)[~spheres][0])
-        raise model.error(f"{w.kind.capitalize()} wall {w.name!r}: shape {sid} is not an "
-                          f"exact sphere; only exact spheres contact mesh and surface walls "
-                          f"(NURBS particles against them are not built yet)", w.line)
-
-
 def check_curved_walls(builder, model) -> None:
-    """Cross-checks of a deck's mesh and surface walls: only exact spheres meet them, only
-    they turn, and ``ToContact`` moves flat walls only (it needs the wall's plane)."""
+    """Cross-checks of a deck's mesh and surface walls: only they turn, and ``ToContact``
+    moves flat walls only (it needs the wall's plane)."""
     from ..model import MoveWallStep
     curved = {w.name for w in model.curved_walls}
     for s in model.steps:
@@ -142,9 +128,6 @@ def check_curved_walls(builder, model) -> None:
         if isinstance(s, MoveWallStep) and s.wall in curved and s.to_contact:
             builder.fail(f"Step {s.id}: MoveWall {s.wall} ToContact moves flat walls only; "
                          f"move a mesh or surface wall by Displacement", s.line)
-    shape_ids = [sid for g in model.random_groups for sid in g.shape_ids]
-    shape_ids += [p.shape_id for p in model.particles]
-    refuse_nurbs_particles(model, [sid for sid in shape_ids if sid in model.shapes])
 
 
 def rotate_step(builder, e, name: str):
