@@ -257,6 +257,7 @@ def main(argv: list[str]) -> dict:
         print(f"ratio nurbsdem (NURBS drum) / Yade time: {n['loop'] / y['wall']:.2f}; angles "
               f"differ by {n['angle'] - y['angle']:+.2f} deg; torques by "
               f"{100 * (n['torque'] / y['torque'] - 1):+.1f} % (Yade at dt {dt:.3g} s)")
+    out.update(count=count, window=WINDOW, T=T)
     return out
 
 

@@ -862,6 +862,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
         _section_large(rep, workdir)
         _section_settled(rep)
     section_spheres(rep)
+    section_drum(rep)
     section_point_surface(rep)
     _section_paper(rep, workdir, quick)
 
@@ -1167,6 +1168,37 @@ def section_spheres(rep: Report) -> None:
         rep.headline["spheres"] = dict(ratio=None, nurbsdem=nd["loop"], yade=None)
 
 
+def section_drum(rep: Report) -> None:
+    """A rotating drum of spheres against the real Yade (benchmarks/bench_drum.py)."""
+    import bench_drum
+    rep.add("### A rotating drum against Yade\n")
+    r = bench_drum.main(["--quick"] if rep.quick else [])
+    rows = [[name, fmt(res.get("loop", res.get("wall")), ".2f"),
+             f"{res['angle']:.2f} ± {res['angle_spread']:.2f}", fmt(res["torque"], ".4f")]
+            for name, res in (("nurbsdem, exact NURBS drum", r["nurbs"]),
+                              ("nurbsdem, mesh drum", r["mesh"]),
+                              (f"Yade, {bench_drum.SEGMENTS} facets", r["yade"]))
+            if isinstance(res, dict)]
+    rep.add(f"`benchmarks/bench_drum.py`: {r['count']} spheres (radii "
+            f"{', '.join(str(x) for x in bench_drum.RADII)} m) in a drum of radius "
+            f"{bench_drum.R_DRUM} m and length {bench_drum.LENGTH} m turning at Froude number "
+            f"{bench_drum.FROUDE} after settling; the same positions, linear law and time step "
+            "for both codes, one thread each; the dynamic angle of repose (the bed's tilt) and "
+            f"the drive torque over the last {r['window']} s.\n\n"
+            + md_table(["code", "time loop s", "angle of repose (deg)", "drive torque N m"],
+                       rows) + "\n")
+    y = r["yade"]
+    if isinstance(y, dict):
+        n = r["nurbs"]
+        ratio = n["loop"] / y["wall"]
+        rep.add(f"Ratio nurbsdem (NURBS drum) / Yade: **{ratio:.2f}**; angles differ by "
+                f"{n['angle'] - y['angle']:+.2f} degrees, torques by "
+                f"{100 * (n['torque'] / y['torque'] - 1):+.1f} %.\n")
+        rep.headline["drum"] = dict(ratio=ratio, angle=n["angle"] - y["angle"])
+    else:
+        rep.add(f"{y}.\n")
+
+
 # =========================================================================== 6. fit
 def section_fit(rep: Report) -> None:
     """Accuracy of ``nurbsdem fit`` on exact inputs (ellipsoid meshes) and on the synthetic
@@ -1423,6 +1455,11 @@ def _headline_md(rep: Report) -> str:
     if sp and sp.get("ratio") is not None:
         out.append(f"* 112 spheres against Yade (one thread each): {sp['ratio']:.2f} x Yade's "
                    f"time, section 5.")
+    dr = h.get("drum")
+    if dr:
+        out.append(f"* Rotating drum of spheres against Yade (one thread each): {dr['ratio']:.2f} "
+                   f"x Yade's time, angles of repose {dr['angle']:+.2f} degrees apart, "
+                   "section 5.")
     st = h.get("settled")
     if st:
         lo, hi = st["rows"][0], st["rows"][-1]
