@@ -171,17 +171,20 @@ class PointerKernel:
     kernel returns.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
 
     ``lazy``: the kernel returns nothing and its slot stays empty until
-    :func:`fill_lazy_kernels` (a scene that needs it: the LCP kernels, which a scene of exact
-    spheres never calls, so that its first run does not compile them).  A call through an
-    empty slot raises ``RuntimeError`` naming the kernel.
+    :func:`fill_lazy_kernels` of its group (``True``: "lcp") is called by a scene that needs
+    it: the LCP kernels, which a scene of exact spheres never calls, and the mesh and surface
+    walls' kernels ("curved"), which a scene without them never calls, so that a first run
+    does not compile them.  A call through an empty slot raises ``RuntimeError`` naming the
+    kernel.
     """
 
-    def __init__(self, dispatcher, name: str, lazy: bool = False) -> None:
+    def __init__(self, dispatcher, name: str, lazy: bool | str = False) -> None:
         from numba.core import config
 
         self.dispatcher = dispatcher
         self.name = name
-        self.lazy = lazy
+        #: the lazy group (None: not lazy)
+        self.lazy = ("lcp" if lazy is True else lazy) or None
         self._slots: dict[tuple, tuple] = {}
         _POINTER_KERNELS[name] = self
         if config.DISABLE_JIT:
@@ -209,11 +212,11 @@ class PointerKernel:
             llb.add_symbol(self.symbol(argtypes), ctypes.addressof(slot))
             self._slots[argtypes] = (slot, types.none)
         slot, restype = self._slots[argtypes]
-        if not slot.value and not (self.lazy and not _LAZY_WANTED[0]):
+        if not slot.value and (self.lazy is None or self.lazy in _LAZY_WANTED):
             self.dispatcher.compile(argtypes)
             cres = self.dispatcher.overloads[argtypes]
             restype = cres.signature.return_type
-            if self.lazy and restype != types.none:
+            if self.lazy is not None and restype != types.none:
                 raise TypeError(f"the lazy pointer kernel {self.name} returns {restype}")
             slot.value = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
             self._slots[argtypes] = (slot, restype)
@@ -227,19 +230,20 @@ class PointerKernel:
 
 #: every :class:`PointerKernel` by name
 _POINTER_KERNELS: dict[str, PointerKernel] = {}
-#: whether :func:`fill_lazy_kernels` was called in this process
-_LAZY_WANTED = [False]
+#: the lazy groups :func:`fill_lazy_kernels` was called for in this process
+_LAZY_WANTED: set[str] = set()
 
 
-def fill_lazy_kernels() -> None:
-    """Fill the slots of the lazy :class:`PointerKernel` s (compiling or loading them), now
-    and, for callers typed or loaded later, at once: called where a scene with bodies other
-    than exact spheres is set up (:class:`~nurbsdem.contact.detect.ContactTable`)."""
-    if _LAZY_WANTED[0]:
+def fill_lazy_kernels(group: str = "lcp") -> None:
+    """Fill the slots of the lazy :class:`PointerKernel` s of ``group`` (compiling or loading
+    them), now and, for callers typed or loaded later, at once: "lcp" where a scene with
+    bodies other than exact spheres is set up (:class:`~nurbsdem.contact.detect.ContactTable`),
+    "curved" where the compiled deck steps take mesh or surface walls."""
+    if group in _LAZY_WANTED:
         return
-    _LAZY_WANTED[0] = True
+    _LAZY_WANTED.add(group)
     for pk in list(_POINTER_KERNELS.values()):
-        if pk.lazy:
+        if pk.lazy == group:
             pk.fill_all()
 
 

@@ -35,7 +35,7 @@ def _axpy_lazy(a, x, y):
 @pytest.fixture
 def lazy_kernel(monkeypatch):
     """A lazy kernel and its caller in a process where no scene asked for lazy kernels."""
-    monkeypatch.setattr(jit, "_LAZY_WANTED", [False])
+    monkeypatch.setattr(jit, "_LAZY_WANTED", set())
     pk = jit.PointerKernel(_axpy_lazy, "test_axpy_lazy", lazy=True)
     ptr = pk.call
 

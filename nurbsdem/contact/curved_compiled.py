@@ -26,6 +26,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ..jit import PointerKernel
+
 from .curved_walls import MAX_PER_WALL, wall_contact_key, wall_pose_at, world_box
 from .kinds import MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
@@ -48,10 +50,12 @@ CurvedConst = namedtuple(
 #: tris, cand_q, cand_d, cand_f) and the query mark (1,); the surfaces' certificates per
 #: wall: gap (W,N) m, x0 (W,N,3), odo0 (W,N), the odometer (W,) m and the pose it was last
 #: advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces' extents (W,) m and
-#: centres (W,3) m (wall frame); the points on the sphere and on the wall (last_pa, last_pb
-#: (W·N·MAX_PER_WALL, 3) m) of the last call's last_n (1,) contacts
+#: centres (W,3) m (wall frame); the last call's contacts (count (1,) of them): bodies
+#: out_a, out_b, points on the sphere and on the wall out_pa, out_pb (m), normals, depths
+#: (m) and keys, each of room W·N·MAX_PER_WALL
 CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f mark gap x0 odo0 odo "
-                        "prev_R prev_t posed extent centre last_pa last_pb last_n")
+                        "prev_R prev_t posed extent centre out_a out_b out_pa out_pb "
+                        "out_normal out_depth out_key count")
 
 
 def _offsets(sizes) -> np.ndarray:
@@ -126,6 +130,7 @@ def pack_curved(provider, n_all_walls: int) -> tuple:
         _joined([g.seed_uv for g in surfs], (0, 2)),
         surface_value(lambda g: g.spacing), surface_value(lambda g: g.size))
     T = len(cc.faces)
+    room = W * n * MAX_PER_WALL
     extent, centre = np.zeros(W), np.zeros((W, 3))
     for k, g in enumerate(geo):
         if not isinstance(g, MeshWall):
@@ -135,8 +140,9 @@ def pack_curved(provider, n_all_walls: int) -> tuple:
                       np.empty(T), np.empty(T, np.int64), np.zeros(1, np.int64),
                       np.full((W, n), -1.0), np.zeros((W, n, 3)), np.zeros((W, n)),
                       np.zeros(W), np.zeros((W, 3, 3)), np.zeros((W, 3)),
-                      np.zeros(W, np.bool_), extent, centre,
-                      np.zeros((W * n * MAX_PER_WALL, 3)), np.zeros((W * n * MAX_PER_WALL, 3)),
+                      np.zeros(W, np.bool_), extent, centre, np.zeros(room, np.int64),
+                      np.zeros(room, np.int64), np.zeros((room, 3)), np.zeros((room, 3)),
+                      np.zeros((room, 3)), np.zeros(room), np.zeros(room, np.int64),
                       np.zeros(1, np.int64))
     return cc, work
 
@@ -249,71 +255,54 @@ def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, n):
 
 
 @njit(cache=True)
-def curved_contacts(cc, wk, time, x, wall_d):
+def curved_contacts(cc, wk, time, x, wall_d) -> None:
     """The spheres' contacts with the curved walls at time (s), the walls displaced by
-    wall_d (W_all,3) m: (a, b, point_a, point_b, normal, depth, key), wall by wall in the
-    provider's order (module docstring); the points are kept in ``wk`` too."""
+    wall_d (W_all,3) m, into ``wk``: bodies, points, normals, depths (m) and keys, wall by
+    wall in the provider's order (module docstring), ``wk.count[0]`` of them (called through
+    a lazy pointer, :data:`curved_contacts_ptr`)."""
     N = x.shape[0]
-    cap = MAX_PER_WALL * N + 1
-    a_parts, rows_parts, key_parts = [], [], []
-    total = 0
+    c = 0
     for w in range(cc.n_walls):
         R, t = wall_pose_at(cc.omega[w], cc.center[w], cc.t0[w], cc.R0[w], cc.shift0[w],
                             time, wall_d[cc.first + w])
         lo, hi = world_box(cc.corners[w], R, t)
         idx = _candidates(x, cc.radius, lo, hi)
-        rows_f = np.zeros((min(cap, MAX_PER_WALL * idx.shape[0] + 1), NF))
+        rows_f = np.zeros((MAX_PER_WALL * idx.shape[0] + 1, NF))
         owner = np.zeros(rows_f.shape[0], np.int64)
         rank = np.zeros(rows_f.shape[0], np.int64)
         if cc.kind[w] == MESH_WALL:
             n = _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, 0)
         else:
             n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, 0)
-        keys = np.empty(n, np.int64)
-        for c in range(n):
-            keys[c] = wall_contact_key(cc.nb, owner[c], w, cc.n_walls, rank[c])
-        a_parts.append(owner[:n].copy())
-        rows_parts.append(rows_f[:n].copy())
-        key_parts.append(keys)
-        total += n
-    a = np.empty(total, np.int64)
-    b = np.empty(total, np.int64)
-    pa = np.empty((total, 3))
-    pb = np.empty((total, 3))
-    nrm = np.empty((total, 3))
-    dep = np.empty(total)
-    key = np.empty(total, np.int64)
-    c = 0
-    for w in range(cc.n_walls):
-        rows = rows_parts[w]
-        for r in range(rows.shape[0]):
-            a[c] = a_parts[w][r]
-            b[c] = N + cc.first + w
+        for r in range(n):
+            wk.out_a[c] = owner[r]
+            wk.out_b[c] = N + cc.first + w
             for k in range(3):
-                pa[c, k] = rows[r, F_PA + k]
-                pb[c, k] = rows[r, F_PB + k]
-                nrm[c, k] = rows[r, F_N + k]
-            dep[c] = -rows[r, F_SD]
-            key[c] = key_parts[w][r]
+                wk.out_pa[c, k] = rows_f[r, F_PA + k]
+                wk.out_pb[c, k] = rows_f[r, F_PB + k]
+                wk.out_normal[c, k] = rows_f[r, F_N + k]
+            wk.out_depth[c] = -rows_f[r, F_SD]
+            wk.out_key[c] = wall_contact_key(cc.nb, owner[r], w, cc.n_walls, rank[r])
             c += 1
-    wk.last_pa[:total] = pa
-    wk.last_pb[:total] = pb
-    wk.last_n[0] = total
-    return a, b, pa, pb, nrm, dep, key
+    wk.count[0] = c
 
 
-def with_curved_contacts(cs, wk, a, b, normal, depth, key):
-    """The ContactSet ``cs`` of the scene followed by the last ``wk.last_n`` contacts with
-    the curved walls (their bodies, normals, depths and keys the last entries of the loop's
-    arrays a, b, normal, depth, key), as the provider of
+#: :func:`curved_contacts` through a lazy pointer (group "curved",
+#: :func:`~nurbsdem.jit.fill_lazy_kernels`): a scene without mesh or surface walls does not
+#: compile it
+curved_contacts_ptr = PointerKernel(curved_contacts, "curved_contacts", lazy="curved").call
+
+def with_curved_contacts(cs, wk):
+    """The ContactSet ``cs`` of the scene followed by the curved walls' contacts of the last
+    :func:`curved_contacts` (in ``wk``), as the provider of
     :mod:`nurbsdem.contact.curved_walls` merges them."""
     from .curved_walls import _merged
-    k = int(wk.last_n[0])
+    k = int(wk.count[0])
     if k == 0:
         return cs
     rows = np.zeros((k, NF))
-    rows[:, F_PA:F_PA + 3] = wk.last_pa[:k]
-    rows[:, F_PB:F_PB + 3] = wk.last_pb[:k]
-    rows[:, F_N:F_N + 3] = normal[-k:]
-    rows[:, F_SD] = -depth[-k:]
-    return _merged(cs, [(a[-k:], b[-k:], rows, key[-k:])])
+    rows[:, F_PA:F_PA + 3] = wk.out_pa[:k]
+    rows[:, F_PB:F_PB + 3] = wk.out_pb[:k]
+    rows[:, F_N:F_N + 3] = wk.out_normal[:k]
+    rows[:, F_SD] = -wk.out_depth[:k]
+    return _merged(cs, [(wk.out_a[:k].copy(), wk.out_b[:k].copy(), rows, wk.out_key[:k].copy())])

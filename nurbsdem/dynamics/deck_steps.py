@@ -52,14 +52,14 @@ import numpy as np
 from numba import njit
 
 from ..contact.analytic import closed_form_into
-from ..contact.curved_compiled import curved_contacts, pack_curved, with_curved_contacts
+from ..contact.curved_compiled import curved_contacts_ptr, pack_curved, with_curved_contacts
 from ..contact.listed import scene_list_ptr, solve_due_into_ptr
 from ..contact.verlet import (active_arrays, active_rows, advance_odometers, carry_rows,
                               due_rows, list_is_stale, near_arrays, near_pairs, renew_certificates,
                               repose, reposed_bodies)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
-from ..jit import PointerKernel, cycles, seconds_per_cycle
+from ..jit import PointerKernel, cycles, fill_lazy_kernels, seconds_per_cycle
 from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
@@ -199,11 +199,13 @@ def _with_curved(sc, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg, p
     """The scene's active contact arrays followed by those of the spheres with the mesh and
     surface walls (:func:`~nurbsdem.contact.curved_compiled.curved_contacts`; no surface
     parameters: closed forms, patch −1), as the Python driver's provider merges them."""
-    ca, cb, cpa, cpb, cn, cd, ck = curved_contacts(sc.curved, cwork, time, x, wall_d)
-    k = ca.shape[0]
-    return (np.concatenate((a, ca)), np.concatenate((b, cb)), np.concatenate((pa, cpa)),
-            np.concatenate((pb, cpb)), np.concatenate((nrm, cn)), np.concatenate((dep, cd)),
-            np.concatenate((key, ck)), np.concatenate((deg, np.zeros(k, deg.dtype))),
+    curved_contacts_ptr((sc.curved, cwork, time, x, wall_d))
+    k = cwork.count[0]
+    w = cwork
+    return (np.concatenate((a, w.out_a[:k])), np.concatenate((b, w.out_b[:k])),
+            np.concatenate((pa, w.out_pa[:k])), np.concatenate((pb, w.out_pb[:k])),
+            np.concatenate((nrm, w.out_normal[:k])), np.concatenate((dep, w.out_depth[:k])),
+            np.concatenate((key, w.out_key[:k])), np.concatenate((deg, np.zeros(k, deg.dtype))),
             np.concatenate((params, np.zeros((k, 4)))),
             np.concatenate((patch_a, np.full(k, -1, patch_a.dtype))),
             np.concatenate((patch_b, np.full(k, -1, patch_b.dtype))))
@@ -556,6 +558,8 @@ class DeckSteps:
         s = system
         W = s.walls.n
         packed, self.cwork = pack_curved(curved, W)
+        if curved is not None:
+            fill_lazy_kernels("curved")      # the mesh and surface walls' kernels
         spin = (np.zeros((W, 6)) if s.wall_spin is None
                 else np.ascontiguousarray(s.wall_spin, float))
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
@@ -707,10 +711,9 @@ class DeckSteps:
         sc.point_solves += int(counters[POINT_SOLVES])
         sc.timers.global_search += float(counters[SEARCH_CYCLES]) * seconds_per_cycle()
         sc.timers.lcp += float(counters[ROW_CYCLES]) * seconds_per_cycle()
-        curved = int(self.cwork.last_n[0]) if self.sc.curved.n_walls else 0
+        curved = int(self.cwork.count[0]) if self.sc.curved.n_walls else 0
         sc.last = sc.contact_set(ev.reach, monitored=int(ev.monitored) - curved)
-        s.last_contacts = (with_curved_contacts(sc.last, self.cwork, ev.a, ev.b, ev.normal,
-                                                ev.depth, ev.key) if curved else sc.last)
+        s.last_contacts = with_curved_contacts(sc.last, self.cwork) if curved else sc.last
         s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot = ev.a, ev.b, ev.point, ev.normal, ev.ftot
         s.c_fdn, s.c_fdt, s.c_fet, s.c_fn, s.c_eel = ev.fdn, ev.fdt, ev.fet, ev.fn, ev.eel
         s.c_stick, s.c_key, s.c_coeffs = ev.stick, ev.key, ev.coeffs
