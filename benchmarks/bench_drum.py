@@ -37,7 +37,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "postproc"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 from repose import bed_angle  # noqa: E402
+from bench_yade import NURBSDEM_RUN  # noqa: E402
 
 R_DRUM, LENGTH, G = 0.1, 0.04, 9.81
 RADII = (0.0035, 0.004, 0.0045)
@@ -114,18 +116,6 @@ def nurbsdem_deck(pos, rad, T: float, wall_line: str) -> str:
           Monitors Every 0.01
         """)
 
-
-NURBSDEM_RUN = """
-import json, sys, time
-from nurbsdem.io.deck import parse_deck
-from nurbsdem.solver import Solver
-s = Solver(parse_deck(sys.argv[1]), output=sys.argv[2], quiet=True)
-t = time.perf_counter()
-summary = s.run()
-wall = time.perf_counter() - t
-print(json.dumps(dict(wall=wall, loop=wall - summary.timers.get("output", 0.0)
-                      - summary.timers.get("setup", 0.0), substeps=summary.substeps)))
-"""
 
 YADE_RUN = """
 import json, time

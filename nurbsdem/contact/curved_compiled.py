@@ -28,11 +28,11 @@ from numba import njit
 
 from ..jit import PointerKernel
 
-from .curved_walls import MAX_PER_WALL, wall_contact_key, wall_pose_at, world_box
+from .curved_walls import (MAX_PER_WALL, _mesh_rows_of, _surface_rows_of, wall_contact_key,
+                           wall_pose_at, world_box)
 from .kinds import MESH_WALL
-from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_wall import MeshWall, sphere_mesh_rows
-from .surface_wall import sphere_surface_row
+from .lcp import F_N, F_PA, F_PB, F_SD, NF, NI
+from .mesh_wall import MeshWall
 
 #: the packed walls (W curved walls, N particles): n, first (the first curved wall's index
 #: among the system's W_all walls), nb = N + W_all, radius (N,) the spheres' radii; per wall
@@ -197,60 +197,47 @@ def _surface_due(wk, w, idx, x):
 
 
 @njit(cache=True)
-def _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, n):
-    """Append the touching rows of spheres idx with mesh wall w (as the provider keeps them:
-    the kernel's rows with negative signed distance, each with its rank among the sphere's
-    rows) from row n; returns the new count."""
+def _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank):
+    """The touching rows of spheres idx with mesh wall w as the provider keeps them (the
+    kernel's rows with negative signed distance, each with its rank among the sphere's rows)
+    into rows_f, owner, rank; returns their count."""
     v0, v1, f0, f1 = cc.vo[w], cc.vo[w + 1], cc.fo[w], cc.fo[w + 1]
-    one_f = np.zeros((MAX_PER_WALL, NF))
-    one_i = np.zeros((MAX_PER_WALL, NI), np.int64)
-    for m in range(idx.shape[0]):
-        i = idx[m]
-        wk.mark[0] += 1
-        k = sphere_mesh_rows(x[i], cc.radius[i], R, t, cc.vertices[v0:v1], cc.faces[f0:f1],
-                             cc.normals[f0:f1], cc.two_sided[w], cc.msize[w],
-                             cc.grid_origin[w], cc.grid_cell[w], cc.grid_dims[w],
-                             cc.cell_start[cc.co[w]:cc.co[w + 1]],
-                             cc.cell_tris[cc.to[w]:cc.to[w + 1]], wk.stamp[f0:f1], wk.mark[0],
-                             wk.tris[f0:f1], wk.cand_q[f0:f1], wk.cand_d[f0:f1],
-                             wk.cand_f[f0:f1], one_f, one_i)
-        for j in range(min(k, MAX_PER_WALL)):
-            if one_f[j, F_SD] < 0.0:
-                rows_f[n, :] = one_f[j, :]
-                owner[n] = i
-                rank[n] = j
-                n += 1
-    return n
+    rows_i = np.zeros((rows_f.shape[0], NI), np.int64)
+    n = _mesh_rows_of(idx, x, cc.radius, R, t, cc.vertices[v0:v1], cc.faces[f0:f1],
+                      cc.normals[f0:f1], cc.two_sided[w], cc.msize[w], cc.grid_origin[w],
+                      cc.grid_cell[w], cc.grid_dims[w], cc.cell_start[cc.co[w]:cc.co[w + 1]],
+                      cc.cell_tris[cc.to[w]:cc.to[w + 1]], wk.stamp[f0:f1], wk.mark[0] + 1,
+                      wk.tris[f0:f1], wk.cand_q[f0:f1], wk.cand_d[f0:f1], wk.cand_f[f0:f1],
+                      rows_f, rows_i, owner, rank)
+    wk.mark[0] += idx.shape[0]
+    kept = 0
+    for r in range(n):
+        if rows_f[r, F_SD] < 0.0:
+            rows_f[kept, :] = rows_f[r, :]
+            owner[kept] = owner[r]
+            rank[kept] = rank[r]
+            kept += 1
+    return kept
 
 
 @njit(cache=True)
-def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, n):
-    """Append the active rows of the spheres idx not certified apart from surface wall w
-    from row n (their certificates renewed); returns the new count."""
+def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank):
+    """The active rows of the spheres idx not certified apart from surface wall w into
+    rows_f, owner, rank (their certificates renewed); returns their count."""
     p0, p1, s0, s1 = cc.po[w], cc.po[w + 1], cc.so[w], cc.so[w + 1]
     _advance(wk, w, R, t)
     due = _surface_due(wk, w, idx, x)
-    ev = np.zeros((6, 3))
-    one_f = np.zeros(NF)
-    one_i = np.zeros(NI, np.int64)
+    gap = np.zeros(due.shape[0])
+    n = _surface_rows_of(due, x, cc.radius, R, t, cc.deg[p0:p1], cc.ncp[p0:p1],
+                         cc.koff[p0:p1], cc.knots, cc.pw, cc.poff[p0:p1], cc.dom[p0:p1],
+                         cc.periodic[p0:p1], cc.seed_x[s0:s1], cc.seed_p[s0:s1],
+                         cc.seed_uv[s0:s1], cc.spacing[w], cc.ssize[w], rows_f, owner, gap)
     for m in range(due.shape[0]):
         i = due[m]
-        ok = sphere_surface_row(x[i], cc.radius[i], R, t, cc.deg[p0:p1], cc.ncp[p0:p1],
-                                cc.koff[p0:p1], cc.knots, cc.pw, cc.poff[p0:p1],
-                                cc.dom[p0:p1], cc.periodic[p0:p1], cc.seed_x[s0:s1],
-                                cc.seed_p[s0:s1], cc.seed_uv[s0:s1], cc.spacing[w],
-                                cc.ssize[w], ev, one_f, one_i)
-        gap = 0.0
-        if ok and one_i[I_ACTIVE]:
-            rows_f[n, :] = one_f
-            owner[n] = i
-            rank[n] = 0
-            n += 1
-        elif ok and one_f[F_SD] > 0.0:
-            gap = one_f[F_SD]
-        wk.gap[w, i] = gap
+        wk.gap[w, i] = gap[m]
         wk.x0[w, i, 0], wk.x0[w, i, 1], wk.x0[w, i, 2] = x[i, 0], x[i, 1], x[i, 2]
         wk.odo0[w, i] = wk.odo[w]
+    rank[:n] = 0
     return n
 
 
@@ -271,9 +258,9 @@ def curved_contacts(cc, wk, time, x, wall_d) -> None:
         owner = np.zeros(rows_f.shape[0], np.int64)
         rank = np.zeros(rows_f.shape[0], np.int64)
         if cc.kind[w] == MESH_WALL:
-            n = _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, 0)
+            n = _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
         else:
-            n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank, 0)
+            n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
         for r in range(n):
             wk.out_a[c] = owner[r]
             wk.out_b[c] = N + cc.first + w
