@@ -145,6 +145,7 @@ def test_two_ranks_give_the_serial_run_bit_for_bit(serial, tmp_path):
 
 
 @needs_mpi
+@pytest.mark.slow      # the suite's time: two_ranks_give_the_serial_run covers 2 ranks by default
 def test_hertz_mindlin_on_two_ranks(tmp_path):
     """Hertz–Mindlin laws (the exact curvature per contact, its fallback count in
     monitors/hertz.csv) on 2 ranks: the serial results."""
@@ -205,7 +206,8 @@ def test_three_ranks_through_the_python_api(serial, tmp_path):
 
 
 @needs_mpi
-@pytest.mark.parametrize("before, after", [(2, 1), pytest.param(1, 2, marks=pytest.mark.slow)])
+@pytest.mark.slow      # the suite's time: restarts on other rank counts run with -m slow
+@pytest.mark.parametrize("before, after", [(2, 1), (1, 2)])
 def test_a_checkpoint_written_on_p_ranks_restarts_on_q(serial, tmp_path, before, after):
     """Killed after the replication (a checkpoint at 0.3 s) on ``before`` ranks, restarted
     from its checkpoint on ``after`` ranks: the serial run's results."""
@@ -216,6 +218,7 @@ def test_a_checkpoint_written_on_p_ranks_restarts_on_q(serial, tmp_path, before,
 
 
 @needs_mpi
+@pytest.mark.slow      # the suite's time: the serial guard is tested by default (test_deck_steps)
 def test_deck_steps_rolled_back_by_the_guard_on_two_ranks(tmp_path):
     """With the time-step control misjudging the limit, the guard rolls deck steps back and
     repeats them on all ranks together: the same results as the serial run doing so."""

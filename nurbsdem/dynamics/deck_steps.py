@@ -80,12 +80,11 @@ DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 
 #: the scene's constants: the tables of :mod:`nurbsdem.contact.listed`, the skin, margin and
 #: certificates, the contact law (Hertz), the first patch of each shape (curvature radii);
-#: ``owned`` (N,) all True (one rank); the mesh and surface walls
-#: (:data:`~nurbsdem.contact.curved_compiled.CurvedConst`, none: zero walls) and the walls'
-#: spin (W,6): angular velocity (rad/s) and centre (m) of each wall (zeros: not turning)
+#: ``owned`` (N,) all True (one rank); the flat walls (the first ``flat_walls`` walls: the
+#: mesh and surface walls follow them)
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
-                        "first_patch body_shape sphere_radius owned threads all_spheres curved "
-                        "spin")
+                        "first_patch body_shape sphere_radius owned threads all_spheres "
+                        "flat_walls")
 #: the neighbour list and its per-pair arrays, odometers, the poses it was built at and the
 #: previous poses
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
@@ -194,12 +193,12 @@ def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
 
 
 @njit(cache=True)
-def _with_curved(sc, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
-                 patch_b):
+def _with_curved(curved, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg, params,
+                 patch_a, patch_b):
     """The scene's active contact arrays followed by those of the spheres with the mesh and
     surface walls (:func:`~nurbsdem.contact.curved_compiled.curved_contacts`; no surface
     parameters: closed forms, patch −1), as the Python driver's provider merges them."""
-    curved_contacts_ptr((sc.curved, cwork, time, x, wall_d))
+    curved_contacts_ptr((curved, cwork, time, x, wall_d))
     k = cwork.count[0]
     w = cwork
     return (np.concatenate((a, w.out_a[:k])), np.concatenate((b, w.out_b[:k])),
@@ -215,26 +214,27 @@ def _with_curved(sc, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg, p
 def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev,
               x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray,
               R: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float,
-              counters: np.ndarray, cwork, time: float):
+              counters: np.ndarray, curved, cwork, spin: np.ndarray, time: float):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
     gravity (omega (N,3): the particles' angular velocities, rad/s; implicit dashpots when
     ``cc.implicit``).  The active pairs are found among the rows just solved (``due``, list
     positions: :func:`~nurbsdem.contact.verlet.active_rows`); the separated pairs, which only
     the time-step control at the end of a deck step takes, with ``full`` only (else none).
-    The contacts of the spheres with mesh and surface walls at ``time`` (s) follow the
-    scene's (:func:`_with_curved`; ``cwork``: their workspaces).  Returns (True, the new
+    The contacts of the spheres with mesh and surface walls ``curved`` at ``time`` (s) follow
+    the scene's (:func:`_with_curved`; ``cwork``: their workspaces; ``spin`` (W,6): each
+    wall's angular velocity, rad/s, and centre, m).  Returns (True, the new
     Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
     error)."""
     (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
      patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys,
                               active_rows(pl.rows_i, due))
     monitored = due.shape[0]
-    if sc.curved.n_walls:          # the provider counts the curved walls' contacts monitored
+    if curved.n_walls:             # the provider counts the curved walls' contacts monitored
         K0 = a.shape[0]
         (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
-         patch_b) = _with_curved(sc, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg,
-                                 params, patch_a, patch_b)
+         patch_b) = _with_curved(curved, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key,
+                                 deg, params, patch_a, patch_b)
         monitored += a.shape[0] - K0
     if full:
         near, gap = near_pairs(pl.rows_f, pl.rows_i, pl.budget, reach)
@@ -245,12 +245,12 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
         return False, ev
     radius, n_fall = _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R)
     pos_all, vel_all, omg_all = all_kinematics(x, v, omega, wall_d, wall_u)
-    if sc.curved.n_walls:          # a wall turns about its centre: u + ω × (p − c − d)
+    if curved.n_walls:             # a wall turns about its centre: u + ω × (p − c − d)
         n = x.shape[0]
         for w in range(wall_d.shape[0]):
             for k in range(3):
-                pos_all[n + w, k] += sc.spin[w, 3 + k]
-                omg_all[n + w, k] = sc.spin[w, k]
+                pos_all[n + w, k] += spin[w, 3 + k]
+                omg_all[n + w, k] = spin[w, k]
     solves = np.zeros(4, np.int64)
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
      hist_springs, _) = contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
@@ -398,12 +398,12 @@ def _kept(j: int, x, q, v, L, wall_d, ev):
 
 
 @njit(cache=True)
-def _kick_walls(sc, ev, n: int, wall_d, u_mean):
+def _kick_walls(n_curved: int, spin, ev, n: int, wall_d, u_mean):
     """(body_b, wall_d, u_mean) of the stored contacts for a half kick's work terms: as they
     are, or with turning walls each contact with one at its point velocity
     (:func:`spun_contacts`; the Python driver's ``_kick_walls``)."""
-    if sc.curved.n_walls and ev.a.shape[0]:
-        return spun_contacts(ev.a, ev.b, ev.point, n, sc.spin, wall_d, u_mean)
+    if n_curved and ev.a.shape[0]:
+        return spun_contacts(ev.a, ev.b, ev.point, n, spin, wall_d, u_mean)
     return ev.b, wall_d, u_mean
 
 
@@ -418,7 +418,7 @@ _step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
                    counters, peak, acc_growth, estimate, sample_at, rows, state_at, times,
-                   cwork):
+                   curved, cwork, spin):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
 
@@ -429,9 +429,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     Evaluation's a, b, point, ftot, fn, normal, depth, deg, coeffs, radius).
 
     walls_d, walls_u (n_deck·n_run, W, 3): the walls' displacements (m) and velocities
-    (m/s) at the end of each internal step, times (n_deck·n_run,) s those ends (the mesh and
-    surface walls' poses; ``cwork``: their workspaces,
-    :data:`~nurbsdem.contact.curved_compiled.CurvedWork`).  Body state (x, v, q, L), ledger (5,) J, wall_work
+    (m/s) at the end of each internal step, times (n_deck·n_run,) s those ends (the poses of
+    the mesh and surface walls ``curved``,
+    :data:`~nurbsdem.contact.curved_compiled.CurvedConst`; ``cwork``: their workspaces; spin
+    (W,6): each wall's angular velocity, rad/s, and centre, m).  Body state (x, v, q, L), ledger (5,) J, wall_work
     (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy
@@ -457,7 +458,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
-            kick_b, kick_d, kick_u = _kick_walls(sc, ev, x.shape[0], wall_d, u_mean)
+            kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0], wall_d,
+                                                 u_mean)
             omega, _, worst, run = step_start_ptr((
                 bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force, ev.torque,
                 x, v, q, L, omega, kick_b, kick_d, kick_u, h, ledger, wall_work, alt_prev_v,
@@ -469,18 +471,20 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             R, pos = body_poses(q, bc.P, x, bc.centroid)
             c2 = cycles()
             pl, reach, due, failed = _search(sc, pl, x.copy(), R, pos,   # the flat walls
-                                             wall_d[:sc.curved.first].copy(), counters)
+                                             wall_d[:sc.flat_walls].copy(), counters)
             if failed:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             counters[EVALS] += 1
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
             ok, ev = _evaluate_ptr((sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
-                                    omega, R, wall_d, wall_u, h, counters, cwork, times[t]))
+                                    omega, R, wall_d, wall_u, h, counters, curved, cwork,
+                                    spin, times[t]))
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             c4 = cycles()
-            kick_b, kick_d, kick_u = _kick_walls(sc, ev, x.shape[0], wall_d, u_mean)
+            kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0], wall_d,
+                                                 u_mean)
             omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
                                       ev.force, ev.torque, x, v, q, L, omega, kick_b, kick_d,
                                       kick_u, 0.5 * h, ledger, wall_work, np.bool_(True)))
@@ -557,17 +561,17 @@ class DeckSteps:
         self.system, self.scene = system, scene
         s = system
         W = s.walls.n
-        packed, self.cwork = pack_curved(curved, W)
+        self.curved, self.cwork = pack_curved(curved, W)
         if curved is not None:
             fill_lazy_kernels("curved")      # the mesh and surface walls' kernels
-        spin = (np.zeros((W, 6)) if s.wall_spin is None
-                else np.ascontiguousarray(s.wall_spin, float))
+        self.spin = (np.zeros((W, 6)) if s.wall_spin is None
+                     else np.ascontiguousarray(s.wall_spin, float))
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
                              scene.certificates, s.uses_hertz, scene.table.tab[:7],
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
                              np.ones(scene.n, np.bool_), numba.get_num_threads(),
-                             bool(scene.is_sphere.all()), packed, spin)
+                             bool(scene.is_sphere.all()), W - self.curved.n_walls)
         self.bc = s._bc
 
     @staticmethod
@@ -664,7 +668,7 @@ class DeckSteps:
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
             s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
-            estimate, sample_at, rows, state_at, times, self.cwork)
+            estimate, sample_at, rows, state_at, times, self.curved, self.cwork, self.spin)
 
     def run(self, n_deck: int, sample_at: np.ndarray,
             state_at: np.ndarray | None = None) -> tuple[int, int, np.ndarray, np.ndarray, list]:
@@ -711,7 +715,7 @@ class DeckSteps:
         sc.point_solves += int(counters[POINT_SOLVES])
         sc.timers.global_search += float(counters[SEARCH_CYCLES]) * seconds_per_cycle()
         sc.timers.lcp += float(counters[ROW_CYCLES]) * seconds_per_cycle()
-        curved = int(self.cwork.count[0]) if self.sc.curved.n_walls else 0
+        curved = int(self.cwork.count[0]) if self.curved.n_walls else 0
         sc.last = sc.contact_set(ev.reach, monitored=int(ev.monitored) - curved)
         s.last_contacts = with_curved_contacts(sc.last, self.cwork) if curved else sc.last
         s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot = ev.a, ev.b, ev.point, ev.normal, ev.ftot
