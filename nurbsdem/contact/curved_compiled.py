@@ -20,7 +20,6 @@ global body indices (particles 0..N-1, walls N..N+W-1).
 """
 from __future__ import annotations
 
-import math
 from collections import namedtuple
 
 import numpy as np
@@ -33,6 +32,7 @@ from .curved_walls import (MAX_PER_WALL, _mesh_rows_of, _surface_rows_of, wall_c
 from .kinds import MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, NF, NI
 from .mesh_wall import MeshWall
+from .wall_skin import due_spheres, pose_travel, wall_reach
 
 #: the packed walls (W curved walls, N particles): n, first (the first curved wall's index
 #: among the system's W_all walls), nb = N + W_all, radius (N,) the spheres' radii; per wall
@@ -134,8 +134,7 @@ def pack_curved(provider, n_all_walls: int) -> tuple:
     extent, centre = np.zeros(W), np.zeros((W, 3))
     for k, g in enumerate(geo):
         if not isinstance(g, MeshWall):
-            centre[k] = 0.5 * (g.seed_x.min(axis=0) + g.seed_x.max(axis=0))
-            extent[k] = float(np.linalg.norm(g.seed_x - centre[k], axis=1).max()) + g.spacing
+            centre[k], extent[k] = wall_reach(g.seed_x, g.spacing)
     work = CurvedWork(np.full(T, -1, np.int64), np.empty(T, np.int64), np.empty((T, 3)),
                       np.empty(T), np.empty(T, np.int64), np.zeros(1, np.int64),
                       np.full((W, n), -1.0), np.zeros((W, n, 3)), np.zeros((W, n)),
@@ -167,15 +166,7 @@ def _candidates(x, r, lo, hi):
 def _advance(wk, w, R, t):
     """Surface wall w's odometer moved on by its motion to pose (R, t) (wall_skin)."""
     if wk.posed[w]:
-        fro, lin = 0.0, 0.0
-        for a in range(3):
-            s = t[a] - wk.prev_t[w, a]
-            for c in range(3):
-                d = R[a, c] - wk.prev_R[w, a, c]
-                fro += d * d
-                s += d * wk.centre[w, c]
-            lin += s * s
-        wk.odo[w] += math.sqrt(fro) * wk.extent[w] + math.sqrt(lin)
+        wk.odo[w] += pose_travel(wk.prev_R[w], wk.prev_t[w], R, t, wk.centre[w], wk.extent[w])
     wk.prev_R[w] = R
     wk.prev_t[w] = t
     wk.posed[w] = True
@@ -185,15 +176,7 @@ def _advance(wk, w, R, t):
 def _surface_due(wk, w, idx, x):
     """The spheres of idx whose certificate against surface wall w fails."""
     out = np.empty(idx.shape[0], np.int64)
-    n = 0
-    for m in range(idx.shape[0]):
-        i = idx[m]
-        moved = math.sqrt((x[i, 0] - wk.x0[w, i, 0]) ** 2 + (x[i, 1] - wk.x0[w, i, 1]) ** 2
-                          + (x[i, 2] - wk.x0[w, i, 2]) ** 2)
-        if wk.gap[w, i] <= 0.0 or moved + (wk.odo[w] - wk.odo0[w, i]) >= wk.gap[w, i]:
-            out[n] = i
-            n += 1
-    return out[:n]
+    return out[:due_spheres(idx, x, wk.gap[w], wk.x0[w], wk.odo0[w], wk.odo[w], out)]
 
 
 @njit(cache=True)

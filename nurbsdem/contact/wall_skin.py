@@ -38,22 +38,20 @@ class WallSkin:
         self.x0 = np.zeros((n, 3))
         self.odo0 = np.zeros(n)
         self.odo = 0.0
-        self.centre = 0.5 * (seed_x.min(axis=0) + seed_x.max(axis=0))
-        self.extent = float(np.linalg.norm(seed_x - self.centre, axis=1).max()) + spacing
+        self.centre, self.extent = wall_reach(seed_x, spacing)
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
 
     def advance(self, R: np.ndarray, t: np.ndarray) -> None:
         """The odometer moved on by the wall's motion to pose (R, t) (module docstring)."""
+        R, t = np.ascontiguousarray(R, float), np.ascontiguousarray(t, float)
         if self.pose is not None:
-            dR = R - self.pose[0]
-            self.odo += (float(np.linalg.norm(dR)) * self.extent
-                         + float(np.linalg.norm(dR @ self.centre + t - self.pose[1])))
-        self.pose = (R.copy(), np.asarray(t, float).copy())
+            self.odo += pose_travel(self.pose[0], self.pose[1], R, t, self.centre, self.extent)
+        self.pose = (R.copy(), t.copy())
 
     def due(self, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
         """The spheres of ``idx`` (centres x (N,3) m) whose certificate does not hold."""
         out = np.empty(len(idx), np.int64)
-        return out[:_due(idx, x, self.gap, self.x0, self.odo0, self.odo, out)]
+        return out[:due_spheres(idx, x, self.gap, self.x0, self.odo0, self.odo, out)]
 
     def certify(self, idx: np.ndarray, x: np.ndarray, gap: np.ndarray) -> None:
         """Spheres ``idx`` found at least ``gap`` (m, ≤ 0: touching, no certificate) apart
@@ -63,8 +61,31 @@ class WallSkin:
         self.odo0[idx] = self.odo
 
 
+def wall_reach(seed_x: np.ndarray, spacing: float) -> tuple[np.ndarray, float]:
+    """The wall-frame centre (3,) m of a surface wall's samples ``seed_x`` (S,3) and the
+    radius (m) about it within which its surface lies (the samples' plus their spacing)."""
+    centre = 0.5 * (seed_x.min(axis=0) + seed_x.max(axis=0))
+    return centre, float(np.linalg.norm(seed_x - centre, axis=1).max()) + spacing
+
+
 @njit(cache=True)
-def _due(idx, x, gap, x0, odo0, odo, out) -> int:
+def pose_travel(R0, t0, R, t, centre, extent) -> float:
+    """A bound (m) of the largest displacement of a wall point within ``extent`` (m) of the
+    wall-frame ``centre`` (3,) when the wall moves from pose (R0, t0) to (R, t) (module
+    docstring): ‖R − R₀‖_F · extent + |(R − R₀) c + t − t₀|."""
+    fro, lin = 0.0, 0.0
+    for a in range(3):
+        s = t[a] - t0[a]
+        for c in range(3):
+            d = R[a, c] - R0[a, c]
+            fro += d * d
+            s += d * centre[c]
+        lin += s * s
+    return math.sqrt(fro) * extent + math.sqrt(lin)
+
+
+@njit(cache=True)
+def due_spheres(idx, x, gap, x0, odo0, odo, out) -> int:
     """The spheres of idx whose certificate (module docstring) fails, into out; their count."""
     n = 0
     for m in range(idx.shape[0]):
