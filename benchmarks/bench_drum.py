@@ -13,9 +13,9 @@ Measured from each code's output over the last ``WINDOW`` seconds of the turn: t
 angle of repose (the tilt of the bed's cross-section, ``postproc/repose.py`` ``bed_angle``,
 mean and spread over samples 0.1 s apart) and the drive torque about the axis (the mean of
 the torque the drive applies, minus the particles' load on the drum about x: nurbsdem
-``monitors/wall_drum.csv``; Yade: the facets' forces' moments about the axis).  Printed with the wall time of each time loop on one thread
-(nurbsdem ``NUMBA_NUM_THREADS=1``, the run less its set-up and output; Yade ``-j1``) and
-their ratio.  When Yade is not installed (``apt-get install yade``) the benchmark says so
+``monitors/wall_drum.csv``; Yade: the facets' forces' moments about the axis).  Printed
+with the wall time of each time loop on one thread (nurbsdem ``NUMBA_NUM_THREADS=1``, the
+run less its set-up and output; Yade ``-j1``) and their ratio.  When Yade is not installed (``apt-get install yade``) the benchmark says so
 and measures nurbsdem alone.
 
 Usage: .venv/bin/python benchmarks/bench_drum.py [--quick] [--count N]

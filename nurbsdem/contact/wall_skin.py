@@ -2,8 +2,9 @@
 closest point solved at an evaluation.
 
 A sphere found apart from the wall keeps its distance to the wall's surface less its radius,
-``gap`` (m), with its centre ``x0`` and the wall's odometer ``odo0`` at that time.  The distance from a point to a surface changes by at most the point's
-displacement plus the largest displacement of a surface point, so while
+``gap`` (m), with its centre ``x0`` and the wall's odometer ``odo0`` at that time.  The
+distance from a point to a surface changes by at most the point's displacement plus the
+largest displacement of a surface point, so while
 
     |x − x0| + (odo − odo0) < gap
 
