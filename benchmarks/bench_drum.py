@@ -26,7 +26,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -39,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "postproc"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from repose import bed_angle  # noqa: E402
-from bench_yade import NURBSDEM_RUN  # noqa: E402
+from bench_yade import NURBSDEM_RUN, run_yade_script  # noqa: E402
 
 R_DRUM, LENGTH, G = 0.1, 0.04, 9.81
 RADII = (0.0035, 0.004, 0.0045)
@@ -184,27 +183,19 @@ def run_nurbsdem(deck: Path, out: Path) -> dict:
 
 
 def run_yade(pos, rad, T: float, dt: float, work: Path) -> dict | str:
-    exe = shutil.which("yade")
-    if exe is None:
-        return "Yade is not installed (apt-get install yade): it could not be measured"
-    data = work / "scene.json"
-    data.write_text(json.dumps(dict(pos=pos.tolist(), rad=rad.tolist(), R=R_DRUM, L=LENGTH,
-                                    segments=SEGMENTS, kn=KN, cn=CN, kt=KT, mu=MU, rho=DENSITY,
-                                    settle=SETTLE, T=T, omega=OMEGA, dt=dt, window=WINDOW)))
-    script = work / "yade_run.py"
-    script.write_text(f"DATA = {str(data)!r}\n" + YADE_RUN)
-    r = subprocess.run([exe, "-n", "-j1", "-x", str(script)], capture_output=True, text=True,
-                       cwd=work, timeout=7200)
-    for line in r.stdout.splitlines():
-        if line.startswith("YADE-RESULT "):
-            res = json.loads(line[len("YADE-RESULT "):])
-            angles = [bed_angle(np.array(s)) for s in res.pop("samples")]
-            torques = res.pop("torques")
-            res.update(angle=float(np.mean(angles)), angle_spread=float(np.std(angles)),
-                       torque=float(-np.mean(torques)), samples=len(angles))
-            return res
-    return f"Yade failed (exit {r.returncode}): {r.stderr.strip().splitlines()[-1:]}"
-
+    """Yade's run of the same drum (:data:`YADE_RUN`), its angle and torque as
+    :func:`run_nurbsdem` gives them; or why it could not run."""
+    res = run_yade_script(YADE_RUN, dict(pos=pos.tolist(), rad=rad.tolist(), R=R_DRUM,
+                                         L=LENGTH, segments=SEGMENTS, kn=KN, cn=CN, kt=KT,
+                                         mu=MU, rho=DENSITY, settle=SETTLE, T=T, omega=OMEGA,
+                                         dt=dt, window=WINDOW), work, timeout=7200)
+    if isinstance(res, str):
+        return res
+    angles = [bed_angle(np.array(s)) for s in res.pop("samples")]
+    torques = res.pop("torques")
+    res.update(angle=float(np.mean(angles)), angle_spread=float(np.std(angles)),
+               torque=float(-np.mean(torques)), samples=len(angles))
+    return res
 
 def main(argv: list[str]) -> dict:
     quick = "--quick" in argv

@@ -140,20 +140,29 @@ def run_nurbsdem(deck: Path, out: Path, warmup: Path | None = None) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
-def run_yade(pos, rad, T: float, work: Path) -> dict | str:
+def run_yade_script(script_text: str, data: dict, work: Path, timeout: float = 3600
+                    ) -> dict | str:
+    """Run the Yade script ``script_text`` (``DATA`` names a JSON file of ``data``) with
+    ``yade -n -j1`` in ``work``: the JSON dict it prints after ``YADE-RESULT``, or why there
+    is none (Yade not installed, or failed)."""
     exe = shutil.which("yade")
     if exe is None:
         return "Yade is not installed (apt-get install yade): it could not be measured"
-    data = work / "scene.json"
-    data.write_text(json.dumps(dict(pos=pos.tolist(), rad=rad.tolist(), box=BOX, dt=DT, T=T)))
+    path = work / "scene.json"
+    path.write_text(json.dumps(data))
     script = work / "yade_run.py"
-    script.write_text(f"DATA = {str(data)!r}\n" + YADE_RUN)
+    script.write_text(f"DATA = {str(path)!r}\n" + script_text)
     r = subprocess.run([exe, "-n", "-j1", "-x", str(script)], capture_output=True, text=True,
-                       cwd=work, timeout=3600)
+                       cwd=work, timeout=timeout)
     for line in r.stdout.splitlines():
         if line.startswith("YADE-RESULT "):
             return json.loads(line[len("YADE-RESULT "):])
     return f"Yade failed (exit {r.returncode}): {r.stderr.strip().splitlines()[-1:]}"
+
+
+def run_yade(pos, rad, T: float, work: Path) -> dict | str:
+    return run_yade_script(YADE_RUN, dict(pos=pos.tolist(), rad=rad.tolist(), box=BOX, dt=DT,
+                                          T=T), work)
 
 
 def main(argv: list[str]) -> dict:
