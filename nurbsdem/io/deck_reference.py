@@ -78,9 +78,10 @@ ENTRIES: dict[tuple[str, str], str] = {
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
         "with `ToContact` (instantaneous; flat walls), `Displacement` (timed; any wall) or "
         "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`) or "
-        "`Table` (timed; any wall) or `Force` (timed; flat walls: a servo). A `Step` line with the previous step's id moves one more "
-        "wall in that MoveWall step (`Step 3 MoveWall floor Displacement 0 0 0.01`): it names "
-        "the wall and its motion only, the first line gives the timing. A timed step is split "
+        "`Table` (timed; any wall) or `Force` (timed; flat walls: a servo). A `Step` line "
+        "with the previous step's id moves one more wall in that MoveWall step (`Step 3 "
+        "MoveWall floor Displacement 0 0 0.01`): it names the wall and its motion only, the "
+        "first line gives the timing. A timed step is split "
         "into internal sub-steps below the contact network's stability limit."),
     ("Flow", "Inlet"): (
         "Particles created during every timed step in a box or a disc at a rate (counted "
