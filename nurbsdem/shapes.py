@@ -50,7 +50,7 @@ def single_patch_sphere(radius: float, name: str | None = None):
 
 def ellipsoid(a: float, b: float, c: float, name: str | None = None):
     """Exact ellipsoid with semi-axes a, b, c (m) along x, y, z."""
-    from .io.deck import ASPECT_MAX
+    from .ranges import ASPECT_MAX
     abc = [_length("SemiAxes", x, "ellipsoid") for x in (a, b, c)]
     if max(abc) > ASPECT_MAX * min(abc):
         raise InputError(f"ellipsoid: SemiAxes {max(abc) / min(abc):.3g} times longer than wide "

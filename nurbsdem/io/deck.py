@@ -40,7 +40,7 @@ from ..errors import InputError
 from ..model import Model
 # the supported magnitudes of the values (below the solver: the geometry and scene checks read
 # them too)
-from ..ranges import ASPECT_MAX, ID_MAX, RANGES, Range  # noqa: F401
+from ..ranges import ID_MAX, RANGES
 from .deck_build import build_entries
 from .deck_schema import SCHEMA, Arg, Entry, LineError
 
