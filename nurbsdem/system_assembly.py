@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .contact.detect import ContactTable
 from .contact.scene import SceneContacts
 from .dynamics import DemSystem, InterfaceTable, PrescribedMotion
 from .dynamics.laws import law_named
@@ -32,6 +33,15 @@ class SystemAssembly:
         self.shapes = [model.shapes[s].shape for s in self.shape_ids]
         self.interfaces = self._interface_table()
         self._compliances: dict = {}
+        self._contact_table: ContactTable | None = None
+
+    def contact_table(self) -> ContactTable:
+        """The contact table of :attr:`shapes`, made once: every scene of the run shares it
+        (it depends on the shapes only, and a run with inlets or outlets builds a scene at
+        each exchange of particles)."""
+        if self._contact_table is None:
+            self._contact_table = ContactTable(self.shapes)
+        return self._contact_table
 
     def _interface_table(self) -> InterfaceTable:
         """Contact laws per pair of material indices (walls: material M), from the deck."""
@@ -114,7 +124,7 @@ class SystemAssembly:
         periodic = self.model.periodic
         scene = SceneContacts(self.shapes, body_shape, [w.patch for w in self.model.walls],
                               cell=None if periodic is None else periodic.cell(),
-                              **contact_options)
+                              table=self.contact_table(), **contact_options)
         if periodic is not None and scene.n:       # the reach with the scene's skin and margin
             check_cell_reach(self.model, 2.0 * float(scene.radius.max()) + scene.margin
                              + scene.skin)

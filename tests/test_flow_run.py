@@ -1,6 +1,7 @@
 """Inlets and outlets in a run (nurbsdem.flow_run): a pour by the Python API inserts its
 count without overlaps and keeps its mass in the box; an outlet under falling particles
-accounts for every particle and its mass with the energy balance closed; a pour deck run by
+accounts for every particle and its mass with the energy balance closed, the scenes of
+its exchanges sharing one contact table; a pour deck run by
 ``nurbsdem solve`` and restarted mid-pour ends bit for bit where the uninterrupted run ends;
 bad Flow entries are one-line errors at their line; the history keys follow the new count."""
 from __future__ import annotations
@@ -14,6 +15,7 @@ from click.testing import CliRunner
 
 from nurbsdem import Simulation, shapes
 from nurbsdem.cli import main
+from nurbsdem.contact.detect import ContactTable
 from nurbsdem.errors import InputError
 from nurbsdem.flow_run import FlowRun, remap_history
 from nurbsdem.io.deck import build_model, parse_deck
@@ -85,14 +87,20 @@ Output
 """
 
 
-def test_an_outlet_accounts_for_every_particle_and_the_energy_balance_stays_closed(tmp_path):
+def test_an_outlet_accounts_for_every_particle_and_the_energy_balance_stays_closed(
+        tmp_path, monkeypatch):
     deck = tmp_path / "outflow.inp"
     deck.write_text(OUTFLOW)
     model = parse_deck(deck)
     start = model.bodies.copy()
+    tables = []
+    original = ContactTable.__init__
+    monkeypatch.setattr(ContactTable, "__init__",
+                        lambda self, shapes: (tables.append(1), original(self, shapes))[1])
     solver = Solver(model, output=tmp_path / "out", quiet=True)
     solver.run()
     out = rows(tmp_path / "out" / "monitors" / "outlet_floor.csv")
+    assert solver.scene is not None and len(tables) == 1    # one table for every exchange
     left = len(solver.bodies)
     assert 0 < out[-1]["count"] < len(start) and out[-1]["count"] + left == len(start)
 

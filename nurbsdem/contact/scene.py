@@ -137,13 +137,17 @@ class SceneContacts:
     cell: a periodic cell (:class:`~nurbsdem.contact.periodic.PeriodicCell`): the list is
         built over the bodies and their images through its faces, the centroids wrapped into
         it at each build (:mod:`nurbsdem.contact.periodic_scene`); None: none.
+    table: the :class:`~nurbsdem.contact.detect.ContactTable` of ``shapes`` (they in its
+        order), when the caller keeps one across scenes (a run whose particle count changes
+        builds a scene at each exchange; the table depends on the shapes only); None: made.
     """
 
     def __init__(self, shapes: Sequence, body_shape: np.ndarray, walls: Sequence = (),
                  margin: float = 0.0, skin: float | None = None, certificates: bool = True,
-                 point_surface: bool = True, cell: PeriodicCell | None = None) -> None:
+                 point_surface: bool = True, cell: PeriodicCell | None = None,
+                 table: ContactTable | None = None) -> None:
         self.shapes = list(shapes)
-        self.table = ContactTable(self.shapes)
+        self.table = ContactTable(self.shapes) if table is None else table
         self.boxes, self.box_offsets = pack_boxes(self.shapes)
         self.body_shape = np.ascontiguousarray(body_shape, dtype=np.int64)
         self.radius = np.asarray(self.table.radius, float)[self.body_shape]
