@@ -1,11 +1,13 @@
 """Inlets and outlets in a run (nurbsdem.flow_run): a pour by the Python API inserts its
 count without overlaps and keeps its mass in the box; an outlet under falling particles
-accounts for every particle and its mass with the energy balance closed; a pour deck run by
+accounts for every particle and its mass with the energy balance closed, and its exchanges
+are timed once (``inlets + outlets``); a pour deck run by
 ``nurbsdem solve`` and restarted mid-pour ends bit for bit where the uninterrupted run ends;
 bad Flow entries are one-line errors at their line; the history keys follow the new count."""
 from __future__ import annotations
 
 import csv
+import time
 from pathlib import Path
 
 import numpy as np
@@ -91,7 +93,16 @@ def test_an_outlet_accounts_for_every_particle_and_the_energy_balance_stays_clos
     model = parse_deck(deck)
     start = model.bodies.copy()
     solver = Solver(model, output=tmp_path / "out", quiet=True)
-    solver.run()
+    rebuild, calls, pause = solver.rebuild, [], 0.02
+
+    def slow_rebuild(*args):                # a rebuild that takes at least `pause` s
+        calls.append(time.sleep(pause))
+        rebuild(*args)
+    solver.rebuild = slow_rebuild
+    summary = solver.run()
+    # the exchanges, their rebuilt systems included, are booked once, in their own timer
+    assert summary.timers["inlets + outlets"] >= pause * len(calls) > 0
+    assert sum(summary.timers.values()) <= summary.wall_time
     out = rows(tmp_path / "out" / "monitors" / "outlet_floor.csv")
     left = len(solver.bodies)
     assert 0 < out[-1]["count"] < len(start) and out[-1]["count"] + left == len(start)
