@@ -85,6 +85,7 @@ SAFETY = 0.8
 DT = 1.0e-3                               # the deck's TimeStep (s); the solver sub-steps it
 EVERY = 0.01                              # inlet and outlet segments (s)
 SEGMENTS = 64                             # the orifice's polygon
+POUR, SETTLE = 0.15, 0.15                 # the fill's pour and settling times (s)
 LEAD, TAIL = 0.35, 0.1                    # fractions of a discharge left out of the fit
 #: the published ranges for spheres: exponent, k, C
 RANGES = {"n": (2.2, 2.8), "k": (1.0, 2.0), "C": (0.5, 0.7)}
@@ -155,20 +156,21 @@ def fill_count(side: float, height: float) -> int:
 
 
 def fill_deck(side: float, height: float, count: int) -> tuple[str, float]:
-    """The fill: an inlet pours ``count`` spheres into the closed silo from a slab above the
-    bed's expected top ``height``; the deck and its duration (s)."""
+    """The fill: an inlet pours ``count`` spheres into the closed silo at 1.5 m/s down over
+    ``POUR`` seconds from a slab 11 d thick above the bed's expected top ``height`` (m);
+    the run lasts until the last of them has fallen to the floor and ``SETTLE`` seconds more.
+    The deck and its duration (s)."""
     h = 0.5 * side - 1.2 * RADII[-1]
-    top = height + 6.0 * D_GRAIN
-    pour = 0.1
-    settle = 0.15 + math.sqrt(2.0 * top / G)
-    T = round((pour + settle) / EVERY) * EVERY
-    rate = count / pour
+    top = height + 12.0 * D_GRAIN
+    v0 = 1.5
+    fall = (math.sqrt(v0 * v0 + 2.0 * G * top) - v0) / G
+    T = round((POUR + fall + SETTLE) / EVERY) * EVERY
     deck = _header() + textwrap.dedent(f"""\
         Walls
           Wall 1 Name floor Point 0 0 0 Normal 0 0 1 Size {side + 0.02} {side + 0.02}
         """) + side_walls(side, top) + "\n" + _contact() + textwrap.dedent(f"""\
         Flow
-          Inlet 1 Name feed Shapes 1 2 3 Fractions 0.3333333333333333 0.3333333333333334 0.3333333333333333 Material 1 Box {-h} {-h} {height + D_GRAIN} {h} {h} {top} Rate {rate:.6g} Count {count} Velocity 0 0 -1 Seed 3 Every {EVERY}
+          Inlet 1 Name feed Shapes 1 2 3 Fractions 0.3333333333333333 0.3333333333333334 0.3333333333333333 Material 1 Box {-h} {-h} {height + D_GRAIN} {h} {h} {top} Rate {count / POUR:.6g} Count {count} Velocity 0 0 {-v0} Seed 3 Every {EVERY}
         Steps
           Step 1 Dynamic Duration {T:.6g} TimeStep {DT} Safety {SAFETY}
         Output
@@ -264,12 +266,23 @@ def run_nurbsdem(deck_text: str, work: Path, name: str, state: Path | None = Non
     return res
 
 
+def bed_top(z: np.ndarray) -> float:
+    """The height (m) of a bed's free surface from its centres' heights z (N,): the top of the
+    highest slab of thickness d holding at least half the bulk's centres (the median count
+    of the slabs between 2 d and mid-height)."""
+    d = D_GRAIN
+    edges = np.arange(0.0, float(z.max()) + 2.0 * d, d)
+    counts = np.histogram(z, edges)[0]
+    bulk = float(np.median(counts[2:max(3, len(counts) // 2)]))
+    return float(edges[np.flatnonzero(counts >= 0.5 * bulk)[-1] + 1])
+
+
 def bulk_density(pos: np.ndarray, shape: np.ndarray, side: float) -> tuple[float, float]:
     """ρ_b (kg/m³): the mass of the spheres whose centres lie in the core of the bed (2 d
     clear of the side walls and the floor, 2 d below the free surface) over the core's
-    volume; and the bed's height (m: the mean height of the top layer's centres + a radius)."""
+    volume; and the height of the free surface (m, :func:`bed_top`)."""
     r = np.asarray(RADII)[shape - 1]
-    top = float(np.percentile(pos[:, 2] + r, 98))
+    top = bed_top(pos[:, 2])
     h = 0.5 * side - 2.0 * D_GRAIN
     lo, hi = 2.0 * D_GRAIN, top - 2.0 * D_GRAIN
     core = (np.all(np.abs(pos[:, :2]) < h, axis=1) & (pos[:, 2] > lo) & (pos[:, 2] < hi))
@@ -384,15 +397,20 @@ def _fill(work: Path, side: float, height: float, count: int) -> dict:
     inl = np.genfromtxt(fill.pop("out") / "monitors" / "inlet_feed.csv", delimiter=",",
                         names=True)
     n = int(keep.sum())
+    speed = np.linalg.norm(bed["velocity"], axis=1)
     res = dict(loop=fill["loop"], flow=fill["flow"], substeps=fill["substeps"], T=T_fill,
-               inserted=int(np.atleast_1d(inl["inserted"])[-1]), count=n, rho_b=rho_b,
+               inserted=int(np.atleast_1d(inl["inserted"])[-1]),
+               waiting=int(np.atleast_1d(inl["waiting"])[-1]), count=n, rho_b=rho_b,
                top=top, timers=fill["timers"], split=fill["split"],
+               speed_max=float(speed.max()), speed_mean=float(speed.mean()),
                per_particle_step=fill["loop"] / (n * fill["substeps"]))
     print(f"fill: {n} spheres (d {d * 1e3:.1f} mm, radii "
           f"{', '.join(f'{r * 1e3:.1f}' for r in RADII)} mm) poured into a silo "
           f"{side * 1e3:.0f} mm square in {T_fill:.2f} s: bed {top * 1e3:.1f} mm "
           f"({top / d:.1f} d) high, bulk density {rho_b:.0f} kg/m^3 (solid fraction "
-          f"{rho_b / DENSITY:.3f}); time loop {fill['loop']:.1f} s ({_split(fill)}), inlet "
+          f"{rho_b / DENSITY:.3f}); {res['waiting']} still waiting at the inlet, speeds at the "
+          f"end {res['speed_mean']:.2g} m/s mean, {res['speed_max']:.2g} m/s at most; "
+          f"time loop {fill['loop']:.1f} s ({_split(fill)}), inlet "
           f"{100 * fill['flow'] / fill['loop']:.1f} % of it; {fill['substeps']} internal "
           f"steps (mean {T_fill / fill['substeps']:.3g} s)")
     return res
@@ -477,7 +495,8 @@ def main(argv: list[str]) -> dict:
     count = fill_count(side, cfg["fill"] * d)
     T = cfg["discharge"]
     out: dict = dict(quick=quick, d=d, side=side, count=count, radii=RADII, kn=KN,
-                     cn=damping(), mu=MU, safety=SAFETY, T=T, orifices=[])
+                     cn=damping(), mu=MU, safety=SAFETY, T=T, lead=LEAD, tail=TAIL,
+                     orifices=[])
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)

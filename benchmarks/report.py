@@ -1222,7 +1222,8 @@ def section_beverloo(rep: Report) -> None:
             f"wide, settled (bed {fill['top'] / d:.1f} d high, bulk density "
             f"{fill['rho_b']:.0f} kg/m³), then discharged for {r['T']} s through a circular "
             "orifice in a mesh floor into an outlet; W is the slope of the discharged mass over "
-            f"the run less its first {int(100 * bb.LEAD)} % and last {int(100 * bb.TAIL)} %; "
+            f"the run less its first {100 * r.get('lead', bb.LEAD):.0f} % and last "
+            f"{100 * r.get('tail', bb.TAIL):.0f} %; "
             "one thread; the time loop includes the inlet's and outlet's exchanges.\n\n")
     rows = [[f"{o['ratio']:g}", fmt(o["W"], ".4f"),
              f"{fmt(o['halves'][0], '.4f')} / {fmt(o['halves'][1], '.4f')}",
