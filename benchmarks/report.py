@@ -1232,12 +1232,19 @@ def section_beverloo(rep: Report) -> None:
     rep.add(md_table(["D / d", "W kg/s", "W of the window's halves", "C at n 2.5, k 1.5",
                       "bed left (d)", "time loop s", "outlet % of loop", "mean step s"], rows)
             + "\n\n")
-    fit = r.get("fit")
+    fit, fixed = r.get("fit"), r.get("fit_n25")
     if fit:
-        marks = {k: "inside" if fit["inside"][k] else "**outside**" for k in bb.RANGES}
-        rep.add(f"Beverloo fit (`postproc/beverloo.py`): exponent {fit['n']:.2f} ({marks['n']} "
-                f"2.5 ± 0.3), k {fit['k']:.2f} ({marks['k']} 1–2), C {fit['C']:.3f} "
-                f"({marks['C']} 0.5–0.7); RMS of W {100 * fit['rms']:.2f} %.\n")
+        def par(f, k, spec):
+            mark = "inside" if f["inside"][k] else "**outside**"
+            lo, hi = bb.RANGES[k]
+            return f"{f[k]:{spec}} ± {f.get('sd_' + k, float('nan')):.2g} ({mark} {lo}–{hi})"
+        rep.add(f"Beverloo fit (`postproc/beverloo.py`, ± its standard errors): exponent "
+                f"{par(fit, 'n', '.2f')}, k {par(fit, 'k', '.2f')}, C {par(fit, 'C', '.3f')}; "
+                f"RMS of W {100 * fit['rms']:.2f} %.")
+        if fixed:
+            rep.add(f" At n = 2.5: k {par(fixed, 'k', '.2f')}, C {par(fixed, 'C', '.3f')}; "
+                    f"RMS of W {100 * fixed['rms']:.2f} %.")
+        rep.add("\n")
         rep.headline["beverloo"] = dict(n=fit["n"], k=fit["k"], C=fit["C"])
     else:
         rep.add("No Beverloo fit: it needs three orifices.\n")
