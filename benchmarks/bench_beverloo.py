@@ -15,12 +15,16 @@ of the fill presses the lowest contacts by about 1 % of d; normal damping for a 
 of about 0.5; μ 0.5), the solver's sub-steps at ``Safety`` 0.8 of the contact network's
 stability limit.
 
-1. **Fill** (once, for all orifices): the silo with a closed flat floor (the orifice shut by a
-   gate) is filled by an ``Inlet`` pouring the spheres into its upper part; they settle.  The
-   bulk density ρ_b is the mass of the spheres whose centres lie in the core of the settled
-   bed (2 d from the side walls, the floor and the free surface) over the core's volume.
+1. **Fill** (once, for all orifices): the silo with a closed floor (a flat ``Wall``: the
+   orifice shut by its gate) is filled to 14 d (full run) by an ``Inlet`` pouring the
+   spheres at 1.5 m/s down from a slab 11 d thick above the bed over ``POUR`` seconds; they
+   settle for ``SETTLE`` seconds after the last has landed (their speeds at the end are
+   printed).  The bulk density ρ_b is the mass of the spheres whose centres lie in the core
+   of the settled bed (2 d from the side walls, the floor and the free surface) over the
+   core's volume.
 2. **Discharge** (per orifice): the settled bed (positions and velocities) in the silo whose
-   floor is the mesh with the orifice: the gate is gone at t = 0.  The spheres falling out
+   floor is the mesh with the orifice: the gate is gone at t = 0; 0.28 s of discharge (full
+   run) at orifices of 6, 7, 8 and 9.5 d.  The spheres falling out
    pass an ``Outlet`` plane 4 d below the floor; the steady mass flow rate W is the slope of
    a linear fit of the discharged mass (``monitors/outlet_below.csv``) over the steady window,
    leaving out the first ``LEAD`` and the last ``TAIL`` of the run (the start-up and the
@@ -43,7 +47,9 @@ Yade's time step set to nurbsdem's mean internal step; a ``PyRunner`` every 0.01
 weighs the spheres below the outlet plane (nurbsdem's outlet, also every 0.01 s).  Printed: the
 wall time of each time loop on one thread (nurbsdem: ``NUMBA_NUM_THREADS=1``, the run less its
 set-up and output; the inlet and outlet exchanges and the rebuilt systems are in the loop;
-Yade: ``-j1``, its ``O.run``), their ratio and the two flow rates.
+Yade: ``-j1``, its ``O.run``), their ratio and the two flow rates; and the CPU time of each
+(nurbsdem: its whole run, set-up and output included; Yade: its ``O.run``), which a machine
+shared with other work disturbs less than the wall time.
 
 **Inlet and outlet cost**: the solver books its exchanges (the outlets' removal, the inlets'
 placement and the system built anew for the new set of particles) in the timer
@@ -232,14 +238,14 @@ if len(sys.argv) > 3:                  # the settled state of another run
     model.bodies = Bodies(np.arange(1, n + 1), st['shape'], np.ones(n), st['position'], q,
                           st['velocity'], w, np.zeros(n))
 s = Solver(model, output=sys.argv[2], quiet=True)
-t = time.perf_counter()
+t, c = time.perf_counter(), time.process_time()
 summary = s.run()
-wall = time.perf_counter() - t
+wall, cpu = time.perf_counter() - t, time.process_time() - c
 b = s.bodies
 np.savez(sys.argv[2] + '/end.npz', position=b.position, velocity=b.velocity, shape=b.shape_id,
          quaternion=b.quaternion, angular_velocity=b.angular_velocity)
 tm = summary.timers
-print(json.dumps(dict(wall=wall, loop=wall - tm.get('output', 0.0) - tm.get('setup', 0.0),
+print(json.dumps(dict(wall=wall, cpu=cpu, loop=wall - tm.get('output', 0.0) - tm.get('setup', 0.0),
                       flow=tm.get('inlets + outlets', 0.0), timers=tm, split=summary.split,
                       substeps=summary.substeps, steps=summary.steps,
                       time=summary.simulated_time)))
@@ -340,10 +346,10 @@ O.engines = [ForceResetter(),
              NewtonIntegrator(damping=0, gravity=(0, 0, -9.81)),
              PyRunner(command='outlet()', virtPeriod=data['every'])]
 O.dt = data['dt']
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 O.run(int(round(data['T'] / data['dt'])), True)
-wall_t = time.perf_counter() - t0
-print('YADE-RESULT ' + json.dumps(dict(wall=wall_t, rows=rows)))
+wall_t, cpu = time.perf_counter() - t0, time.process_time() - c0
+print('YADE-RESULT ' + json.dumps(dict(wall=wall_t, cpu=cpu, rows=rows)))
 """
 
 
@@ -429,7 +435,8 @@ def _discharge(work: Path, side: float, ratio: float, T: float, fill: dict) -> d
     rate = steady_rate(res.pop("out") / "monitors" / "outlet_below.csv", T)
     inside = left["position"][:, 2] > 0
     _, top_end = bulk_density(left["position"][inside], left["shape"][inside], side)
-    row = dict(D=D, ratio=ratio, loop=res["loop"], flow=res["flow"], substeps=res["substeps"],
+    row = dict(D=D, ratio=ratio, loop=res["loop"], cpu=res["cpu"], flow=res["flow"],
+               substeps=res["substeps"],
                dt=T / res["substeps"], top_end=top_end, timers=res["timers"],
                split=res["split"], C_mid=_c_mid(rate["W"], D, fill["rho_b"]),
                per_particle_step=res["loop"] / (fill["count"] * res["substeps"]), **rate)
@@ -492,6 +499,10 @@ def _costs(out: dict, dt_yade: float) -> None:
           f"(window halves {y['halves'][0]:.4f}, {y['halves'][1]:.4f}); nurbsdem / Yade time "
           f"{out['ratio']:.2f} (target at most 2); rates differ by "
           f"{100 * (n0['W'] / y['W'] - 1):+.1f} %")
+    out["cpu_ratio"] = n0["cpu"] / y["cpu"]
+    print(f"CPU time (the machine may be shared): nurbsdem's whole run {n0['cpu']:.1f} s "
+          f"(set-up and output included), Yade's time loop {y['cpu']:.1f} s: ratio "
+          f"{out['cpu_ratio']:.2f}")
 
 
 def refit(path: Path) -> dict:

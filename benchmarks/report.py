@@ -1256,7 +1256,10 @@ def section_beverloo(rep: Report) -> None:
         rep.add(f"Yade, the same bed through D = {o['ratio']:g} d: time loop {y['wall']:.1f} s "
                 f"against nurbsdem's {o['loop']:.1f} s, ratio nurbsdem / Yade "
                 f"**{r['ratio']:.2f}** (target at most 2); W {y['W']:.4f} kg/s, nurbsdem's "
-                f"differs by {100 * (o['W'] / y['W'] - 1):+.1f} %.\n")
+                f"differs by {100 * (o['W'] / y['W'] - 1):+.1f} %."
+                + (f" CPU time: nurbsdem's whole run {o['cpu']:.1f} s, Yade's time loop "
+                   f"{y['cpu']:.1f} s, ratio {r['cpu_ratio']:.2f}." if "cpu_ratio" in r else "")
+                + "\n")
         rep.headline["beverloo_yade"] = r["ratio"]
     else:
         rep.add(f"{y}.\n")
