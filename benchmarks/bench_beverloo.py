@@ -93,6 +93,7 @@ SAFETY = 0.8
 DT = 1.0e-3                               # the deck's TimeStep (s); the solver sub-steps it
 EVERY = 0.01                              # inlet and outlet segments (s)
 SEGMENTS = 64                             # the orifice's polygon
+FRACTIONS = "Fractions 0.3333333333333333 0.3333333333333334 0.3333333333333333"
 POUR, SETTLE = 0.15, 0.15                 # the fill's pour and settling times (s)
 LEAD, TAIL = 0.35, 0.1                    # fractions of a discharge left out of the fit
 #: the published ranges for spheres: exponent, k, C
@@ -173,12 +174,14 @@ def fill_deck(side: float, height: float, count: int) -> tuple[str, float]:
     v0 = 1.5
     fall = (math.sqrt(v0 * v0 + 2.0 * G * top) - v0) / G
     T = round((POUR + fall + SETTLE) / EVERY) * EVERY
+    box = f"Box {-h} {-h} {height + D_GRAIN} {h} {h} {top}"
+    flow = f"Rate {count / POUR:.6g} Count {count} Velocity 0 0 {-v0} Seed 3 Every {EVERY}"
     deck = _header() + textwrap.dedent(f"""\
         Walls
           Wall 1 Name floor Point 0 0 0 Normal 0 0 1 Size {side + 0.02} {side + 0.02}
         """) + side_walls(side, top) + "\n" + _contact() + textwrap.dedent(f"""\
         Flow
-          Inlet 1 Name feed Shapes 1 2 3 Fractions 0.3333333333333333 0.3333333333333334 0.3333333333333333 Material 1 Box {-h} {-h} {height + D_GRAIN} {h} {h} {top} Rate {count / POUR:.6g} Count {count} Velocity 0 0 {-v0} Seed 3 Every {EVERY}
+          Inlet 1 Name feed Shapes 1 2 3 {FRACTIONS} Material 1 {box} {flow}
         Steps
           Step 1 Dynamic Duration {T:.6g} TimeStep {DT} Safety {SAFETY}
         Output
@@ -342,7 +345,8 @@ O.engines = [ForceResetter(),
              InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Facet_Aabb(), Bo1_Wall_Aabb()]),
              InteractionLoop([Ig2_Sphere_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom(),
                               Ig2_Wall_Sphere_ScGeom()],
-                             [Ip2_ViscElMat_ViscElMat_ViscElPhys()], [Law2_ScGeom_ViscElPhys_Basic()]),
+                             [Ip2_ViscElMat_ViscElMat_ViscElPhys()],
+                             [Law2_ScGeom_ViscElPhys_Basic()]),
              NewtonIntegrator(damping=0, gravity=(0, 0, -9.81)),
              PyRunner(command='outlet()', virtPeriod=data['every'])]
 O.dt = data['dt']

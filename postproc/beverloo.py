@@ -80,7 +80,8 @@ def fit_beverloo(D, W, d: float, rho_b: float, g: float = 9.81,
         sd[2] = 0.0                            # the exponent was given
     rms = float(np.sqrt(np.mean((model(D, A, k, m) / W - 1.0) ** 2)))
     scale = rho_b * np.sqrt(g)
-    return BeverlooFit(m, k, float(A / scale), rms, float(sd[2]), float(sd[1]), float(sd[0] / scale))
+    return BeverlooFit(m, k, float(A / scale), rms, float(sd[2]), float(sd[1]),
+                       float(sd[0] / scale))
 
 
 def main(argv=None) -> int:
