@@ -863,6 +863,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
         _section_settled(rep)
     section_spheres(rep)
     section_drum(rep)
+    section_beverloo(rep)
     section_point_surface(rep)
     _section_paper(rep, workdir, quick)
 
@@ -1195,6 +1196,71 @@ def section_drum(rep: Report) -> None:
                 f"{n['angle'] - y['angle']:+.2f} degrees, torques by "
                 f"{100 * (n['torque'] / y['torque'] - 1):+.1f} %.\n")
         rep.headline["drum"] = dict(ratio=ratio, angle=n["angle"] - y["angle"])
+    else:
+        rep.add(f"{y}.\n")
+
+
+def section_beverloo(rep: Report) -> None:
+    """Silo discharge against Beverloo's law and against Yade, and the inlet's and outlet's
+    share of the step (benchmarks/bench_beverloo.py), read from the JSON it wrote (its full
+    run takes minutes of CPU: it is run on its own, not from here)."""
+    import bench_beverloo as bb
+    rep.add("### Silo discharge: Beverloo's law, Yade, and the inlet and outlet cost\n")
+    cache = REPO / "benchmarks" / ".cache"
+    path = next((p for p in (cache / "beverloo.json", cache / "beverloo_quick.json")
+                 if p.exists()), None)
+    if path is None:
+        rep.add("Not measured: run `benchmarks/bench_beverloo.py` (it writes "
+                "`benchmarks/.cache/beverloo.json`, which this section reads).\n")
+        return
+    r = json.loads(path.read_text())
+    d = r["d"]
+    fill = r["fill"]
+    rep.add(f"`benchmarks/bench_beverloo.py`{' (quick: a smoke test)' if r['quick'] else ''}: "
+            f"{r['count']} spheres (radii {', '.join(f'{x * 1e3:g}' for x in r['radii'])} mm, "
+            f"d {d * 1e3:g} mm) poured by an inlet into a square silo {r['side'] * 1e3:.0f} mm "
+            f"wide, settled (bed {fill['top'] / d:.1f} d high, bulk density "
+            f"{fill['rho_b']:.0f} kg/m³), then discharged for {r['T']} s through a circular "
+            "orifice in a mesh floor into an outlet; W is the slope of the discharged mass over "
+            f"the run less its first {100 * r.get('lead', bb.LEAD):.0f} % and last "
+            f"{100 * r.get('tail', bb.TAIL):.0f} %; "
+            "one thread; the time loop includes the inlet's and outlet's exchanges.\n\n")
+    rows = [[f"{o['ratio']:g}", fmt(o["W"], ".4f"),
+             f"{fmt(o['halves'][0], '.4f')} / {fmt(o['halves'][1], '.4f')}",
+             fmt(o["C_mid"], ".3f"), f"{o['top_end'] / d:.1f}", fmt(o["loop"], ".1f"),
+             f"{100 * o['flow'] / o['loop']:.1f}", fmt(o["dt"], ".3g")] for o in r["orifices"]]
+    rep.add(md_table(["D / d", "W kg/s", "W of the window's halves", "C at n 2.5, k 1.5",
+                      "bed left (d)", "time loop s", "outlet % of loop", "mean step s"], rows)
+            + "\n\n")
+    fit, fixed = r.get("fit"), r.get("fit_n25")
+    if fit:
+        def par(f, k, spec):
+            mark = "inside" if f["inside"][k] else "**outside**"
+            lo, hi = bb.RANGES[k]
+            return f"{f[k]:{spec}} ± {f.get('sd_' + k, float('nan')):.2g} ({mark} {lo}–{hi})"
+        rep.add(f"Beverloo fit (`postproc/beverloo.py`, ± its standard errors): exponent "
+                f"{par(fit, 'n', '.2f')}, k {par(fit, 'k', '.2f')}, C {par(fit, 'C', '.3f')}; "
+                f"RMS of W {100 * fit['rms']:.2f} %.")
+        if fixed:
+            rep.add(f" At n = 2.5: k {par(fixed, 'k', '.2f')}, C {par(fixed, 'C', '.3f')}; "
+                    f"RMS of W {100 * fixed['rms']:.2f} %.")
+        rep.add("\n")
+        rep.headline["beverloo"] = dict(n=fit["n"], k=fit["k"], C=fit["C"])
+    else:
+        rep.add("No Beverloo fit: it needs three orifices.\n")
+    rep.add(f"Inlet and outlet exchanges: **{100 * r['flow_share']:.1f} %** of the time loop "
+            f"(target at most 5 %; the fill's inlet {100 * fill['flow'] / fill['loop']:.1f} %).\n")
+    y = r["yade"]
+    if isinstance(y, dict):
+        o = r["orifices"][0]
+        rep.add(f"Yade, the same bed through D = {o['ratio']:g} d: time loop {y['wall']:.1f} s "
+                f"against nurbsdem's {o['loop']:.1f} s, ratio nurbsdem / Yade "
+                f"**{r['ratio']:.2f}** (target at most 2); W {y['W']:.4f} kg/s, nurbsdem's "
+                f"differs by {100 * (o['W'] / y['W'] - 1):+.1f} %."
+                + (f" CPU time: nurbsdem's whole run {o['cpu']:.1f} s, Yade's time loop "
+                   f"{y['cpu']:.1f} s, ratio {r['cpu_ratio']:.2f}." if "cpu_ratio" in r else "")
+                + "\n")
+        rep.headline["beverloo_yade"] = r["ratio"]
     else:
         rep.add(f"{y}.\n")
 

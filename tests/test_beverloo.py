@@ -35,3 +35,28 @@ def test_command_line(tmp_path, capsys):
     assert "exponent 2.500, k 1.500, C 0.600" in capsys.readouterr().out
     path.write_text("D,W\n0.1,1\n0.2,2\n")
     assert beverloo.main([str(path), "--d", "0.004", "--rho-b", "1500"]) == 2
+
+
+def test_given_exponent_and_standard_errors():
+    d, rho_b, g = 0.004, 1500.0, 9.81
+    D = np.array([6, 7, 8, 9.5]) * d
+    W = 0.6 * rho_b * np.sqrt(g) * (D - 1.3 * d) ** 2.5
+    fit = beverloo.fit_beverloo(D[:2], W[:2], d, rho_b, g, n=2.5)    # two orifices suffice
+    assert (fit.n, fit.k, fit.C, fit.sd_n) == (2.5, pytest.approx(1.3, rel=1e-6),
+                                               pytest.approx(0.6, rel=1e-6), 0.0)
+    assert np.isnan(beverloo.fit_beverloo(D[:3], W[:3], d, rho_b, g).sd_n)   # no spare one
+    with pytest.raises(ValueError):
+        beverloo.fit_beverloo(D[:1], W[:1], d, rho_b, g, n=2.5)
+    # noisy rates: the standard errors cover the errors of the parameters, and the free
+    # exponent's is much larger than k's and C's with n given (the narrow range of D)
+    rng = np.random.default_rng(3)
+    errors = []
+    for _ in range(40):
+        noisy = W * (1 + 0.01 * rng.standard_normal(len(W)))
+        free = beverloo.fit_beverloo(D, noisy, d, rho_b, g)
+        fixed = beverloo.fit_beverloo(D, noisy, d, rho_b, g, n=2.5)
+        errors.append((abs(free.n - 2.5) / free.sd_n, abs(fixed.k - 1.3) / fixed.sd_k,
+                       abs(fixed.C - 0.6) / fixed.sd_C, free.sd_k / fixed.sd_k))
+    errors = np.array(errors)
+    assert np.all(np.median(errors[:, :3], axis=0) < 2.0)
+    assert np.median(errors[:, 3]) > 3.0

@@ -1,12 +1,14 @@
 """Inlets and outlets in a run (nurbsdem.flow_run): a pour by the Python API inserts its
 count without overlaps and keeps its mass in the box; an outlet under falling particles
 accounts for every particle and its mass with the energy balance closed, the scenes of
-its exchanges sharing one contact table; a pour deck run by
+its exchanges sharing one contact table, and its exchanges are timed once
+(``inlets + outlets``); a pour deck run by
 ``nurbsdem solve`` and restarted mid-pour ends bit for bit where the uninterrupted run ends;
 bad Flow entries are one-line errors at their line; the history keys follow the new count."""
 from __future__ import annotations
 
 import csv
+import time
 from pathlib import Path
 
 import numpy as np
@@ -98,7 +100,16 @@ def test_an_outlet_accounts_for_every_particle_and_the_energy_balance_stays_clos
     monkeypatch.setattr(ContactTable, "__init__",
                         lambda self, shapes: (tables.append(1), original(self, shapes))[1])
     solver = Solver(model, output=tmp_path / "out", quiet=True)
-    solver.run()
+    rebuild, calls, pause = solver.rebuild, [], 0.02
+
+    def slow_rebuild(*args):                # a rebuild that takes at least `pause` s
+        calls.append(time.sleep(pause))
+        rebuild(*args)
+    solver.rebuild = slow_rebuild
+    summary = solver.run()
+    # the exchanges, their rebuilt systems included, are booked once, in their own timer
+    assert summary.timers["inlets + outlets"] >= pause * len(calls) > 0
+    assert sum(summary.timers.values()) <= summary.wall_time
     out = rows(tmp_path / "out" / "monitors" / "outlet_floor.csv")
     assert solver.scene is not None and len(tables) == 1    # one table for every exchange
     left = len(solver.bodies)
