@@ -1,12 +1,14 @@
 """Mesh and NURBS-surface walls inside the compiled deck steps
 (nurbsdem.contact.curved_compiled): a drum of exact spheres — an exact NURBS cylinder with a
 triangle-mesh baffle inside and flat end plates — settling, then turning, gives the same bits
-whichever driver runs it, and the compiled loop really ran."""
+whichever driver runs it, and the compiled loop really ran; so does a drum of ellipsoids and
+spheres without the baffle (NURBS particles against the surface wall,
+nurbsdem.contact.surface_particle_compiled)."""
 from __future__ import annotations
 
 import numpy as np
 
-from nurbsdem.dynamics import system as system_module
+from nurbsdem.dynamics import deck_steps, system as system_module
 from nurbsdem.geometry.surfaces import cylinder_patch
 from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.io.shapefile import save_shape
@@ -50,7 +52,8 @@ Output
 """
 
 
-def test_a_turning_drum_gives_the_same_bits_on_both_drivers(tmp_path, monkeypatch):
+def _counting_steps(monkeypatch) -> list:
+    """Whether each DemSystem.steps call ran the compiled loop, appended to the list."""
     used = []
     original = system_module.DemSystem.steps
 
@@ -59,11 +62,12 @@ def test_a_turning_drum_gives_the_same_bits_on_both_drivers(tmp_path, monkeypatc
         used.append(bool(self._deck_steps) and self.compiled_steps)
         return done
     monkeypatch.setattr(system_module.DemSystem, "steps", counting)
-    text = _drum_deck(tmp_path)
-    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "drum.inp", text)
-    assert any(used) and not all(used)                     # the Python run, then compiled
-    for name in ("energy.csv", "contacts.csv", "wall_drum.csv", "wall_baffle.csv",
-                 "wall_plate_x_min.csv"):
+    return used
+
+
+def _same_bits(py, cc, s_py, s_cc, monitors) -> None:
+    """Monitors, results samples, VTK files and counters of the two runs equal."""
+    for name in monitors:
         assert (py / "monitors" / name).read_text() == (cc / "monitors" / name).read_text(), name
     times = read_results_times(py / "results.h5")
     np.testing.assert_array_equal(times, read_results_times(cc / "results.h5"))
@@ -77,8 +81,47 @@ def test_a_turning_drum_gives_the_same_bits_on_both_drivers(tmp_path, monkeypatc
         assert (py / "vtk" / name).read_bytes() == (cc / "vtk" / name).read_bytes(), name
     for key in ("steps", "substeps", "active_total", "active_max"):
         assert getattr(s_py, key) == getattr(s_cc, key), key
+
+
+def test_a_turning_drum_gives_the_same_bits_on_both_drivers(tmp_path, monkeypatch):
+    used = _counting_steps(monkeypatch)
+    text = _drum_deck(tmp_path)
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "drum.inp", text)
+    assert any(used) and not all(used)                     # the Python run, then compiled
+    _same_bits(py, cc, s_py, s_cc, ("energy.csv", "contacts.csv", "wall_drum.csv",
+                                    "wall_baffle.csv", "wall_plate_x_min.csv"))
     drum = np.genfromtxt(cc / "monitors" / "wall_drum.csv", delimiter=",", names=True)
     baffle = np.genfromtxt(cc / "monitors" / "wall_baffle.csv", delimiter=",", names=True)
     assert np.abs(drum["reaction_z"]).max() > 0 and np.abs(drum["torque_x"][-5:]).max() > 0
     assert np.abs(baffle["reaction_z"]).max() > 0
     assert s_cc.active_max >= 5
+
+
+def test_ellipsoids_in_a_turning_drum_give_the_same_bits_on_both_drivers(tmp_path,
+                                                                         monkeypatch):
+    """Two ellipsoids and two spheres in the drum (no baffle), settling, turning, resting:
+    the compiled loop takes the NURBS particles' contacts with the surface wall (it never
+    hands a deck step back) and gives the Python driver's bits; at the end the drum carries
+    more than the spheres' weight."""
+    used = _counting_steps(monkeypatch)
+    statuses = []
+    original = deck_steps.DeckSteps.run
+
+    def run(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        statuses.append(out[0])
+        return out
+    monkeypatch.setattr(deck_steps.DeckSteps, "run", run)
+    text = _drum_deck(tmp_path).replace("  Mesh 2 Name baffle File baffle.stl\n", "").replace(
+        "  Shape 1 Sphere Radius 0.006", "  Shape 1 Ellipsoid SemiAxes 0.008 0.0065 0.005"
+    ).replace("Counts 9 9 Material 1 Region -0.014 -0.035 -0.035 0.014 0.035 0.035",
+              "Counts 2 2 Material 1 Region -0.012 -0.03 -0.05 0.012 0.03 -0.008"
+              ).replace("NormalDamping 2", "NormalDamping 6").replace(
+        "Center 0 0 0 Duration 0.08", "Center 0 0 0 Duration 0.04")
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "ellipsoids.inp", text)
+    assert any(used) and not all(used) and statuses and deck_steps.GUARD not in statuses
+    _same_bits(py, cc, s_py, s_cc, ("energy.csv", "contacts.csv", "wall_drum.csv",
+                                    "wall_plate_x_min.csv"))
+    drum = np.genfromtxt(cc / "monitors" / "wall_drum.csv", delimiter=",", names=True)
+    spheres = 2 * 2500 * 4 / 3 * np.pi * 0.005 ** 3 * 9.81          # N
+    assert drum["reaction_z"][-5:].min() > 1.5 * spheres
