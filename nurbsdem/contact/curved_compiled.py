@@ -1,6 +1,7 @@
 """Mesh and NURBS-surface walls inside the compiled deck steps: the contacts of exact spheres
-with them, as the provider of :mod:`nurbsdem.contact.curved_walls` finds them, from packed
-arrays.
+with them and of NURBS particles with the surface walls
+(:mod:`nurbsdem.contact.surface_particle_compiled`), as the provider of
+:mod:`nurbsdem.contact.curved_walls` finds them, from packed arrays.
 
 The compiled loop (:mod:`nurbsdem.dynamics.deck_steps`) cannot hold a list of wall objects,
 so :func:`pack_curved` packs the walls of a
@@ -8,13 +9,14 @@ so :func:`pack_curved` packs the walls of a
 flat arrays whose types do not depend on how many walls there are (each wall's share is a
 slice given by offsets): the meshes' vertices, faces, normals and grids; the surfaces' patch
 pools (knot and power-form offsets shifted into the joint arrays) and samples; each wall's
-pose in time (:func:`~nurbsdem.contact.curved_walls.wall_pose_at`) and bounding-box corners.
-:data:`CurvedWork` holds what changes: the mesh kernels' workspaces and the surfaces' gap
+pose in time (:func:`~nurbsdem.contact.curved_walls.wall_pose_at`) and bounding-box corners;
+the particles' kinds and reach and the contact table of their shapes.  :data:`CurvedWork` holds what changes: the mesh kernels' workspaces and the surfaces' gap
 certificates (:mod:`nurbsdem.contact.wall_skin`).
 
-:func:`curved_contacts` then gives, at time t, the contacts of the spheres with every wall in
-the provider's order, keys and rows (wall by wall; spheres in index order; a mesh's rows in
-the kernel's order, those touching kept with their rank), so that the loop's contact part
+:func:`curved_contacts` then gives, at time t, the contacts of the particles with every wall
+in the provider's order, keys and rows (wall by wall; spheres in index order, then a surface
+wall's NURBS particles in index order; a mesh's rows in the kernel's order, those touching
+kept with their rank), so that the loop's contact part
 sees the arrays the Python driver sees, bit for bit.  Units: metres, seconds, radians;
 global body indices (particles 0..N-1, walls N..N+W-1).
 """
