@@ -184,3 +184,36 @@ Output
     weight = 2700 * 9.81 * (2 * 98.57 + 4 * 50.47 + 14 * 21.29) * 1e-6          # N
     assert drum["reaction_z"][-10:].mean() == pytest.approx(weight, rel=0.3)
     assert np.all(np.abs(drum["torque_x"][-10:]) > 0)
+
+
+def test_a_refused_surface_contact_hands_back_and_the_provider_names_the_wall():
+    """An ellipsoid in a cylinder narrower than its flat side's radius of curvature (two
+    contact points, test_particle_walls): the compiled search reports the refusal (count −1,
+    the loop then hands the deck step back), and the Python provider raises
+    ContactNotUnique naming the wall."""
+    from nurbsdem import shapes
+    from nurbsdem.contact.curved_compiled import curved_contacts, pack_curved
+    from nurbsdem.contact.curved_walls import CurvedWall, CurvedWallContacts
+    from nurbsdem.contact.detect import ContactTable
+    from nurbsdem.contact.kinds import SURFACE_WALL
+    from nurbsdem.contact.surface_particle import ContactNotUnique
+    from nurbsdem.contact.surface_wall import build_surface_wall
+    from nurbsdem.dynamics.internal_step import Kinematics
+    from nurbsdem.jit import fill_lazy_kernels
+    shape = shapes.ellipsoid(0.03, 0.02, 0.015)
+    table = ContactTable([shape])
+    narrow = build_surface_wall([cylinder_patch(0.021, 0.2, base=(0, 0, -0.1), axis=(0, 0, 1))])
+    provider = CurvedWallContacts(None, np.zeros(1), np.zeros(1, bool),
+                                  [CurvedWall(SURFACE_WALL, narrow, name="narrow")], 0,
+                                  table=table, body_shape=np.zeros(1, np.int64))
+    R = np.array([[[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]])  # a, b, c on z, x, y
+    x = np.array([[0.0, 0.0065, 0.0]])
+    pos = x - R[0] @ shape.centroid
+    fill_lazy_kernels("surface_particles")
+    cc, wk = pack_curved(provider, 1, table)
+    curved_contacts(cc, wk, 0.0, x, R, pos, np.zeros((1, 3)))
+    assert wk.count[0] == -1
+    kin = Kinematics(0.0, x, R, pos, np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
+                     np.zeros((1, 3)), 1, 2)
+    with pytest.raises(ContactNotUnique, match="surface wall 'narrow': .*not unique"):
+        provider(kin)
