@@ -34,6 +34,8 @@ reports it (:class:`ContactNotUnique`) for a particle that crosses the wall, as 
 Newton that does not converge there.
 
 The wall is one-sided: a particle whose centroid is behind the surface makes no contact.
+The solve runs compiled (:mod:`nurbsdem.contact.surface_particle_compiled`: one kernel per
+particle and wall, one call per wall); the Python one here is its reference.
 Lengths in metres; rows in the layout of :mod:`nurbsdem.contact.lcp` (``I_PB``: the wall's
 patch, ``F_PAR + 2:4``: its (u, v); ``I_PA``: −1).
 """
@@ -80,8 +82,8 @@ def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
     deepest converged contact wins.  Raises :class:`ContactNotUnique` (naming ``where``)
     when the particle crosses a patch (sd < 0) whose contact does not converge or is not
     unique (module docstring); apart from the wall, neither matters.  Compiled
-    (:func:`surface_rows`);
-    :func:`particle_surface_row_reference` is the same solve in Python."""
+    (:func:`surface_rows`); :func:`particle_surface_row_reference` is the same solve in
+    Python."""
     R = np.eye(3) if R is None else np.asarray(R, float)
     t = np.zeros(3) if t is None else np.asarray(t, float)
     s = np.array([int(shape)], np.int64)
