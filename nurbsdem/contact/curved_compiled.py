@@ -10,8 +10,9 @@ flat arrays whose types do not depend on how many walls there are (each wall's s
 slice given by offsets): the meshes' vertices, faces, normals and grids; the surfaces' patch
 pools (knot and power-form offsets shifted into the joint arrays) and samples; each wall's
 pose in time (:func:`~nurbsdem.contact.curved_walls.wall_pose_at`) and bounding-box corners;
-the particles' kinds and reach and the contact table of their shapes.  :data:`CurvedWork` holds what changes: the mesh kernels' workspaces and the surfaces' gap
-certificates (:mod:`nurbsdem.contact.wall_skin`).
+the particles' kinds and reach and the contact table of their shapes.  :data:`CurvedWork`
+holds what changes: the mesh kernels' workspaces and the surfaces' gap certificates
+(:mod:`nurbsdem.contact.wall_skin`).
 
 :func:`curved_contacts` then gives, at time t, the contacts of the particles with every wall
 in the provider's order, keys and rows (wall by wall; spheres in index order, then a surface

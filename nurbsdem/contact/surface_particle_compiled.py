@@ -159,7 +159,8 @@ def _support(tab, info, cen, rad, seeds, work):
 @kernel(inline="always")
 def _normal(ev, sw):
     """The wall's unit normal n = S_u × S_v / |·| at ev into sw[_N], its derivatives
-    (I − n nᵀ) ∂(S_u × S_v)/∂u_j / |S_u × S_v| into sw[_NU], sw[_NV], and d = −n into sw[_D]."""
+    (I − n nᵀ) ∂(S_u × S_v)/∂u_j / |S_u × S_v| into sw[_NU], sw[_NV], and d = −n into
+    sw[_D]."""
     m0 = ev[1, 1] * ev[2, 2] - ev[1, 2] * ev[2, 1]
     m1 = ev[1, 2] * ev[2, 0] - ev[1, 0] * ev[2, 2]
     m2 = ev[1, 0] * ev[2, 1] - ev[1, 1] * ev[2, 0]
