@@ -3,7 +3,8 @@ nurbsdem.contact.surface_particle): an exact ellipsoid on a two-triangle floor a
 tessellated plane against the flat wall's kernel, edge and vertex contacts against the
 ellipsoid's analytic support function, convex and concave folds, the ellipsoid inside an
 exact cylinder against the analytic contact and the same cylinder as a mesh (chord error), a
-wall pocket narrower than the particle refused, and moved walls.  (Runs: test_mesh_walls_deck,
+wall pocket narrower than the particle refused, moved walls, and the compiled surface-wall
+solve against its Python reference in the drum and the cone of inputs/.  (Runs: test_mesh_walls_deck,
 test_wall_checks.)"""
 from __future__ import annotations
 
@@ -20,11 +21,13 @@ from nurbsdem.contact.detect import table_of
 from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE
 from nurbsdem.contact.mesh_particle import particle_mesh_contacts
 from nurbsdem.contact.mesh_wall import build_mesh_wall
-from nurbsdem.contact.surface_particle import ContactNotUnique, particle_surface_row
+from nurbsdem.contact.surface_particle import (ContactNotUnique, particle_surface_row,
+                                               particle_surface_row_reference)
 from nurbsdem.contact.surface_wall import build_surface_wall
 from nurbsdem.contact.wall import detect_wall
 from nurbsdem.geometry.rotation import quat_from_rotvec, quat_to_matrix
 from nurbsdem.geometry.surfaces import cylinder_patch
+from nurbsdem.io.shapefile import read_patches
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_mesh_wall import plane_mesh  # noqa: E402
@@ -295,3 +298,50 @@ def test_over_the_corner_of_a_cube_one_contact_passes_face_edge_vertex():
         seen.add(sum(on))
     assert seen == {1, 2, 3}                        # a face, an edge and the corner
     assert np.max(np.abs(np.diff(sds, 2))) < 3e-5     # its slope changes smoothly: no jump
+
+
+INPUTS = Path(__file__).resolve().parents[1] / "inputs"
+
+
+def _outcome(solve, table, pos, R, wall):
+    try:
+        return solve(table, 0, pos, R, wall, where="w")
+    except ContactNotUnique as err:
+        return str(err)
+
+
+def test_the_compiled_surface_solve_is_the_python_one_in_the_drum_and_the_cone():
+    """Random poses of an ellipsoid and of the paper's particle A (C in the narrower cone)
+    near the wall, some crossing it, some apart: the compiled rows equal the Python
+    reference's (the support oracle's Newton) to 1e-12 of the wall's size (points, depth)
+    and 1e-12 (normal), the same patch and activity; a refusal is the same error."""
+    drum = build_surface_wall(read_patches(INPUTS / "drum" / "drum.yaml")[0])  # r 0.1, z 0..0.1
+    cone = build_surface_wall(read_patches(INPUTS / "hopper" / "cone.yaml")[0])
+    rng = np.random.default_rng(7)
+    paper = {k: table_of(shapes.paper_particle_shape(k)) for k in "AC"}
+    seen = {"contact": 0, "apart": 0}
+    for wall, name, radius_at, tables in (
+            (drum, "drum", lambda z: 0.1, (TABLE, paper["A"])),
+            (cone, "cone", lambda z: 0.02 + 0.05 * z / 0.08, (TABLE, paper["C"]))):
+        for table in tables:
+            rad = float(table.radius[0])
+            for _ in range(6):
+                R = _rotation(rng.normal(size=3))
+                phi, z = rng.uniform(0, 2 * math.pi), rng.uniform(0.045, 0.06)
+                rho = radius_at(z) - rad * rng.uniform(0.55, 1.05)
+                c = np.array([rho * math.cos(phi), rho * math.sin(phi), z])
+                pos = c - R @ table.centroid[0]
+                got = _outcome(particle_surface_row, table, pos, R, wall)
+                ref = _outcome(particle_surface_row_reference, table, pos, R, wall)
+                if isinstance(ref, str):
+                    assert got == ref, name
+                    continue
+                (f, i, ok), (fr, ir, okr) = got, ref
+                assert ok == okr and i[I_ACTIVE] == ir[I_ACTIVE] and i[2] == ir[2], name
+                tol = 1e-12 * wall.size
+                assert f[F_SD] == pytest.approx(fr[F_SD], abs=tol)
+                np.testing.assert_allclose(f[F_PA:F_PA + 3], fr[F_PA:F_PA + 3], rtol=0, atol=tol)
+                np.testing.assert_allclose(f[F_PB:F_PB + 3], fr[F_PB:F_PB + 3], rtol=0, atol=tol)
+                np.testing.assert_allclose(f[F_N:F_N + 3], fr[F_N:F_N + 3], rtol=0, atol=1e-12)
+                seen["contact" if i[I_ACTIVE] else "apart"] += 1
+    assert seen["contact"] >= 5 and seen["apart"] >= 3, seen

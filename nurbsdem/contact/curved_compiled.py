@@ -1,6 +1,7 @@
 """Mesh and NURBS-surface walls inside the compiled deck steps: the contacts of exact spheres
-with them, as the provider of :mod:`nurbsdem.contact.curved_walls` finds them, from packed
-arrays.
+with them and of NURBS particles with the surface walls
+(:mod:`nurbsdem.contact.surface_particle_compiled`), as the provider of
+:mod:`nurbsdem.contact.curved_walls` finds them, from packed arrays.
 
 The compiled loop (:mod:`nurbsdem.dynamics.deck_steps`) cannot hold a list of wall objects,
 so :func:`pack_curved` packs the walls of a
@@ -8,13 +9,15 @@ so :func:`pack_curved` packs the walls of a
 flat arrays whose types do not depend on how many walls there are (each wall's share is a
 slice given by offsets): the meshes' vertices, faces, normals and grids; the surfaces' patch
 pools (knot and power-form offsets shifted into the joint arrays) and samples; each wall's
-pose in time (:func:`~nurbsdem.contact.curved_walls.wall_pose_at`) and bounding-box corners.
-:data:`CurvedWork` holds what changes: the mesh kernels' workspaces and the surfaces' gap
-certificates (:mod:`nurbsdem.contact.wall_skin`).
+pose in time (:func:`~nurbsdem.contact.curved_walls.wall_pose_at`) and bounding-box corners;
+the particles' kinds and reach and the contact table of their shapes.  :data:`CurvedWork`
+holds what changes: the mesh kernels' workspaces and the surfaces' gap certificates
+(:mod:`nurbsdem.contact.wall_skin`).
 
-:func:`curved_contacts` then gives, at time t, the contacts of the spheres with every wall in
-the provider's order, keys and rows (wall by wall; spheres in index order; a mesh's rows in
-the kernel's order, those touching kept with their rank), so that the loop's contact part
+:func:`curved_contacts` then gives, at time t, the contacts of the particles with every wall
+in the provider's order, keys and rows (wall by wall; spheres in index order, then a surface
+wall's NURBS particles in index order; a mesh's rows in the kernel's order, those touching
+kept with their rank), so that the loop's contact part
 sees the arrays the Python driver sees, bit for bit.  Units: metres, seconds, radians;
 global body indices (particles 0..N-1, walls N..N+W-1).
 """
@@ -30,8 +33,10 @@ from ..jit import PointerKernel
 from .curved_walls import (MAX_PER_WALL, _mesh_rows_of, _surface_rows_of, wall_contact_key,
                            wall_pose_at, world_box)
 from .kinds import MESH_WALL
-from .lcp import F_N, F_PA, F_PB, F_SD, NF, NI
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
 from .mesh_wall import MeshWall
+from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
+                                        particle_surface_rows_ptr)
 from .wall_skin import due_spheres, pose_travel, wall_reach
 
 #: the packed walls (W curved walls, N particles): n, first (the first curved wall's index
@@ -40,12 +45,16 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 #: corners (W,8,3) of its wall-frame box; meshes: offsets (W+1,) into vertices, faces, cell
 #: starts and cell triangles, the arrays, per-wall two_sided, size, grid origin, cell and
 #: dims; surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
-#: per-wall spacing and size
+#: per-wall spacing and size; the particles: reach (N,) m (bounding radius about the
+#: centroid), which are exact spheres and which NURBS particles (N,) bool, their shapes
+#: body_shape (N,) and the NURBS particles' count, and the contact table's arrays (ptab …
+#: pseeds: tab, info, centroid, radius, seeds of
+#: :class:`~nurbsdem.contact.detect.ContactTable`)
 CurvedConst = namedtuple(
     "CurvedConst", "n_walls first nb radius kind omega center t0 R0 shift0 corners "
     "vo fo co to vertices faces normals two_sided msize grid_origin grid_cell grid_dims "
     "cell_start cell_tris po so deg ncp koff knots pw poff dom periodic seed_x seed_p "
-    "seed_uv spacing ssize")
+    "seed_uv spacing ssize reach sphere nurbs body_shape n_nurbs ptab pinfo pcen prad pseeds")
 #: what the search changes: the mesh kernels' workspaces over all meshes' triangles (stamp,
 #: tris, cand_q, cand_d, cand_f) and the query mark (1,); the surfaces' certificates per
 #: wall: gap (W,N) m, x0 (W,N,3), odo0 (W,N), the odometer (W,) m and the pose it was last
@@ -67,10 +76,11 @@ def _joined(parts, empty_shape, dtype=float) -> np.ndarray:
             else np.zeros(empty_shape, dtype))
 
 
-def pack_curved(provider, n_all_walls: int) -> tuple:
+def pack_curved(provider, n_all_walls: int, table) -> tuple:
     """(:data:`CurvedConst`, :data:`CurvedWork`) of the walls of ``provider`` (a
     :class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`; None: no walls) in a system
-    of ``n_all_walls`` walls; the poses are those the walls hold now."""
+    of ``n_all_walls`` walls whose particles' shapes are those of ``table`` (the scene's
+    :class:`~nurbsdem.contact.detect.ContactTable`); the poses are those the walls hold now."""
     walls = [] if provider is None else provider.walls
     radius = (np.zeros(0) if provider is None else np.ascontiguousarray(provider.radii, float))
     n = len(radius)
@@ -128,7 +138,9 @@ def pack_curved(provider, n_all_walls: int) -> tuple:
         _joined([g.seed_x for g in surfs], (0, 3)),
         _joined([g.seed_p for g in surfs], (0,), np.int64),
         _joined([g.seed_uv for g in surfs], (0, 2)),
-        surface_value(lambda g: g.spacing), surface_value(lambda g: g.size))
+        surface_value(lambda g: g.spacing), surface_value(lambda g: g.size),
+        *_particles(provider, n), table.tab, table.info, table.centroid, table.radius,
+        table.seeds)
     T = len(cc.faces)
     room = W * n * MAX_PER_WALL
     extent, centre = np.zeros(W), np.zeros((W, 3))
@@ -146,12 +158,27 @@ def pack_curved(provider, n_all_walls: int) -> tuple:
     return cc, work
 
 
+def _particles(provider, n: int) -> tuple:
+    """(reach, sphere, nurbs, body_shape, n_nurbs) of the provider's n particles (zeros: no
+    provider)."""
+    if provider is None:
+        return np.zeros(0), np.zeros(0, np.bool_), np.zeros(0, np.bool_), np.zeros(0, np.int64), 0
+    shape = (np.zeros(n, np.int64) if provider.body_shape is None
+             else np.ascontiguousarray(provider.body_shape, np.int64))
+    return (np.ascontiguousarray(provider.reach, float),
+            np.ascontiguousarray(provider.spheres, np.bool_),
+            np.ascontiguousarray(provider.nurbs, np.bool_), shape, int(provider.nurbs.sum()))
+
+
 @njit(cache=True)
-def _candidates(x, r, lo, hi):
-    """The spheres (ascending) whose bounding boxes (centre ± radius) meet the box [lo, hi]."""
+def _candidates(x, r, kind, lo, hi):
+    """The particles of ``kind`` (N,) bool (ascending) whose bounding boxes (centre ± r) meet
+    the box [lo, hi]."""
     out = np.empty(x.shape[0], np.int64)
     n = 0
     for i in range(x.shape[0]):
+        if not kind[i]:
+            continue
         inside = True
         for a in range(3):
             if x[i, a] + r[i] < lo[a] or x[i, a] - r[i] > hi[a]:
@@ -225,25 +252,59 @@ def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank):
 
 
 @njit(cache=True)
-def curved_contacts(cc, wk, time, x, wall_d) -> None:
-    """The spheres' contacts with the curved walls at time (s), the walls displaced by
-    wall_d (W_all,3) m, into ``wk``: bodies, points, normals, depths (m) and keys, wall by
-    wall in the provider's order (module docstring), ``wk.count[0]`` of them (called through
-    a lazy pointer, :data:`curved_contacts_ptr`)."""
+def _nurbs_rows(cc, w, idx, pos, rot, R, t, rows_f, owner, rank, n):
+    """The active rows of the NURBS particles idx (poses pos, rot) with surface wall w
+    appended to rows_f, owner, rank from row n
+    (:func:`~nurbsdem.contact.surface_particle_compiled.particle_surface_rows`); returns
+    the new count, or −1 where a contact is refused (the Python driver raises)."""
+    p0, p1, s0, s1 = cc.po[w], cc.po[w + 1], cc.so[w], cc.so[w + 1]
+    K = idx.shape[0]
+    rf, ri = np.zeros((K, NF)), np.zeros((K, NI), np.int64)
+    status = np.zeros((K, 2), np.int64)
+    particle_surface_rows_ptr((idx, cc.body_shape, pos, rot, R, t, cc.ptab, cc.pinfo, cc.pcen,
+                               cc.prad, cc.pseeds, cc.deg[p0:p1], cc.ncp[p0:p1],
+                               cc.koff[p0:p1], cc.knots, cc.pw, cc.poff[p0:p1], cc.dom[p0:p1],
+                               cc.periodic[p0:p1], cc.seed_x[s0:s1], cc.seed_p[s0:s1],
+                               cc.seed_uv[s0:s1], cc.spacing[w], cc.ssize[w], rf, ri, status))
+    for m in range(K):
+        if status[m, 0] == NOT_CONVERGED or status[m, 0] == NOT_UNIQUE:
+            return -1
+        if status[m, 0] == CONTACT and ri[m, I_ACTIVE] == 1:
+            rows_f[n, :] = rf[m, :]
+            owner[n] = idx[m]
+            rank[n] = 0
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def curved_contacts(cc, wk, time, x, rot, pos, wall_d) -> None:
+    """The particles' contacts with the curved walls at time (s) (centroids x (N,3) m, pose
+    rotations rot (N,3,3) and origins pos (N,3) m), the walls displaced by wall_d (W_all,3)
+    m, into ``wk``: bodies, points, normals, depths (m) and keys, wall by wall in the
+    provider's order (module docstring; a surface wall's NURBS particles after its spheres),
+    ``wk.count[0]`` of them, −1 where a NURBS particle's contact with a surface wall is
+    refused (called through a lazy pointer, :data:`curved_contacts_ptr`)."""
     N = x.shape[0]
     c = 0
     for w in range(cc.n_walls):
         R, t = wall_pose_at(cc.omega[w], cc.center[w], cc.t0[w], cc.R0[w], cc.shift0[w],
                             time, wall_d[cc.first + w])
         lo, hi = world_box(cc.corners[w], R, t)
-        idx = _candidates(x, cc.radius, lo, hi)
-        rows_f = np.zeros((MAX_PER_WALL * idx.shape[0] + 1, NF))
+        idx = _candidates(x, cc.reach, cc.sphere, lo, hi)
+        more = _candidates(x, cc.reach, cc.nurbs, lo, hi) if cc.n_nurbs else idx[:0]
+        rows_f = np.zeros((MAX_PER_WALL * idx.shape[0] + more.shape[0] + 1, NF))
         owner = np.zeros(rows_f.shape[0], np.int64)
         rank = np.zeros(rows_f.shape[0], np.int64)
         if cc.kind[w] == MESH_WALL:
             n = _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
         else:
             n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
+            if more.shape[0]:
+                n = _nurbs_rows(cc, w, more, pos, rot, R, t, rows_f, owner, rank, n)
+                if n < 0:
+                    wk.count[0] = -1
+                    return
         for r in range(n):
             wk.out_a[c] = owner[r]
             wk.out_b[c] = N + cc.first + w

@@ -43,7 +43,8 @@ from .kinds import (MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE, SURFACE_POI
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
 from .mesh_particle import particle_mesh_contacts
 from .mesh_wall import MeshWall, make_workspace, sphere_mesh_rows
-from .surface_particle import particle_surface_row
+from .surface_particle import refusal, surface_rows
+from .surface_particle_compiled import CONTACT, NOT_CONVERGED, NOT_UNIQUE
 from .surface_wall import SurfaceWall, sphere_surface_row
 from .wall_skin import WallSkin
 
@@ -262,23 +263,35 @@ class CurvedWallContacts:
         pose (R, tv)."""
         rows, owners, ranks = [], [], []
         g = w.geometry
+        if not isinstance(g, MeshWall):
+            return self._nurbs_surface_rows(w, idx, kin, R, tv, w_i)
         for i in idx.tolist():
             s = int(self.body_shape[i])
-            if isinstance(g, MeshWall):
-                rf, _ = particle_mesh_contacts(self.table, s, kin.pose_origin[i], kin.R[i], g,
-                                               R, tv, w.work)
-                rf = rf[:MAX_PER_WALL]
-            else:
-                f, ii, ok = particle_surface_row(self.table, s, kin.pose_origin[i], kin.R[i],
-                                                 g, R, tv, where=f"surface wall "
-                                                 f"{w.name or w_i!r}")
-                rf = f[None] if (ok and ii[I_ACTIVE]) else np.zeros((0, NF))
+            rf, _ = particle_mesh_contacts(self.table, s, kin.pose_origin[i], kin.R[i], g,
+                                           R, tv, w.work)
+            rf = rf[:MAX_PER_WALL]
             rows.append(rf)
             owners.append(np.full(len(rf), i, np.int64))
             ranks.append(np.arange(len(rf), dtype=np.int64))
         if not rows:
             return np.zeros((0, NF)), np.zeros(0, np.int64), np.zeros(0, np.int64)
         return np.concatenate(rows), np.concatenate(owners), np.concatenate(ranks)
+
+    def _nurbs_surface_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
+        """(rows_f, owner, rank) of the NURBS particles ``idx``' active contacts with surface
+        wall w at the pose (R, tv), in one compiled call
+        (:func:`~nurbsdem.contact.surface_particle.surface_rows`); the first refusal in
+        ``idx``'s order raises :class:`~nurbsdem.contact.surface_particle.ContactNotUnique`."""
+        rf, ri, status = surface_rows(self.table, w.geometry, idx, self.body_shape,
+                                      kin.pose_origin, kin.R, R, tv)
+        bad = np.flatnonzero((status[:, 0] == NOT_CONVERGED) | (status[:, 0] == NOT_UNIQUE))
+        if len(bad):
+            m, i = bad[0], idx[bad[0]]
+            raise refusal(f"surface wall {w.name or w_i!r}", kin.pose_origin[i] + kin.R[i]
+                          @ self.table.centroid[self.body_shape[i]], int(status[m, 1]),
+                          int(status[m, 0]))
+        keep = (status[:, 0] == CONTACT) & (ri[:, I_ACTIVE] == 1)
+        return rf[keep], idx[keep], np.zeros(int(keep.sum()), np.int64)
 
     def _wall_rows(self, w: CurvedWall, kin, w_i: int, d: np.ndarray):
         """(rows_f, owner, rank) of the particles' contacts with wall ``w`` (the w_i-th) at

@@ -33,6 +33,8 @@ reports it (:class:`ContactNotUnique`) for a particle that crosses the wall, as 
 Newton that does not converge there.
 
 The wall is one-sided: a particle whose centroid is behind the surface makes no contact.
+The solve runs compiled (:mod:`nurbsdem.contact.surface_particle_compiled`: one kernel per
+particle and wall, one call per wall); the Python one here is its reference.
 Lengths in metres; rows in the layout of :mod:`nurbsdem.contact.lcp` (``I_PB``: the wall's
 patch, ``F_PAR + 2:4``: its (u, v); ``I_PA``: −1).
 """
@@ -46,18 +48,69 @@ from ..errors import NurbsdemError
 from ..geometry.kernel import power_derivs
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_IT, I_PA, I_PB, I_VALID, NF, NI
 from .support_oracle import SupportOracle
+from .surface_particle_compiled import (CONTACT, MAX_IT, MAX_STEP, NOT_CONVERGED, NOT_UNIQUE,
+                                        TOL, particle_surface_rows)
 from .surface_wall import SurfaceWall, _nearest_seeds
-
-#: Newton iterations before a solve counts as not converged
-MAX_IT = 50
-#: convergence: |F| below this × the wall's size × |S_u| (and |S_v|)
-TOL = 1e-13
-#: the largest Newton step, as a fraction of the parameter rectangle's side
-MAX_STEP = 0.25
 
 
 class ContactNotUnique(NurbsdemError):
     """A particle's contact with a surface wall has no unique solution (module docstring)."""
+
+
+def refusal(where: str, centroid: np.ndarray, patch: int, status: int) -> ContactNotUnique:
+    """The error of a refused contact (status NOT_CONVERGED or NOT_UNIQUE of
+    :mod:`~nurbsdem.contact.surface_particle_compiled`) of the particle with world centroid
+    ``centroid`` (m) with ``patch`` of the wall named by ``where``."""
+    head = (f"{where}: the contact of a particle (centroid "
+            f"{np.round(np.asarray(centroid, float), 6).tolist()} m) with patch {patch}")
+    if status == NOT_CONVERGED:
+        return ContactNotUnique(f"{head} did not converge")
+    return ContactNotUnique(f"{head} is not unique: the wall curves more tightly than the "
+                            f"particle there")
+
+
+def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
+                         wall: SurfaceWall, R: np.ndarray | None = None,
+                         t: np.ndarray | None = None, where: str = "surface wall"
+                         ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(res_f (NF,), res_i (NI,), found) of the NURBS particle of shape ``shape`` of
+    ``table`` (a :class:`~nurbsdem.contact.detect.ContactTable`) at the pose (pos (3,) m, Rb
+    (3,3)) against ``wall`` at (R, t) (``x_world = R x_wall + t``; identity by default),
+    world frame, normal from the particle to the wall.  Each patch whose sample nearest to
+    the centroid lies within the samples' spacing of the nearest overall is solved; the
+    deepest converged contact wins.  Raises :class:`ContactNotUnique` (naming ``where``)
+    when the particle crosses a patch (sd < 0) whose contact does not converge or is not
+    unique (module docstring); apart from the wall, neither matters.  Compiled
+    (:func:`surface_rows`); :func:`particle_surface_row_reference` is the same solve in
+    Python."""
+    R = np.eye(3) if R is None else np.asarray(R, float)
+    t = np.zeros(3) if t is None else np.asarray(t, float)
+    s = np.array([int(shape)], np.int64)
+    f, i, status = surface_rows(table, wall, np.zeros(1, np.int64), s,
+                                np.asarray(pos, float)[None], np.asarray(Rb, float)[None], R, t)
+    if status[0, 0] == NOT_CONVERGED or status[0, 0] == NOT_UNIQUE:
+        raise refusal(where, np.asarray(pos, float) + np.asarray(Rb, float)
+                      @ table.centroid[s[0]], int(status[0, 1]), int(status[0, 0]))
+    return f[0], i[0], bool(status[0, 0] == CONTACT)
+
+
+def surface_rows(table, wall: SurfaceWall, idx: np.ndarray, body_shape: np.ndarray,
+                 pos: np.ndarray, rot: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """(rows_f (K,NF), rows_i (K,NI), status (K,2)) of the NURBS particles ``idx`` (K,)
+    (shapes ``body_shape`` (N,) in ``table``, poses pos (N,3) m, rot (N,3,3)) against
+    ``wall`` at (R, t): :func:`~nurbsdem.contact.surface_particle_compiled.particle_surface_rows`
+    (status: CONTACT, NO_CONTACT, or a refusal with its patch)."""
+    K = len(idx)
+    rows_f, rows_i = np.zeros((K, NF)), np.zeros((K, NI), np.int64)
+    status = np.zeros((K, 2), np.int64)
+    c = np.ascontiguousarray
+    particle_surface_rows(c(idx, np.int64), c(body_shape, np.int64), c(pos, float),
+                          c(rot, float), c(R, float), c(t, float), table.tab, table.info,
+                          table.centroid, table.radius, table.seeds, wall.deg, wall.ncp,
+                          wall.koff, wall.knots, wall.pw, wall.poff, wall.dom, wall.periodic,
+                          wall.seed_x, wall.seed_p, wall.seed_uv, float(wall.spacing),
+                          float(wall.size), rows_f, rows_i, status)
+    return rows_f, rows_i, status
 
 
 def _derivs(wall: SurfaceWall, ip: int, u: float, v: float, ev: np.ndarray) -> None:
@@ -144,10 +197,10 @@ def _solve_patch(oracle: SupportOracle, wall: SurfaceWall, ip: int, u: float, v:
     return (sd,)
 
 
-def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
-                         wall: SurfaceWall, R: np.ndarray | None = None,
-                         t: np.ndarray | None = None, where: str = "surface wall"
-                         ) -> tuple[np.ndarray, np.ndarray, bool]:
+def particle_surface_row_reference(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
+                                   wall: SurfaceWall, R: np.ndarray | None = None,
+                                   t: np.ndarray | None = None, where: str = "surface wall"
+                                   ) -> tuple[np.ndarray, np.ndarray, bool]:
     """(res_f (NF,), res_i (NI,), found) of the NURBS particle of shape ``shape`` of
     ``table`` (a :class:`~nurbsdem.contact.detect.ContactTable`) at the pose (pos (3,) m, Rb
     (3,3)) against ``wall`` at (R, t) (``x_world = R x_wall + t``; identity by default),
@@ -155,7 +208,9 @@ def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
     the centroid lies within the samples' spacing of the nearest overall is solved; the
     deepest converged contact wins.  Raises :class:`ContactNotUnique` (naming ``where``)
     when the particle crosses a patch (sd < 0) whose contact does not converge or is not
-    unique (module docstring); apart from the wall, neither matters."""
+    unique (module docstring); apart from the wall, neither matters.  The Python solve
+    through :class:`~nurbsdem.contact.support_oracle.SupportOracle`: the reference of the
+    compiled :func:`particle_surface_row` (tests)."""
     R = np.eye(3) if R is None else np.asarray(R, float)
     t = np.zeros(3) if t is None else np.asarray(t, float)
     oracle = SupportOracle(table, shape, R.T @ (np.asarray(pos, float) - t),
@@ -178,14 +233,9 @@ def particle_surface_row(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
         if hit is None or (len(hit) == 1 and not hit[0] < 0.0):
             continue                         # no support point, or clear of the wall
         if len(hit) == 1:
-            raise ContactNotUnique(f"{where}: the contact of a particle (centroid "
-                                   f"{np.round(R @ c + t, 6).tolist()} m) with patch {ip} "
-                                   f"did not converge")
+            raise refusal(where, R @ c + t, ip, NOT_CONVERGED)
         if not hit[7] and hit[0] < 0.0:
-            raise ContactNotUnique(f"{where}: the contact of a particle (centroid "
-                                   f"{np.round(R @ c + t, 6).tolist()} m) with patch {ip} is "
-                                   f"not unique: the wall curves more tightly than the "
-                                   f"particle there")
+            raise refusal(where, R @ c + t, ip, NOT_UNIQUE)
         if found is None or hit[0] < found[0]:
             found = hit + (ip,)
     if found is None:

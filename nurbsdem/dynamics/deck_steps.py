@@ -193,13 +193,14 @@ def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
 
 
 @njit(cache=True)
-def _with_curved(curved, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, deg, params,
-                 patch_a, patch_b):
-    """The scene's active contact arrays followed by those of the spheres with the mesh and
-    surface walls (:func:`~nurbsdem.contact.curved_compiled.curved_contacts`; no surface
-    parameters: closed forms, patch −1), as the Python driver's provider merges them."""
-    curved_contacts_ptr((curved, cwork, time, x, wall_d))
-    k = cwork.count[0]
+def _with_curved(curved, cwork, time, x, R, pos, wall_d, a, b, pa, pb, nrm, dep, key, deg,
+                 params, patch_a, patch_b):
+    """The scene's active contact arrays followed by those of the particles with the mesh and
+    surface walls (:func:`~nurbsdem.contact.curved_compiled.curved_contacts`, particles' pose
+    rotations R and origins pos; no surface parameters: patch −1), as the Python driver's
+    provider merges them (none where a contact was refused: ``cwork.count[0]`` −1)."""
+    curved_contacts_ptr((curved, cwork, time, x, R, pos, wall_d))
+    k = max(cwork.count[0], 0)
     w = cwork
     return (np.concatenate((a, w.out_a[:k])), np.concatenate((b, w.out_b[:k])),
             np.concatenate((pa, w.out_pa[:k])), np.concatenate((pb, w.out_pb[:k])),
@@ -213,7 +214,7 @@ def _with_curved(curved, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key, de
 @njit(cache=True)
 def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev,
               x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray,
-              R: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float,
+              R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float,
               counters: np.ndarray, curved, cwork, spin: np.ndarray, time: float):
     """DemSystem._evaluate after the search: contact forces (Eq. 16–17, or Hertz–Mindlin with
     the contacts' equivalent radii) of the active pairs with their tangential histories, and
@@ -233,8 +234,10 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     if curved.n_walls:             # the provider counts the curved walls' contacts monitored
         K0 = a.shape[0]
         (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
-         patch_b) = _with_curved(curved, cwork, time, x, wall_d, a, b, pa, pb, nrm, dep, key,
-                                 deg, params, patch_a, patch_b)
+         patch_b) = _with_curved(curved, cwork, time, x, R, pos, wall_d, a, b, pa, pb, nrm,
+                                 dep, key, deg, params, patch_a, patch_b)
+        if cwork.count[0] < 0:     # a refused surface contact: the Python driver raises it
+            return False, ev
         monitored += a.shape[0] - K0
     if full:
         near, gap = near_pairs(pl.rows_f, pl.rows_i, pl.budget, reach)
@@ -479,7 +482,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
             ok, ev = _evaluate_ptr((sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
-                                    omega, R, wall_d, wall_u, h, counters, curved, cwork,
+                                    omega, R, pos, wall_d, wall_u, h, counters, curved, cwork,
                                     spin, times[t]))
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
@@ -541,10 +544,15 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
 def _curved_provider(provider):
     """``provider`` when it is a mesh- and surface-wall provider
     (:class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`) the compiled loop takes:
-    every particle an exact sphere, every wall at rest or turning at a constant rate
+    exact spheres with any of its walls, NURBS particles with surface walls only (no mesh
+    wall), every wall at rest or turning at a constant rate
     (:class:`~nurbsdem.contact.curved_walls.WallPose`); else None."""
     from ..contact.curved_walls import CurvedWallContacts, WallPose
-    if type(provider) is not CurvedWallContacts or not np.all(provider.spheres):
+    from ..contact.mesh_wall import MeshWall
+    if type(provider) is not CurvedWallContacts:
+        return None
+    if not np.all(provider.spheres) and any(isinstance(w.geometry, MeshWall)
+                                            for w in provider.walls):
         return None
     if not all(isinstance(w.pose, WallPose) for w in provider.walls):
         return None
@@ -562,9 +570,11 @@ class DeckSteps:
         self.system, self.scene = system, scene
         s = system
         W = s.walls.n
-        self.curved, self.cwork = pack_curved(curved, W)
+        self.curved, self.cwork = pack_curved(curved, W, scene.table)
         if curved is not None:
             fill_lazy_kernels("curved")      # the mesh and surface walls' kernels
+        if self.curved.n_nurbs:
+            fill_lazy_kernels("surface_particles")
         self.spin = (np.zeros((W, 6)) if s.wall_spin is None
                      else np.ascontiguousarray(s.wall_spin, float))
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
@@ -581,8 +591,8 @@ class DeckSteps:
         cell, that has been called once (any contact law: the Hertz radii of NURBS contacts
         come from the curvature kernel the Python path calls, :func:`_hertz_radii`) whose laws
         are all built in (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with
-        mesh and surface walls met by exact spheres only, at rest or turning at constant rates
-        (:func:`_curved_provider`); else None."""
+        mesh and surface walls (met by exact spheres, or surface walls by NURBS particles), at
+        rest or turning at constant rates (:func:`_curved_provider`); else None."""
         from ..contact.scene import SceneContacts
         scene, curved = system.provider, _curved_provider(system.provider)
         if curved is not None:

@@ -66,11 +66,12 @@ ENTRIES: dict[tuple[str, str], str] = {
         "`Normal` points to."),
     ("Walls", "Mesh"): (
         "A wall of triangles from an STL, OBJ or PLY file (open or closed, convex or not; a "
-        "thin two-sided shell unless `OneSided yes`). Exact spheres only: one contact per "
-        "flat or convex region, one per face in a concave fold."),
+        "thin two-sided shell unless `OneSided yes`). Spheres and NURBS particles: one "
+        "contact per flat or convex region, one per face in a concave fold."),
     ("Walls", "Surface"): (
         "A wall of open NURBS patches from a shape file (`nurbsdem shape cylinder|cone|plane` "
-        "writes them); their front S_u x S_v faces the particles. Exact spheres only."),
+        "writes them); their front S_u x S_v faces the particles. Spheres and NURBS "
+        "particles (a particle where the wall curves more tightly than it stops the run)."),
     ("Contact", "Interface"): (
         "A contact law. The last interface that applies to a pair (by `Between` and "
         "`Materials`) is the one used; a pair no interface covers does not interact."),
