@@ -1,0 +1,163 @@
+"""Sections of the verification report that run nurbsdem beside a reference: exact spheres and
+a rotating drum against the real Yade, a silo's discharge against Beverloo's law (and Yade),
+a pour's accounting and energy balance."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import REPO  # noqa: E402
+
+from report_base import Report, fmt, md_table  # noqa: E402
+
+
+def section_spheres(rep: Report) -> None:
+    """112 exact spheres against the real Yade (benchmarks/bench_yade.py), side by side."""
+    import bench_yade
+    rep.add("### 112 spheres against Yade\n")
+    r = bench_yade.main(["--quick"] if rep.quick else [])
+    nd, yd = r["nurbsdem"], r["yade"]
+    rows = [["nurbsdem (compiled deck steps)", fmt(nd["loop"], ".2f"), nd["substeps"],
+             fmt(nd["height"], ".4f")]]
+    if isinstance(yd, dict):
+        rows.append(["Yade " + "(`-j1`)", fmt(yd["wall"], ".2f"), "", fmt(yd["height"], ".4f")])
+    rep.add(f"`benchmarks/bench_yade.py`: the paper's box and contact law with 112 exact spheres "
+            f"(volume-equivalent radii of A, B, C), released at rest, {r['T']} s at dt 1e-4 s, "
+            "one thread each, the same positions; time of the time loop (compiled kernels "
+            f"cached: a warm-up run first); the faster of {bench_yade.ROUNDS} runs of each, "
+            "alternated (nurbsdem: " + ", ".join(f"{t:.2f}" for t in nd["loops"]) + " s"
+            + ("; Yade: " + ", ".join(f"{t:.2f}" for t in yd["walls"]) + " s"
+               if isinstance(yd, dict) else "") + ").\n\n" +
+            md_table(["code", "time loop s", "internal steps", "mean height at the end m"], rows)
+            + "\n")
+    if isinstance(yd, dict):
+        ratio = nd["loop"] / yd["wall"]
+        rep.add(f"Ratio nurbsdem / Yade: **{ratio:.2f}**; mean heights differ by "
+                f"{100 * abs(nd['height'] / yd['height'] - 1):.2f} %.\n")
+        rep.headline["spheres"] = dict(ratio=ratio, nurbsdem=nd["loop"], yade=yd["wall"])
+    else:
+        rep.add(f"{yd}.\n")
+        rep.headline["spheres"] = dict(ratio=None, nurbsdem=nd["loop"], yade=None)
+
+
+def section_drum(rep: Report) -> None:
+    """A rotating drum of spheres against the real Yade (benchmarks/bench_drum.py)."""
+    import bench_drum
+    rep.add("### A rotating drum against Yade\n")
+    r = bench_drum.main(["--quick"] if rep.quick else [])
+    rows = [[name, fmt(res.get("loop", res.get("wall")), ".2f"),
+             f"{res['angle']:.2f} ± {res['angle_spread']:.2f}", fmt(res["torque"], ".4f")]
+            for name, res in (("nurbsdem, exact NURBS drum", r["nurbs"]),
+                              ("nurbsdem, mesh drum", r["mesh"]),
+                              (f"Yade, {bench_drum.SEGMENTS} facets", r["yade"]))
+            if isinstance(res, dict)]
+    rep.add(f"`benchmarks/bench_drum.py`: {r['count']} spheres (radii "
+            f"{', '.join(str(x) for x in bench_drum.RADII)} m) in a drum of radius "
+            f"{bench_drum.R_DRUM} m and length {bench_drum.LENGTH} m turning at Froude number "
+            f"{bench_drum.FROUDE} after settling; the same positions, linear law and time step "
+            "for both codes, one thread each; the dynamic angle of repose (the bed's tilt) and "
+            f"the drive torque over the last {r['window']} s.\n\n"
+            + md_table(["code", "time loop s", "angle of repose (deg)", "drive torque N m"],
+                       rows) + "\n")
+    y = r["yade"]
+    if isinstance(y, dict):
+        n = r["nurbs"]
+        ratio = n["loop"] / y["wall"]
+        rep.add(f"Ratio nurbsdem (NURBS drum) / Yade: **{ratio:.2f}**; angles differ by "
+                f"{n['angle'] - y['angle']:+.2f} degrees, torques by "
+                f"{100 * (n['torque'] / y['torque'] - 1):+.1f} %.\n")
+        rep.headline["drum"] = dict(ratio=ratio, angle=n["angle"] - y["angle"])
+    else:
+        rep.add(f"{y}.\n")
+
+
+def section_beverloo(rep: Report) -> None:
+    """Silo discharge against Beverloo's law and against Yade, and the inlet's and outlet's
+    share of the step (benchmarks/bench_beverloo.py), read from the JSON it wrote (its full
+    run takes minutes of CPU: it is run on its own, not from here)."""
+    import bench_beverloo as bb
+    rep.add("### Silo discharge: Beverloo's law, Yade, and the inlet and outlet cost\n")
+    cache = REPO / "benchmarks" / ".cache"
+    path = next((p for p in (cache / "beverloo.json", cache / "beverloo_quick.json")
+                 if p.exists()), None)
+    if path is None:
+        rep.add("Not measured: run `benchmarks/bench_beverloo.py` (it writes "
+                "`benchmarks/.cache/beverloo.json`, which this section reads).\n")
+        return
+    r = json.loads(path.read_text())
+    d = r["d"]
+    fill = r["fill"]
+    rep.add(f"`benchmarks/bench_beverloo.py`{' (quick: a smoke test)' if r['quick'] else ''}: "
+            f"{r['count']} spheres (radii {', '.join(f'{x * 1e3:g}' for x in r['radii'])} mm, "
+            f"d {d * 1e3:g} mm) poured by an inlet into a square silo {r['side'] * 1e3:.0f} mm "
+            f"wide, settled (bed {fill['top'] / d:.1f} d high, bulk density "
+            f"{fill['rho_b']:.0f} kg/m³), then discharged for {r['T']} s through a circular "
+            "orifice in a mesh floor into an outlet; W is the slope of the discharged mass over "
+            f"the run less its first {100 * r.get('lead', bb.LEAD):.0f} % and last "
+            f"{100 * r.get('tail', bb.TAIL):.0f} %; "
+            "one thread; the time loop includes the inlet's and outlet's exchanges.\n\n")
+    rows = [[f"{o['ratio']:g}", fmt(o["W"], ".4f"),
+             f"{fmt(o['halves'][0], '.4f')} / {fmt(o['halves'][1], '.4f')}",
+             fmt(o["C_mid"], ".3f"), f"{o['top_end'] / d:.1f}", fmt(o["loop"], ".1f"),
+             f"{100 * o['flow'] / o['loop']:.1f}", fmt(o["dt"], ".3g")] for o in r["orifices"]]
+    rep.add(md_table(["D / d", "W kg/s", "W of the window's halves", "C at n 2.5, k 1.5",
+                      "bed left (d)", "time loop s", "outlet % of loop", "mean step s"], rows)
+            + "\n\n")
+    fit, fixed = r.get("fit"), r.get("fit_n25")
+    if fit:
+        def par(f, k, spec):
+            mark = "inside" if f["inside"][k] else "**outside**"
+            lo, hi = bb.RANGES[k]
+            return f"{f[k]:{spec}} ± {f.get('sd_' + k, float('nan')):.2g} ({mark} {lo}–{hi})"
+        rep.add(f"Beverloo fit (`postproc/beverloo.py`, ± its standard errors): exponent "
+                f"{par(fit, 'n', '.2f')}, k {par(fit, 'k', '.2f')}, C {par(fit, 'C', '.3f')}; "
+                f"RMS of W {100 * fit['rms']:.2f} %.")
+        if fixed:
+            rep.add(f" At n = 2.5: k {par(fixed, 'k', '.2f')}, C {par(fixed, 'C', '.3f')}; "
+                    f"RMS of W {100 * fixed['rms']:.2f} %.")
+        rep.add("\n")
+        rep.headline["beverloo"] = dict(n=fit["n"], k=fit["k"], C=fit["C"])
+    else:
+        rep.add("No Beverloo fit: it needs three orifices.\n")
+    rep.add(f"Inlet and outlet exchanges: **{100 * r['flow_share']:.1f} %** of the time loop "
+            f"(target at most 5 %; the fill's inlet {100 * fill['flow'] / fill['loop']:.1f} %).\n")
+    y = r["yade"]
+    if isinstance(y, dict):
+        o = r["orifices"][0]
+        rep.add(f"Yade, the same bed through D = {o['ratio']:g} d: time loop {y['wall']:.1f} s "
+                f"against nurbsdem's {o['loop']:.1f} s, ratio nurbsdem / Yade "
+                f"**{r['ratio']:.2f}** (target at most 2); W {y['W']:.4f} kg/s, nurbsdem's "
+                f"differs by {100 * (o['W'] / y['W'] - 1):+.1f} %."
+                + (f" CPU time: nurbsdem's whole run {o['cpu']:.1f} s, Yade's time loop "
+                   f"{y['cpu']:.1f} s, ratio {r['cpu_ratio']:.2f}." if "cpu_ratio" in r else "")
+                + "\n")
+        rep.headline["beverloo_yade"] = r["ratio"]
+    else:
+        rep.add(f"{y}.\n")
+
+
+def section_pour(rep: Report) -> None:
+    """A pour of spheres into a box with an outlet (benchmarks/bench_pour.py): accounting,
+    placement, containment and the energy balance with its convergence."""
+    import bench_pour
+    rep.add("### A pour: every particle accounted for\n")
+    r = bench_pour.main(["--quick"] if rep.quick else ["--count", "2000", "--convergence"])
+    h = r.get("half_step")
+    rows = [["0.5 (default)", r["substeps"], fmt(r["wall"], ".1f"), fmt(r["balance"], ".2e")]]
+    if h:
+        rows.append(["0.25", h["substeps"], fmt(h["wall"], ".1f"), fmt(h["balance"], ".2e")])
+    rep.add(f"`benchmarks/bench_pour.py`: {r['count']} exact spheres (radii "
+            f"{', '.join(f'{x * 1e3:g}' for x in bench_pour.RADII)} mm) poured at "
+            f"{bench_pour.RATE:g} per second into a box with an outlet in a corner of its floor, "
+            f"{r['simulated']:.2f} s simulated, one thread. Inserted {r['inserted']} = in the box "
+            f"{r['in_box']} + discharged {r['discharged']} (count error {r['count_error']}, mass "
+            f"error {r['mass_error']:.1e}); smallest gap at an insertion "
+            f"{r['min_gap'] * 1e3:.3f} mm; every sphere left inside the box: {r['inside']}. "
+            "The energy balance error relative to the energy turned over, at the solver's "
+            "safety factor and at half of it (an explicit scheme's error falls as h²):\n\n"
+            + md_table(["safety", "internal steps", "run s", "balance error"], rows) + "\n")
+    rep.headline["pour"] = dict(count=r["count"], count_error=r["count_error"],
+                                balance=r["balance"])
