@@ -312,15 +312,16 @@ class Simulation:
         ``table``: a CSV file or an array of rows t, x, y, z[, rx, ry, rz] (s, m, rad) the
         wall follows (``Table``; ``duration`` default: the last time; an array is written to
         ``<output>/tables/`` for the deck text when the simulation has an output folder).
-        ``force`` (N): a flat wall servo-controlled over ``duration`` s to that push of the
-        particles along its normal, its speed ``gain`` (m/(s N)) times the push's error, at
-        most ``max_speed`` (m/s) (``Force``; :mod:`nurbsdem.wall_servo`).
+        ``force`` (N): a wall servo-controlled over ``duration`` s to that push of the
+        particles along its normal (a mesh or surface wall: along ``direction``, required),
+        its speed ``gain`` (m/(s N)) times the push's error, at most ``max_speed`` (m/s)
+        (``Force``; :mod:`nurbsdem.wall_servo`).
         ``damping``, ``accuracy``, ``safety``: as for :meth:`run_dynamic`.
 
         Several walls in one step: ``name`` a list of ``(name, motion)`` pairs, ``motion`` a
         dict of ``displacement``, ``table`` or ``angular_velocity`` (and ``center``) or
-        ``force`` (and ``max_speed``, ``gain``), the timing shared (``Step`` lines of one id
-        in the deck)."""
+        ``force`` (and ``max_speed``, ``gain``, ``direction``), the timing shared (``Step``
+        lines of one id in the deck)."""
         step = move_wall_of(self.model, name, displacement, duration, time_step,
                             to_contact=to_contact, gap=gap, direction=direction,
                             damping=damping, accuracy=accuracy, safety=safety,

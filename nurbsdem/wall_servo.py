@@ -1,10 +1,11 @@
-"""Force-controlled flat walls (servo walls): ``Step ID MoveWall NAME Force F MaxSpeed v
-Gain g Duration T TimeStep DT``, as in oedometric and triaxial tests.
+"""Force-controlled walls (servo walls): ``Step ID MoveWall NAME Force F MaxSpeed v Gain g
+[Direction dx dy dz] Duration T TimeStep DT``, as in oedometric and triaxial tests.
 
-The wall translates along its normal n (which points to the particles) at a speed set once
-per deck step from the particles' push on it, F_measured = reaction · n (N, the wall's
-reaction of ``monitors/wall_NAME.csv`` along n, measured at the end of the deck step
-before):
+The wall translates along n — a flat wall's normal (which points to the particles) or the
+unit ``Direction`` (required for a mesh or surface wall, which has no normal of its own) —
+at a speed set once per deck step from the particles' push on it, F_measured = reaction · n
+(N, the wall's reaction of ``monitors/wall_NAME.csv`` along n, measured at the end of the
+deck step before):
 
     u = clamp(g · (F − F_measured), −v, v)      (m/s; velocity u · n)
 
@@ -86,7 +87,8 @@ def plan(solver, step, motions: list[PrescribedMotion], offsets: np.ndarray,
     solver.motion_spec["servo"] = {}
     for m in servos:
         k = names.index(m.wall)
-        mo = ServoMotion(solver.model.walls[k].normal, offsets[k], t_start)
+        axis = m.direction if m.direction is not None else solver.model.walls[k].normal
+        mo = ServoMotion(axis, offsets[k], t_start)
         if m.wall in kept:
             s = kept[m.wall]
             mo.d0 = np.array(s["d"], float).reshape(3)

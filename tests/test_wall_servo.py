@@ -1,8 +1,9 @@
 """Servo walls (``MoveWall NAME Force F MaxSpeed v Gain g``, :mod:`nurbsdem.wall_servo`): a
 lid servo-pressing a sphere that rests on a floor under gravity ends pressing it with F and
 the floor bears F plus the sphere's weight; the lid never moves faster than MaxSpeed; the
-deck's line reads back and ``move_wall(force=...)`` writes the same monitors; bad entries are
-one-line errors; a restart inside a servo step is bit for bit."""
+deck's line reads back and ``move_wall(force=...)`` writes the same monitors; a mesh lid
+driven along a Direction presses as the flat lid does; bad entries are one-line errors; a
+restart inside a servo step is bit for bit."""
 from __future__ import annotations
 
 import csv
@@ -127,22 +128,68 @@ def test_bad_servo_entries_are_one_line_errors(tmp_path, line, message):
     assert "case.inp:16: Step 1: " in text
 
 
-def test_a_servo_on_a_mesh_wall_is_refused_at_its_line(tmp_path):
-    """Only flat walls are servo-controlled: a further Step line putting a Force on a mesh
-    wall is an error at that line; so is ``move_wall(force=...)`` of a mesh wall."""
-    stl = tmp_path / "plate.stl"
-    stl.write_text("solid p\nfacet normal 0 0 1\nouter loop\nvertex -1 -1 -0.5\n"
-                   "vertex 1 -1 -0.5\nvertex 1 1 -0.5\nendloop\nendfacet\nendsolid p\n")
-    deck = _deck(tmp_path, SERVO + "\n  Step 1 MoveWall plate Force 1 MaxSpeed 1 Gain 1",
-                 walls="  Mesh 3 Name plate File plate.stl")
-    with pytest.raises(InputError) as err:
-        _build(deck)
-    text = str(err.value)
-    assert "only flat walls are servo-controlled" in text and "\n" not in text
-    assert f"case.inp:{deck.read_text().splitlines().index(SERVO) + 2}: Step 1: MoveWall " in text
+def _plate(path, z: float = 0.00995):
+    """An STL square of side 0.2 m at height z (m): two triangles, the flat lid's rectangle."""
+    stl = path / "plate.stl"
+    tri = [((-0.1, -0.1), (0.1, -0.1), (0.1, 0.1)), ((-0.1, -0.1), (0.1, 0.1), (-0.1, 0.1))]
+    stl.write_text("solid p\n" + "".join(
+        "facet normal 0 0 -1\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y in t)
+        + "endloop\nendfacet\n" for t in tri) + "endsolid p\n")
+    return stl
+
+
+def test_a_mesh_lid_with_a_direction_is_the_flat_lids_servo(tmp_path):
+    """A mesh plate in the flat lid's place (the same square as two triangles), servo-driven
+    along Direction 0 0 -1, presses the sphere as the flat lid does: the same displacements
+    and reactions at every monitor row (to 1e-9 of their scale: the mesh's face contact is
+    the flat wall's closed form, summed on another path)."""
+    flat = _deck(tmp_path, SERVO.replace("0.08", "0.03"))
+    Simulation.from_deck(flat, output=tmp_path / "flat").run()
+    _plate(tmp_path)
+    text = flat.read_text().replace(
+        "  Wall 2 Name lid Point 0 0 0.00995 Normal 0 0 -1 Size 0.2 0.2",
+        "  Mesh 2 Name lid File plate.stl").replace("TimeStep 1e-4", "TimeStep 1e-4 "
+                                                     "Direction 0 0 -1")
+    mesh = tmp_path / "mesh.inp"
+    mesh.write_text(text)
+    again = tmp_path / "again.inp"
+    again.write_text(format_model(_build(mesh)))
+    assert not model_differences(_build(mesh), _build(again))     # Direction written back
+    Simulation.from_deck(mesh, output=tmp_path / "mesh").run()
+    for name in ("wall_lid.csv", "wall_floor.csv"):
+        a = _rows(tmp_path / "flat" / "monitors" / name)
+        b = _rows(tmp_path / "mesh" / "monitors" / name)
+        assert len(a) == len(b) == 31
+        for key in ("displacement_z", "reaction_z"):
+            x, y = np.array([r[key] for r in a]), np.array([r[key] for r in b])
+            assert np.abs(x - y).max() <= 1e-9 * np.abs(x).max(), (name, key)
+    lid = _rows(tmp_path / "mesh" / "monitors" / "wall_lid.csv")
+    assert lid[-1]["displacement_z"] < 0 and -lid[-1]["reaction_z"] > 0.5 * F   # pressing
+
+
+def test_a_servo_direction_is_checked_at_its_line(tmp_path):
+    """A Force on a mesh wall without a Direction, a zero Direction, or a flat wall's
+    Direction that does not advance it towards the particles: one-line errors at the line;
+    ``move_wall(force=...)`` says the same."""
+    stl = _plate(tmp_path, -0.5)
+    bad = [("Step 1 MoveWall plate Force 1 MaxSpeed 1 Gain 1", "needs Direction dx dy dz"),
+           ("Step 1 MoveWall plate Force 1 MaxSpeed 1 Gain 1 Direction 0 0 0",
+            "Direction must not be zero"),
+           ("Step 1 MoveWall floor Force 1 MaxSpeed 1 Gain 1 Direction 0 0 -1",
+            "Direction must advance the flat wall towards the particles")]
+    for line, message in bad:
+        deck = _deck(tmp_path, SERVO + "\n  " + line, walls="  Mesh 3 Name plate File plate.stl")
+        with pytest.raises(InputError) as err:
+            _build(deck)
+        text = str(err.value)
+        assert message in text and "\n" not in text, text
+        assert f"case.inp:{deck.read_text().splitlines().index(SERVO) + 2}: Step 1: " in text
     sim = _api(mesh=stl)
-    with pytest.raises(InputError, match="only flat walls are servo-controlled"):
+    with pytest.raises(InputError, match="needs Direction"):
         sim.move_wall("plate", force=1, max_speed=1, gain=1, duration=0.01, time_step=1e-4)
+    with pytest.raises(InputError, match="towards the particles"):
+        sim.move_wall("lid", force=1, max_speed=1, gain=1, duration=0.01, time_step=1e-4,
+                      direction=(0, 0, 1))
     for bad, message in [(dict(max_speed=0, gain=1), "MaxSpeed must be > 0"),
                          (dict(max_speed=1, gain=-1), "Gain must be >= 0"),
                          (dict(max_speed=1), "force needs max_speed and gain"),

@@ -78,8 +78,8 @@ def move_wall_step(model: Model, sid: int, name: Any,
         if to_contact or (displacement, table, angular_velocity) != (None, None, None):
             raise InputError(f"{what}: force takes max_speed, gain, duration and time_step, "
                              f"not displacement, table, angular_velocity or to_contact")
-        return _servo_step(sid, name, curved, servo, duration, time_step, damping_scheme,
-                           accuracy, safety)
+        return _servo_step(model, sid, name, servo, direction, duration, time_step,
+                           damping_scheme, accuracy, safety)
     if table is not None:
         if to_contact or displacement is not None or angular_velocity is not None:
             raise InputError(f"{what}: table takes center, duration and time_step, not "
@@ -139,7 +139,7 @@ def move_walls_step(model: Model, sid: int, moves: Any, duration: Any, time_step
     (``duration``, default the first wall's table's; ``time_step``, ...) is the step's."""
     what = f"Step {sid}"
     keys = {"displacement", "table", "angular_velocity", "center", "force", "max_speed",
-            "gain"}
+            "gain", "direction"}
     if not isinstance(moves, (list, tuple)) or not moves:
         raise InputError(f"{what}: move_wall takes a wall name or a non-empty list of "
                          f"(name, motion) pairs")
@@ -157,7 +157,8 @@ def move_walls_step(model: Model, sid: int, moves: Any, duration: Any, time_step
         steps.append(move_wall_step(
             model, sid, name, motion.get("displacement"),
             steps[0].duration if steps else duration, time_step, to_contact=False, gap=0.0,
-            direction=None, damping_scheme=damping_scheme, accuracy=accuracy, safety=safety,
+            direction=motion.get("direction"), damping_scheme=damping_scheme,
+            accuracy=accuracy, safety=safety,
             angular_velocity=motion.get("angular_velocity"),
             center=motion.get("center", (0.0, 0.0, 0.0)), table=motion.get("table"),
             servo=servo_of(sid, motion.get("force"), motion.get("max_speed"),
@@ -178,24 +179,35 @@ def servo_of(sid: int, force: Any, max_speed: Any, gain: Any) -> dict | None:
     return dict(force=force, max_speed=max_speed, gain=gain)
 
 
-def _servo_step(sid: int, name: str, curved: bool, servo: dict, duration: Any,
-                time_step: Any, damping_scheme: Any, accuracy: Any,
+def _servo_step(model: Model, sid: int, name: str, servo: dict, direction: Any,
+                duration: Any, time_step: Any, damping_scheme: Any, accuracy: Any,
                 safety: Any) -> MoveWallStep:
-    """``MoveWall NAME Force F MaxSpeed v Gain g``: a flat wall servo-controlled to the
-    particles' push F (N) at most v m/s (> 0), gain g m/(s N) (>= 0)."""
+    """``MoveWall NAME Force F MaxSpeed v Gain g [Direction ..]``: a wall servo-controlled to
+    the particles' push F (N) along ``direction`` (made unit; None: a flat wall's normal;
+    required for a mesh or surface wall) at most v m/s (> 0), gain g m/(s N) (>= 0)."""
+    from ..io.deck_moves import check_servo_direction
     what = f"Step {sid}"
-    if curved:
-        raise InputError(f"{what}: force: only flat walls are servo-controlled ({name!r} is "
-                         f"a mesh or surface wall)")
     if duration is None or time_step is None:
         raise InputError(f"{what}: force needs duration and time_step")
+    d = None
+    if direction is not None:
+        d = vector("Direction", direction, what)
+        if not np.linalg.norm(d) > 0:
+            raise InputError(f"{what}: direction must not be zero")
+        d = d / np.linalg.norm(d)
     dur, dt = timing(sid, duration, time_step)
-    return MoveWallStep(sid, 0, wall=name, force=number("Force", servo["force"], what),
+    step = MoveWallStep(sid, 0, wall=name, force=number("Force", servo["force"], what),
                         max_speed=number("MaxSpeed", servo["max_speed"], what, positive=True),
                         gain=number("Gain", servo["gain"], what, nonnegative=True),
-                        duration=dur, time_step=dt, damping=damping(sid, damping_scheme),
+                        direction=d, duration=dur, time_step=dt,
+                        damping=damping(sid, damping_scheme),
                         accuracy=optional_positive("Accuracy", sid, accuracy),
                         safety=optional_positive("Safety", sid, safety))
+
+    def fail(message: str, line: int) -> None:
+        raise InputError(message)
+    check_servo_direction(model, step, fail, f"{what}: force")
+    return step
 
 
 def _table_step(sid: int, name: str, curved: bool, table: Any, center: Any, duration: Any,

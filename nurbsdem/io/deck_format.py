@@ -213,7 +213,9 @@ def step_entry(s: Step) -> Entry:
 def _motion(s: MoveWallStep) -> dict[str, Any]:
     """The keys of one wall's motion in a MoveWall step (no timing)."""
     if s.force is not None:
-        return {"MoveWall": s.wall, "Force": s.force, "MaxSpeed": s.max_speed, "Gain": s.gain}
+        axis = {} if s.direction is None else {"Direction": unit_preimage(s.direction)}
+        return {"MoveWall": s.wall, "Force": s.force, "MaxSpeed": s.max_speed, "Gain": s.gain,
+                **axis}
     if s.table is not None:
         centre = {} if s.center is None else {"Center": s.center}
         return {"MoveWall": s.wall, "Table": s.table.file or f"step{s.id}_{s.wall}.csv",

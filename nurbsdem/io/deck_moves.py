@@ -60,17 +60,23 @@ def table_step(builder, e, name: str) -> MoveWallStep:
 
 
 def servo(builder, e, name: str) -> dict:
-    """The keys of ``MoveWall NAME Force F MaxSpeed v Gain g``: F (N) any number, v > 0
-    (m/s), g >= 0 (m/(s N))."""
+    """The keys of ``MoveWall NAME Force F MaxSpeed v Gain g [Direction dx dy dz]``: F (N)
+    any number, v > 0 (m/s), g >= 0 (m/(s N)), the direction of advance made unit (None: a
+    flat wall's normal; :func:`check_moves` requires it for mesh and surface walls)."""
     builder.require(e, "MaxSpeed", "Gain")
+    d = e.get("Direction")
+    if d is not None:
+        if not np.linalg.norm(d) > 0:
+            builder.fail(f"Step {e.id}: Direction must not be zero", e.line)
+        d = np.asarray(d, float) / np.linalg.norm(d)
     return dict(wall=name, force=float(e.get("Force")),
                 max_speed=builder.positive(e, "MaxSpeed", e.get("MaxSpeed")),
-                gain=builder.positive(e, "Gain", e.get("Gain"), strict=False))
+                gain=builder.positive(e, "Gain", e.get("Gain"), strict=False), direction=d)
 
 
 def force_step(builder, e, name: str) -> MoveWallStep:
-    """``MoveWall NAME Force F MaxSpeed v Gain g Duration T TimeStep DT ..``."""
-    builder.only(e, {"MoveWall", *SERVO, *TIMING}, "MoveWall Force")
+    """``MoveWall NAME Force F MaxSpeed v Gain g [Direction ..] Duration T TimeStep DT ..``."""
+    builder.only(e, {"MoveWall", *SERVO, "Direction", *TIMING}, "MoveWall Force")
     builder.require(e, "Duration", "TimeStep")
     dur, dt = builder.timing(e)
     return MoveWallStep(e.id, e.line, **servo(builder, e, name), duration=dur, time_step=dt,
@@ -132,7 +138,7 @@ def add_wall_move(builder, e, first: MoveWallStep) -> None:
                             center=np.asarray(e.get("Center", np.zeros(3)), float),
                             displacement=e.get("Displacement"), **common)
     elif modes[0] == "Force":
-        builder.only(e, {"MoveWall", *SERVO}, "MoveWall Force")
+        builder.only(e, {"MoveWall", *SERVO, "Direction"}, "MoveWall Force")
         move = MoveWallStep(e.id, e.line, **servo(builder, e, name), **common)
     else:
         builder.only(e, {"MoveWall", "Table", "Center"}, "MoveWall Table")
@@ -144,7 +150,8 @@ def add_wall_move(builder, e, first: MoveWallStep) -> None:
 
 def check_moves(builder, model) -> None:
     """Each moved wall exists; a table with rotation columns turns a mesh or surface wall; a
-    servo (``Force``) moves a flat wall."""
+    servo (``Force``) of a mesh or surface wall has a ``Direction``, and a flat wall's
+    advances towards the particles (its normal's side)."""
     names = model.wall_names
     curved = {w.name for w in model.curved_walls}
     for s in model.steps:
@@ -156,9 +163,26 @@ def check_moves(builder, model) -> None:
                 builder.fail(f"Step {s.id}: the table {m.table.file} has rotation columns "
                              f"(rx, ry, rz) but wall {m.wall!r} is flat: only mesh and surface "
                              f"walls turn", m.line)
-            if m.force is not None and m.wall in curved:
-                builder.fail(f"Step {s.id}: MoveWall {m.wall} Force: only flat walls are "
-                             f"servo-controlled ({m.wall!r} is a mesh or surface wall)", m.line)
+            if m.force is not None:
+                check_servo_direction(model, m, builder.fail, f"Step {s.id}: MoveWall "
+                                      f"{m.wall} Force")
             if m is not s and m.rotate and m.wall not in curved:
                 builder.fail(f"Step {s.id}: MoveWall {m.wall} Rotate: only mesh and surface "
                              f"walls turn (flat walls translate: Displacement)", m.line)
+
+
+def check_servo_direction(model, m, fail, what: str) -> None:
+    """A servo's direction of advance (``m.direction``): required for a mesh or surface wall
+    (no normal of its own); a flat wall's, when given, must have a positive component along
+    its normal (towards the particles).  ``fail(message, line)`` reports."""
+    curved = {w.name for w in model.curved_walls}
+    if m.direction is None:
+        if m.wall in curved:
+            fail(f"{what}: a mesh or surface wall needs Direction dx dy dz (the way it "
+                 f"advances towards the particles)", m.line)
+        return
+    if m.wall not in curved:
+        n = model.walls[model.wall_names.index(m.wall)].normal
+        if not float(np.asarray(m.direction) @ n) > 1e-12:
+            fail(f"{what}: Direction must advance the flat wall towards the particles "
+                 f"(along its normal {tuple(float(x) for x in n)})", m.line)

@@ -79,7 +79,7 @@ ENTRIES: dict[tuple[str, str], str] = {
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
         "with `ToContact` (instantaneous; flat walls), `Displacement` (timed; any wall) or "
         "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`) or "
-        "`Table` (timed; any wall) or `Force` (timed; flat walls: a servo). A `Step` line "
+        "`Table` (timed; any wall) or `Force` (timed; any wall: a servo). A `Step` line "
         "with the previous step's id moves one more wall in that MoveWall step (`Step 3 "
         "MoveWall floor Displacement 0 0 0.01`): it names the wall and its motion only, the "
         "first line gives the timing. A timed step is split "
@@ -255,11 +255,11 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "exactly at its time and still after the last row. `Duration` defaults to the last "
         "time."),
     ("Steps", "Step", "Force"): KeyDoc(
-        "N", "-", "With `MoveWall NAME`: a servo. The flat wall translates along its normal "
-        "so that the particles push it with F along it: once per deck step its velocity is "
-        "set to `Gain` x (F - the push at the end of the deck step before; the reaction of "
-        "`monitors/wall_NAME.csv` along the normal), towards the particles while they push "
-        "less, at most `MaxSpeed`."),
+        "N", "-", "With `MoveWall NAME`: a servo. The wall translates along its normal (a "
+        "mesh or surface wall: along `Direction`, required) so that the particles push it "
+        "with F along it: once per deck step its velocity is set to `Gain` x (F - the push "
+        "at the end of the deck step before; the reaction of `monitors/wall_NAME.csv` along "
+        "that axis), towards the particles while they push less, at most `MaxSpeed`."),
     ("Steps", "Step", "MaxSpeed"): KeyDoc(
         "m/s", "required with Force", "The servo wall's greatest speed, > 0."),
     ("Steps", "Step", "Gain"): KeyDoc(
@@ -274,7 +274,7 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "while it turns)."),
     ("Steps", "Step", "MoveWall"): KeyDoc(
         "", "-", "The name of the wall to move (with `ToContact`, `Displacement`, "
-        "`Rotate`, `Table` or `Force`; `ToContact` and `Force` move flat walls only)."),
+        "`Rotate`, `Table` or `Force`; `ToContact` moves flat walls only)."),
     ("Steps", "Step", "Duration"): KeyDoc(
         "s", "required by timed steps", "Simulated time; a whole number of `TimeStep`s."),
     ("Steps", "Step", "TimeStep"): KeyDoc(
@@ -289,8 +289,9 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "is `Gap`."),
     ("Steps", "Step", "Gap"): KeyDoc("m", "0", "`ToContact`: the distance left."),
     ("Steps", "Step", "Direction"): KeyDoc(
-        "-", "the wall's normal", "`ToContact`: the direction of travel (towards the "
-        "particles)."),
+        "-", "the wall's normal", "`ToContact` and `Force`: the direction of travel "
+        "(towards the particles; made unit). `Force` on a mesh or surface wall requires it; "
+        "on a flat wall it must have a positive component along the normal."),
     ("Steps", "Step", "Displacement"): KeyDoc(
         "m", "-", "dx dy dz: the wall (flat, mesh or surface) translates by this vector at "
         "constant velocity over `Duration` while the particles move; with `Rotate`, while "
