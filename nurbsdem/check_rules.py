@@ -18,7 +18,9 @@ OVERLAP_TOLERANCE = 1e-6
 #: An overlap up to this many static overlaps (:func:`static_overlap`, the depth at which the
 #: contact carries the heavier body's weight) is a state the contact law holds at rest (a
 #: settled pack's lowest contacts carry the weight of the column above them), so a settled
-#: state written back into a deck runs; capped by :data:`MAX_RESTING_FRACTION`.
+#: state written back into a deck runs; so is the overlap at which the contact carries the
+#: weight of all the particles (a tall pile's lowest contacts carry more than 20 weights);
+#: capped by :data:`MAX_RESTING_FRACTION`.
 RESTING_LOADS = 20.0
 #: Largest overlap accepted, as a fraction of the smaller bounding radius, whatever the load.
 MAX_RESTING_FRACTION = 0.05
@@ -82,12 +84,37 @@ def _body_mass(model: "Model", bodies: "Bodies", i: int) -> float:
     return entry.mass(mat.density) if mat is not None else 0.0
 
 
-def allowed_overlap(radius: float, resting: float) -> float:
+def allowed_overlap(radius: float, resting: float, pile: float = 0.0) -> float:
     """The deepest overlap (m) accepted for a contact of smaller bounding radius ``radius``
-    whose static overlap is ``resting`` (m): round-off, or up to :data:`RESTING_LOADS`
-    static overlaps but at most :data:`MAX_RESTING_FRACTION` of the radius."""
+    whose static overlap is ``resting`` (m) under the heavier body's weight and ``pile`` (m)
+    under the weight of all the particles (:func:`pile_mass`): round-off, or up to the larger
+    of :data:`RESTING_LOADS` static overlaps and ``pile``, but at most
+    :data:`MAX_RESTING_FRACTION` of the radius."""
     return max(OVERLAP_TOLERANCE * radius,
-               min(RESTING_LOADS * resting, MAX_RESTING_FRACTION * radius))
+               min(max(RESTING_LOADS * resting, pile), MAX_RESTING_FRACTION * radius))
+
+
+def pile_mass(model: "Model", bodies: "Bodies") -> float:
+    """The mass (kg) of all the particles of ``bodies``: the most a contact of a pile at rest
+    under gravity carries (walls holding the rest)."""
+    kinds, counts = np.unique(np.stack([np.asarray(bodies.shape_id, np.int64),
+                                        np.asarray(bodies.material_id, np.int64)], axis=1),
+                              axis=0, return_counts=True)
+    total = 0.0
+    for (shape, material), n in zip(kinds.tolist(), counts.tolist()):
+        mat = model.materials.get(material)
+        total += n * (model.shapes[shape].mass(mat.density) if mat is not None else 0.0)
+    return total
+
+
+def pile_overlap(model: "Model", bodies: "Bodies", kind: str, materials: tuple[int, ...],
+                 radius: float, wall_material: int | None = None,
+                 mass: float | None = None) -> float:
+    """The static overlap (m) of a contact carrying all the particles' weight (``mass`` kg:
+    :func:`pile_mass` of ``bodies`` when None); :func:`static_overlap`'s arguments."""
+    return static_overlap(model, kind, materials,
+                          pile_mass(model, bodies) if mass is None else mass, radius,
+                          wall_material)
 
 
 def _warn_deep(model: "Model", line: int | None, text: str, depth: float, radius: float,
@@ -106,7 +133,8 @@ def _warn_deep(model: "Model", line: int | None, text: str, depth: float, radius
 
 def _allowed_rule() -> str:
     return (f"{RESTING_LOADS:g} x the overlap at which the contact carries the heavier "
-            f"body's weight, at most {MAX_RESTING_FRACTION:g} of the bounding radius")
+            f"body's weight, or the overlap at which it carries all the particles' weight, at "
+            f"most {MAX_RESTING_FRACTION:g} of the bounding radius")
 
 
 # ---------------------------------------------------------------------------- flat walls

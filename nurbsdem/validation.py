@@ -34,7 +34,8 @@ import numpy as np
 
 from .check_rules import (MAX_RESTING_FRACTION, OVERLAP_TOLERANCE, RESTING_LOADS,
                           SOFT_FRACTION, WARN_OVERLAP_FRACTION, _allowed_rule, _body_mass,
-                          _inside_rectangle, _warn_deep, allowed_overlap, static_overlap,
+                          _inside_rectangle, _warn_deep, allowed_overlap, pile_mass,
+                          pile_overlap, static_overlap,
                           wall_plane)
 from .dynamics.stepcontrol import critical_step
 from .errors import InputError, vector_text as _vec
@@ -100,6 +101,7 @@ def check_body_overlaps(model: "Model", bodies: "Bodies", index: Sequence[int] |
     radii = np.array([float(s.bounding_radius) for s in shapes])
     pos = bodies.position[idx]
     R = bodies.rotation_matrices()[idx]
+    pile = None             # the particles' mass, once an overlap needs it
     for a, b in close_pairs(pos, radii):
         depth = pair_penetration(shapes[a], pos[a], R[a], shapes[b], pos[b], R[b])
         r = min(radii[a], radii[b])
@@ -108,11 +110,15 @@ def check_body_overlaps(model: "Model", bodies: "Bodies", index: Sequence[int] |
         i, j = int(idx[a]), int(idx[b])
         if bodies.line[i] < bodies.line[j]:
             i, j = j, i
+        mats = (int(bodies.material_id[i]), int(bodies.material_id[j]))
+        reduced = radii[a] * radii[b] / (radii[a] + radii[b])
         resting = 0.0 if math.isinf(depth) else static_overlap(
-            model, "particle-particle", (int(bodies.material_id[i]), int(bodies.material_id[j])),
-            max(_body_mass(model, bodies, i), _body_mass(model, bodies, j)),
-            radii[a] * radii[b] / (radii[a] + radii[b]))
-        tol = allowed_overlap(r, resting)
+            model, "particle-particle", mats,
+            max(_body_mass(model, bodies, i), _body_mass(model, bodies, j)), reduced)
+        if pile is None:
+            pile = pile_mass(model, bodies)
+        tol = allowed_overlap(r, resting, 0.0 if math.isinf(depth) else pile_overlap(
+            model, bodies, "particle-particle", mats, reduced, mass=pile))
         if depth > tol:
             raise model.error(_overlap_text(bodies, i, j, depth, tol), int(bodies.line[i]))
         _warn_deep(model, int(bodies.line[i]), f"particle {bodies.id[i]} overlaps particle "
@@ -183,6 +189,7 @@ def check_bodies_against_walls(model: "Model", bodies: "Bodies",
     radii = np.array([float(s.bounding_radius) for s in shapes])
     pos = bodies.position[idx]
     R = bodies.rotation_matrices()[idx]
+    pile = None             # the particles' mass, once a penetration needs it
     for w in model.walls:
         o, a, b, n = wall_plane(w)
         h = (pos - o) @ n                     # centroid height above the wall's plane
@@ -204,7 +211,11 @@ def check_bodies_against_walls(model: "Model", bodies: "Bodies",
             i = int(idx[k])
             resting = static_overlap(model, "particle-wall", (int(bodies.material_id[i]),),
                                      _body_mass(model, bodies, i), radii[k], w.material_id)
-            tol = allowed_overlap(radii[k], resting)
+            if pile is None:
+                pile = pile_mass(model, bodies)
+            tol = allowed_overlap(radii[k], resting, pile_overlap(
+                model, bodies, "particle-wall", (int(bodies.material_id[i]),), radii[k],
+                w.material_id, mass=pile))
             if sd < -tol and reference is not None:
                 j = int(reference[k])
                 tol -= min(0.0, plane_support_distance(

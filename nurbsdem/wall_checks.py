@@ -348,22 +348,29 @@ def check_bodies_against_curved_wall(model: "Model", bodies: "Bodies", idx: np.n
                           int(bodies.line[idx[k]]))
     crossings = mesh_crossings if spec.kind == "mesh" else surface_crossings
     front, back = crossings(geometry, x, r) if depths is None else depths
+    from .check_rules import pile_mass
+    pile = None             # the particles' mass, once a crossing needs it
     for k in np.flatnonzero((front > 0) | (back > 0)).tolist():
+        if pile is None:
+            pile = pile_mass(model, bodies)
         _judge(model, bodies, int(idx[k]), x[k], float(r[k]), spec, float(front[k]),
-               float(back[k]))
+               float(back[k]), pile)
 
 
 def _judge(model: "Model", bodies: "Bodies", i: int, x: np.ndarray, r: float,
-           spec: "CurvedWallSpec", front: float, back: float) -> None:
-    """Raise for a crossing deeper than the resting overlap; warn of an accepted deep one."""
+           spec: "CurvedWallSpec", front: float, back: float, pile: float) -> None:
+    """Raise for a crossing deeper than the resting overlap (``pile``: the particles' mass,
+    kg, :func:`~nurbsdem.check_rules.pile_mass`); warn of an accepted deep one."""
     from .check_rules import (OVERLAP_TOLERANCE, _allowed_rule, _body_mass, _warn_deep,
-                             allowed_overlap, static_overlap)
+                             allowed_overlap, pile_overlap, static_overlap)
     depth = max(front, back)
     if depth <= OVERLAP_TOLERANCE * r:
         return
     resting = static_overlap(model, "particle-wall", (int(bodies.material_id[i]),),
                              _body_mass(model, bodies, i), r, spec.material_id)
-    tol = allowed_overlap(r, resting)
+    tol = allowed_overlap(r, resting, pile_overlap(
+        model, bodies, "particle-wall", (int(bodies.material_id[i]),), r, spec.material_id,
+        mass=pile))
     line = int(bodies.line[i])
     if back > tol:
         side = ("its triangles' vertex order" if spec.kind == "mesh" else "S_u x S_v")

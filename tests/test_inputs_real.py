@@ -101,6 +101,21 @@ def test_overlap_beyond_what_the_contact_carries_is_refused_with_both_depths(tmp
         parse_deck(_deck(tmp_path, _particle(1, R) + "\n" + _particle(2, 3 * R - deep)))
 
 
+def test_a_tall_piles_deepest_contact_is_accepted_up_to_all_the_particles_weight(tmp_path):
+    """The floor under a pile carries all the particles' weight: with 40 particles in the
+    deck, a sphere sinking 30 resting overlaps into the floor (more than 20, less than the 40
+    that carry them all) is accepted; with 2 particles the same depth is refused."""
+    deep = 30 * D
+    spots = [(x, y, z) for z in (0.12, 0.165, 0.21) for y in (0.03, 0.075, 0.12, 0.165)
+             for x in (0.03, 0.075, 0.12, 0.165)][:38]
+    far = "\n".join(f"  Particle {k} Shape 1 Material 1 Position {x!r} {y!r} {z!r}"
+                    for k, (x, y, z) in enumerate(spots, start=3))
+    parse_deck(_deck(tmp_path, _particle(1, R - deep) + "\n" + _particle(2, 3 * R) + "\n"
+                     + far))
+    with pytest.raises(InputError, match="all the particles' weight"):
+        parse_deck(_deck(tmp_path, _particle(1, R - deep) + "\n" + _particle(2, 3 * R)))
+
+
 def test_without_gravity_only_round_off_is_accepted(tmp_path):
     with pytest.raises(InputError, match="penetrates wall 'bottom'"):
         parse_deck(_deck(tmp_path, _particle(1, R - D), gravity=0.0))
