@@ -9,6 +9,7 @@ not ancestors of ``m``: those already run before ``m``)."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -98,10 +99,12 @@ def _ancestors(name: str) -> list[str]:
     return [".".join(parts[:i]) for i in range(1, len(parts))]
 
 
-def import_graph() -> dict[str, set[str]]:
-    """Module -> the package modules its import statements run (module docstring)."""
+@functools.lru_cache(maxsize=1)
+def import_graph() -> dict[str, frozenset[str]]:
+    """Module -> the package modules its import statements run (module docstring); parsed
+    once per session (the tests only read it)."""
     modules = _modules()
-    graph: dict[str, set[str]] = {}
+    graph: dict[str, frozenset[str]] = {}
     for name, path in modules.items():
         tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
         own = set(_ancestors(name))
@@ -110,7 +113,7 @@ def import_graph() -> dict[str, set[str]]:
             edges.add(t)
             edges.update(a for a in _ancestors(t) if a not in own and a in modules)
         edges.discard(name)
-        graph[name] = edges
+        graph[name] = frozenset(edges)
     return graph
 
 
