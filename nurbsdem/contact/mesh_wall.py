@@ -30,6 +30,13 @@ per face.  Ties within ``1e-12`` of the mesh's size count as equal.
 One-sided meshes ignore the triangles whose front face (the side their vertex order's normal
 points to) the centre is behind.
 
+**Kept lists.**  In the step (:func:`mesh_rows_listed`) each sphere keeps the triangles within
+r + skin of its centre (mesh frame) between evaluations, like a Verlet list, and asks the grid
+again only once it has moved (the wall's motion included) more than skin/2; the candidates
+taken from the list are put back in the grid's order, so the rows are those of the grid bit
+for bit, whatever the lists hold.  A triangle whose bounding box lies beyond reach is skipped
+without its closest point.
+
 Lengths in metres; triangles are indices into the vertex array (T,3).
 """
 from __future__ import annotations
