@@ -33,16 +33,16 @@ def _rows(g, idx, x, r, R, t, work, mark, lists=None):
                          MAX_PER_WALL, rf, ri, owner, rank)
     return rf[:n], ri[:n], owner[:n], rank[:n]
 
-def test_rows_from_kept_lists_equal_the_grid_s():
+
+def test_rows_from_kept_lists_equal_the_grids():
     verts, faces = plane_mesh(16, half=0.5)
     verts[:, 2] = 0.03 * np.sin(9 * verts[:, 0]) * (verts[:, 1] > 0)
     ico = trimesh.creation.icosphere(subdivisions=2, radius=0.4)
     rng = np.random.default_rng(7)
-    for g, spread in ((build_mesh_wall(verts, faces, two_sided=False), 0.45),
-                      (build_mesh_wall(ico.vertices, ico.faces), 0.5)):
+    for g, spread in ((build_mesh_wall(verts, faces, two_sided=False), (0.45, 0.45, 0.09)),
+                      (build_mesh_wall(ico.vertices, ico.faces), (0.5, 0.5, 0.5))):
         n = 120
-        x = rng.uniform(-spread, spread, (n, 3))
-        x[:, 2] *= 0.2 if g.two_sided is False else 1.0
+        x = rng.uniform(-1.0, 1.0, (n, 3)) * spread
         r = rng.uniform(0.04, 0.08, n)
         work = make_workspace(g)
         kept, small = make_lists(g, n), make_lists(g, n, room=2)
