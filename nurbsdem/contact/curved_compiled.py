@@ -30,11 +30,11 @@ from numba import njit
 
 from ..jit import PointerKernel
 
-from .curved_walls import (MAX_PER_WALL, _mesh_rows_of, _surface_rows_of, wall_contact_key,
-                           wall_pose_at, world_box)
+from .curved_walls import (MAX_PER_WALL, _surface_rows_of, wall_contact_key, wall_pose_at,
+                           world_box)
 from .kinds import MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_wall import MeshWall
+from .mesh_wall import LIST_ROOM, NO_LIST, MeshWall, mesh_rows_listed
 from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
                                         particle_surface_rows_ptr)
 from .wall_skin import due_spheres, pose_travel, wall_reach
@@ -42,8 +42,8 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 #: the packed walls (W curved walls, N particles): n, first (the first curved wall's index
 #: among the system's W_all walls), nb = N + W_all, radius (N,) the spheres' radii; per wall
 #: kind (W,), the pose in time (omega, center (W,3), t0 (W,), R0 (W,3,3), shift0 (W,3)) and
-#: corners (W,8,3) of its wall-frame box; meshes: offsets (W+1,) into vertices, faces, cell
-#: starts and cell triangles, the arrays, per-wall two_sided, size, grid origin, cell and
+#: corners (W,8,3) of its wall-frame box; meshes: offsets (W+1,) into vertices, faces (and
+#: the triangles' cells tri_cells), cell starts and cell triangles, the arrays, per-wall two_sided, size, grid origin, cell and
 #: dims; surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
 #: per-wall spacing and size; the particles: reach (N,) m (bounding radius about the
 #: centroid), which are exact spheres and which NURBS particles (N,) bool, their shapes
@@ -53,18 +53,20 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 CurvedConst = namedtuple(
     "CurvedConst", "n_walls first nb radius kind omega center t0 R0 shift0 corners "
     "vo fo co to vertices faces normals two_sided msize grid_origin grid_cell grid_dims "
-    "cell_start cell_tris po so deg ncp koff knots pw poff dom periodic seed_x seed_p "
+    "cell_start cell_tris tri_cells po so deg ncp koff knots pw poff dom periodic seed_x seed_p "
     "seed_uv spacing ssize reach sphere nurbs body_shape n_nurbs ptab pinfo pcen prad pseeds")
 #: what the search changes: the mesh kernels' workspaces over all meshes' triangles (stamp,
-#: tris, cand_q, cand_d, cand_f) and the query mark (1,); the surfaces' certificates per
-#: wall: gap (W,N) m, x0 (W,N,3), odo0 (W,N), the odometer (W,) m and the pose it was last
-#: advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces' extents (W,) m and
-#: centres (W,3) m (wall frame); the last call's contacts (count (1,) of them): bodies
-#: out_a, out_b, points on the sphere and on the wall out_pa, out_pb (m), normals, depths
-#: (m) and keys, each of room W·N·MAX_PER_WALL
-CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f mark gap x0 odo0 odo "
-                        "prev_R prev_t posed extent centre out_a out_b out_pa out_pb "
-                        "out_normal out_depth out_key count")
+#: tris, cand_q, cand_d, cand_f, keys) and the query mark (1,); the spheres' kept lists of
+#: nearby triangles per mesh wall (M meshes: near_p (M,N,5), near_n (M,N), near_t
+#: (M,N,LIST_ROOM), :func:`~nurbsdem.contact.mesh_wall.make_lists`); the surfaces'
+#: certificates per wall: gap (W,N) m, x0 (W,N,3), odo0 (W,N), the odometer (W,) m and the
+#: pose it was last advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces'
+#: extents (W,) m and centres (W,3) m (wall frame); the last call's contacts (count (1,) of
+#: them): bodies out_a, out_b, points on the sphere and on the wall out_pa, out_pb (m),
+#: normals, depths (m) and keys, each of room W·N·MAX_PER_WALL
+CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f keys mark near_p near_n "
+                        "near_t gap x0 odo0 odo prev_R prev_t posed extent centre out_a out_b "
+                        "out_pa out_pb out_normal out_depth out_key count")
 
 
 def _offsets(sizes) -> np.ndarray:
@@ -129,6 +131,7 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
                  for g in geo], (0, 3), np.int64).reshape(W, 3),
         _joined([g.cell_start for g in meshes], (0,), np.int64),
         _joined([g.cell_tris for g in meshes], (0,), np.int64),
+        _joined([g.tri_cells for g in meshes], (0, 6), np.int64),
         _offsets([s[0] for s in ssizes]), _offsets([s[1] for s in ssizes]),
         _joined([g.deg for g in surfs], (0, 2), np.int64),
         _joined([g.ncp for g in surfs], (0, 2), np.int64),
@@ -147,8 +150,11 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
     for k, g in enumerate(geo):
         if not isinstance(g, MeshWall):
             centre[k], extent[k] = wall_reach(g.seed_x, g.spacing)
+    M = len(meshes)
     work = CurvedWork(np.full(T, -1, np.int64), np.empty(T, np.int64), np.empty((T, 3)),
-                      np.empty(T), np.empty(T, np.int64), np.zeros(1, np.int64),
+                      np.empty(T), np.empty(T, np.int64), np.zeros(T, np.int64),
+                      np.zeros(1, np.int64), np.zeros((M, n, 5)),
+                      np.full((M, n), NO_LIST, np.int64), np.zeros((M, n, LIST_ROOM), np.int64),
                       np.full((W, n), -1.0), np.zeros((W, n, 3)), np.zeros((W, n)),
                       np.zeros(W), np.zeros((W, 3, 3)), np.zeros((W, 3)),
                       np.zeros(W, np.bool_), extent, centre, np.zeros(room, np.int64),
@@ -207,27 +213,49 @@ def _surface_due(wk, w, idx, x):
 
 
 @njit(cache=True)
-def _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank):
-    """The touching rows of spheres idx with mesh wall w as the provider keeps them (the
-    kernel's rows with negative signed distance, each with its rank among the sphere's rows)
-    into rows_f, owner, rank; returns their count."""
+def _mesh_contacts(cc, wk, w, mesh, idx, x, R, t, c):
+    """The touching contacts of spheres idx with mesh wall w (the ``mesh``-th mesh) as the
+    provider keeps them (the kernel's rows with negative signed distance, keyed by their rank
+    among the sphere's rows) into ``wk``'s contacts from c on; returns the new count."""
     v0, v1, f0, f1 = cc.vo[w], cc.vo[w + 1], cc.fo[w], cc.fo[w + 1]
-    rows_i = np.zeros((rows_f.shape[0], NI), np.int64)
-    n = _mesh_rows_of(idx, x, cc.radius, R, t, cc.vertices[v0:v1], cc.faces[f0:f1],
-                      cc.normals[f0:f1], cc.two_sided[w], cc.msize[w], cc.grid_origin[w],
-                      cc.grid_cell[w], cc.grid_dims[w], cc.cell_start[cc.co[w]:cc.co[w + 1]],
-                      cc.cell_tris[cc.to[w]:cc.to[w + 1]], wk.stamp[f0:f1], wk.mark[0] + 1,
-                      wk.tris[f0:f1], wk.cand_q[f0:f1], wk.cand_d[f0:f1], wk.cand_f[f0:f1],
-                      rows_f, rows_i, owner, rank)
-    wk.mark[0] += idx.shape[0]
-    kept = 0
+    vertices, faces, normals = cc.vertices[v0:v1], cc.faces[f0:f1], cc.normals[f0:f1]
+    tri_cells = cc.tri_cells[f0:f1]
+    cell_start = cc.cell_start[cc.co[w]:cc.co[w + 1]]
+    cell_tris = cc.cell_tris[cc.to[w]:cc.to[w + 1]]
+    stamp, tris, keys = wk.stamp[f0:f1], wk.tris[f0:f1], wk.keys[f0:f1]
+    cand_q, cand_d, cand_f = wk.cand_q[f0:f1], wk.cand_d[f0:f1], wk.cand_f[f0:f1]
+    near_p, near_n, near_t = wk.near_p[mesh], wk.near_n[mesh], wk.near_t[mesh]
+    room = idx.shape[0] + MAX_PER_WALL              # touching rows: mostly one a sphere
+    while True:
+        rows_f, rows_i = np.empty((room, NF)), np.empty((room, NI), np.int64)
+        owner, rank = np.empty(room, np.int64), np.empty(room, np.int64)
+        n = mesh_rows_listed(idx, x, cc.radius, R, t, vertices, faces, normals,
+                             cc.two_sided[w], cc.msize[w], cc.grid_origin[w], cc.grid_cell[w],
+                             cc.grid_dims[w], cell_start, cell_tris, tri_cells, stamp,
+                             wk.mark[0] + 1, tris, cand_q, cand_d, cand_f, near_p, near_n,
+                             near_t, keys, MAX_PER_WALL, rows_f, rows_i, owner, rank)
+        wk.mark[0] += idx.shape[0]
+        if n <= room:
+            break
+        room = n
+    return _put(cc, wk, w, x.shape[0] + cc.first + w, c, n, rows_f, owner, rank)
+
+
+@njit(cache=True)
+def _put(cc, wk, w, body, c, n, rows_f, owner, rank):
+    """The n rows of rows_f (owner, rank) with wall w (body ``body``) as ``wk``'s contacts
+    from c on; returns the new count."""
     for r in range(n):
-        if rows_f[r, F_SD] < 0.0:
-            rows_f[kept, :] = rows_f[r, :]
-            owner[kept] = owner[r]
-            rank[kept] = rank[r]
-            kept += 1
-    return kept
+        wk.out_a[c] = owner[r]
+        wk.out_b[c] = body
+        for k in range(3):
+            wk.out_pa[c, k] = rows_f[r, F_PA + k]
+            wk.out_pb[c, k] = rows_f[r, F_PB + k]
+            wk.out_normal[c, k] = rows_f[r, F_N + k]
+        wk.out_depth[c] = -rows_f[r, F_SD]
+        wk.out_key[c] = wall_contact_key(cc.nb, owner[r], w, cc.n_walls, rank[r])
+        c += 1
+    return c
 
 
 @njit(cache=True)
@@ -287,34 +315,27 @@ def curved_contacts(cc, wk, time, x, rot, pos, wall_d) -> None:
     refused (called through a lazy pointer, :data:`curved_contacts_ptr`)."""
     N = x.shape[0]
     c = 0
+    mesh = 0
     for w in range(cc.n_walls):
         R, t = wall_pose_at(cc.omega[w], cc.center[w], cc.t0[w], cc.R0[w], cc.shift0[w],
                             time, wall_d[cc.first + w])
         lo, hi = world_box(cc.corners[w], R, t)
         idx = _candidates(x, cc.reach, cc.sphere, lo, hi)
+        if cc.kind[w] == MESH_WALL:
+            c = _mesh_contacts(cc, wk, w, mesh, idx, x, R, t, c)
+            mesh += 1
+            continue
         more = _candidates(x, cc.reach, cc.nurbs, lo, hi) if cc.n_nurbs else idx[:0]
-        rows_f = np.zeros((MAX_PER_WALL * idx.shape[0] + more.shape[0] + 1, NF))
+        rows_f = np.zeros((idx.shape[0] + more.shape[0] + 1, NF))
         owner = np.zeros(rows_f.shape[0], np.int64)
         rank = np.zeros(rows_f.shape[0], np.int64)
-        if cc.kind[w] == MESH_WALL:
-            n = _mesh_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
-        else:
-            n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
-            if more.shape[0]:
-                n = _nurbs_rows(cc, w, more, pos, rot, R, t, rows_f, owner, rank, n)
-                if n < 0:
-                    wk.count[0] = -1
-                    return
-        for r in range(n):
-            wk.out_a[c] = owner[r]
-            wk.out_b[c] = N + cc.first + w
-            for k in range(3):
-                wk.out_pa[c, k] = rows_f[r, F_PA + k]
-                wk.out_pb[c, k] = rows_f[r, F_PB + k]
-                wk.out_normal[c, k] = rows_f[r, F_N + k]
-            wk.out_depth[c] = -rows_f[r, F_SD]
-            wk.out_key[c] = wall_contact_key(cc.nb, owner[r], w, cc.n_walls, rank[r])
-            c += 1
+        n = _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank)
+        if more.shape[0]:
+            n = _nurbs_rows(cc, w, more, pos, rot, R, t, rows_f, owner, rank, n)
+            if n < 0:
+                wk.count[0] = -1
+                return
+        c = _put(cc, wk, w, N + cc.first + w, c, n, rows_f, owner, rank)
     wk.count[0] = c
 
 

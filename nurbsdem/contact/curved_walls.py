@@ -42,7 +42,8 @@ from .kinds import (MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE, SURFACE_POI
                     SURFACE_SUPPORT, pair_solver)
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
 from .mesh_particle import particle_mesh_contacts
-from .mesh_wall import MeshWall, make_workspace, sphere_mesh_rows
+from .mesh_wall import (MeshWall, make_lists, make_workspace, mesh_rows_listed,
+                        sphere_mesh_rows)
 from .surface_particle import refusal, surface_rows
 from .surface_particle_compiled import CONTACT, NOT_CONVERGED, NOT_UNIQUE
 from .surface_wall import SurfaceWall, sphere_surface_row
@@ -232,6 +233,7 @@ class CurvedWallContacts:
             self.reach[self.nurbs] = np.asarray(table.radius, float)[self.body_shape[self.nurbs]]
         self._mark = 0
         self._skins: dict[int, WallSkin] = {}
+        self._near: dict[int, tuple] = {}        # id(wall): (its mesh, the lists)
         for w in self.walls:
             if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
                 raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
@@ -313,13 +315,13 @@ class CurvedWallContacts:
             cap = MAX_PER_WALL * len(idx)
             rf, ri = np.zeros((cap, NF)), np.zeros((cap, NI), np.int64)
             owner, rank = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
-            n = _mesh_rows_of(idx, x, self.radii, R, tv, g.vertices, g.faces, g.normals,
-                              g.two_sided, g.size, g.grid_origin, g.grid_cell, g.grid_dims,
-                              g.cell_start, g.cell_tris, w.work[0], self._mark, *w.work[1:],
-                              rf, ri, owner, rank)
+            n = mesh_rows_listed(idx, x, self.radii, R, tv, g.vertices, g.faces, g.normals,
+                                 g.two_sided, g.size, g.grid_origin, g.grid_cell, g.grid_dims,
+                                 g.cell_start, g.cell_tris, g.tri_cells, w.work[0], self._mark,
+                                 *w.work[1:], *self._lists(w, g), MAX_PER_WALL, rf, ri, owner,
+                                 rank)
             self._mark += len(idx)
-            keep = rf[:n, F_SD] < 0.0
-            return rf[:n][keep], owner[:n][keep], rank[:n][keep]
+            return rf[:n], owner[:n], rank[:n]
         skin = self._skin(w, g)
         skin.advance(R, tv)
         idx = skin.due(idx, x)
@@ -330,6 +332,14 @@ class CurvedWallContacts:
                              g.spacing, g.size, rf, owner, gap)
         skin.certify(idx, x, gap)
         return rf[:n], owner[:n], np.zeros(n, np.int64)
+
+    def _lists(self, w: CurvedWall, g: MeshWall) -> tuple:
+        """The spheres' kept lists of nearby triangles of mesh wall w
+        (:func:`~nurbsdem.contact.mesh_wall.make_lists`)."""
+        held = self._near.get(id(w))
+        if held is None or held[0] is not g or len(held[1][1]) != len(self.radii):
+            held = self._near[id(w)] = (g, make_lists(g, len(self.radii)))
+        return held[1]
 
     def _skin(self, w: CurvedWall, g: SurfaceWall) -> WallSkin:
         """The gap certificates of the spheres against surface wall w."""
