@@ -99,15 +99,12 @@ class SystemAssembly:
                          accuracy=accuracy)
         sysm.compiled_steps = compiled_steps
         b = bodies
-        Rs = b.rotation_matrices()
-        kinds: dict[tuple[int, int], dict] = {}     # what particles of a shape and material share
-        particles = []
-        for i, kind in enumerate(zip(b.shape_id.tolist(), b.material_id.tolist())):
-            if kind not in kinds:
-                kinds[kind] = self.particle_kind(*kind)
-            particles.append(dict(kinds[kind], x=b.position[i], R=Rs[i], v=b.velocity[i],
-                                  omega=b.angular_velocity[i]))
-        sysm.add_particles(particles)
+        pairs = np.stack([b.shape_id, b.material_id], axis=1).reshape(-1, 2)
+        kinds, kind = np.unique(pairs, axis=0, return_inverse=True)
+        sysm.add_particle_kinds(np.ravel(kind), [self.particle_kind(int(s), int(m))
+                                                 for s, m in kinds],
+                                b.rotation_matrices(), b.position, b.velocity,
+                                b.angular_velocity)
         for k, w in enumerate(model.walls + model.curved_walls):    # mesh, surface: last
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
         return sysm
