@@ -106,10 +106,13 @@ class SystemAssembly:
                          accuracy=accuracy)
         sysm.compiled_steps = compiled_steps
         b = bodies
-        pairs = np.stack([b.shape_id, b.material_id], axis=1).reshape(-1, 2)
-        kinds, kind = np.unique(pairs, axis=0, return_inverse=True)
-        sysm.add_particle_kinds(np.ravel(kind), [self.particle_kind(int(s), int(m))
-                                                 for s, m in kinds],
+        m0 = int(b.material_id.min()) if len(b) else 0
+        mats = int(b.material_id.max()) - m0 + 1 if len(b) else 1
+        keys, kind = np.unique(np.asarray(b.shape_id, np.int64) * mats + (b.material_id - m0),
+                               return_inverse=True)       # a key per (shape, material)
+        sysm.add_particle_kinds(np.ravel(kind), [self.particle_kind(int(k // mats),
+                                                                   int(k % mats) + m0)
+                                                 for k in keys],
                                 b.rotation_matrices(), b.position, b.velocity,
                                 b.angular_velocity)
         for k, w in enumerate(model.walls + model.curved_walls):    # mesh, surface: last
