@@ -353,9 +353,9 @@ class Solver:
         self.system.initialize()
         self.ledger.book_external(self.system.initial_wrap_work)
         if not getattr(self, "_rebuilt_loaded", False):
-            # the compiled deck steps, loaded once per run: a new system of the same kinds
-            # of arrays steps with the same compiled loop, and loading it again (a call of
-            # zero deck steps) changes nothing but costs its dispatch
+            # the compiled deck steps, loaded at this solver's first rebuild: later systems
+            # step with the same compiled loop (the same kinds of arrays), and loading it
+            # again (a call of zero deck steps) changes nothing but costs its dispatch
             self.system.load_compiled()
             self._rebuilt_loaded = True
         self.timers["setup"] += time.perf_counter() - t0
