@@ -352,7 +352,12 @@ class Solver:
         t0 = time.perf_counter()
         self.system.initialize()
         self.ledger.book_external(self.system.initial_wrap_work)
-        self.system.load_compiled()
+        if not getattr(self, "_rebuilt_loaded", False):
+            # the compiled deck steps, loaded at this solver's first rebuild: later systems
+            # step with the same compiled loop (the same kinds of arrays), and loading it
+            # again (a call of zero deck steps) changes nothing but costs its dispatch
+            self.system.load_compiled()
+            self._rebuilt_loaded = True
         self.timers["setup"] += time.perf_counter() - t0
 
     def _time_loop(self, writers: OutputWriters, n_total: int, step_t0: float,

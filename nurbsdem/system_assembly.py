@@ -33,6 +33,7 @@ class SystemAssembly:
         self.shapes = [model.shapes[s].shape for s in self.shape_ids]
         self.interfaces = self._interface_table()
         self._compliances: dict = {}
+        self._kinds: dict[tuple[int, int], dict] = {}
         self._contact_table: ContactTable | None = None
 
     def contact_table(self) -> ContactTable:
@@ -77,12 +78,18 @@ class SystemAssembly:
     def particle_kind(self, shape_id: int, material_id: int) -> dict:
         """The arguments of :meth:`DemSystem.add_particle` that every particle of one shape
         and material shares: mass (kg), inertia J0 (kg m^2, file frame), material index,
-        centroid in the file frame and bounding radius (m), a-priori compliances."""
-        entry = self.model.shapes[shape_id]
-        rho = self.model.materials[material_id].density
-        return dict(mass=entry.mass(rho), J0=entry.mass_inertia(rho),
-                    material=self.mat_index[material_id], centroid_file=entry.centroid,
-                    radius=entry.bounding_radius, compliance=self.compliance(shape_id, rho))
+        centroid in the file frame and bounding radius (m), a-priori compliances; formed
+        once per pair (a run with inlets or outlets builds a system at each exchange)."""
+        key = (shape_id, material_id)
+        if key not in self._kinds:
+            entry = self.model.shapes[shape_id]
+            rho = self.model.materials[material_id].density
+            self._kinds[key] = dict(mass=entry.mass(rho), J0=entry.mass_inertia(rho),
+                                    material=self.mat_index[material_id],
+                                    centroid_file=entry.centroid,
+                                    radius=entry.bounding_radius,
+                                    compliance=self.compliance(shape_id, rho))
+        return dict(self._kinds[key])
 
     def system(self, bodies: Bodies, t0: float, dt: float, motions: list[PrescribedMotion],
                safety: float, compiled_steps: bool, implicit_damping: bool = False,
@@ -99,15 +106,15 @@ class SystemAssembly:
                          accuracy=accuracy)
         sysm.compiled_steps = compiled_steps
         b = bodies
-        Rs = b.rotation_matrices()
-        kinds: dict[tuple[int, int], dict] = {}     # what particles of a shape and material share
-        particles = []
-        for i, kind in enumerate(zip(b.shape_id.tolist(), b.material_id.tolist())):
-            if kind not in kinds:
-                kinds[kind] = self.particle_kind(*kind)
-            particles.append(dict(kinds[kind], x=b.position[i], R=Rs[i], v=b.velocity[i],
-                                  omega=b.angular_velocity[i]))
-        sysm.add_particles(particles)
+        m0 = int(b.material_id.min()) if len(b) else 0
+        mats = int(b.material_id.max()) - m0 + 1 if len(b) else 1
+        keys, kind = np.unique(np.asarray(b.shape_id, np.int64) * mats + (b.material_id - m0),
+                               return_inverse=True)       # a key per (shape, material)
+        sysm.add_particle_kinds(np.ravel(kind), [self.particle_kind(int(k // mats),
+                                                                   int(k % mats) + m0)
+                                                 for k in keys],
+                                b.rotation_matrices(), b.position, b.velocity,
+                                b.angular_velocity)
         for k, w in enumerate(model.walls + model.curved_walls):    # mesh, surface: last
             sysm.add_wall(motions[k], material=self.wall_index[w.material_id], name=w.name)
         return sysm

@@ -113,9 +113,7 @@ def particle_rows(particles: Sequence[Mapping]) -> dict[str, np.ndarray]:
     for the quaternions, not ~200 µs of Python per particle."""
     n = len(particles)
     mass = np.array([float(p["mass"]) for p in particles])
-    bad = ~((mass > 0) & np.isfinite(mass))
-    if bad.any():
-        raise InputError(f"particle mass must be positive, got {mass[np.argmax(bad)]}")
+    _check_masses(mass)
     J0 = np.empty((n, 3, 3))
     for i, p in enumerate(particles):
         tensor = np.asarray(p["J0"], dtype=float)
@@ -127,19 +125,57 @@ def particle_rows(particles: Sequence[Mapping]) -> dict[str, np.ndarray]:
     for i, p in enumerate(particles):
         rot = p.get("R")
         R[i] = np.eye(3) if rot is None else np.asarray(rot, dtype=float)
+    return stacked_rows(
+        mass, J0, I, P, R, _vectors(particles, "omega"), _vectors(particles, "centroid_file"),
+        np.array([int(p.get("material", 0)) for p in particles], np.int64),
+        np.array([float(p.get("radius", 0.0)) for p in particles]),
+        np.array([np.asarray(p["x"], dtype=float).reshape(3) for p in particles]),
+        _vectors(particles, "v"))
+
+
+def kind_rows(kind: np.ndarray, mass: np.ndarray, J0: np.ndarray, centroid_file: np.ndarray,
+              material: np.ndarray, radius: np.ndarray, R: np.ndarray, x: np.ndarray,
+              v: np.ndarray, omega: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`particle_rows` of N particles of K kinds (a kind: the particles that share
+    their mass data), given as arrays: ``kind`` (N,) indices into the per-kind mass (K,) kg,
+    J0 (K,3,3) kg m², centroid_file (K,3) m, material (K,) and bounding radius (K,) m; and
+    per particle R (N,3,3), x (N,3) m, v (N,3) m/s, omega (N,3) rad/s.  One principal frame
+    per kind; the rows equal :func:`particle_rows`'s bit for bit (the same stacked
+    operations on the same numbers), without a mapping per particle."""
+    kind = np.asarray(kind, np.int64)
+    mass = np.asarray(mass, float)
+    _check_masses(mass)
+    J0 = np.asarray(J0, float).reshape(-1, 3, 3)
+    frames = [principal_frame(J) for J in J0]
+    I_k = np.array([f[0] for f in frames]).reshape(-1, 3)
+    P_k = np.array([f[1] for f in frames]).reshape(-1, 3, 3)
+    return stacked_rows(mass[kind], J0[kind], I_k[kind], P_k[kind], np.asarray(R, float),
+                        np.asarray(omega, float), np.asarray(centroid_file, float)[kind],
+                        np.asarray(material, np.int64)[kind], np.asarray(radius, float)[kind],
+                        np.asarray(x, float), np.asarray(v, float))
+
+
+def _check_masses(mass: np.ndarray) -> None:
+    """InputError unless every mass (kg) is positive and finite."""
+    bad = ~((mass > 0) & np.isfinite(mass))
+    if bad.any():
+        raise InputError(f"particle mass must be positive, got {mass[np.argmax(bad)]}")
+
+
+def stacked_rows(mass, J0, I, P, R, omega, centroid_file, material, radius, x,
+                 v) -> dict[str, np.ndarray]:
+    """The rows of :func:`particle_rows` from per-particle stacks: mass (N,) kg, J0 (N,3,3)
+    kg m² as given, its principal moments I (N,3) and axes P (N,3,3), R (N,3,3) (checked
+    proper), omega (N,3) rad/s, and the rows kept as they are."""
     _check_rotations(R)
     Q = np.matmul(R, P)                                   # principal -> world
     q = matrix_to_quat(Q)
     Qm = quats_to_matrices(q)
-    omega = _vectors(particles, "omega")
     body = I * np.matmul(np.swapaxes(Qm, 1, 2), omega[:, :, None])[:, :, 0]
     L = np.matmul(Qm, body[:, :, None])[:, :, 0]
     return dict(mass=mass, J0=0.5 * (J0 + np.swapaxes(J0, 1, 2)), I=I, P=P,
-                centroid_file=_vectors(particles, "centroid_file"),
-                material=np.array([int(p.get("material", 0)) for p in particles], np.int64),
-                radius=np.array([float(p.get("radius", 0.0)) for p in particles]),
-                x=np.array([np.asarray(p["x"], dtype=float).reshape(3) for p in particles]),
-                q=q, v=_vectors(particles, "v"), L=L)
+                centroid_file=centroid_file, material=material, radius=radius, x=x,
+                q=q, v=v, L=L)
 
 
 class RigidBodies:
@@ -188,7 +224,10 @@ class RigidBodies:
         ``matmul`` takes the 3×3 products item by item)."""
         if len(particles) == 0:
             return
-        rows = particle_rows(particles)
+        self.add_rows(particle_rows(particles))
+
+    def add_rows(self, rows: Mapping[str, np.ndarray]) -> None:
+        """Append the rows of :func:`particle_rows` or :func:`kind_rows`."""
         self.mass = np.append(self.mass, rows["mass"])
         self.J0 = np.concatenate([self.J0, rows["J0"]])
         self.I = np.concatenate([self.I, rows["I"]])

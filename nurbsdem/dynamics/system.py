@@ -80,7 +80,7 @@ from .forces import InterfaceTable
 from .laws import needs_contact_radius
 from .laws.engine import engine_kernels
 from .monitor import MonitorSample, energy_sample
-from .rigid import PrescribedMotion, RigidBodies, Walls
+from .rigid import PrescribedMotion, RigidBodies, Walls, kind_rows
 from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, REFINE,
                          DeckSteps)
 from .internal_step import ContactProvider, InternalSteps, Kinematics, _Unstable
@@ -272,6 +272,29 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         self.bodies.add_many(rows)
         self._compliance.extend(None if g is None else (float(g[0]), float(g[1]))
                                 for g in compliance)
+
+    def add_particle_kinds(self, kind: np.ndarray, kinds: list[dict], R: np.ndarray,
+                           x: np.ndarray, v: np.ndarray, omega: np.ndarray) -> None:
+        """Add N particles of K kinds at once: ``kind`` (N,) indices into ``kinds`` (K
+        mappings of what the particles of one kind share of :meth:`add_particle`'s arguments:
+        mass, J0, material, centroid_file, radius, compliance), and per particle R (N,3,3),
+        x (N,3) m, v (N,3) m/s, omega (N,3) rad/s.  The same particles as
+        :meth:`add_particles` with one mapping per particle, bit for bit
+        (:func:`~nurbsdem.dynamics.rigid.kind_rows`), without forming the mappings."""
+        self._check_not_initialized()
+        kind = np.asarray(kind, np.int64)
+        if len(kind) == 0:
+            return
+        self.bodies.add_rows(kind_rows(
+            kind, np.array([float(k["mass"]) for k in kinds]),
+            np.array([np.asarray(k["J0"], float) for k in kinds]).reshape(-1, 3, 3),
+            np.array([np.zeros(3) if k.get("centroid_file") is None else
+                      np.asarray(k["centroid_file"], float).reshape(3) for k in kinds]),
+            np.array([int(k.get("material", 0)) for k in kinds], np.int64),
+            np.array([float(k.get("radius", 0.0)) for k in kinds]), R, x, v, omega))
+        shared = [None if k.get("compliance") is None else
+                  (float(k["compliance"][0]), float(k["compliance"][1])) for k in kinds]
+        self._compliance.extend([shared[k] for k in kind.tolist()])
 
     def add_wall(self, motion: PrescribedMotion | None = None, material: int = 0, name: str = "") -> int:
         """Add a fixed (motion None) or prescribed-motion wall; returns its **global** index N+k

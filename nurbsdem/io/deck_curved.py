@@ -14,6 +14,7 @@ them as they do flat walls, ``MoveWall NAME Rotate`` steps (:func:`rotate_step`)
 from __future__ import annotations
 
 import logging
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -99,18 +100,30 @@ def _read_check(spec: CurvedWallSpec, label: str) -> list[str]:
 
 def sphere_radii(model, shape_ids) -> tuple[np.ndarray, np.ndarray]:
     """(radius (N,) m, is an exact sphere centred on its centroid (N,) bool) of particles of
-    the shapes ``shape_ids``, from :func:`~nurbsdem.geometry.analytic.exact_sphere`."""
-    from ..geometry.analytic import exact_sphere
-    table = {}
-    for sid in set(int(s) for s in shape_ids):
+    the shapes ``shape_ids``, from :func:`~nurbsdem.geometry.analytic.exact_sphere` (once
+    per shape: a run with inlets or outlets asks at each exchange of particles)."""
+    ids = np.asarray(shape_ids, np.int64).reshape(-1)
+    kinds, which = np.unique(ids, return_inverse=True)
+    radius, spheres = np.zeros(len(kinds)), np.zeros(len(kinds), bool)
+    for k, sid in enumerate(kinds.tolist()):
         entry = model.shapes[sid]
-        found = exact_sphere(entry.shape)
-        ok = found is not None and np.allclose(found[0], entry.centroid, rtol=0,
-                                               atol=1e-9 * found[1])
-        table[sid] = (found[1] if found is not None else 0.0, ok)
-    radius = np.array([table[int(s)][0] for s in shape_ids], float)
-    spheres = np.array([table[int(s)][1] for s in shape_ids], bool)
-    return radius, spheres
+        found = _exact_sphere(entry.shape)
+        radius[k] = found[1] if found is not None else 0.0
+        spheres[k] = found is not None and np.allclose(found[0], entry.centroid, rtol=0,
+                                                       atol=1e-9 * found[1])
+    return radius[np.ravel(which)], spheres[np.ravel(which)]
+
+
+#: shape -> :func:`~nurbsdem.geometry.analytic.exact_sphere` of it (a shape does not change)
+_SPHERES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _exact_sphere(shape):
+    """:func:`~nurbsdem.geometry.analytic.exact_sphere` of ``shape``, found once per shape."""
+    from ..geometry.analytic import exact_sphere
+    if shape not in _SPHERES:
+        _SPHERES[shape] = exact_sphere(shape)
+    return _SPHERES[shape]
 
 
 def check_curved_walls(builder, model) -> None:
