@@ -237,6 +237,19 @@ def apply_blocks(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, normal: 
                 z[o + k] -= g[k]
 
 @njit(cache=True)
+def network_apply(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
+                  normal: np.ndarray, k_n: np.ndarray, k_t: np.ndarray, x: np.ndarray,
+                  Q: np.ndarray, sq_m: np.ndarray, sq_I: np.ndarray) -> np.ndarray:
+    """z = A y for the operator of Eq. (2) with per-contact normal/tangential coefficients
+    k_n, k_t (stiffness N/m, or damping N s/m).  y, z (6N,); x (N,3) centroids; Q (N,3,3)
+    principal→world; sq_m (N,) √m; sq_I (N,3) √(principal moments).  Walls: index ≥ N."""
+    s, C = network_blocks(body_a, body_b, point, x, Q, sq_m, sq_I)
+    z = np.empty(y.shape[0])
+    apply_blocks(y, body_a, body_b, normal, k_n, k_t, s, C, z)
+    return z
+
+
+@njit(cache=True)
 def _compliance_row(i, r, d, Q, inv_I):
     """c = Qᵀ (r × d) of body i, and Σ_k c_k² / I_k."""
     x0 = r[1] * d[2] - r[2] * d[1]
