@@ -233,3 +233,25 @@ def test_compiled_restart_reaches_the_same_final_state(runs, tmp_path, monkeypat
     deck, out = runs
     killed_and_restarted(deck, tmp_path / "out", 0.15, monkeypatch)
     assert_same_final_state(tmp_path / "out", out[True][0], ("energy.csv", "contacts.csv"))
+
+
+def test_a_control_return_takes_the_loops_estimate_not_a_second_one(tmp_path, monkeypatch):
+    """Where the compiled loop returns because the sub-step count changes, the control step
+    takes the loop's exact estimate of the network (RATES_* of the loop's figures) instead of
+    the same estimate again: the same critical step, bound and message as computed here."""
+    from nurbsdem.dynamics.substep_control import SubstepControl
+    limit, seen = SubstepControl._network_limit, []
+
+    def spy(self, net, rates=None):
+        out = limit(self, net, rates)
+        if rates is not None:
+            seen.append((out, rates[1], limit(self, net), self._network_bound(net)))
+        return out
+
+    monkeypatch.setattr(SubstepControl, "_network_limit", spy)
+    deck = tmp_path / "spheres.inp"
+    deck.write_text(_sphere_deck())
+    Solver(parse_deck(deck), output=tmp_path / "out", quiet=True, compiled_steps=True).run()
+    assert seen
+    for taken, bound, again, bound_again in seen:
+        assert taken == again and bound == bound_again

@@ -25,7 +25,8 @@ The loop returns to Python
 * with :data:`CONTROL` after a deck step at which the time-step control changes the sub-step
   count (or finds more than the most allowed, or reaches the count that warns): the caller
   then runs :meth:`DemSystem._control_step` exactly as after a Python deck step, which takes
-  the same figures and logs, warns or raises.  Where the Gershgorin gate calls for the exact
+  the same figures (the loop's exact estimate, RATES_BOUND …, not computed again: the same
+  kernels on the same arrays) and logs, warns or raises.  Where the Gershgorin gate calls for the exact
   (Lanczos) estimate of the network, or at a periodic re-estimate (every
   ``NETWORK_RECHECK_STEPS`` deck steps, when the count could fall), and the count stands, the
   loop takes the estimate itself (:func:`_step_control`; ~500 returns of the paper example's
@@ -105,6 +106,13 @@ Control = namedtuple("Control", "dt refine_decay safety dt_apriori forced rechec
 #: order: the network's Gershgorin bound, its critical step (Lanczos), the critical step
 #: (the smaller of that and the a-priori one)
 DT_BOUND, DT_NETWORK, DT_CRITICAL = range(3)
+#: ... then those of an exact estimate after which the count changes (the loop returns
+#: CONTROL): the Gershgorin bound (s), λmax of the stiffness (ω², 1/s²) and damping (γ, 1/s)
+#: operators, the body the stiffest mode centres on, and the deck step they belong to (−1:
+#: none); :meth:`DemSystem._control_step <nurbsdem.dynamics.system.DemSystem>` takes them
+#: instead of the same estimate again
+RATES_BOUND, RATES_OMEGA2, RATES_GAMMA, RATES_BODY, RATES_STEP = range(3, 8)
+ESTIMATE_SIZE = 8
 
 #: counters (int64 array) of the loop's state, in this order
 STEP_COUNT, REFINE, CALM, BUILDS, EVALS, MONITORED, ACTIVE_SUM, ACTIVE_MAX = range(8)
@@ -312,8 +320,8 @@ def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
     allowing the count anyway), or by the exact estimate, taken here with the same kernels in
     the same order (its figures written into ``estimate``: DT_BOUND, DT_NETWORK, DT_CRITICAL,
     s).  False when the count is to change, exceeds ``cc.max_substeps`` or reaches
-    ``cc.heavy``: the caller runs _control_step, which takes the same estimate and logs,
-    warns or raises."""
+    ``cc.heavy``: the caller runs _control_step, which logs, warns or raises with the
+    estimate's figures (written into ``estimate`` from RATES_BOUND on; not taken again)."""
     if cc.forced:
         return True
     recheck = periodic_recheck(counters[STEP_COUNT], cc.recheck, counters[REFINE], cc.fall,
@@ -331,16 +339,21 @@ def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
                                             counters[REFINE], substeps):
         return True
     dt_bound, dt_network = math.inf, math.inf
+    omega2, gamma, body = 0.0, 0.0, -1
     if a.shape[0]:
         wk, wc = network_gershgorin(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I,
                                     np.bool_(False))
         dt_bound = critical_step_from_rates(wk, wc)
-        omega2, gamma, _ = network_rates_scaled(a, b, p, n, coeffs, x, Q, bc.sq_m, bc.sq_I)
+        omega2, gamma, body = network_rates_scaled(a, b, p, n, coeffs, x, Q, bc.sq_m, bc.sq_I)
         dt_network = critical_step_from_rates(omega2, gamma)
     dt_critical = min(cc.dt_apriori, dt_network)
     need = needed_substeps(cc.dt, cc.safety * dt_critical) * counters[REFINE]
     if (need > cc.max_substeps or need > substeps or need < cc.fall * substeps
             or substeps >= cc.heavy):
+        estimate[RATES_BOUND], estimate[RATES_OMEGA2], estimate[RATES_GAMMA] = (dt_bound,
+                                                                                omega2, gamma)
+        estimate[RATES_BODY] = body
+        estimate[RATES_STEP] = counters[STEP_COUNT] if a.shape[0] else -1
         return False
     estimate[DT_BOUND], estimate[DT_NETWORK], estimate[DT_CRITICAL] = (dt_bound, dt_network,
                                                                        dt_critical)
@@ -652,9 +665,14 @@ class DeckSteps:
                        s.implicit_damping, s.accuracy or 0.0, s.max_substeps, heavy)
 
     def _estimate(self) -> np.ndarray:
-        """The time-step control's figures (DT_BOUND, DT_NETWORK, DT_CRITICAL; s), a copy."""
+        """The time-step control's figures (DT_BOUND, DT_NETWORK, DT_CRITICAL; s), a copy,
+        and room for those of an estimate the loop leaves to the caller (RATES_BOUND …;
+        none: RATES_STEP −1)."""
         s = self.system
-        return np.array([s.dt_bound, s.dt_network, s.dt_critical])
+        out = np.full(ESTIMATE_SIZE, np.nan)
+        out[DT_BOUND], out[DT_NETWORK], out[DT_CRITICAL] = s.dt_bound, s.dt_network, s.dt_critical
+        out[RATES_STEP] = -1.0
+        return out
 
     def load(self) -> None:
         """Load the compiled loop (numba's on-disk cache: 0.34 s for the 112-sphere scene,
@@ -707,8 +725,12 @@ class DeckSteps:
             return status, done, counters, rows, []
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
         s.acc_last_growth = float(acc_growth[0])
-        s.dt_bound, s.dt_network, s.dt_critical = (float(e) for e in estimate)
+        s.dt_bound, s.dt_network, s.dt_critical = (float(e) for e in estimate[:RATES_BOUND])
         s.network_estimates += int(counters[NETWORK_ESTIMATES])
+        if status == CONTROL and estimate[RATES_STEP] == s.step_count:
+            s.loop_rates = (s.step_count, float(estimate[RATES_BOUND]),
+                            float(estimate[RATES_OMEGA2]), float(estimate[RATES_GAMMA]),
+                            int(estimate[RATES_BODY]))
         return status, done, counters, rows, states
 
     def _store(self, pl, ev, wall_d, wall_u, ledger, counters, peak) -> None:

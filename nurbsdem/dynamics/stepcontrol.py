@@ -172,26 +172,27 @@ def network_blocks(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, x:
     return s, C
 
 
-@njit(cache=True)
-def _contact_displacement(y, c, i, side, s, C, d) -> None:
-    """d += ± (s y_trans + C y_rot) of body i on side ``side`` of contact c (+ for B)."""
-    sign = 1.0 if side == 0 else -1.0
-    o = 6 * i
-    for k in range(3):
-        d[k] += sign * (s[c, side] * y[o + k] + C[c, side, k, 0] * y[o + 3]
-                        + C[c, side, k, 1] * y[o + 4] + C[c, side, k, 2] * y[o + 5])
+@njit(cache=True, inline="always")
+def _side_displacement(y, c, side, o, s, C):
+    """s y_trans + C y_rot (3 floats) of the body whose coordinates start at y[o], on side
+    ``side`` of contact c: the displacement of the contact point by that body's motion."""
+    sc = s[c, side]
+    y3, y4, y5 = y[o + 3], y[o + 4], y[o + 5]
+    e0 = sc * y[o] + C[c, side, 0, 0] * y3 + C[c, side, 0, 1] * y4 + C[c, side, 0, 2] * y5
+    e1 = sc * y[o + 1] + C[c, side, 1, 0] * y3 + C[c, side, 1, 1] * y4 + C[c, side, 1, 2] * y5
+    e2 = sc * y[o + 2] + C[c, side, 2, 0] * y3 + C[c, side, 2, 1] * y4 + C[c, side, 2, 2] * y5
+    return e0, e1, e2
 
 
-@njit(cache=True)
-def _scatter_contact_force(f, c, i, side, s, C, z) -> None:
-    """z += ± (s f, Cᵀ f) of body i: the force f on B (−f on A) as scaled generalised forces."""
-    sign = 1.0 if side == 0 else -1.0
-    o = 6 * i
-    for k in range(3):
-        z[o + k] += sign * s[c, side] * f[k]
-    for j in range(3):
-        z[o + 3 + j] += sign * (C[c, side, 0, j] * f[0] + C[c, side, 1, j] * f[1]
-                                + C[c, side, 2, j] * f[2])
+@njit(cache=True, inline="always")
+def _side_force(c, side, s, C, f0, f1, f2):
+    """(s f, Cᵀ f) (6 floats): the force f on the body of side ``side`` of contact c as scaled
+    generalised forces."""
+    sc = s[c, side]
+    return (sc * f0, sc * f1, sc * f2,
+            C[c, side, 0, 0] * f0 + C[c, side, 1, 0] * f1 + C[c, side, 2, 0] * f2,
+            C[c, side, 0, 1] * f0 + C[c, side, 1, 1] * f1 + C[c, side, 2, 1] * f2,
+            C[c, side, 0, 2] * f0 + C[c, side, 1, 2] * f1 + C[c, side, 2, 2] * f2)
 
 
 @njit(cache=True)
@@ -199,25 +200,41 @@ def apply_blocks(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, normal: 
                  k_n: np.ndarray, k_t: np.ndarray, s: np.ndarray, C: np.ndarray,
                  z: np.ndarray) -> None:
     """z (6N,) = A y of Eq. (2) (in place) with the blocks of :func:`network_blocks` and
-    per-contact normal/tangential coefficients k_n, k_t (N/m, or N s/m)."""
+    per-contact normal/tangential coefficients k_n, k_t (N/m, or N s/m).  Per contact, the
+    relative displacement d = J_c y of B w.r.t. A (B's part added to 0, then A's
+    subtracted), the force f = k_n (d·n) n + k_t (d − (d·n) n), and ±(s f, Cᵀ f) added to B
+    and subtracted from A; each in scalars (no per-contact arrays)."""
     n_part = y.shape[0] // 6
     z[:] = 0.0
-    d = np.empty(3)
-    f = np.empty(3)
     for c in range(body_a.shape[0]):
-        d[:] = 0.0
-        for side in range(2):
-            i = body_b[c] if side == 0 else body_a[c]
-            if i < n_part:
-                _contact_displacement(y, c, i, side, s, C, d)
-        dn = d[0] * normal[c, 0] + d[1] * normal[c, 1] + d[2] * normal[c, 2]
-        for k in range(3):
-            f[k] = k_n[c] * dn * normal[c, k] + k_t[c] * (d[k] - dn * normal[c, k])
-        for side in range(2):
-            i = body_b[c] if side == 0 else body_a[c]
-            if i < n_part:
-                _scatter_contact_force(f, c, i, side, s, C, z)
-
+        ib, ia = body_b[c], body_a[c]
+        d0 = d1 = d2 = 0.0
+        if ib < n_part:
+            e0, e1, e2 = _side_displacement(y, c, 0, 6 * ib, s, C)
+            d0 += e0
+            d1 += e1
+            d2 += e2
+        if ia < n_part:
+            e0, e1, e2 = _side_displacement(y, c, 1, 6 * ia, s, C)
+            d0 -= e0
+            d1 -= e1
+            d2 -= e2
+        n0, n1, n2 = normal[c, 0], normal[c, 1], normal[c, 2]
+        dn = d0 * n0 + d1 * n1 + d2 * n2
+        kn, kt = k_n[c], k_t[c]
+        f0 = kn * dn * n0 + kt * (d0 - dn * n0)
+        f1 = kn * dn * n1 + kt * (d1 - dn * n1)
+        f2 = kn * dn * n2 + kt * (d2 - dn * n2)
+        if ib < n_part:
+            g = _side_force(c, 0, s, C, f0, f1, f2)
+            o = 6 * ib
+            for k in range(6):
+                z[o + k] += g[k]
+        if ia < n_part:
+            g = _side_force(c, 1, s, C, f0, f1, f2)
+            o = 6 * ia
+            for k in range(6):
+                z[o + k] -= g[k]
 
 @njit(cache=True)
 def network_apply(y: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
@@ -491,11 +508,31 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
 @njit(cache=True)
 def _orthogonalise(w: np.ndarray, basis: np.ndarray) -> None:
     """w −= (basis_j · w) basis_j for each row j in turn, in place (modified Gram–Schmidt: each
-    coefficient taken from the w already orthogonal to the rows before it)."""
-    for j in range(basis.shape[0]):
-        c = _dot(basis[j], w)
-        for i in range(w.shape[0]):
-            w[i] -= c * basis[j, i]
+    coefficient taken from the w already orthogonal to the rows before it).  One pass over w
+    per row: the subtraction of row j − 1 and the dot product of row j with the updated w
+    together, the dot's terms summed in :func:`_dot`'s order (the same bits)."""
+    rows, n = basis.shape[0], w.shape[0]
+    if rows == 0:
+        return
+    m = n - n % 4
+    c = _dot(basis[0], w)
+    for j in range(1, rows):
+        s0 = s1 = s2 = s3 = 0.0
+        for i in range(0, m, 4):
+            w[i] -= c * basis[j - 1, i]
+            w[i + 1] -= c * basis[j - 1, i + 1]
+            w[i + 2] -= c * basis[j - 1, i + 2]
+            w[i + 3] -= c * basis[j - 1, i + 3]
+            s0 += basis[j, i] * w[i]
+            s1 += basis[j, i + 1] * w[i + 1]
+            s2 += basis[j, i + 2] * w[i + 2]
+            s3 += basis[j, i + 3] * w[i + 3]
+        for i in range(m, n):
+            w[i] -= c * basis[j - 1, i]
+            s0 += basis[j, i] * w[i]
+        c = (s0 + s1) + (s2 + s3)
+    for i in range(n):
+        w[i] -= c * basis[rows - 1, i]
 
 
 @njit(cache=True)

@@ -56,6 +56,12 @@ class SubstepControl:
     evaluation and sets ``substeps``, ``dt_internal``, ``dt_apriori``, ``dt_bound``,
     ``dt_network`` and ``dt_critical`` (s)."""
 
+    #: the exact estimate the compiled deck steps took before returning for a change of the
+    #: count (:data:`~nurbsdem.dynamics.deck_steps.CONTROL`): (deck step, Gershgorin bound s,
+    #: ω² 1/s², γ 1/s, the mode's body), taken by the next :meth:`_control_step` of that deck
+    #: step instead of the same estimate again; None otherwise
+    loop_rates: tuple | None = None
+
     def critical_time_step(self) -> tuple[float, list[ModeLimit]]:
         """Estimated explicit critical step (s) over every possible interface and mode (module
         docstring), and the per-mode details."""
@@ -185,16 +191,21 @@ class SubstepControl:
                                          self.dt_bound, NETWORK_BOUND_SLACK, self.refine,
                                          self.substeps, *self._net_image))
 
-    def _network_limit(self, net) -> tuple[float, str]:
-        """Critical step (s) of the network ``net`` (:meth:`_network`) by Lanczos, and why."""
+    def _network_limit(self, net, rates=None) -> tuple[float, str]:
+        """Critical step (s) of the network ``net`` (:meth:`_network`) by Lanczos, and why;
+        ``rates``: the compiled loop's estimate of this network (:attr:`loop_rates`), taken
+        instead of computing it again."""
         if net is None:
             return math.inf, "no contacts"
         b = self.bodies
         a, bb, p, n, coeffs = net
-        args = (a, bb, p, n, coeffs, b.x, b.principal_rotations(), b.mass, b.I,
-                *self._net_image)
-        omega2, gamma, body = (network_rates(*args) if self.domain is None
-                               else self.domain.on_root(network_rates, *args))
+        if rates is not None:
+            omega2, gamma, body = rates[2], rates[3], rates[4]
+        else:
+            args = (a, bb, p, n, coeffs, b.x, b.principal_rotations(), b.mass, b.I,
+                    *self._net_image)
+            omega2, gamma, body = (network_rates(*args) if self.domain is None
+                                   else self.domain.on_root(network_rates, *args))
         dt = critical_step_from_rates(omega2, gamma)
         self._network_zeta = gamma / (2.0 * math.sqrt(omega2)) if omega2 > 0 else 0.0
         n_contacts = int(np.count_nonzero(a == body) + np.count_nonzero(bb == body))
@@ -220,13 +231,16 @@ class SubstepControl:
 
     def _choose_substeps(self, initial: bool) -> None:
         """:meth:`_control_step` (the sub-step count and its log or error)."""
+        rates, self.loop_rates = self.loop_rates, None
         net = self._network()
         if not initial and not periodic_recheck(self.step_count, NETWORK_RECHECK_STEPS,
                                                 self.refine, FALL_HYSTERESIS, self.substeps):
             if self._count_stands(net):
                 return      # no stiffer than at the last exact estimate, or allowed anyway
-        self.dt_bound = self._network_bound(net)
-        self.dt_network, net_why = self._network_limit(net)
+        if rates is not None and (initial or rates[0] != self.step_count or net is None):
+            rates = None
+        self.dt_bound = self._network_bound(net) if rates is None else rates[1]
+        self.dt_network, net_why = self._network_limit(net, rates)
         self.network_estimates += 1
         self.dt_critical = min(self.dt_apriori, self.dt_network)
         dt_safe = self.safety * self.dt_critical
