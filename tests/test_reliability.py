@@ -366,11 +366,18 @@ def test_a_second_run_into_a_busy_output_folder_is_refused(tmp_path):
 # ---------------------------------------------------------------- Ctrl-C
 
 
+def _default_sigint() -> None:
+    """In the child before its exec: Ctrl-C's default disposition, as a terminal's process
+    has it (a suite started in the background inherits SIGINT ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _interrupted_run(deck: Path, delay: float) -> tuple[int, str]:
     """``nurbsdem solve`` sent SIGINT ``delay`` s after its first checkpoint is on disk."""
     out = deck.parent / "out"
     p = subprocess.Popen([sys.executable, "-m", "nurbsdem", "solve", str(deck), "--quiet"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=_default_sigint)
     t0 = time.monotonic()
     while not (out / "checkpoint.h5").exists() and p.poll() is None:
         assert time.monotonic() - t0 < 300
@@ -399,7 +406,7 @@ def test_ctrl_c_stops_at_a_checkpoint_with_exit_130(tmp_path, delay):
                                np.arange(201) * 0.01, atol=1e-9)
 
 
-def test_ctrl_c_in_the_python_api_raises_keyboard_interrupt(tmp_path):
+def test_ctrl_c_in_the_python_api_raises_keyboard_interrupt(tmp_path, request):
     """An interrupt of the main thread (a notebook's, here _thread.interrupt_main from a
     timer) during Simulation.run(): KeyboardInterrupt reaches the caller, the simulation's
     time is that of the checkpoint it left, and the previous SIGINT handler is back."""
@@ -408,6 +415,9 @@ def test_ctrl_c_in_the_python_api_raises_keyboard_interrupt(tmp_path):
                  output="VTK Every 0.01 Resolution 2\n  Checkpoint Every 0.05")
     sim = Simulation.from_deck(deck, quiet=True)
     out = tmp_path / "out"
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:     # a suite run in the background
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        request.addfinalizer(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     handler = signal.getsignal(signal.SIGINT)
 
     def interrupt_when_running():
