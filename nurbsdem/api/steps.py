@@ -189,12 +189,7 @@ def _servo_step(model: Model, sid: int, name: str, servo: dict, direction: Any,
     what = f"Step {sid}"
     if duration is None or time_step is None:
         raise InputError(f"{what}: force needs duration and time_step")
-    d = None
-    if direction is not None:
-        d = vector("Direction", direction, what)
-        if not np.linalg.norm(d) > 0:
-            raise InputError(f"{what}: direction must not be zero")
-        d = d / np.linalg.norm(d)
+    d = _unit_direction(direction, what)
     dur, dt = timing(sid, duration, time_step)
     step = MoveWallStep(sid, 0, wall=name, force=number("Force", servo["force"], what),
                         max_speed=number("MaxSpeed", servo["max_speed"], what, positive=True),
@@ -242,13 +237,18 @@ def _to_contact(sid: int, name: str, gap: Any, direction: Any) -> MoveWallStep:
     until the nearest particle is ``gap`` m away."""
     what = f"Step {sid}"
     g = number("Gap", gap, what, nonnegative=True)
-    d = None
-    if direction is not None:
-        d = vector("Direction", direction, what)
-        if not np.linalg.norm(d) > 0:
-            raise InputError(f"{what}: direction must not be zero")
-        d = d / np.linalg.norm(d)
-    return MoveWallStep(sid, 0, wall=name, to_contact=True, gap=g, direction=d)
+    return MoveWallStep(sid, 0, wall=name, to_contact=True, gap=g,
+                        direction=_unit_direction(direction, what))
+
+
+def _unit_direction(direction: Any, what: str) -> np.ndarray | None:
+    """``direction`` made unit (the deck's ``Direction``: d / |d|); None stays None."""
+    if direction is None:
+        return None
+    d = vector("Direction", direction, what)
+    if not np.linalg.norm(d) > 0:
+        raise InputError(f"{what}: direction must not be zero")
+    return d / np.linalg.norm(d)
 
 
 def move_wall_of(model: Model, name: Any, displacement: Any, duration: Any, time_step: Any, *,
