@@ -102,13 +102,8 @@ def test_a_turning_drum_gives_the_same_bits_on_both_drivers(tmp_path, monkeypatc
     assert s_cc.active_max >= 5
 
 
-def test_ellipsoids_in_a_turning_drum_give_the_same_bits_on_both_drivers(tmp_path,
-                                                                         monkeypatch):
-    """Two ellipsoids and two spheres in the drum (no baffle), settling, turning, resting:
-    the compiled loop takes the NURBS particles' contacts with the surface wall (it never
-    hands a deck step back) and gives the Python driver's bits; at the end the drum carries
-    more than the spheres' weight."""
-    used = _counting_steps(monkeypatch)
+def _recorded_statuses(monkeypatch) -> list:
+    """The status of every run of the compiled deck steps, appended as they return."""
     statuses = []
     original = deck_steps.DeckSteps.run
 
@@ -117,6 +112,17 @@ def test_ellipsoids_in_a_turning_drum_give_the_same_bits_on_both_drivers(tmp_pat
         statuses.append(out[0])
         return out
     monkeypatch.setattr(deck_steps.DeckSteps, "run", run)
+    return statuses
+
+
+def test_ellipsoids_in_a_turning_drum_give_the_same_bits_on_both_drivers(tmp_path,
+                                                                         monkeypatch):
+    """Two ellipsoids and two spheres in the drum (no baffle), settling, turning, resting:
+    the compiled loop takes the NURBS particles' contacts with the surface wall (it never
+    hands a deck step back) and gives the Python driver's bits; at the end the drum carries
+    more than the spheres' weight."""
+    used = _counting_steps(monkeypatch)
+    statuses = _recorded_statuses(monkeypatch)
     text = _drum_deck(tmp_path).replace("  Mesh 2 Name baffle File baffle.stl\n", "").replace(
         "  Shape 1 Sphere Radius 0.006", "  Shape 1 Ellipsoid SemiAxes 0.008 0.0065 0.005"
     ).replace("Counts 9 9 Material 1 Region -0.014 -0.035 -0.035 0.014 0.035 0.035",
@@ -143,14 +149,7 @@ def test_paper_particles_settle_and_turn_in_a_drum(tmp_path, monkeypatch):
     (no refused contact), the energy balance error below 3 % of the energy turned over
     (the impacts of the fall; with the accuracy control it is smaller), the drum carrying
     the particles' weight and turning the pile (torque about its axis)."""
-    statuses = []
-    original = deck_steps.DeckSteps.run
-
-    def run(self, *args, **kwargs):
-        out = original(self, *args, **kwargs)
-        statuses.append(out[0])
-        return out
-    monkeypatch.setattr(deck_steps.DeckSteps, "run", run)
+    statuses = _recorded_statuses(monkeypatch)
     save_shape(tmp_path / "drum.yaml", [cylinder_patch(0.1, 0.2, axis=(0, 0, 1))])
     deck = tmp_path / "paper_drum.inp"
     deck.write_text(f"""Environment

@@ -201,16 +201,9 @@ def particle_surface_row_reference(table, shape: int, pos: np.ndarray, Rb: np.nd
                                    wall: SurfaceWall, R: np.ndarray | None = None,
                                    t: np.ndarray | None = None, where: str = "surface wall"
                                    ) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(res_f (NF,), res_i (NI,), found) of the NURBS particle of shape ``shape`` of
-    ``table`` (a :class:`~nurbsdem.contact.detect.ContactTable`) at the pose (pos (3,) m, Rb
-    (3,3)) against ``wall`` at (R, t) (``x_world = R x_wall + t``; identity by default),
-    world frame, normal from the particle to the wall.  Each patch whose sample nearest to
-    the centroid lies within the samples' spacing of the nearest overall is solved; the
-    deepest converged contact wins.  Raises :class:`ContactNotUnique` (naming ``where``)
-    when the particle crosses a patch (sd < 0) whose contact does not converge or is not
-    unique (module docstring); apart from the wall, neither matters.  The Python solve
-    through :class:`~nurbsdem.contact.support_oracle.SupportOracle`: the reference of the
-    compiled :func:`particle_surface_row` (tests)."""
+    """:func:`particle_surface_row` (the same arguments, result and refusals) solved in
+    Python through :class:`~nurbsdem.contact.support_oracle.SupportOracle`: the reference of
+    the compiled kernel (tests)."""
     R = np.eye(3) if R is None else np.asarray(R, float)
     t = np.zeros(3) if t is None else np.asarray(t, float)
     oracle = SupportOracle(table, shape, R.T @ (np.asarray(pos, float) - t),
