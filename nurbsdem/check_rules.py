@@ -107,16 +107,6 @@ def pile_mass(model: "Model", bodies: "Bodies") -> float:
     return total
 
 
-def pile_overlap(model: "Model", bodies: "Bodies", kind: str, materials: tuple[int, ...],
-                 radius: float, wall_material: int | None = None,
-                 mass: float | None = None) -> float:
-    """The static overlap (m) of a contact carrying all the particles' weight (``mass`` kg:
-    :func:`pile_mass` of ``bodies`` when None); :func:`static_overlap`'s arguments."""
-    return static_overlap(model, kind, materials,
-                          pile_mass(model, bodies) if mass is None else mass, radius,
-                          wall_material)
-
-
 def _warn_deep(model: "Model", line: int | None, text: str, depth: float, radius: float,
                resting: float) -> None:
     """One warning on the ``nurbsdem`` logger for an accepted overlap deeper than

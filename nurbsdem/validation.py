@@ -35,8 +35,7 @@ import numpy as np
 from .check_rules import (MAX_RESTING_FRACTION, OVERLAP_TOLERANCE, RESTING_LOADS,
                           SOFT_FRACTION, WARN_OVERLAP_FRACTION, _allowed_rule, _body_mass,
                           _inside_rectangle, _warn_deep, allowed_overlap, pile_mass,
-                          pile_overlap, static_overlap,
-                          wall_plane)
+                          static_overlap, wall_plane)
 from .dynamics.stepcontrol import critical_step
 from .errors import InputError, vector_text as _vec
 
@@ -117,8 +116,8 @@ def check_body_overlaps(model: "Model", bodies: "Bodies", index: Sequence[int] |
             max(_body_mass(model, bodies, i), _body_mass(model, bodies, j)), reduced)
         if pile is None:
             pile = pile_mass(model, bodies)
-        tol = allowed_overlap(r, resting, 0.0 if math.isinf(depth) else pile_overlap(
-            model, bodies, "particle-particle", mats, reduced, mass=pile))
+        tol = allowed_overlap(r, resting, 0.0 if math.isinf(depth) else static_overlap(
+            model, "particle-particle", mats, pile, reduced))
         if depth > tol:
             raise model.error(_overlap_text(bodies, i, j, depth, tol), int(bodies.line[i]))
         _warn_deep(model, int(bodies.line[i]), f"particle {bodies.id[i]} overlaps particle "
@@ -213,9 +212,9 @@ def check_bodies_against_walls(model: "Model", bodies: "Bodies",
                                      _body_mass(model, bodies, i), radii[k], w.material_id)
             if pile is None:
                 pile = pile_mass(model, bodies)
-            tol = allowed_overlap(radii[k], resting, pile_overlap(
-                model, bodies, "particle-wall", (int(bodies.material_id[i]),), radii[k],
-                w.material_id, mass=pile))
+            tol = allowed_overlap(radii[k], resting, static_overlap(
+                model, "particle-wall", (int(bodies.material_id[i]),), pile, radii[k],
+                w.material_id))
             if sd < -tol and reference is not None:
                 j = int(reference[k])
                 tol -= min(0.0, plane_support_distance(

@@ -362,15 +362,14 @@ def _judge(model: "Model", bodies: "Bodies", i: int, x: np.ndarray, r: float,
     """Raise for a crossing deeper than the resting overlap (``pile``: the particles' mass,
     kg, :func:`~nurbsdem.check_rules.pile_mass`); warn of an accepted deep one."""
     from .check_rules import (OVERLAP_TOLERANCE, _allowed_rule, _body_mass, _warn_deep,
-                             allowed_overlap, pile_overlap, static_overlap)
+                             allowed_overlap, static_overlap)
     depth = max(front, back)
     if depth <= OVERLAP_TOLERANCE * r:
         return
     resting = static_overlap(model, "particle-wall", (int(bodies.material_id[i]),),
                              _body_mass(model, bodies, i), r, spec.material_id)
-    tol = allowed_overlap(r, resting, pile_overlap(
-        model, bodies, "particle-wall", (int(bodies.material_id[i]),), r, spec.material_id,
-        mass=pile))
+    tol = allowed_overlap(r, resting, static_overlap(
+        model, "particle-wall", (int(bodies.material_id[i]),), pile, r, spec.material_id))
     line = int(bodies.line[i])
     if back > tol:
         side = ("its triangles' vertex order" if spec.kind == "mesh" else "S_u x S_v")

@@ -17,7 +17,8 @@ from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep
                      ParticleSpec, PeriodicSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 from ..ranges import ASPECT_MAX
 from .deck_curved import check_curved_walls, curved_entry, rotate_step
-from .deck_moves import MODES, add_wall_move, check_moves, force_step, table_step
+from .deck_moves import (MODES, add_wall_move, check_moves, force_step, table_step,
+                         unit_direction)
 from .deck_flow import check_inlet, check_outlet, inlet_spec, outlet_spec
 from .deck_schema import SCHEMA, Entry, LineError
 
@@ -348,12 +349,8 @@ class DeckBuilder:
         if modes[0] == "ToContact":
             self.only(e, {"MoveWall", "ToContact", "Gap", "Direction"}, "MoveWall ToContact")
             gap = self.positive(e, "Gap", e.get("Gap", 0.0), strict=False)
-            d = e.get("Direction")
-            if d is not None:
-                if not np.linalg.norm(d) > 0:
-                    self.fail(f"Step {e.id}: Direction must not be zero", e.line)
-                d = d / np.linalg.norm(d)
-            return MoveWallStep(e.id, e.line, wall=name, to_contact=True, gap=gap, direction=d)
+            return MoveWallStep(e.id, e.line, wall=name, to_contact=True, gap=gap,
+                                direction=unit_direction(self, e))
         self.only(e, {"MoveWall", "Displacement", "Duration", "TimeStep", "Damping",
                       "Accuracy", "Safety"}, "MoveWall Displacement")
         self.require(e, "Duration", "TimeStep")

@@ -64,14 +64,21 @@ def servo(builder, e, name: str) -> dict:
     any number, v > 0 (m/s), g >= 0 (m/(s N)), the direction of advance made unit (None: a
     flat wall's normal; :func:`check_moves` requires it for mesh and surface walls)."""
     builder.require(e, "MaxSpeed", "Gain")
-    d = e.get("Direction")
-    if d is not None:
-        if not np.linalg.norm(d) > 0:
-            builder.fail(f"Step {e.id}: Direction must not be zero", e.line)
-        d = np.asarray(d, float) / np.linalg.norm(d)
     return dict(wall=name, force=float(e.get("Force")),
                 max_speed=builder.positive(e, "MaxSpeed", e.get("MaxSpeed")),
-                gain=builder.positive(e, "Gain", e.get("Gain"), strict=False), direction=d)
+                gain=builder.positive(e, "Gain", e.get("Gain"), strict=False),
+                direction=unit_direction(builder, e))
+
+
+def unit_direction(builder, e) -> np.ndarray | None:
+    """The entry's ``Direction`` made unit (d / |d|; None when absent); zero: an error at
+    its line."""
+    d = e.get("Direction")
+    if d is None:
+        return None
+    if not np.linalg.norm(d) > 0:
+        builder.fail(f"Step {e.id}: Direction must not be zero", e.line)
+    return d / np.linalg.norm(d)
 
 
 def force_step(builder, e, name: str) -> MoveWallStep:
