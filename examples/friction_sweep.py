@@ -30,7 +30,6 @@ def scene(friction: float) -> nurbsdem.Simulation:
     rng = np.random.default_rng(7)
     for k in range(14):
         i, j, layer = k % 2, (k // 2) % 2, k // 4
-        r = RADII[k % 3 == 0]
         x = 0.011 + 0.018 * i + rng.uniform(-1e-3, 1e-3)
         y = 0.011 + 0.018 * j + rng.uniform(-1e-3, 1e-3)
         sim.add_particle(shapes[k % 3 == 0], 1, (x, y, 0.012 + 0.018 * layer))

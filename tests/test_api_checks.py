@@ -15,7 +15,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import nurbsdem
 from nurbsdem import Simulation, shapes
 from nurbsdem.errors import InputError
 from nurbsdem.io.deck import ID_MAX, RANGES

@@ -7,8 +7,8 @@ import pytest
 
 from nurbsdem.errors import GeometryError
 from nurbsdem.geometry import generators as gen
-from nurbsdem.geometry.connectivity import (EDGE_SENSE, Connectivity, check_shape, edge_uv,
-                                            find_connectivity, map_to_neighbour_nb)
+from nurbsdem.geometry.connectivity import (EDGE_SENSE, Connectivity, edge_uv,
+                                            map_to_neighbour_nb)
 from nurbsdem.geometry.nurbs import Patch
 from nurbsdem.geometry.shape import Shape
 from nurbsdem.io.shapefile import load_shape, save_shape

@@ -413,7 +413,7 @@ def test_cli_restart_goes_through_the_simulation(runs, tmp_path, monkeypatch):
     from click.testing import CliRunner
 
     from nurbsdem.cli import main
-    d, deck_sim = runs[0], runs[1]
+    d = runs[0]
     deck = d / "case.inp"
     out = tmp_path / "out"
     original = Solver._sample
