@@ -9,7 +9,6 @@ import contextlib
 
 import numpy as np
 
-from .errors import InputError
 
 
 class CurvedWallMotion:
@@ -71,16 +70,15 @@ class CurvedWallMotion:
             provider = _Spinning(provider, self, sysm)
         sysm.set_contact_provider(provider)
 
-    def contacts(self, scene, shape_ids: np.ndarray, comm):
+    def contacts(self, scene, shape_ids: np.ndarray):
         """The scene with the model's mesh and surface walls for particles of shapes
         ``shape_ids`` (exact spheres by closed forms, NURBS particles by their support
         mapping through the scene's contact table; the Python path of the deck steps:
-        :mod:`nurbsdem.contact.curved_walls`); refused on several MPI ranks (``comm``)."""
+        :mod:`nurbsdem.contact.curved_walls`).  On several MPI ranks each rank solves the
+        contacts of the particles it owns."""
         from .contact.curved_walls import CurvedWall, CurvedWallContacts
         from .io.deck_curved import curved_wall_geometry, sphere_radii
         model = self.model
-        if comm is not None:
-            raise InputError("mesh and surface walls run on one MPI rank only")
         if self._geometry is None:
             self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
                               for w in model.curved_walls]

@@ -188,8 +188,7 @@ class Solver:
                                     self.compiled_steps, implicit_damping, accuracy)
         self.scene = self.assembly.scene(self.scene, self.bodies, self.contact_options)
         if model.curved_walls:
-            self.curved.attach(sysm, self.curved.contacts(self.scene, self.bodies.shape_id,
-                                                          self.comm))
+            self.curved.attach(sysm, self.curved.contacts(self.scene, self.bodies.shape_id))
         else:
             sysm.set_contact_provider(self.scene)
         if self.comm is not None:

@@ -67,6 +67,22 @@ def split_wall_contact_key(key, nb: int, n_walls: int):
     return rest // n_walls, rest % n_walls, off % MAX_PER_WALL
 
 
+def serial_order(keys, nb: int, n_walls: int, nurbs: np.ndarray) -> np.ndarray:
+    """Sort values (int64) that put contacts with keys ``keys`` in the order
+    :class:`CurvedWallContacts` gives them: the pair keys (below nb²) ascending, then the mesh
+    and surface walls' contacts wall by wall, the exact spheres' before the NURBS particles'
+    (``nurbs`` (N,) bool), each by particle and rank.  Several MPI ranks merge their contacts
+    by it into the serial order (:mod:`nurbsdem.parallel.domain`)."""
+    keys = np.asarray(keys, np.int64)
+    out = keys.copy()
+    curved = keys >= nb * nb
+    if n_walls and curved.any():
+        owner, wall, rank = split_wall_contact_key(keys[curved], nb, n_walls)
+        group = 2 * wall + np.asarray(nurbs, bool)[owner]
+        out[curved] = nb * nb + ((group * nb + owner) * MAX_PER_WALL + rank)
+    return out
+
+
 @njit(cache=True)
 def wall_pose_at(omega, center, t0, R0, shift0, t, d):
     """(R (3,3), t (3,) m) of a wall at time t (s): its rest pose (R0, shift0 m) turned by the
@@ -255,9 +271,29 @@ class CurvedWallContacts:
                        wall_velocity=kin.wall_velocity[:first],
                        n_bodies=kin.n_particles + first)
 
+    def serial_order(self, keys: np.ndarray, nb: int) -> np.ndarray:
+        """Sort values of contact keys in this provider's order (:func:`serial_order`)."""
+        return serial_order(keys, nb, len(self.walls), self.nurbs)
+
+    def particles_of(self, keys: np.ndarray, nb: int) -> np.ndarray:
+        """The particle (body A) of each contact key: pair keys a·nb + b, wall keys
+        (:func:`wall_contact_key`) their owner."""
+        keys = np.asarray(keys, np.int64)
+        out = keys // nb
+        curved = keys >= nb * nb
+        if curved.any():
+            out[curved] = split_wall_contact_key(keys[curved], nb, len(self.walls))[0]
+        return out
+
     def _candidates(self, x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The particles whose bounding spheres meet the box [lo, hi] (m) of a wall; on
+        several MPI ranks only the owned ones (each contact with a wall is solved by the owner
+        of its particle, whose loads reach the ghosts' holders)."""
         r = self.reach[:, None]
         near = np.all((x + r >= lo) & (x - r <= hi), axis=1) & (self.spheres | self.nurbs)
+        domain = getattr(self.base, "domain", None)
+        if domain is not None:
+            near &= domain.owned
         return np.flatnonzero(near).astype(np.int64)
 
     def _nurbs_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):

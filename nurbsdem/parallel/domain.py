@@ -53,14 +53,14 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable
 
 import numpy as np
 
 from ..contact.contactset import ContactSet
 from ..dynamics.energy import EnergyLedger
-from ..dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B, match_history, wall_loads
+from ..dynamics.forces import N_TERMS, match_history, wall_loads
 from ..dynamics.rigid import omega_world
 from ..dynamics.step import all_kinematics, book_kick
 from ..geometry.rotation import quats_to_matrices
@@ -151,12 +151,20 @@ class GhostPlan:
         return int(sum(v.size for v in self.recv.values()))
 
 
-def merge_by_key(pieces: list[dict], key: str) -> dict:
+def merge_by_key(pieces: list[dict], key: str, order: Callable | None = None) -> dict:
     """Concatenate the arrays of per-rank dicts and sort them by ``key`` (unique keys: each
-    row counted by one rank): the serial row order."""
+    row counted by one rank), or by ``order(keys)`` (sort values of the keys: the provider's
+    order where it is not the keys' own, :meth:`Domain.order`): the serial row order."""
     out = {name: np.concatenate([p[name] for p in pieces]) for name in pieces[0]}
-    order = np.argsort(out[key], kind="stable")
-    return {name: arr[order] for name, arr in out.items()}
+    values = out[key] if order is None else order(out[key])
+    rank = np.argsort(values, kind="stable")
+    return {name: arr[rank] for name, arr in out.items()}
+
+
+def positions_of(keys_in_order: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """The rows of ``keys`` (each present, unique) in ``keys_in_order`` (any order)."""
+    by_key = np.argsort(keys_in_order, kind="stable")
+    return by_key[np.searchsorted(keys_in_order[by_key], keys)]
 
 
 class Domain:
@@ -178,6 +186,11 @@ class Domain:
         self.nb = int(system.n_bodies)
         self._set_owner(decompose(system.bodies.x, self.size) if owner is None
                         else np.asarray(owner, np.int64))
+        #: the contact provider's order of contact keys (mesh and surface walls:
+        #: :meth:`~nurbsdem.contact.curved_walls.CurvedWallContacts.serial_order`); None: the
+        #: keys' own order
+        self._provider_order = getattr(system.provider, "serial_order", None)
+        self._provider_particles = getattr(system.provider, "particles_of", None)
         self.plan = plan if plan is not None else GhostPlan(self.owned.copy(), {}, {})
         self._ghosts_at_cut = -1
         self._steps_since_cut = 0
@@ -190,6 +203,18 @@ class Domain:
         #: seconds in the ghosts' loads exchange, the reductions, and the gathers with their
         #: merges (each including the wait for the slowest rank)
         self.seconds = dict(loads=0.0, reductions=0.0, gathers=0.0)
+
+    def order(self, keys: np.ndarray) -> np.ndarray:
+        """Sort values of contact keys that give the serial run's contact order."""
+        keys = np.asarray(keys, np.int64)
+        return keys if self._provider_order is None else self._provider_order(keys, self.nb)
+
+    def particles_of(self, keys: np.ndarray) -> np.ndarray:
+        """The particle (body A) of each contact key."""
+        keys = np.asarray(keys, np.int64)
+        if self._provider_particles is None:
+            return keys // self.nb
+        return self._provider_particles(keys, self.nb)
 
     def _set_owner(self, owner: np.ndarray) -> None:
         self.owner = owner
@@ -308,13 +333,16 @@ class Domain:
     @_timed("gathers")
     def sync_for_build(self, kin: Any) -> Any:
         """Before a neighbour-list rebuild (inside a force evaluation, after the drift): every
-        particle's state and odometer from its owner; returns the kinematics recomputed."""
+        particle's state and odometer from its owner; returns the kinematics recomputed, with
+        the walls of ``kin`` (the scene sees the flat walls only where a provider of mesh and
+        surface walls wraps it)."""
         s = self.system
         b = s.bodies
         self._from_owners([getattr(b, f) for f in BODY_FIELDS]
                           + [getattr(s, f) for f in SYSTEM_BODY_FIELDS]
                           + [self.scene.odo[:self.n]])
-        return s._kinematics(kin.t)
+        return replace(s._kinematics(kin.t), wall_displacement=kin.wall_displacement,
+                       wall_velocity=kin.wall_velocity, n_bodies=kin.n_bodies)
 
     def after_build(self, a: np.ndarray, b: np.ndarray) -> None:
         """After a rebuild: the ghosts of the new list, and the others frozen."""
@@ -345,7 +373,7 @@ class Domain:
                     d=depth[sel], r=radius[sel], s=spring[sel])
         pieces = self.comm.allgather(mine)
         self.sent["gathers"] += _nbytes(mine)
-        net = merge_by_key(pieces, "key")
+        net = merge_by_key(pieces, "key", self.order)
         if net["key"].shape[0] == 0:
             return np.zeros(0)
         bodies = s.bodies
@@ -362,18 +390,15 @@ class Domain:
         solves[0] += 1
         solves[1] += rounds
         solves[2] += iterations
-        return np.ascontiguousarray(f[np.searchsorted(net["key"], key)])
+        return np.ascontiguousarray(f[positions_of(net["key"], key)])
 
     # ------------------------------------------------------------------ the energy ledger
     def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
-        """Keep the work terms of a half kick's counted contacts for the deck end's replay:
-        the keys (the bodies follow from them), the three terms of every contact and the wall
-        term of the contacts with a wall (body B; body A is always a particle)."""
+        """Keep the work terms (K, N_TERMS) of a half kick's counted contacts, with their keys
+        and bodies, for the deck end's replay."""
         sel = self.counted(a)
-        k, t = key[sel], terms[sel]
-        wall = b[sel] >= self.n
-        self.events.append(("kick", dict(key=k, t=np.ascontiguousarray(t[:, :T_WALL_A])),
-                            dict(key=k[wall], w=t[wall, T_WALL_B])))
+        self.events.append(("kick", dict(key=key[sel], a=a[sel], b=b[sel],
+                                         t=np.ascontiguousarray(terms[sel]))))
 
     def log_dropped(self, a: np.ndarray, key: np.ndarray, elastic: np.ndarray) -> None:
         """Keep the normal elastic energy (J) of counted contacts left out after failed LCPs
@@ -387,15 +412,11 @@ class Domain:
         ``DemSystem._book_dropped``)."""
         s = self.system
         for k, (kind, *_) in enumerate(logs[0]):
-            rows = merge_by_key([log[k][1] for log in logs], "key")
+            rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
             if kind == "kick":
-                key = rows["key"]
-                terms = np.zeros((key.shape[0], N_TERMS))
-                terms[:, :T_WALL_A] = rows["t"].reshape(-1, T_WALL_A)
-                walls = merge_by_key([log[k][2] for log in logs], "key")
-                terms[np.searchsorted(key, walls["key"]), T_WALL_B] = walls["w"]
                 ledger = s.ledger.to_array()
-                book_kick(terms, key // self.nb, key % self.nb, self.n, ledger, s.wall_work)
+                book_kick(np.ascontiguousarray(rows["t"]).reshape(-1, N_TERMS), rows["a"],
+                          rows["b"], self.n, ledger, s.wall_work)
                 s.ledger = EnergyLedger.from_array(ledger)
             elif rows["key"].shape[0]:
                 s.ledger.dissipated_normal += float(rows["e"].sum())
@@ -412,13 +433,13 @@ class Domain:
                           + [s.force[:N], s.torque[:N]])
         sel = self.counted(s.c_a)
         rows = {f: getattr(s, f)[sel] for f in ROW_FIELDS}
-        hsel = self.counted(s.hist_keys // self.nb)
+        hsel = self.counted(self.particles_of(s.hist_keys))
         hist = dict(key=s.hist_keys[hsel], spring=s.hist_springs[hsel])
         cs = s.last_contacts
         mine = (rows, hist, self._counted_contacts(cs), self.events, (self.lcps, self.failed))
         self.sent["gathers"] += _nbytes(mine)
         gathered = self.comm.allgather(mine)
-        rows = merge_by_key([g[0] for g in gathered], "c_key")
+        rows = merge_by_key([g[0] for g in gathered], "c_key", self.order)
         for f in ROW_FIELDS:
             setattr(s, f, rows[f])
         hist = merge_by_key([g[1] for g in gathered], "key")
@@ -447,7 +468,7 @@ class Domain:
             cs = ContactSet.empty()
         sel = self.counted(cs.body_a)
         near = self.counted(cs.near_a)
-        drop = self.counted(np.asarray(cs.dropped_keys, np.int64) // self.nb)
+        drop = self.counted(self.particles_of(cs.dropped_keys))
         return dict(active={f: np.asarray(getattr(cs, f))[sel] for f in CS_ACTIVE},
                     near={f: np.asarray(getattr(cs, f))[near] for f in CS_NEAR},
                     dropped=np.asarray(cs.dropped_keys, np.int64)[drop],
@@ -456,7 +477,7 @@ class Domain:
     def _merged_contacts(self, pieces: list[dict]) -> ContactSet:
         """The serial ContactSet of the last evaluation, from every rank's counted pairs."""
         act = [dict(p["active"]) for p in pieces]
-        active = merge_by_key(act, "key")
+        active = merge_by_key(act, "key", self.order)
         near = [dict(p["near"], near_key=p["near"]["near_a"] * self.nb + p["near"]["near_b"])
                 for p in pieces]
         near = merge_by_key(near, "near_key")

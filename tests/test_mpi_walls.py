@@ -1,0 +1,69 @@
+"""Mesh and NURBS-surface walls on several MPI ranks give the serial run bit for bit.
+
+A turning drum (an exact NURBS cylinder, a triangle-mesh baffle inside, flat end plates) holds
+ellipsoids and exact spheres: the ranks solve the wall contacts of the particles they own and
+merge them in the serial order (the spheres' contacts with a wall before the NURBS
+particles', :func:`nurbsdem.contact.curved_walls.serial_order`), so results.h5, every monitor
+(the walls' loads among them) and the checkpoint equal the serial run's exactly.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from nurbsdem.contact.curved_walls import serial_order, wall_contact_key
+from test_curved_steps import _drum_deck
+from test_mpi import _run, BIN, assert_same_run, needs_mpi
+
+
+#: two ellipsoids (shape 1, the first particles) and six spheres (shape 2): four just above
+#: the drum beside the baffle, two above the baffle, so that the drum meets both kinds at once
+PARTICLES = """Particles
+  Particle 1 Shape 1 Material 1 Position 0.008 0.032 -0.040
+  Particle 2 Shape 1 Material 1 Position -0.008 -0.032 -0.040
+  Particle 3 Shape 2 Material 1 Position 0.008 -0.030 -0.044
+  Particle 4 Shape 2 Material 1 Position -0.008 0.030 -0.044
+  Particle 5 Shape 2 Material 1 Position 0.0 0.0 -0.035
+  Particle 6 Shape 2 Material 1 Position 0.0 0.012 -0.028
+  Particle 7 Shape 2 Material 1 Position 0.0 -0.012 -0.028
+  Particle 8 Shape 2 Material 1 Position 0.008 0.038 -0.026
+"""
+
+
+def _deck(folder):
+    text = _drum_deck(folder).replace(
+        "  Shape 1 Sphere Radius 0.006", "  Shape 1 Ellipsoid SemiAxes 0.008 0.0065 0.005"
+    ).replace("Step 1 Dynamic Duration 0.08", "Step 1 Dynamic Duration 0.04").replace(
+        "Center 0 0 0 Duration 0.08", "Center 0 0 0 Duration 0.03").replace(
+        "Step 3 Dynamic Duration 0.02", "Step 3 Dynamic Duration 0.01").replace(
+        "NormalDamping 2", "NormalDamping 6")
+    head, rest = text.split("Particles\n")
+    deck = folder / "drum.inp"
+    deck.write_text(head + PARTICLES + rest[rest.index("Walls"):])
+    return deck
+
+
+def test_the_serial_order_puts_a_walls_spheres_before_its_nurbs_particles():
+    """Keys of contacts with two curved walls (particle 0 a NURBS particle, 1 and 2 spheres)
+    sort wall by wall, spheres first, then by particle and rank; pair keys come first."""
+    nb, walls = 5, 2
+    nurbs = np.array([True, False, False])
+    keys = np.array([wall_contact_key(nb, o, w, walls, r)
+                     for o, w, r in ((0, 0, 0), (0, 0, 1), (2, 0, 0), (1, 1, 0), (0, 1, 0),
+                                     (1, 0, 0))] + [7])
+    order = np.argsort(serial_order(keys, nb, walls, nurbs), kind="stable")
+    np.testing.assert_array_equal(order, [6, 5, 2, 0, 1, 3, 4])
+
+
+@needs_mpi
+def test_a_turning_drum_with_a_mesh_baffle_on_two_ranks(tmp_path):
+    deck = _deck(tmp_path)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
+    log = _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "two", "--verbose"], 2)
+    assert any("owned [4, 4]" in line for line in log.splitlines())
+    assert_same_run(tmp_path / "two", tmp_path / "serial")
+    drum = np.genfromtxt(tmp_path / "two" / "monitors" / "wall_drum.csv", delimiter=",",
+                         names=True)
+    baffle = np.genfromtxt(tmp_path / "two" / "monitors" / "wall_baffle.csv", delimiter=",",
+                           names=True)
+    assert np.abs(drum["torque_x"]).max() > 0 and np.abs(baffle["reaction_z"]).max() > 0
+    assert drum["reaction_z"][-1] > 0
