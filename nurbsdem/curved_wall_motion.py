@@ -77,19 +77,26 @@ class CurvedWallMotion:
         mapping through the scene's contact table; the Python path of the deck steps:
         :mod:`nurbsdem.contact.curved_walls`); refused on several MPI ranks (``comm``)."""
         from .contact.curved_walls import CurvedWall, CurvedWallContacts
-        from .io.deck_curved import curved_wall_geometry, sphere_radii
+        from .io.deck_curved import sphere_radii
         model = self.model
         if comm is not None:
             raise InputError("mesh and surface walls run on one MPI rank only")
-        if self._geometry is None:
-            self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
-                              for w in model.curved_walls]
         radius, spheres = sphere_radii(model, shape_ids)
         walls = [CurvedWall(kind, geom, self.pose(k), name=model.curved_walls[k].name)
-                 for k, (kind, geom) in enumerate(self._geometry)]
+                 for k, (kind, geom) in enumerate(self.geometry())]
         return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls),
                                   table=getattr(scene, "table", None),
                                   body_shape=getattr(scene, "body_shape", None))
+
+    def geometry(self) -> list:
+        """(kind, geometry) of each mesh and surface wall in its own frame (built once:
+        :func:`~nurbsdem.io.deck_curved.curved_wall_geometry`)."""
+        from .io.deck_curved import curved_wall_geometry
+        if self._geometry is None:
+            model = self.model
+            self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
+                              for w in model.curved_walls]
+        return self._geometry
 
     def rest_state(self) -> dict:
         """The rest poses for a checkpoint: R (9,) then t (3,) per wall, keyed by str(k)."""
