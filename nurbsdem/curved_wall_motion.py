@@ -120,6 +120,12 @@ class _Spinning:
         self._sysm.wall_spin[:] = self._motion.spin(self._sysm.walls.n, kin.t)
         return self._provider(kin)
 
+    @property
+    def inner(self):
+        """The wrapped provider (the compiled deck steps take it, with the walls' poses and
+        spin tabulated at the loop's times: :mod:`nurbsdem.dynamics.deck_steps`)."""
+        return self._provider
+
     def __getattr__(self, name):
         if name.startswith("__") or name in ("_provider", "_motion", "_sysm"):
             raise AttributeError(name)
