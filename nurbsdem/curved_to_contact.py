@@ -10,17 +10,19 @@ is).  The distance is to the wall's surface, from either side; it is the flat wa
 * Exact spheres against a mesh: a sphere swept along the line against the triangles, in
   closed form (:mod:`nurbsdem.contact.mesh_sweep`).
 * Everything else (spheres against a surface wall; NURBS particles, by their support mapping,
-  paper Eq. 8–9): a safeguarded root find on the exact gap G(s) of each particle
-  (:func:`first_crossing`).
+  paper Eq. 8–9, from where their bounding sphere comes within g: no contact before): a
+  safeguarded root find on the exact gap G(s) of each particle (:func:`first_crossing`).
 
 **Why the root find does not step over the first contact.**  Translating the wall by δ moves
 every wall point by |δ|, so G is 1-Lipschitz in s: from a point with G(s) − g = r > 0 no
 contact is possible before s + r (the conservative advance).  Each step is a Newton step on
 G (its slope n · d from the contact normal), never shorter than that advance; a step that
 lands at G ≤ g gives a bracket, refined by the Illinois variant of regula falsi to ~1e-13 of
-the scale.  A root inside the last Newton step before an earlier one can only be missed where
-G dips below g and comes back within that step (a tangential graze), which a convex
-particle against a convex part of the wall never does: there G is convex in s.
+the scale.  Against one convex piece of the wall (a triangle, a convex patch) the distance
+is convex in s (the distance between two convex sets along a translation), and a Newton step
+from the left of a convex function's first root never passes it; a step can pass over a
+root only where another piece, not the nearest at the step's start, comes within g and
+leaves again inside that step.
 
 Lengths in metres.
 """
@@ -113,7 +115,7 @@ def curved_to_contact(model, bodies, wall_offset: np.ndarray, step, curved,
                           along)
     if not spheres.all():
         travel = min(travel, _nurbs(model, bodies, ~spheres, geom, step.gap, R, t, d, along,
-                                    where))
+                                    f"{model.path}:{step.line}: {where}"))
     if not math.isfinite(travel):
         raise model.error(f"{where}: the wall meets no particle along the direction "
                           f"{np.round(d, 6).tolist()}", step.line)
@@ -163,6 +165,58 @@ def _least(gap_of, centre_along: np.ndarray, reach: np.ndarray, along: np.ndarra
 
 
 def _nurbs(model, bodies, mask, geom, g: float, R, t, d, along, where: str) -> float:
-    """The least travel (m) bringing the wall within g of the NURBS particles ``mask``."""
-    raise model.error(f"{where}: only exact spheres are brought to contact with a mesh or "
-                      f"surface wall")
+    """The least travel (m) bringing the wall (at pose R, t) within g of the NURBS particles
+    ``mask``: from where each one's bounding sphere comes within g (the sphere's own first
+    crossing: no contact before it), the root find on the particle's exact distance
+    (:func:`_nurbs_gap`)."""
+    from .contact.detect import ContactTable
+    idx = np.flatnonzero(mask)
+    tables = {}
+    for sid in np.unique(bodies.shape_id[idx]).tolist():
+        tables[sid] = ContactTable([model.shapes[sid].shape])
+    Rs = bodies.rotation_matrices()
+    centre = bodies.position[idx]
+    radius = np.array([tables[int(bodies.shape_id[i])].radius[0] for i in idx])
+    best = math.inf
+    for m, i in enumerate(idx.tolist()):
+        table = tables[int(bodies.shape_id[i])]
+        pos = bodies.position[i] - Rs[i] @ table.centroid[0]
+        scale = geom.size + radius[m]
+        s0 = _spheres(geom, centre[m:m + 1], radius[m:m + 1], g, R, t, d, along)
+        if not s0 < best:
+            continue
+        end = float(centre[m] @ d + radius[m] + g - along.min()) + 1e-3 * scale
+        gap = _nurbs_gap(table, pos, Rs[i], geom, g, R, t, d, radius[m] * 1.25 + g, where)
+        best = min(best, first_crossing(gap, s0, min(end, best), REL_TOL * scale))
+    return best
+
+
+def _nurbs_gap(table, pos, Rb, geom, g: float, R, t, d, reach: float, where: str):
+    """gap(s) = (G(s) − g, dG/ds) of the NURBS particle (pose pos, Rb; shape 0 of ``table``)
+    and the wall moved by s d: the least signed distance over the wall's features within
+    ``reach`` (m) of its centroid (paper Eq. 8–9 through the support mapping), its slope
+    the contact normal's component along d; with none there, G − g ≥ reach − radius − g
+    (the bounding sphere), a safe advance with slope 0."""
+    from .contact.lcp import F_N, F_SD
+    from .contact.mesh_particle import particle_mesh_contacts
+    from .contact.mesh_wall import MeshWall, make_workspace
+    from .contact.surface_particle import particle_surface_row_reference
+    clear = reach - float(table.radius[0]) - g
+    work = make_workspace(geom) if isinstance(geom, MeshWall) else None
+
+    def gap(s):
+        ts = t + s * d
+        if work is not None:
+            rows_f, _ = particle_mesh_contacts(table, 0, pos, Rb, geom, R, ts, work=work,
+                                               active_only=False, reach=reach)
+            if not len(rows_f):
+                return clear, 0.0
+            k = int(np.argmin(rows_f[:, F_SD]))
+            f = rows_f[k]
+        else:
+            f, _, found = particle_surface_row_reference(table, 0, pos, Rb, geom, R, ts,
+                                                         where=where, reach=reach)
+            if not found:
+                return clear, 0.0
+        return float(f[F_SD]) - g, float(f[F_N:F_N + 3] @ d)
+    return gap

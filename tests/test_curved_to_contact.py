@@ -89,3 +89,45 @@ def test_nurbs_cylinder_ends_at_the_gap(tmp_path):
     aside.add_surface_wall("drum", tmp_path / "drum.yaml", position=(1.0, 0, 0.5))
     with pytest.raises(InputError, match="meets no particle along the direction"):
         aside.move_wall("drum", to_contact=True, direction=(0, 0, -1))
+
+
+def test_ellipsoids_against_a_planar_mesh_and_a_nurbs_plane(tmp_path):
+    """Turned ellipsoids (NURBS particles): a planar mesh lands where the flat wall does, and
+    a NURBS plane patch brought along a slanted direction ends with the smallest gap, from
+    the support function h(n) = |A Rᵀ n| (A = diag(a, b, c)), equal to Gap."""
+    import trimesh
+    from scipy.spatial.transform import Rotation
+    trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+                    [[0, 1, 2], [0, 2, 3]]).export(tmp_path / "floor.stl")
+    axes = (0.012, 0.008, 0.005)
+    bodies = [((0.0, 0.0, 0.0), (0.3, -0.5, 0.2)), ((0.04, 0.01, 0.003), (1.0, 0.2, -0.4))]
+
+    def sim_of():
+        sim = Simulation(gravity=(0, 0, -9.81))
+        sim.add_material(1, density=2500)
+        sim.add_interface(normal_penalty=1e5, tangential_penalty=1e5, friction=0.3)
+        for x, rv in bodies:
+            sim.add_particle(shapes.ellipsoid(*axes), 1, x, rotation=rv)
+        return sim
+    moved = {}
+    for kind in ("flat", "mesh"):
+        sim = sim_of()
+        if kind == "flat":
+            sim.add_wall("floor", (0, 0, -0.2), (0, 0, 1), (2, 2))
+        else:
+            sim.add_mesh_wall("floor", tmp_path / "floor.stl", position=(0, 0, -0.2))
+        sim.move_wall("floor", to_contact=True, gap=1e-3, direction=(0.1, 0.05, 1.0))
+        moved[kind] = sim.wall_displacements["floor"]
+    np.testing.assert_allclose(moved["mesh"], moved["flat"], rtol=1e-11, atol=1e-14)
+    n = np.array([0.2, -0.1, 1.0]) / np.linalg.norm([0.2, -0.1, 1.0])
+    from nurbsdem.geometry.surfaces import plane_patch
+    save_shape(tmp_path / "plane.yaml", [plane_patch((0, 0, 0), n, (1.0, 1.0))])
+    sim = sim_of()
+    sim.add_surface_wall("plane", tmp_path / "plane.yaml", position=-0.3 * n)
+    gap = 2e-3
+    sim.move_wall("plane", to_contact=True, gap=gap, direction=(0.3, 0.1, 1.0))
+    origin = -0.3 * n + sim.wall_displacements["plane"]
+    gaps = [n @ (np.array(x) - origin)
+            - np.linalg.norm(np.diag(axes) @ Rotation.from_rotvec(rv).as_matrix().T @ n)
+            for x, rv in bodies]
+    assert min(gaps) == pytest.approx(gap, rel=1e-10)
