@@ -11,8 +11,9 @@ import nurbsdem.shapes as shapes
 from nurbsdem import Simulation
 from nurbsdem.errors import InputError
 from nurbsdem.geometry.surfaces import cylinder_patch
-from nurbsdem.io.deck import build_model
+from nurbsdem.io.deck import build_model, parse_deck
 from nurbsdem.io.shapefile import save_shape
+from nurbsdem.solver import Solver
 
 #: (centre (m), radius (m)) of the spheres
 SPHERES = [((0.0, 0.0, 0.0), 0.010), ((0.05, 0.02, 0.004), 0.012), ((-0.03, -0.04, 0.002), 0.009),
@@ -131,3 +132,43 @@ def test_ellipsoids_against_a_planar_mesh_and_a_nurbs_plane(tmp_path):
             - np.linalg.norm(np.diag(axes) @ Rotation.from_rotvec(rv).as_matrix().T @ n)
             for x, rv in bodies]
     assert min(gaps) == pytest.approx(gap, rel=1e-10)
+
+
+def test_a_restart_after_to_contact_keeps_the_wall_where_it_went(tmp_path, monkeypatch):
+    """A mesh floor brought up to two spheres (ToContact in the deck), then a short settling
+    step killed after its checkpoint and restarted: the same final state bit for bit as the
+    run straight through, the floor where ToContact left it."""
+    import trimesh
+    from runs import assert_same_final_state, killed_and_restarted
+    trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+                    [[0, 1, 2], [0, 2, 3]]).export(tmp_path / "floor.stl")
+    deck = tmp_path / "case.inp"
+    deck.write_text("""Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2500
+Shapes
+  Shape 1 Sphere Radius 0.01
+Particles
+  Particle 1 Shape 1 Material 1 Position 0 0 0.02
+  Particle 2 Shape 1 Material 1 Position 0.03 0 0.021
+Walls
+  Mesh 7 Name floor File floor.stl Position 0 0 -0.3
+Contact
+  Interface 1 NormalPenalty 1e5 NormalDamping 5 TangentialPenalty 1e5 Friction 0.3
+Steps
+  Step 1 MoveWall floor ToContact Gap 0.0005 Direction 0 0 1
+  Step 2 Dynamic Duration 0.02 TimeStep 1e-3
+Output
+  Directory results
+  Monitors Every 0.002
+  Results Every 0.005
+  Checkpoint Every 0.01
+""")
+    ref = tmp_path / "ref"
+    Solver(parse_deck(deck), output=ref, quiet=True).run()
+    out = tmp_path / "out"
+    killed_and_restarted(deck, out, 0.012, monkeypatch)
+    assert_same_final_state(out, ref, monitors=("wall_floor.csv",))
+    rows = np.genfromtxt(out / "monitors" / "wall_floor.csv", delimiter=",", names=True)
+    assert rows["displacement_z"][-1] == pytest.approx(0.3 + 0.02 - 0.01 - 0.0005, rel=1e-14)
