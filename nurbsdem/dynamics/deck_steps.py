@@ -563,8 +563,8 @@ def _curved_provider(provider):
     exact spheres with any of its walls, NURBS particles with surface walls only (no mesh
     wall), every wall at rest, turning at a constant rate
     (:class:`~nurbsdem.contact.curved_walls.WallPose`) or turned by a table (the provider
-    that sets the table's spin hands over the one it wraps: :func:`_table_turns`); else
-    None."""
+    that sets the table's spin hands over the one it wraps:
+    :func:`~nurbsdem.dynamics.curved_turns.table_turns`); else None."""
     from ..contact.curved_walls import CurvedWallContacts, WallPose
     from ..contact.mesh_wall import MeshWall
     provider = getattr(provider, "inner", provider)
@@ -612,7 +612,8 @@ class DeckSteps:
         come from the curvature kernel the Python path calls, :func:`_hertz_radii`) whose laws
         are all built in (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with
         mesh and surface walls (met by exact spheres, or surface walls by NURBS particles), at
-        rest or turning at constant rates (:func:`_curved_provider`); else None."""
+        rest, turning at constant rates or turned by tables (:func:`_curved_provider`); else
+        None."""
         from ..contact.scene import SceneContacts
         scene, curved = system.provider, _curved_provider(system.provider)
         if curved is not None:
