@@ -112,11 +112,29 @@ def sweep_entries(centres, rho, d, vertices, faces, normals):
     """(N,) first travel s (m) at which each point c − s d comes within rho[i] (m) of the mesh
     (vertices (V,3), faces (T,3), unit normals (T,3); centres (N,3) and d (3,) unit in the
     mesh's frame); inf where the line never does."""
+    T = faces.shape[0]
+    ball = np.empty((T, 4))              # each triangle's bounding ball: centre, radius
+    for t in range(T):
+        for k in range(3):
+            ball[t, k] = (vertices[faces[t, 0], k] + vertices[faces[t, 1], k]
+                          + vertices[faces[t, 2], k]) / 3.0
+        r2 = 0.0
+        for j in range(3):
+            v = vertices[faces[t, j]]
+            r2 = max(r2, (v[0] - ball[t, 0]) ** 2 + (v[1] - ball[t, 1]) ** 2
+                     + (v[2] - ball[t, 2]) ** 2)
+        ball[t, 3] = math.sqrt(r2) * (1.0 + 1e-9)
     out = np.full(centres.shape[0], np.inf)
     for i in range(centres.shape[0]):
         c = centres[i]
         best = math.inf
-        for t in range(faces.shape[0]):
+        for t in range(T):
+            # the line passes farther than ρ from the triangle's ball: no entry
+            w0, w1, w2 = c[0] - ball[t, 0], c[1] - ball[t, 1], c[2] - ball[t, 2]
+            wd = w0 * d[0] + w1 * d[1] + w2 * d[2]
+            reach = rho[i] + ball[t, 3]
+            if w0 * w0 + w1 * w1 + w2 * w2 - wd * wd > reach * reach * (1.0 + 1e-9):
+                continue
             best = min(best, triangle_entry(c, d, vertices[faces[t, 0]], vertices[faces[t, 1]],
                                             vertices[faces[t, 2]], normals[t], rho[i]))
         out[i] = best
