@@ -1,16 +1,16 @@
 """Mesh and surface walls turned by a motion table (``MoveWall NAME Table`` with rotation
 vectors, :class:`~nurbsdem.wall_tables.TablePose`) in the compiled deck steps.
 
-A table's pose (an interpolated rotation vector about a centre, paper-independent
-kinematics: :mod:`nurbsdem.wall_tables`) and its angular velocity change along the step.  The
-Python side tabulates both at the times the loop evaluates the contacts (the ends of its
-internal steps, the times the Python driver uses, :meth:`DeckSteps._wall_tables`) with the
-very functions the Python driver calls (``TablePose.at``, ``TablePose.angular_velocity``),
-and the loop, before each evaluation, writes the pose into the wall's rest pose of the
-packed walls (:data:`~nurbsdem.contact.curved_compiled.CurvedConst`, with a zero angular
-velocity and centre there, so that :func:`~nurbsdem.contact.curved_walls.wall_pose_at`
-returns it as it is, plus the wall's displacement) and the spin into the system's ``spin``
-(W,6) rows: the two drivers see the same bits.
+A table's pose (an interpolated rotation vector about a centre, :mod:`nurbsdem.wall_tables`)
+and its angular velocity change along the step. The Python side tabulates both at the times
+the loop evaluates the contacts (the ends of its internal steps, the times the Python driver
+uses, :meth:`DeckSteps._wall_tables`) with the very functions the Python driver calls
+(``TablePose.at``, ``TablePose.angular_velocity``), and the loop, before each evaluation,
+writes the pose into the wall's rest pose of the packed walls
+(:data:`~nurbsdem.contact.curved_compiled.CurvedConst`, with a zero angular velocity and
+centre there, so that :func:`~nurbsdem.contact.curved_walls.wall_pose_at` returns it as it
+is, plus the wall's displacement) and the spin into the system's ``spin`` (W,6) rows: the
+two drivers see the same bits.
 
 Lengths in metres, angles in radians, times in seconds.
 """
@@ -32,7 +32,7 @@ def table_turns(provider, cc, spin: np.ndarray, times: np.ndarray) -> tuple:
     W = spin.shape[0]
     if not which.any():
         return which, np.zeros((0, len(walls), 3, 3)), np.zeros((0, len(walls), 3)), \
-            np.zeros((0, W, 3 * 2))
+            np.zeros((0, W, 6))
     T = len(times)
     R = np.zeros((T, len(walls), 3, 3))
     shift = np.zeros((T, len(walls), 3))

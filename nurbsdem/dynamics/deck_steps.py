@@ -450,9 +450,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     the mesh and surface walls ``curved``,
     :data:`~nurbsdem.contact.curved_compiled.CurvedConst`; ``cwork``: their workspaces; spin
     (W,6): each wall's angular velocity, rad/s, and centre, m; ``turns``: the poses and spin
-    of the walls a table turns at those times, :mod:`~nurbsdem.dynamics.curved_turns`).  Body state (x, v, q, L),
-    ledger (5,) J, wall_work (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT
-    …), peak (1,) J,
+    of the walls a table turns at those times, :mod:`~nurbsdem.dynamics.curved_turns`).
+    Body state (x, v, q, L), ledger (5,) J, wall_work (W,) J, the period-2 watch arrays,
+    counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy
     control (``cc.accuracy`` > 0,
