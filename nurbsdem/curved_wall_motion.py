@@ -77,17 +77,24 @@ class CurvedWallMotion:
         :mod:`nurbsdem.contact.curved_walls`).  On several MPI ranks each rank solves the
         contacts of the particles it owns."""
         from .contact.curved_walls import CurvedWall, CurvedWallContacts
-        from .io.deck_curved import curved_wall_geometry, sphere_radii
+        from .io.deck_curved import sphere_radii
         model = self.model
-        if self._geometry is None:
-            self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
-                              for w in model.curved_walls]
         radius, spheres = sphere_radii(model, shape_ids)
         walls = [CurvedWall(kind, geom, self.pose(k), name=model.curved_walls[k].name)
-                 for k, (kind, geom) in enumerate(self._geometry)]
+                 for k, (kind, geom) in enumerate(self.geometry())]
         return CurvedWallContacts(scene, radius, spheres, walls, first_wall=len(model.walls),
                                   table=getattr(scene, "table", None),
                                   body_shape=getattr(scene, "body_shape", None))
+
+    def geometry(self) -> list:
+        """(kind, geometry) of each mesh and surface wall in its own frame (built once:
+        :func:`~nurbsdem.io.deck_curved.curved_wall_geometry`)."""
+        from .io.deck_curved import curved_wall_geometry
+        if self._geometry is None:
+            model = self.model
+            self._geometry = [curved_wall_geometry(w, f"{model.path}:{w.line}")
+                              for w in model.curved_walls]
+        return self._geometry
 
     def rest_state(self) -> dict:
         """The rest poses for a checkpoint: R (9,) then t (3,) per wall, keyed by str(k)."""
@@ -110,6 +117,12 @@ class _Spinning:
     def __call__(self, kin):
         self._sysm.wall_spin[:] = self._motion.spin(self._sysm.walls.n, kin.t)
         return self._provider(kin)
+
+    @property
+    def inner(self):
+        """The wrapped provider (the compiled deck steps take it, with the walls' poses and
+        spin tabulated at the loop's times: :mod:`nurbsdem.dynamics.deck_steps`)."""
+        return self._provider
 
     def __getattr__(self, name):
         if name.startswith("__") or name in ("_provider", "_motion", "_sysm"):

@@ -1,6 +1,6 @@
 """The steps that take no simulated time: ``Replicate`` (copies of the particles, whose energy
-the solver books) and ``MoveWall … ToContact`` (a flat wall translated until its gap to the
-nearest particle is ``Gap``)."""
+the solver books) and ``MoveWall … ToContact`` (a wall translated until its gap to the
+nearest particle is ``Gap``; mesh and surface walls: :mod:`nurbsdem.curved_to_contact`)."""
 from __future__ import annotations
 
 import math
@@ -29,10 +29,16 @@ def mechanical_energy(model: Model, bodies: Bodies) -> float:
 
 
 def to_contact(model: Model, bodies: Bodies, wall_offset: np.ndarray,
-               step: MoveWallStep) -> float:
+               step: MoveWallStep, curved=None, time: float = 0.0) -> float:
     """Translate the wall along its direction until the nearest particle is ``gap`` away
-    (its row of ``wall_offset`` (walls, 3) m replaced); returns the travel (m)."""
+    (its row of ``wall_offset`` (walls, 3) m replaced); returns the travel (m).  A mesh or
+    surface wall (``curved``: the model's
+    :class:`~nurbsdem.curved_wall_motion.CurvedWallMotion`, at time ``time`` s) goes to
+    :func:`~nurbsdem.curved_to_contact.curved_to_contact`."""
     k = model.wall_names.index(step.wall)
+    if k >= len(model.walls):
+        from .curved_to_contact import curved_to_contact
+        return curved_to_contact(model, bodies, wall_offset, step, curved, time)
     wall = model.walls[k]
     n = wall.normal
     direction = n if step.direction is None else np.asarray(step.direction, float)

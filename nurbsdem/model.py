@@ -438,8 +438,9 @@ class MoveWallStep(Step):
     """``Step ID MoveWall NAME ...`` — three forms:
 
     * ``ToContact [Gap g] [Direction dx dy dz]``: instantaneous; translate the wall along
-      ``direction`` (default: its normal, i.e. towards the particles) until its distance to
-      the nearest particle is ``gap`` (m, default 0). No time passes.
+      ``direction`` (default: its normal, i.e. towards the particles; a mesh or surface
+      wall needs one, :mod:`nurbsdem.curved_to_contact`) until its distance to the nearest
+      particle is ``gap`` (m, default 0). No time passes.
     * ``Displacement dx dy dz Duration T TimeStep DT``: the wall translates by the given
       vector (m) at constant velocity over T seconds while the particles move (a dynamic
       step with a prescribed wall motion; ``[Damping Explicit|Implicit] [Accuracy η]

@@ -306,7 +306,8 @@ class Simulation:
         """``MoveWall``: either ``displacement`` (m) at constant velocity over ``duration`` s
         with time step ``time_step`` s (the particles move meanwhile), or ``to_contact=True``:
         translate the wall (along ``direction``, default its normal) until the nearest
-        particle is ``gap`` m away (no time passes; flat walls), or ``angular_velocity``
+        particle is ``gap`` m away (no time passes; a mesh or surface wall needs
+        ``direction``: :mod:`nurbsdem.curved_to_contact`), or ``angular_velocity``
         (rad/s): a mesh or surface wall turns about ``center`` (m) over ``duration`` s
         (``Rotate``), translating by ``displacement`` too when given (the centre with it), or
         ``table``: a CSV file or an array of rows t, x, y, z[, rx, ry, rz] (s, m, rad) the

@@ -427,7 +427,8 @@ class Solver:
 
     def _to_contact(self, step: MoveWallStep) -> None:
         """Translate the wall along its direction until the nearest particle is ``gap`` away."""
-        travel = to_contact(self.model, self.bodies, self.wall_offset, step)
+        travel = to_contact(self.model, self.bodies, self.wall_offset, step, self.curved,
+                            self.time)
         log.info("step %d: wall %s moved %.6g m to a gap of %g m", step.id, step.wall, travel,
                  step.gap)
 

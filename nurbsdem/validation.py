@@ -494,14 +494,14 @@ def check_random_fill(model: "Model") -> None:
 
 
 def check_wall_moves(model: "Model") -> None:
-    """A ``MoveWall ... ToContact Direction d`` must move the wall towards the particles
+    """A ``MoveWall ... ToContact Direction d`` must move a flat wall towards the particles
     (d . normal > 0); otherwise no travel reaches them."""
     from .model import MoveWallStep
     for s in model.steps:
         if not (isinstance(s, MoveWallStep) and s.to_contact and s.direction is not None):
             continue
-        if s.wall not in model.wall_names:
-            continue
+        if s.wall not in [w.name for w in model.walls]:
+            continue                           # unknown, or a mesh or surface wall
         n = wall_plane(model.wall(s.wall))[3]
         if float(np.asarray(s.direction, float) @ n) <= 1e-12:
             raise model.error(f"Step {s.id}: Direction {_vec(s.direction)} does not move wall "

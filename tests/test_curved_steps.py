@@ -216,3 +216,39 @@ def test_a_refused_surface_contact_hands_back_and_the_provider_names_the_wall():
                      np.zeros((1, 3)), 1, 2)
     with pytest.raises(ContactNotUnique, match="surface wall 'narrow': .*not unique"):
         provider(kin)
+
+
+def test_walls_turned_by_tables_give_the_same_bits_on_both_drivers(tmp_path, monkeypatch):
+    """The drum and the baffle both moved by tables in one MoveWall step (each turning by
+    interpolated rotation vectors about its centre while it translates): the compiled loop
+    runs that step (the walls' poses and spin tabulated at its times) and gives the Python
+    driver's bits."""
+    calls = []
+    original = system_module.DemSystem.steps
+
+    def recording(self, n_max, sample_at=None, state_at=None):
+        done = original(self, n_max, sample_at, state_at)
+        table = hasattr(self.provider, "inner")          # a table turns a wall
+        calls.append((self.compiled_steps, table, bool(self._deck_steps)))
+        return done
+    monkeypatch.setattr(system_module.DemSystem, "steps", recording)
+    (tmp_path / "turn.csv").write_text("t,x,y,z,rx,ry,rz\n0,0,0,0,0,0,0\n"
+                                       "0.02,0,0.001,0,0.08,0,0\n0.04,0,0,0.001,0.1,0,0\n")
+    (tmp_path / "lift.csv").write_text("t,x,y,z,rx,ry,rz\n0,0,0,0,0,0,0\n"
+                                       "0.04,0,0.001,0.003,0.1,0,0\n")
+    turn = ("  Step 2 MoveWall drum Rotate AngularVelocity 4 0 0 Center 0 0 0 Duration 0.08 "
+            "TimeStep 1e-3")
+    text = _drum_deck(tmp_path)
+    assert turn in text
+    text = text.replace(turn, "  Step 2 MoveWall drum Table turn.csv Center 0 0 0 TimeStep 1e-3\n"
+                              "  Step 2 MoveWall baffle Table lift.csv Center 0 0 -0.045")
+    text = text.replace("Duration 0.08", "Duration 0.04").replace("Duration 0.02",
+                                                                  "Duration 0.01")
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "tables.inp", text)
+    compiled = [used for on, table, used in calls if on and table]
+    assert compiled and all(compiled)                 # the table step ran compiled
+    assert not any(used for on, _, used in calls if not on)
+    _same_bits(py, cc, s_py, s_cc, ("energy.csv", "contacts.csv", "wall_drum.csv",
+                                    "wall_baffle.csv"))
+    baffle = np.genfromtxt(cc / "monitors" / "wall_baffle.csv", delimiter=",", names=True)
+    assert np.abs(baffle["reaction_z"]).max() > 0

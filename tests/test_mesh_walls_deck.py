@@ -124,10 +124,11 @@ def test_ellipsoid_dropped_into_the_nurbs_drum_closes_its_energy_balance(files):
     assert np.hypot(x[1], x[2]) < 0.1 - 0.01
 
 
-def test_move_wall_to_contact_of_a_mesh_wall_is_refused(files):
+def test_move_wall_to_contact_of_a_mesh_wall_needs_a_direction(files):
     deck = _deck(files, "  Mesh 7 Name floor File floor.stl",
                  extra="  Step 2 MoveWall floor ToContact")
-    with pytest.raises(InputError, match=r"case.inp:15: .*ToContact moves flat walls only"):
+    with pytest.raises(InputError, match=r"case.inp:15: .*a mesh or surface wall needs a "
+                                         r"Direction"):
         build_model(deck.read_text(), str(deck))
     moved = deck.read_text().replace("ToContact", "Displacement 0 0 0.1 Duration 0.1 "
                                                   "TimeStep 1e-3")
@@ -193,7 +194,8 @@ def test_api_rotation_reads_back_from_deck_text(files):
     sim.add_interface(normal_penalty=1e5, tangential_penalty=1e5, friction=0.3)
     sim.add_particle(nurbsdem.shapes.sphere(0.01), 1, (0, 0, -0.0895))
     sim.add_surface_wall("drum", files / "drum.yaml", position=(-0.1, 0, 0))
-    with pytest.raises(InputError, match="to_contact moves flat walls only"):
+    with pytest.raises(InputError, match="to_contact of a mesh or surface wall needs a "
+                                         "direction"):
         sim.move_wall("drum", to_contact=True)
     sim.move_wall("drum", angular_velocity=(1.0, 0, 0), center=(0, 0, 0), duration=0.01,
                   time_step=1e-3)

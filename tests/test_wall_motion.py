@@ -149,7 +149,7 @@ def test_deck_lifts_a_mesh_floor_as_a_flat_floor(tmp_path):
     and the energies are those of a flat floor lifted the same way, to 1e-9; the floor's
     work is the potential energy gained, but for the start's transient, and the balance
     error is the integration's (the velocity jump);
-    ``ToContact`` of a mesh wall is a one-line error at its line."""
+    ``ToContact`` of a mesh wall without a ``Direction`` is a one-line error at its line."""
     import subprocess
     import sys
     steps = ("  Step 1 MoveWall floor Displacement 0 0 0.0002 Duration 0.1 TimeStep 1e-3")
@@ -182,7 +182,7 @@ def test_deck_lifts_a_mesh_floor_as_a_flat_floor(tmp_path):
     run = subprocess.run([sys.executable, "-m", "nurbsdem", "check", str(deck)],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode != 0
-    assert "ToContact moves flat walls only" in run.stderr
+    assert "a mesh or surface wall needs a Direction" in run.stderr
     assert f"{deck}:14" in run.stderr and len(run.stderr.strip().splitlines()) == 1
 
 

@@ -94,9 +94,8 @@ def move_wall_step(model: Model, sid: int, name: Any,
                              f"and optionally displacement, not to_contact")
         return _turn(sid, name, angular_velocity, center, displacement, duration, time_step,
                      damping_scheme, accuracy, safety)
-    if curved and to_contact:
-        raise InputError(f"{what}: to_contact moves flat walls only; move a mesh or surface "
-                         f"wall by displacement")
+    if curved and to_contact and direction is None:
+        raise InputError(f"{what}: to_contact of a mesh or surface wall needs a direction")
     if to_contact:
         if displacement is not None or duration is not None or time_step is not None:
             raise InputError(f"{what}: to_contact=True takes gap and direction, not "

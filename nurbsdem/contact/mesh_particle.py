@@ -353,17 +353,18 @@ def _separated(oracle: SupportOracle, d: np.ndarray, points) -> bool:
 
 
 def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
-                active_only: bool) -> list:
+                active_only: bool, reach: float) -> list:
     """The contacts [(sd, p, q, d, feature, triangle, iterations)] of the particle with the
     triangles ``near`` (module docstring), before the ties; ``active_only``: features the
-    particle does not reach (a support plane separates them) are left out."""
+    particle does not reach (a support plane separates them) are left out; edges and
+    vertices farther than ``reach`` (m) from the centroid are not solved."""
     out = []
     for tri in near[_may_hold(oracle, mesh, near)].tolist():
         face = _face(oracle, mesh, tri)
         if face is not None:
             out.append(face + (FACE, tri, 1))
     edges, verts = _features(mesh, near)
-    c, reach = oracle.centroid, oracle.radius
+    c = oracle.centroid
     for (i, j), tris in edges.items():
         p0, p1 = mesh.vertices[i], mesh.vertices[j]
         if _segment_distance(c, p0, p1) > reach:
@@ -410,21 +411,26 @@ def _distinct(cands: list, size: float) -> list:
 def particle_mesh_contacts(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
                            mesh: MeshWall, R: np.ndarray | None = None,
                            t: np.ndarray | None = None, work=None,
-                           active_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                           active_only: bool = True,
+                           reach: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The contact rows (rows_f (K,NF), rows_i (K,NI), world frame, normal from the particle
     to the wall) of the NURBS particle of shape ``shape`` of ``table`` (a
     :class:`~nurbsdem.contact.detect.ContactTable`) at the pose (pos (3,) m, Rb (3,3):
     ``x = pos + Rb x_file``) with ``mesh`` at the pose (R, t) (identity by default); only
     those with sd < 0 unless ``active_only`` is False.  ``work``: the mesh's
-    :func:`~nurbsdem.contact.mesh_wall.make_workspace` (made when None)."""
+    :func:`~nurbsdem.contact.mesh_wall.make_workspace` (made when None).  ``reach`` (m): the
+    features within it of the centroid are solved (None: the bounding radius; a larger one
+    gives the separated features' exact distances, ``MoveWall … ToContact``)."""
     from .mesh_wall import make_workspace
     R = np.eye(3) if R is None else np.asarray(R, float)
     t = np.zeros(3) if t is None else np.asarray(t, float)
     work = make_workspace(mesh) if work is None else work
     pm, Rm = _to_mesh(R, t, pos, Rb)
     oracle = SupportOracle(table, shape, pm, Rm)
+    if reach is not None and reach > oracle.radius:
+        oracle.radius = float(reach)        # the flat-wall solve's early exit beyond it too
     near = _near_triangles(mesh, oracle.centroid, oracle.radius, work)
-    cands = _distinct(_candidates(oracle, mesh, near, active_only), mesh.size)
+    cands = _distinct(_candidates(oracle, mesh, near, active_only, oracle.radius), mesh.size)
     if active_only:
         cands = [c for c in cands if c[0] < 0.0]
     rows_f = np.zeros((len(cands), NF))

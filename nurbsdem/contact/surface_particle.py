@@ -199,15 +199,20 @@ def _solve_patch(oracle: SupportOracle, wall: SurfaceWall, ip: int, u: float, v:
 
 def particle_surface_row_reference(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
                                    wall: SurfaceWall, R: np.ndarray | None = None,
-                                   t: np.ndarray | None = None, where: str = "surface wall"
+                                   t: np.ndarray | None = None, where: str = "surface wall",
+                                   reach: float | None = None
                                    ) -> tuple[np.ndarray, np.ndarray, bool]:
     """:func:`particle_surface_row` (the same arguments, result and refusals) solved in
     Python through :class:`~nurbsdem.contact.support_oracle.SupportOracle`: the reference of
-    the compiled kernel (tests)."""
+    the compiled kernel (tests).  ``reach`` (m): the patches within it (and the samples'
+    spacing) of the centroid are solved (None: the bounding radius; a larger one gives a
+    separated particle's exact distance, ``MoveWall … ToContact``)."""
     R = np.eye(3) if R is None else np.asarray(R, float)
     t = np.zeros(3) if t is None else np.asarray(t, float)
     oracle = SupportOracle(table, shape, R.T @ (np.asarray(pos, float) - t),
                            R.T @ np.asarray(Rb, float))
+    if reach is not None and reach > oracle.radius:
+        oracle.radius = float(reach)        # the flat-wall solve's early exit beyond it too
     c = oracle.centroid
     n_patches = wall.dom.shape[0]
     best_k = np.empty(n_patches, np.int64)

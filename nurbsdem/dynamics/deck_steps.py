@@ -61,6 +61,7 @@ from ..contact.verlet import (active_arrays, active_rows, advance_odometers, car
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import PointerKernel, cycles, fill_lazy_kernels, seconds_per_cycle
+from .curved_turns import table_turns, turn_walls
 from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
@@ -434,7 +435,7 @@ _step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
                    counters, peak, acc_growth, estimate, sample_at, rows, state_at, times,
-                   curved, cwork, spin):
+                   curved, cwork, spin, turns):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
 
@@ -448,9 +449,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     (m/s) at the end of each internal step, times (n_deck·n_run,) s those ends (the poses of
     the mesh and surface walls ``curved``,
     :data:`~nurbsdem.contact.curved_compiled.CurvedConst`; ``cwork``: their workspaces; spin
-    (W,6): each wall's angular velocity, rad/s, and centre, m).  Body state (x, v, q, L),
-    ledger (5,) J, wall_work (W,) J, the period-2 watch arrays, counters (int64, STEP_COUNT
-    …), peak (1,) J,
+    (W,6): each wall's angular velocity, rad/s, and centre, m; ``turns``: the poses and spin
+    of the walls a table turns at those times, :mod:`~nurbsdem.dynamics.curved_turns`).
+    Body state (x, v, q, L), ledger (5,) J, wall_work (W,) J, the period-2 watch arrays,
+    counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy
     control (``cc.accuracy`` > 0,
@@ -494,6 +496,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             counters[EVALS] += 1
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
+            turn_walls(curved, spin, turns, t)
             ok, ev = _evaluate_ptr((sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
                                     omega, R, pos, wall_d, wall_u, h, counters, curved, cwork,
                                     spin, times[t]))
@@ -558,10 +561,13 @@ def _curved_provider(provider):
     """``provider`` when it is a mesh- and surface-wall provider
     (:class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`) the compiled loop takes:
     exact spheres with any of its walls, NURBS particles with surface walls only (no mesh
-    wall), every wall at rest or turning at a constant rate
-    (:class:`~nurbsdem.contact.curved_walls.WallPose`); else None."""
+    wall), every wall at rest, turning at a constant rate
+    (:class:`~nurbsdem.contact.curved_walls.WallPose`) or turned by a table (the provider
+    that sets the table's spin hands over the one it wraps:
+    :func:`~nurbsdem.dynamics.curved_turns.table_turns`); else None."""
     from ..contact.curved_walls import CurvedWallContacts, WallPose
     from ..contact.mesh_wall import MeshWall
+    provider = getattr(provider, "inner", provider)
     if type(provider) is not CurvedWallContacts:
         return None
     if not np.all(provider.spheres) and any(isinstance(w.geometry, MeshWall)
@@ -584,6 +590,7 @@ class DeckSteps:
         s = system
         W = s.walls.n
         self.curved, self.cwork = pack_curved(curved, W, scene.table)
+        self.provider = curved
         if curved is not None:
             fill_lazy_kernels("curved")      # the mesh and surface walls' kernels
         if self.curved.n_nurbs:
@@ -605,7 +612,8 @@ class DeckSteps:
         come from the curvature kernel the Python path calls, :func:`_hertz_radii`) whose laws
         are all built in (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with
         mesh and surface walls (met by exact spheres, or surface walls by NURBS particles), at
-        rest or turning at constant rates (:func:`_curved_provider`); else None."""
+        rest, turning at constant rates or turned by tables (:func:`_curved_provider`); else
+        None."""
         from ..contact.scene import SceneContacts
         scene, curved = system.provider, _curved_provider(system.provider)
         if curved is not None:
@@ -697,7 +705,8 @@ class DeckSteps:
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
             s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
-            estimate, sample_at, rows, state_at, times, self.curved, self.cwork, self.spin)
+            estimate, sample_at, rows, state_at, times, self.curved, self.cwork, self.spin,
+            table_turns(self.provider, self.curved, self.spin, times))
 
     def run(self, n_deck: int, sample_at: np.ndarray,
             state_at: np.ndarray | None = None) -> tuple[int, int, np.ndarray, np.ndarray, list]:
@@ -723,6 +732,8 @@ class DeckSteps:
             sample_at, rows, state_at, times)
         if status == GUARD:
             return status, done, counters, rows, []
+        if s.wall_spin is not None and s.wall_spin is not self.spin:
+            s.wall_spin[:] = self.spin          # a table's spin at the last evaluation
         self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
         s.acc_last_growth = float(acc_growth[0])
         s.dt_bound, s.dt_network, s.dt_critical = (float(e) for e in estimate[:RATES_BOUND])

@@ -127,8 +127,8 @@ def _exact_sphere(shape):
 
 
 def check_curved_walls(builder, model) -> None:
-    """Cross-checks of a deck's mesh and surface walls: only they turn, and ``ToContact``
-    moves flat walls only (it needs the wall's plane)."""
+    """Cross-checks of a deck's mesh and surface walls: only they turn, and their
+    ``ToContact`` needs a ``Direction`` (a flat wall's default is its normal)."""
     from ..model import MoveWallStep
     curved = {w.name for w in model.curved_walls}
     for s in model.steps:
@@ -138,9 +138,10 @@ def check_curved_walls(builder, model) -> None:
     if not model.curved_walls:
         return
     for s in model.steps:
-        if isinstance(s, MoveWallStep) and s.wall in curved and s.to_contact:
-            builder.fail(f"Step {s.id}: MoveWall {s.wall} ToContact moves flat walls only; "
-                         f"move a mesh or surface wall by Displacement", s.line)
+        if (isinstance(s, MoveWallStep) and s.wall in curved and s.to_contact
+                and s.direction is None):
+            builder.fail(f"Step {s.id}: MoveWall {s.wall} ToContact: a mesh or surface wall "
+                         f"needs a Direction (it has no normal)", s.line)
 
 
 def rotate_step(builder, e, name: str):

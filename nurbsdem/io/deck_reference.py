@@ -77,7 +77,7 @@ ENTRIES: dict[tuple[str, str], str] = {
         "`Materials`) is the one used; a pair no interface covers does not interact."),
     ("Steps", "Step"): (
         "A solution step, run in deck order: `Dynamic`, `Replicate`, or `MoveWall NAME` "
-        "with `ToContact` (instantaneous; flat walls), `Displacement` (timed; any wall) or "
+        "with `ToContact` (instantaneous; any wall), `Displacement` (timed; any wall) or "
         "`Rotate` (timed; mesh and surface walls, with or without a `Displacement`) or "
         "`Table` (timed; any wall) or `Force` (timed; any wall: a servo). A `Step` line "
         "with the previous step's id moves one more wall in that MoveWall step (`Step 3 "
@@ -274,7 +274,7 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "while it turns)."),
     ("Steps", "Step", "MoveWall"): KeyDoc(
         "", "-", "The name of the wall to move (with `ToContact`, `Displacement`, "
-        "`Rotate`, `Table` or `Force`; `ToContact` moves flat walls only)."),
+        "`Rotate`, `Table` or `Force`)."),
     ("Steps", "Step", "Duration"): KeyDoc(
         "s", "required by timed steps", "Simulated time; a whole number of `TimeStep`s."),
     ("Steps", "Step", "TimeStep"): KeyDoc(
@@ -286,11 +286,12 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "m", "required by `Replicate`", "Height from layer 0 to the top layer."),
     ("Steps", "Step", "ToContact"): KeyDoc(
         "", "-", "Instantaneous: translate the wall until its distance to the nearest particle "
-        "is `Gap`."),
+        "is `Gap` (a mesh or surface wall: the first such place coming from far behind along "
+        "`Direction`)."),
     ("Steps", "Step", "Gap"): KeyDoc("m", "0", "`ToContact`: the distance left."),
     ("Steps", "Step", "Direction"): KeyDoc(
         "-", "the wall's normal", "`ToContact` and `Force`: the direction of travel "
-        "(towards the particles; made unit). `Force` on a mesh or surface wall requires it; "
+        "(towards the particles; made unit). A mesh or surface wall requires it; "
         "on a flat wall it must have a positive component along the normal."),
     ("Steps", "Step", "Displacement"): KeyDoc(
         "m", "-", "dx dy dz: the wall (flat, mesh or surface) translates by this vector at "
