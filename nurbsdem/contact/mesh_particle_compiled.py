@@ -235,7 +235,8 @@ def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, wor
         _facing_into(c, vertices, faces, normals, tris[m], facing[m])
         j = 0
         while j < nd:
-            if (dkey[j, 0] == np.rint(facing[m, 0] * 1e9) and dkey[j, 1] == np.rint(facing[m, 1] * 1e9)
+            if (dkey[j, 0] == np.rint(facing[m, 0] * 1e9)
+                    and dkey[j, 1] == np.rint(facing[m, 1] * 1e9)
                     and dkey[j, 2] == np.rint(facing[m, 2] * 1e9)):
                 break
             j += 1
@@ -308,8 +309,9 @@ def _face(tab, info, cen, rad, seeds, vertices, faces, normals, tri, work, nc):
 
 @kernel(inline="always")
 def _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, th):
-    """(g, h, ok) of the edge's f(θ) = h_A(d(θ)) − d(θ) · P0: f' = (p − P0) · d', f'' = d'ᵀ
-    (dp/dd) d' − (p − P0) · d, with d(θ) = cos θ e1 + sin θ e2 (in sw[_D]) and p in sw[_P]."""
+    """(g, h, ok) of the edge's f(θ) = h_A(d(θ)) − d(θ) · P0: f' = (p − P0) · d',
+    f'' = d'ᵀ (dp/dd) d' − (p − P0) · d, with d(θ) = cos θ e1 + sin θ e2 (in sw[_D]) and p
+    in sw[_P]."""
     cs, sn = math.cos(th), math.sin(th)
     for k in range(3):
         mv[_DD, k] = -sn * mv[_E1, k] + cs * mv[_E2, k]
