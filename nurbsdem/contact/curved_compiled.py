@@ -45,11 +45,11 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 #: kind (W,), the pose in time (omega, center (W,3), t0 (W,), R0 (W,3,3), shift0 (W,3)) and
 #: corners (W,8,3) of its wall-frame box; meshes: offsets (W+1,) into vertices, faces (and
 #: the triangles' cells tri_cells), cell starts and cell triangles, the arrays, per-wall
-#: two_sided, size, grid origin, cell and dims, and offsets (W+1,) into the features (edges and vertices that are not flat) of
-#: the meshes met by NURBS particles, their triangles and the triangles' features: feat,
-#: feat_tris, tri_feat_range (per face) and tri_feat
-#: (:func:`~nurbsdem.contact.mesh_particle_compiled.pack_topology`; empty without NURBS
-#: particles); surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
+#: two_sided, size, grid origin, cell and dims, and offsets (W+1,) mfo, mlo, mto into the
+#: features (edges and vertices that are not flat) of the meshes met by NURBS particles,
+#: their triangles and the triangles' features: feat, feat_tris, tri_feat_range (per face)
+#: and tri_feat (:func:`~nurbsdem.contact.mesh_particle_compiled.pack_topology`; empty
+#: without NURBS particles); surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
 #: per-wall spacing and size; the particles: reach (N,) m (bounding radius about the
 #: centroid), which are exact spheres and which NURBS particles (N,) bool, their shapes
 #: body_shape (N,) and the NURBS particles' count, and the contact table's arrays (ptab …
