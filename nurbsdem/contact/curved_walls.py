@@ -268,8 +268,9 @@ class CurvedWallContacts:
         g = w.geometry
         if not isinstance(g, MeshWall):
             return self._nurbs_surface_rows(w, idx, kin, R, tv, w_i)
-        return mesh_rows(self.table, g, idx, self.body_shape, kin.pose_origin, kin.R, R, tv,
-                         MAX_PER_WALL)
+        rf, _, owner, rank = mesh_rows(self.table, g, idx, self.body_shape, kin.pose_origin,
+                                       kin.R, R, tv, MAX_PER_WALL)
+        return rf, owner, rank
 
     def _nurbs_surface_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
         """(rows_f, owner, rank) of the NURBS particles ``idx``' active contacts with surface

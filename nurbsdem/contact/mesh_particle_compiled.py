@@ -680,8 +680,8 @@ particle_mesh_rows_ptr = PointerKernel(particle_mesh_rows, "particle_mesh_rows",
 
 def mesh_rows(table, mesh: MeshWall, idx: np.ndarray, body_shape: np.ndarray, pos: np.ndarray,
               rot: np.ndarray, R: np.ndarray, t: np.ndarray,
-              per: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rows_f, owner, rank) of the touching contacts of the NURBS particles ``idx`` (shapes
+              per: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rows_f, rows_i, owner, rank) of the touching contacts of the NURBS particles ``idx`` (shapes
     ``body_shape`` in ``table``, poses pos (N,3) m, rot (N,3,3)) with ``mesh`` at (R, t), at
     most ``per`` each: :func:`particle_mesh_rows` from Python."""
     c = np.ascontiguousarray
@@ -696,26 +696,4 @@ def mesh_rows(table, mesh: MeshWall, idx: np.ndarray, body_shape: np.ndarray, po
                        mesh.grid_dims, mesh.cell_start, mesh.cell_tris, *pack_topology(mesh),
                        int(per), rows_f, rows_i, owner, rank, count)
     n = int(count[0])
-    return rows_f[:n], owner[:n], rank[:n]
-
-
-def particle_mesh_contacts_compiled(table, shape: int, pos: np.ndarray, Rb: np.ndarray,
-                                    mesh: MeshWall, R: np.ndarray | None = None,
-                                    t: np.ndarray | None = None,
-                                    active_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts` (same arguments, same
-    rows) by :func:`particle_mesh_into`, for one query from Python."""
-    c = np.ascontiguousarray
-    R = np.eye(3) if R is None else c(R, float)
-    t = np.zeros(3) if t is None else c(t, float)
-    topo = pack_topology(mesh)
-    work = make_mesh_particle_work(len(mesh.faces), len(topo[0]))
-    room = len(mesh.faces) + len(topo[0])
-    rows_f, rows_i = np.zeros((room, NF)), np.zeros((room, NI), np.int64)
-    s = int(shape)
-    n = particle_mesh_into(table.tab, table.info[s], table.centroid[s], float(table.radius[s]),
-                           table.seeds, c(pos, float), c(Rb, float), R, t, mesh.vertices,
-                           mesh.faces, mesh.normals, mesh.two_sided, float(mesh.size),
-                           mesh.grid_origin, mesh.grid_cell, mesh.grid_dims, mesh.cell_start,
-                           mesh.cell_tris, *topo, bool(active_only), work, rows_f, rows_i)
-    return rows_f[:n], rows_i[:n]
+    return rows_f[:n], rows_i[:n], owner[:n], rank[:n]
