@@ -216,3 +216,47 @@ def test_a_refused_surface_contact_hands_back_and_the_provider_names_the_wall():
                      np.zeros((1, 3)), 1, 2)
     with pytest.raises(ContactNotUnique, match="surface wall 'narrow': .*not unique"):
         provider(kin)
+
+
+def test_an_ellipsoid_rolling_over_a_mesh_ridge_gives_the_same_bits_on_both_drivers(
+        tmp_path, monkeypatch):
+    """A tilted ellipsoid launched over a triangle-mesh ridge (a convex fold: face, edge,
+    face) beside a sphere at rest on the mesh: the compiled loop takes the NURBS particle's
+    contacts with the mesh (nurbsdem.contact.mesh_particle_compiled; it never hands a deck
+    step back) and gives the Python driver's bits; the ellipsoid crosses the ridge."""
+    import trimesh
+    used = _counting_steps(monkeypatch)
+    statuses = _recorded_statuses(monkeypatch)
+    v = np.array([[-0.1, -0.1, 0], [-0.1, 0.1, 0], [0, -0.1, 0.005], [0, 0.1, 0.005],
+                  [0.1, -0.1, 0], [0.1, 0.1, 0]], float)
+    trimesh.Trimesh(v, np.array([[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]]),
+                    process=False).export(tmp_path / "ridge.stl")
+    text = """Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2500
+Shapes
+  Shape 1 Ellipsoid SemiAxes 0.01 0.012 0.02
+  Shape 2 Sphere Radius 0.006
+Particles
+  Particle 1 Shape 1 Material 1 Position -0.012 0 0.0244 Rotation 0.3 0.2 0 Velocity 0.5 0 0
+  Particle 2 Shape 2 Material 1 Position 0.05 0.05 0.0087
+Walls
+  Mesh 1 Name ridge File ridge.stl
+Contact
+  Interface 1 NormalPenalty 1e5 NormalDamping 5 TangentialPenalty 1e5 Friction 0.3
+Steps
+  Step 1 Dynamic Duration 0.06 TimeStep 1e-3
+Output
+  Directory results
+  VTK Every 0.03 Resolution 4
+  Monitors Every 0.005
+  Results Every 0.03
+"""
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "ridge.inp", text)
+    assert any(used) and not all(used) and statuses and deck_steps.GUARD not in statuses
+    _same_bits(py, cc, s_py, s_cc, ("energy.csv", "contacts.csv", "wall_ridge.csv"))
+    ridge = np.genfromtxt(cc / "monitors" / "wall_ridge.csv", delimiter=",", names=True)
+    assert ridge["reaction_z"][-3:].min() > 0
+    x = read_results_sample(cc / "results.h5", len(read_results_times(cc / "results.h5")) - 1)
+    assert x["position"][0, 0] > 0.005
