@@ -357,8 +357,9 @@ def _bumps() -> tuple[np.ndarray, np.ndarray]:
 
 def test_the_compiled_mesh_solve_is_the_python_one_over_a_cube_and_bumps():
     """Random poses of the ellipsoid over a 6 cm cube (faces, edges, corners; half of them
-    1 mm into a corner along a normal of its cone) and over a bumped plane (convex and concave folds), in one call of the
-    compiled kernel: the same rows as the Python reference (count, order, triangle,
+    1 mm into a corner along a normal of its cone) and over a bumped plane (convex and
+    concave folds; one pose out of reach of every triangle), in one call of the compiled
+    kernel: the same rows as the Python reference (count, order, triangle,
     iterations) to 1e-12 of the size (points, depth) and 1e-12 (normal)."""
     import trimesh
     from nurbsdem.contact.lcp import I_IT, I_PB
@@ -381,7 +382,8 @@ def test_the_compiled_mesh_solve_is_the_python_one_over_a_cube_and_bumps():
                 d = rng.normal(size=3)
                 c = d / np.linalg.norm(d) * rng.uniform(0.035, 0.06)
             else:
-                c = np.array([*rng.uniform(-0.04, 0.04, size=2), rng.uniform(0.0, 0.025)])
+                c = np.array([*rng.uniform(-0.04, 0.04, size=2), rng.uniform(0.0, 0.025)
+                              if k else 0.06])      # the first: no triangle within reach
             poses.append(_pose(c, R))
         pos, rot = np.array([p for p, _ in poses]), np.array([r for _, r in poses])
         rf, ri, owner, rank = mesh_rows(TABLE, mesh, np.arange(len(poses)),

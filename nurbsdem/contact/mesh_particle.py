@@ -102,6 +102,8 @@ def _may_hold(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray) -> np.nda
     the support point along its normal facing the particle (one per distinct normal, within
     1e-9) projects within 1e-8 of the mesh size of the triangle (the face contact is then
     solved exactly, :func:`_face`)."""
+    if len(near) == 0:
+        return np.zeros(0, bool)
     tri = mesh.vertices[mesh.faces[near]]                          # (T, 3, 3)
     n = mesh.normals[near]
     n = n * np.where(np.einsum("ij,ij->i", oracle.centroid - tri[:, 0], n) >= 0.0,
