@@ -34,7 +34,8 @@ from .curved_walls import (MAX_PER_WALL, _surface_rows_of, wall_contact_key, wal
                            world_box)
 from .kinds import MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_particle_compiled import pack_topology, particle_mesh_rows_ptr
+from .mesh_particle_compiled import (make_mesh_particle_work, pack_topology,
+                                     particle_mesh_rows_ptr)
 from .mesh_wall import LIST_ROOM, NO_LIST, MeshWall, mesh_rows_listed
 from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
                                         particle_surface_rows_ptr)
@@ -69,10 +70,12 @@ CurvedConst = namedtuple(
 #: pose it was last advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces'
 #: extents (W,) m and centres (W,3) m (wall frame); the last call's contacts (count (1,) of
 #: them): bodies out_a, out_b, points on the sphere and on the wall out_pa, out_pb (m),
-#: normals, depths (m) and keys, each of room W·N·MAX_PER_WALL
+#: normals, depths (m) and keys, each of room W·N·MAX_PER_WALL; the NURBS particles'
+#: workspace against the meshes, particle_work
+#: (:data:`~nurbsdem.contact.mesh_particle_compiled.MeshParticleWork`, for the largest mesh)
 CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f keys mark near_p near_n "
                         "near_t gap x0 odo0 odo prev_R prev_t posed extent centre out_a out_b "
-                        "out_pa out_pb out_normal out_depth out_key count")
+                        "out_pa out_pb out_normal out_depth out_key count particle_work")
 
 
 def _offsets(sizes) -> np.ndarray:
@@ -167,7 +170,9 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
                       np.zeros(W, np.bool_), extent, centre, np.zeros(room, np.int64),
                       np.zeros(room, np.int64), np.zeros((room, 3)), np.zeros((room, 3)),
                       np.zeros((room, 3)), np.zeros(room), np.zeros(room, np.int64),
-                      np.zeros(1, np.int64))
+                      np.zeros(1, np.int64),
+                      make_mesh_particle_work(max([0] + [len(g.faces) for g in meshes]),
+                                              int(np.diff(cc.mfo).max(initial=0))))
     return cc, work
 
 
@@ -350,8 +355,8 @@ def _mesh_nurbs_contacts(cc, wk, w, idx, pos, rot, R, t, c):
                             cc.cell_tris[cc.to[w]:cc.to[w + 1]],
                             cc.feat[cc.mfo[w]:cc.mfo[w + 1]],
                             cc.feat_tris[cc.mlo[w]:cc.mlo[w + 1]], cc.tri_feat_range[f0:f1],
-                            cc.tri_feat[cc.mto[w]:cc.mto[w + 1]], MAX_PER_WALL, rows_f, rows_i,
-                            owner, rank, count))
+                            cc.tri_feat[cc.mto[w]:cc.mto[w + 1]], MAX_PER_WALL, wk.particle_work,
+                            rows_f, rows_i, owner, rank, count))
     return _put(cc, wk, w, pos.shape[0] + cc.first + w, c, count[0], rows_f, owner, rank)
 
 

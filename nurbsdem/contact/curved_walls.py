@@ -41,7 +41,7 @@ from .contactset import ContactSet
 from .kinds import (MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE, SURFACE_POINT,
                     SURFACE_SUPPORT, pair_solver)
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_particle_compiled import mesh_rows
+from .mesh_particle_compiled import mesh_rows, mesh_work
 from .mesh_wall import (MeshWall, make_lists, make_workspace, mesh_rows_listed,
                         sphere_mesh_rows)
 from .surface_particle import refusal, surface_rows
@@ -234,6 +234,7 @@ class CurvedWallContacts:
         self._mark = 0
         self._skins: dict[int, WallSkin] = {}
         self._near: dict[int, tuple] = {}        # id(wall): (its mesh, the lists)
+        self._particle_work: dict[int, tuple] = {}   # id(wall): (its mesh, the workspace)
         for w in self.walls:
             if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
                 raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
@@ -269,7 +270,7 @@ class CurvedWallContacts:
         if not isinstance(g, MeshWall):
             return self._nurbs_surface_rows(w, idx, kin, R, tv, w_i)
         rf, _, owner, rank = mesh_rows(self.table, g, idx, self.body_shape, kin.pose_origin,
-                                       kin.R, R, tv, MAX_PER_WALL)
+                                       kin.R, R, tv, MAX_PER_WALL, self._mesh_work(w, g))
         return rf, owner, rank
 
     def _nurbs_surface_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
@@ -332,6 +333,14 @@ class CurvedWallContacts:
         held = self._near.get(id(w))
         if held is None or held[0] is not g or len(held[1][1]) != len(self.radii):
             held = self._near[id(w)] = (g, make_lists(g, len(self.radii)))
+        return held[1]
+
+    def _mesh_work(self, w: CurvedWall, g: MeshWall):
+        """The NURBS particles' workspace against mesh wall w
+        (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_work`)."""
+        held = self._particle_work.get(id(w))
+        if held is None or held[0] is not g:
+            held = self._particle_work[id(w)] = (g, mesh_work(g))
         return held[1]
 
     def _skin(self, w: CurvedWall, g: SurfaceWall) -> WallSkin:

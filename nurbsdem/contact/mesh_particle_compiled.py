@@ -17,17 +17,19 @@ are packed once per mesh by :func:`pack_topology` as *features*: ``feat`` (F, 4)
 triangles in ``feat_tris``; ``tri_feat_range`` (T, 2) the range in ``tri_feat`` of each
 triangle's features (its edges, then its vertices).
 
-:func:`particle_mesh_into` solves one particle against one mesh in three parts:
-:func:`_start` (the pose in the mesh frame, the triangles within reach, the faces that may
-hold the contact), the features' iterations (:func:`_face`, :func:`_edge`, :func:`_vertex`)
-and the result (:func:`_distinct`, :func:`_rows`), over one tuple of named workspaces
-(:func:`make_mesh_particle_work`).  :func:`particle_mesh_rows` runs the particles of one mesh
+:func:`particle_mesh_into` solves one particle against one mesh in three parts: the start
+(the pose in the mesh frame, :func:`_near`: the triangles within reach, :func:`_may_hold`:
+the faces that may hold the contact), the iterations of each feature (:func:`_face`,
+:func:`_edge`, :func:`_vertex`, in :func:`_features`'s order) and the result
+(:func:`_distinct`, :func:`_rows`), over one tuple of named workspaces
+(:data:`MeshParticleWork`).  :func:`particle_mesh_rows` runs the particles of one mesh
 in one call (the Python provider and the compiled deck steps).  Lengths in metres.
 """
 from __future__ import annotations
 
 import math
 import weakref
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -86,25 +88,32 @@ def pack_topology(mesh: MeshWall) -> tuple:
     return data
 
 
+#: the workspaces of :func:`particle_mesh_into` (T triangles, F features, C = T + F): the
+#: support mapping's sv (:func:`make_surface_work`); the broad phase's stamp (T,) (−1),
+#: query mark (1,), tris (T,), cand_q (T,3), cand_d (T,), cand_f (T,); per near triangle its
+#: facing normal facing (T,3), whether it may hold the contact hold (T,) and its distinct
+#: normal's index key (T,); the distinct normals' keys dkey (T,3), first triangle drep (T,),
+#: order dord (T,) and support points dp (T,3); the features' stamp fstamp (F,) (−1) and
+#: list flist (F,); the candidates' rows cf (C,10), ci (C,3) and keep (C,); the in-plane
+#: inward normals of an edge's triangles inward (T,3); vectors mv (10,3)
+MeshParticleWork = namedtuple("MeshParticleWork", "sv stamp mark tris cand_q cand_d cand_f "
+                              "facing hold key dkey drep dord dp fstamp flist cf ci keep "
+                              "inward mv")
+
+
 @njit(cache=True)
 def make_mesh_particle_work(n_tris, n_feat):
-    """The workspaces of :func:`particle_mesh_into` for a mesh of ``n_tris`` triangles and
-    ``n_feat`` features, one tuple: the support mapping's (:func:`make_surface_work`); the
-    broad phase's stamp (T,) (−1), mark (1,), tris (T,), cand_q (T,3), cand_d (T,), cand_f
-    (T,); per near triangle its facing normal facing (T,3), whether it may hold the contact
-    hold (T,), its distinct normal's index key (T,); the distinct normals' keys dkey (T,3),
-    first triangle drep (T,), order dord (T,) and support points dp (T,3); the features'
-    stamp fstamp (F,) (−1) and list flist (F,); the candidates' rows cf (C,10), ci (C,3) and
-    keep (C,) (C = T + F); the in-plane inward normals of an edge's triangles inward (T,3);
-    vectors mv (10,3)."""
-    C = n_tris + n_feat
-    return (make_surface_work(0), np.full(n_tris, -1, np.int64), np.zeros(1, np.int64),
-            np.empty(n_tris, np.int64), np.empty((n_tris, 3)), np.empty(n_tris),
-            np.empty(n_tris, np.int64), np.empty((n_tris, 3)), np.empty(n_tris, np.bool_),
-            np.empty(n_tris, np.int64), np.empty((n_tris, 3)), np.empty(n_tris, np.int64),
-            np.empty(n_tris, np.int64), np.empty((n_tris, 3)), np.full(n_feat, -1, np.int64),
-            np.empty(n_feat, np.int64), np.empty((C, CF_COLS)), np.empty((C, 3), np.int64),
-            np.empty(C, np.bool_), np.empty((n_tris, 3)), np.zeros((MV_ROWS, 3)))
+    """The :data:`MeshParticleWork` of :func:`particle_mesh_into` for a mesh of ``n_tris``
+    triangles and ``n_feat`` features (one per thread)."""
+    T, F = n_tris, n_feat
+    C = T + F
+    i8 = np.int64
+    return MeshParticleWork(
+        make_surface_work(0), np.full(T, -1, i8), np.zeros(1, i8), np.empty(T, i8),
+        np.empty((T, 3)), np.empty(T), np.empty(T, i8), np.empty((T, 3)), np.empty(T, np.bool_),
+        np.empty(T, i8), np.empty((T, 3)), np.empty(T, i8), np.empty(T, i8), np.empty((T, 3)),
+        np.full(F, -1, i8), np.empty(F, i8), np.empty((C, CF_COLS)), np.empty((C, 3), i8),
+        np.empty(C, np.bool_), np.empty((T, 3)), np.zeros((MV_ROWS, 3)))
 
 
 # --------------------------------------------------------------------------- small helpers
@@ -195,13 +204,13 @@ def _near(rad, vertices, faces, normals, two_sided, grid_origin, grid_cell, grid
           cell_start, cell_tris, work):
     """The triangles within ``rad`` of the centroid (the reference's ``_near_triangles``)
     compacted to the front of work's tris; returns their count."""
-    sv, stamp, mark, tris, cand_q, cand_d, cand_f = work[:7]
+    sv, stamp, mark, tris = work.sv, work.stamp, work.mark, work.tris
     c = sv[5][_C]
     mark[0] += 1
     n = triangles_near(c, rad, grid_origin, grid_cell, grid_dims, cell_start, cell_tris, stamp,
                        mark[0], tris)
     n = _triangle_candidates(c, rad, vertices, faces, normals, True, tris, min(n, tris.shape[0]),
-                             cand_q, cand_d, cand_f)
+                             work.cand_q, work.cand_d, work.cand_f)
     if two_sided:
         return n
     k = 0
@@ -227,8 +236,8 @@ def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, wor
     """Per near triangle m < n, whether the deepest point below its plane may project into
     it (the reference's ``_may_hold``): the support point along each distinct facing normal
     (rounded to 1e-9, asked in sorted order), projected within 1e-8 of the mesh size."""
-    sv, tris = work[0], work[3]
-    facing, hold, key, dkey, drep, dord, dp = work[7:14]
+    sv, tris, facing, hold, key = work.sv, work.tris, work.facing, work.hold, work.key
+    dkey, drep, dord, dp = work.dkey, work.drep, work.dord, work.dp
     c = sv[5][_C]
     nd = 0
     for m in range(n):
@@ -284,7 +293,7 @@ def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, wor
 def _face(tab, info, cen, rad, seeds, vertices, faces, normals, tri, work, nc):
     """The face contact of triangle ``tri`` (the reference's ``_face``: the flat-wall kernel
     against its plane, normal towards the particle) as candidate nc; returns the new count."""
-    sv, mv, cf, ci = work[0], work[20], work[16], work[17]
+    sv, mv, cf, ci = work.sv, work.mv, work.cf, work.ci
     ws, wf, wi, wfs, no_mask, sw, rw, wdom, _, prev_f, prev_i, qf, qi, _, _ = sv
     a, b, c = vertices[faces[tri, 0]], vertices[faces[tri, 1]], vertices[faces[tri, 2]]
     front = _dot_diff(normals[tri], sw[_C], a) >= 0.0
@@ -329,7 +338,7 @@ def _edge_arc(vertices, faces, feat_tris, t0, t1, i, j, work):
     """(L, lo, hi): the length (m) of edge (i, j), its direction t and a basis e1, e2 of the
     plane normal to it (mv), and the arc [lo, hi] (rad) of its normal cone (the reference's
     ``_edge_arc``, from the in-plane inward normals of its triangles feat_tris[t0:t1])."""
-    mv, inward = work[20], work[19]
+    mv, inward = work.mv, work.inward
     p0, p1 = vertices[i], vertices[j]
     L = math.sqrt((p1[0] - p0[0]) ** 2 + (p1[1] - p0[1]) ** 2 + (p1[2] - p0[2]) ** 2)
     t = mv[_T]
@@ -367,7 +376,7 @@ def _edge(tab, info, cen, rad, seeds, vertices, faces, normals, feat_tris, t0, t
     """The contact of edge (i, j) with triangles feat_tris[t0:t1] (the reference's ``_edge``
     and its side test: a safeguarded Newton on f'(θ) = 0 inside the normal arc) as candidate
     nc; returns the new count."""
-    sv, mv, cf, ci = work[0], work[20], work[16], work[17]
+    sv, mv, cf, ci = work.sv, work.mv, work.cf, work.ci
     sw = sv[5]
     L, lo, hi = _edge_arc(vertices, faces, feat_tris, t0, t1, i, j, work)
     if hi - lo < MIN_ARC:
@@ -442,7 +451,7 @@ def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
     """(found, λ, iterations) of the point V against the particle (the reference's
     ``_vertex``): a Newton on the tangent components of p_A(d) − V from the unit d, with the
     Jacobian (dp/dd)_t − λ I; found: converged to a minimum, with p in sw[_P], d in sw[_D]."""
-    sv, mv = work[0], work[20]
+    sv, mv = work.sv, work.mv
     sw = sv[5]
     u1, u2 = mv[_U1], mv[_U2]
     tol = TOL * rad
@@ -481,7 +490,7 @@ def _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat_tri
     """The contact of vertex v with triangles feat_tris[t0:t1] (the reference's vertex
     branch: Newton from minus the sum of their facing normals, kept in the vertex's normal
     cone on the particle's side) as candidate nc; returns the new count."""
-    sv, mv, cf, ci = work[0], work[20], work[16], work[17]
+    sv, mv, cf, ci = work.sv, work.mv, work.cf, work.ci
     sw = sv[5]
     V = vertices[v]
     s = mv[_S]
@@ -517,7 +526,7 @@ def _features(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat, 
     """The edge, then the vertex contacts of the features of the near triangles (first-seen
     order, the reference's ``_features``) within the particle's reach, appended from
     candidate nc; returns the new count."""
-    sv, mark, tris, fstamp, flist = work[0], work[2], work[3], work[14], work[15]
+    sv, mark, tris, fstamp, flist = work.sv, work.mark, work.tris, work.fstamp, work.flist
     c = sv[5][_C]
     nf = 0
     for edges in (True, False):
@@ -624,7 +633,7 @@ def particle_mesh_into(tab, info, cen, rad, seeds, pos, Rb, R, t, vertices, face
     :func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts`, in its order (only those
     with sd < 0 with ``active_only``).  ``work``: :func:`make_mesh_particle_work`.  Returns
     the count of rows (written or not)."""
-    sv, cf, ci, keep = work[0], work[16], work[17], work[18]
+    sv, cf, ci, keep = work.sv, work.cf, work.ci, work.keep
     _pose_start(pos, Rb, R, t, cen, sv[5], sv[6], sv[10], sv[11], sv[12])
     n = _near(rad, vertices, faces, normals, two_sided, grid_origin, grid_cell, grid_dims,
               cell_start, cell_tris, work)
@@ -632,7 +641,7 @@ def particle_mesh_into(tab, info, cen, rad, seeds, pos, Rb, R, t, vertices, face
         return 0
     _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, work)
     nc = 0
-    tris, hold = work[3], work[8]
+    tris, hold = work.tris, work.hold
     for m in range(n):
         if hold[m]:
             nc = _face(tab, info, cen, rad, seeds, vertices, faces, normals, tris[m], work, nc)
@@ -646,15 +655,14 @@ def particle_mesh_into(tab, info, cen, rad, seeds, pos, Rb, R, t, vertices, face
 def particle_mesh_rows(idx, body_shape, pos, rot, R, t, tab, info, cen, rad, seeds, vertices,
                        faces, normals, two_sided, size, grid_origin, grid_cell, grid_dims,
                        cell_start, cell_tris, feat, feat_tris, tri_feat_range, tri_feat, per,
-                       rows_f, rows_i, owner, rank, count):
+                       work, rows_f, rows_i, owner, rank, count):
     """The touching rows of the NURBS particles ``idx`` (K,) (shapes ``body_shape`` (N,),
     poses pos (N,3) m, rot (N,3,3); the arrays tab … seeds of a
     :class:`~nurbsdem.contact.detect.ContactTable`) against one mesh at (R, t):
     :func:`particle_mesh_into` for each, its first ``per`` rows appended to rows_f (≥ K·per,
     NF), rows_i with their particle in ``owner`` and rank among its rows in ``rank``; their
-    count in count[0].  One set of workspaces for all (the Python provider's and the
-    compiled deck steps' call)."""
-    work = make_mesh_particle_work(faces.shape[0], feat.shape[0])
+    count in count[0].  ``work``: a :data:`MeshParticleWork` for at least this mesh's
+    triangles and features (kept between calls and meshes: its marks only grow)."""
     n = 0
     for m in range(idx.shape[0]):
         i = idx[m]
@@ -678,13 +686,20 @@ particle_mesh_rows_ptr = PointerKernel(particle_mesh_rows, "particle_mesh_rows",
                                        lazy="mesh_particles").call
 
 
+def mesh_work(mesh: MeshWall):
+    """A :data:`MeshParticleWork` for ``mesh``."""
+    return make_mesh_particle_work(len(mesh.faces), len(pack_topology(mesh)[0]))
+
+
 def mesh_rows(table, mesh: MeshWall, idx: np.ndarray, body_shape: np.ndarray, pos: np.ndarray,
-              rot: np.ndarray, R: np.ndarray, t: np.ndarray,
-              per: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(rows_f, rows_i, owner, rank) of the touching contacts of the NURBS particles ``idx`` (shapes
-    ``body_shape`` in ``table``, poses pos (N,3) m, rot (N,3,3)) with ``mesh`` at (R, t), at
-    most ``per`` each: :func:`particle_mesh_rows` from Python."""
+              rot: np.ndarray, R: np.ndarray, t: np.ndarray, per: int,
+              work=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rows_f, rows_i, owner, rank) of the touching contacts of the NURBS particles ``idx``
+    (shapes ``body_shape`` in ``table``, poses pos (N,3) m, rot (N,3,3)) with ``mesh`` at
+    (R, t), at most ``per`` each: :func:`particle_mesh_rows` from Python (``work``: the
+    mesh's :func:`mesh_work`, made when None)."""
     c = np.ascontiguousarray
+    work = mesh_work(mesh) if work is None else work
     K = len(idx)
     rows_f, rows_i = np.zeros((K * per, NF)), np.zeros((K * per, NI), np.int64)
     owner, rank, count = (np.zeros(K * per, np.int64), np.zeros(K * per, np.int64),
@@ -694,6 +709,6 @@ def mesh_rows(table, mesh: MeshWall, idx: np.ndarray, body_shape: np.ndarray, po
                        table.radius, table.seeds, mesh.vertices, mesh.faces, mesh.normals,
                        mesh.two_sided, float(mesh.size), mesh.grid_origin, mesh.grid_cell,
                        mesh.grid_dims, mesh.cell_start, mesh.cell_tris, *pack_topology(mesh),
-                       int(per), rows_f, rows_i, owner, rank, count)
+                       int(per), work, rows_f, rows_i, owner, rank, count)
     n = int(count[0])
     return rows_f[:n], rows_i[:n], owner[:n], rank[:n]
