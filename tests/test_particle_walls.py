@@ -5,8 +5,8 @@ ellipsoid's analytic support function, convex and concave folds, the ellipsoid i
 exact cylinder against the analytic contact and the same cylinder as a mesh (chord error), a
 wall pocket narrower than the particle refused, moved walls, and the compiled surface-wall
 solve against its Python reference in the drum and the cone of inputs/, and the compiled
-mesh solve against its Python reference over a cube and a bumped plane.  (Runs: test_mesh_walls_deck,
-test_wall_checks.)"""
+mesh solve against its Python reference over a cube and a bumped plane.  (Runs:
+test_mesh_walls_deck, test_wall_checks.)"""
 from __future__ import annotations
 
 import math
