@@ -238,7 +238,8 @@ def fill_lazy_kernels(group: str = "lcp") -> None:
     """Fill the slots of the lazy :class:`PointerKernel` s of ``group`` (compiling or loading
     them), now and, for callers typed or loaded later, at once: "lcp" where a scene with
     bodies other than exact spheres is set up (:class:`~nurbsdem.contact.detect.ContactTable`),
-    "curved" where the compiled deck steps take mesh or surface walls."""
+    "curved" where the compiled deck steps take mesh or surface walls, "surface_particles"
+    and "mesh_particles" where they take NURBS particles with surface or mesh walls."""
     if group in _LAZY_WANTED:
         return
     _LAZY_WANTED.add(group)

@@ -3,7 +3,8 @@
 triangle-mesh baffle inside and flat end plates — settling, then turning, gives the same bits
 whichever driver runs it, and the compiled loop really ran; so does a drum of ellipsoids and
 spheres without the baffle (NURBS particles against the surface wall,
-nurbsdem.contact.surface_particle_compiled)."""
+nurbsdem.contact.surface_particle_compiled), and an ellipsoid rolling off a mesh ridge
+(NURBS particles against a mesh wall, nurbsdem.contact.mesh_particle_compiled)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -252,3 +253,58 @@ def test_walls_turned_by_tables_give_the_same_bits_on_both_drivers(tmp_path, mon
                                     "wall_baffle.csv"))
     baffle = np.genfromtxt(cc / "monitors" / "wall_baffle.csv", delimiter=",", names=True)
     assert np.abs(baffle["reaction_z"]).max() > 0
+
+
+def test_an_ellipsoid_rolling_off_a_mesh_ridge_gives_the_same_bits_on_both_drivers(
+        tmp_path, monkeypatch):
+    """An ellipsoid dropped on a triangle-mesh ridge (a convex fold) just beside its edge
+    rolls off it onto a face, beside a sphere on the mesh: the compiled loop takes the NURBS
+    particle's contacts with the mesh (nurbsdem.contact.mesh_particle_compiled; it never
+    hands a deck step back) and gives the Python driver's bits; the Python driver's contacts
+    were the edge's, then the face's."""
+    import trimesh
+    from nurbsdem.contact import curved_walls
+    from nurbsdem.contact.lcp import F_PB
+    used = _counting_steps(monkeypatch)
+    statuses = _recorded_statuses(monkeypatch)
+    points = []                                       # the wall points of the rows (m)
+    rows_of = curved_walls.mesh_rows
+
+    def recording(*args, **kwargs):
+        out = rows_of(*args, **kwargs)
+        points.extend(out[0][:, F_PB:F_PB + 3].tolist())
+        return out
+    monkeypatch.setattr(curved_walls, "mesh_rows", recording)
+    v = np.array([[-0.1, -0.1, 0], [-0.1, 0.1, 0], [0, -0.1, 0.02], [0, 0.1, 0.02],
+                  [0.1, -0.1, 0], [0.1, 0.1, 0]], float)
+    trimesh.Trimesh(v, np.array([[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]]),
+                    process=False).export(tmp_path / "ridge.stl")
+    text = """Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2500
+Shapes
+  Shape 1 Ellipsoid SemiAxes 0.01 0.012 0.02
+  Shape 2 Sphere Radius 0.006
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.0005 0 0.0402 Rotation 0 0 0.3 Velocity 0.05 0 0
+  Particle 2 Shape 2 Material 1 Position 0.05 0.05 0.0163
+Walls
+  Mesh 1 Name ridge File ridge.stl
+Contact
+  Interface 1 NormalPenalty 1e5 NormalDamping 5 TangentialPenalty 1e5 Friction 0.3
+Steps
+  Step 1 Dynamic Duration 0.06 TimeStep 1e-3
+Output
+  Directory results
+  VTK Every 0.03 Resolution 4
+  Monitors Every 0.005
+  Results Every 0.03
+"""
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "ridge.inp", text)
+    assert any(used) and not all(used) and statuses and deck_steps.GUARD not in statuses
+    _same_bits(py, cc, s_py, s_cc, ("energy.csv", "contacts.csv", "wall_ridge.csv"))
+    ridge = np.genfromtxt(cc / "monitors" / "wall_ridge.csv", delimiter=",", names=True)
+    assert ridge["reaction_z"][-3:].min() > 0
+    x = np.array(points)[:, 0]
+    assert np.any(np.abs(x) < 1e-12) and np.any(x > 1e-4)     # on the edge, on the face

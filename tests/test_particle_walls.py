@@ -4,8 +4,9 @@ tessellated plane against the flat wall's kernel, edge and vertex contacts again
 ellipsoid's analytic support function, convex and concave folds, the ellipsoid inside an
 exact cylinder against the analytic contact and the same cylinder as a mesh (chord error), a
 wall pocket narrower than the particle refused, moved walls, and the compiled surface-wall
-solve against its Python reference in the drum and the cone of inputs/.  (Runs: test_mesh_walls_deck,
-test_wall_checks.)"""
+solve against its Python reference in the drum and the cone of inputs/, and the compiled
+mesh solve against its Python reference over a cube and a bumped plane.  (Runs:
+test_mesh_walls_deck, test_wall_checks.)"""
 from __future__ import annotations
 
 import math
@@ -345,3 +346,77 @@ def test_the_compiled_surface_solve_is_the_python_one_in_the_drum_and_the_cone()
                 np.testing.assert_allclose(f[F_N:F_N + 3], fr[F_N:F_N + 3], rtol=0, atol=1e-12)
                 seen["contact" if i[I_ACTIVE] else "apart"] += 1
     assert seen["contact"] >= 5 and seen["apart"] >= 3, seen
+
+
+def _bumps() -> tuple[np.ndarray, np.ndarray]:
+    """A 0.12 m square of 6 x 6 squares whose heights undulate by ±1 cm: convex and concave
+    folds, bent edges and vertices."""
+    v, f = plane_mesh(6, half=0.06)
+    v[:, 2] = 0.01 * np.sin(40 * v[:, 0]) * np.cos(30 * v[:, 1])
+    return v, f
+
+
+def _compiled_equals_reference(table, mesh, poses) -> tuple[list, np.ndarray]:
+    """The rows of the compiled mesh solve of the poses [(pos, R)] of the table's shape 0, in
+    one call, equal the Python reference's (count, order, triangle, iterations) to 1e-12 of
+    the size (points, depth) and 1e-12 (normal); returns (the reference's rows_f per pose,
+    each compiled row's pose)."""
+    from nurbsdem.contact.lcp import I_IT, I_PB
+    from nurbsdem.contact.mesh_particle_compiled import mesh_rows
+    pos, rot = np.array([p for p, _ in poses]), np.array([r for _, r in poses])
+    rf, ri, owner, rank = mesh_rows(table, mesh, np.arange(len(poses)),
+                                    np.zeros(len(poses), np.int64), pos, rot, np.eye(3),
+                                    np.zeros(3), 8)
+    tol = 1e-12 * 0.1
+    refs = []
+    for k, (p, R) in enumerate(poses):
+        ref_f, ref_i = particle_mesh_contacts(table, 0, p, R, mesh)
+        refs.append(ref_f)
+        got = owner == k
+        assert np.array_equal(rank[got], np.arange(len(ref_f)))
+        f, i = rf[got], ri[got]
+        assert np.array_equal(i[:, [I_ACTIVE, I_PB, I_IT]], ref_i[:, [I_ACTIVE, I_PB, I_IT]])
+        for a, b in ((F_SD, 1), (F_PA, 3), (F_PB, 3)):
+            np.testing.assert_allclose(f[:, a:a + b], ref_f[:, a:a + b], rtol=0, atol=tol)
+        np.testing.assert_allclose(f[:, F_N:F_N + 3], ref_f[:, F_N:F_N + 3], rtol=0, atol=1e-12)
+    return refs, owner
+
+
+def test_the_compiled_mesh_solve_is_the_python_one_over_a_cube_and_bumps():
+    """Random poses of the ellipsoid over a 6 cm cube (faces, edges, corners; half of them
+    1 mm into a corner along a normal of its cone) and over a bumped plane (convex and
+    concave folds; one pose out of reach of every triangle), and of the paper's particle A
+    over the bumps: the compiled kernel's rows are the Python reference's
+    (:func:`_compiled_equals_reference`)."""
+    import trimesh
+    box = trimesh.creation.box(extents=(0.06, 0.06, 0.06))
+    cube, bumps = build_mesh_wall(box.vertices, box.faces), build_mesh_wall(*_bumps())
+    rng = np.random.default_rng(3)
+    poses = []
+    for k in range(24):
+        R = _rotation(rng.normal(size=3))
+        if k % 2:                            # the support point along −n 1 mm into a corner
+            sign = np.sign(rng.normal(size=3))
+            n = sign * rng.uniform(0.2, 1.0, size=3)
+            n /= np.linalg.norm(n)
+            M = _support_matrix(R)
+            c = 0.03 * sign - 1e-3 * n + M @ n / math.sqrt(n @ M @ n)
+        else:
+            d = rng.normal(size=3)
+            c = d / np.linalg.norm(d) * rng.uniform(0.035, 0.06)
+        poses.append(_pose(c, R))
+    refs, _ = _compiled_equals_reference(TABLE, cube, poses)
+    on_cube = {int(np.sum(np.abs(np.abs(q) - 0.03) < 1e-12))
+               for rows in refs for q in rows[:, F_PB:F_PB + 3]}
+    assert on_cube == {1, 2, 3}                                 # faces, edges and corners
+    paper = table_of(shapes.paper_particle_shape("A"))
+    for table, n in ((TABLE, 24), (paper, 8)):
+        poses = []
+        for k in range(n):
+            R = _rotation(rng.normal(size=3))
+            c = np.array([*rng.uniform(-0.04, 0.04, size=2), rng.uniform(0.0, 0.025)
+                          if k else 0.06])          # the first: no triangle within reach
+            poses.append((c - R @ table.centroid[0], R))
+        refs, owner = _compiled_equals_reference(table, bumps, poses)
+        assert len(refs[0]) == 0 and sum(len(r) > 0 for r in refs) >= n // 2
+        assert table is paper or np.bincount(owner).max() >= 2    # a concave fold: two rows

@@ -1,6 +1,6 @@
 """Mesh and NURBS-surface walls inside the compiled deck steps: the contacts of exact spheres
-with them and of NURBS particles with the surface walls
-(:mod:`nurbsdem.contact.surface_particle_compiled`), as the provider of
+and of NURBS particles with them (:mod:`nurbsdem.contact.mesh_particle_compiled`,
+:mod:`nurbsdem.contact.surface_particle_compiled`), as the provider of
 :mod:`nurbsdem.contact.curved_walls` finds them, from packed arrays.
 
 The compiled loop (:mod:`nurbsdem.dynamics.deck_steps`) cannot hold a list of wall objects,
@@ -15,10 +15,10 @@ holds what changes: the mesh kernels' workspaces and the surfaces' gap certifica
 (:mod:`nurbsdem.contact.wall_skin`).
 
 :func:`curved_contacts` then gives, at time t, the contacts of the particles with every wall
-in the provider's order, keys and rows (wall by wall; spheres in index order, then a surface
-wall's NURBS particles in index order; a mesh's rows in the kernel's order, those touching
-kept with their rank), so that the loop's contact part
-sees the arrays the Python driver sees, bit for bit.  Units: metres, seconds, radians;
+in the provider's order, keys and rows (wall by wall; spheres in index order, then the
+wall's NURBS particles in index order; a mesh's rows per particle in the kernel's order,
+those touching kept with their rank), so that the loop's contact part sees the arrays the
+Python driver sees, bit for bit (the same kernels on both).  Units: metres, seconds, radians;
 global body indices (particles 0..N-1, walls N..N+W-1).
 """
 from __future__ import annotations
@@ -34,6 +34,8 @@ from .curved_walls import (MAX_PER_WALL, _surface_rows_of, wall_contact_key, wal
                            world_box)
 from .kinds import MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
+from .mesh_particle_compiled import (make_mesh_particle_work, pack_topology,
+                                     particle_mesh_rows_ptr)
 from .mesh_wall import LIST_ROOM, NO_LIST, MeshWall, mesh_rows_listed
 from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
                                         particle_surface_rows_ptr)
@@ -43,8 +45,12 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 #: among the system's W_all walls), nb = N + W_all, radius (N,) the spheres' radii; per wall
 #: kind (W,), the pose in time (omega, center (W,3), t0 (W,), R0 (W,3,3), shift0 (W,3)) and
 #: corners (W,8,3) of its wall-frame box; meshes: offsets (W+1,) into vertices, faces (and
-#: the triangles' cells tri_cells), cell starts and cell triangles, the arrays, per-wall two_sided, size, grid origin, cell and
-#: dims; surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
+#: the triangles' cells tri_cells), cell starts and cell triangles, the arrays, per-wall
+#: two_sided, size, grid origin, cell and dims, and offsets (W+1,) mfo, mlo, mto into the
+#: features (edges and vertices that are not flat) of the meshes met by NURBS particles,
+#: their triangles and the triangles' features: feat, feat_tris, tri_feat_range (per face)
+#: and tri_feat (:func:`~nurbsdem.contact.mesh_particle_compiled.pack_topology`; empty
+#: without NURBS particles); surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
 #: per-wall spacing and size; the particles: reach (N,) m (bounding radius about the
 #: centroid), which are exact spheres and which NURBS particles (N,) bool, their shapes
 #: body_shape (N,) and the NURBS particles' count, and the contact table's arrays (ptab …
@@ -53,8 +59,9 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 CurvedConst = namedtuple(
     "CurvedConst", "n_walls first nb radius kind omega center t0 R0 shift0 corners "
     "vo fo co to vertices faces normals two_sided msize grid_origin grid_cell grid_dims "
-    "cell_start cell_tris tri_cells po so deg ncp koff knots pw poff dom periodic seed_x seed_p "
-    "seed_uv spacing ssize reach sphere nurbs body_shape n_nurbs ptab pinfo pcen prad pseeds")
+    "cell_start cell_tris tri_cells mfo mlo mto feat feat_tris tri_feat_range tri_feat "
+    "po so deg ncp koff knots pw poff dom periodic seed_x seed_p seed_uv spacing ssize reach "
+    "sphere nurbs body_shape n_nurbs ptab pinfo pcen prad pseeds")
 #: what the search changes: the mesh kernels' workspaces over all meshes' triangles (stamp,
 #: tris, cand_q, cand_d, cand_f, keys) and the query mark (1,); the spheres' kept lists of
 #: nearby triangles per mesh wall (M meshes: near_p (M,N,5), near_n (M,N), near_t
@@ -63,10 +70,12 @@ CurvedConst = namedtuple(
 #: pose it was last advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces'
 #: extents (W,) m and centres (W,3) m (wall frame); the last call's contacts (count (1,) of
 #: them): bodies out_a, out_b, points on the sphere and on the wall out_pa, out_pb (m),
-#: normals, depths (m) and keys, each of room W·N·MAX_PER_WALL
+#: normals, depths (m) and keys, each of room W·N·MAX_PER_WALL; the NURBS particles'
+#: workspace against the meshes, particle_work
+#: (:data:`~nurbsdem.contact.mesh_particle_compiled.MeshParticleWork`, for the largest mesh)
 CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f keys mark near_p near_n "
                         "near_t gap x0 odo0 odo prev_R prev_t posed extent centre out_a out_b "
-                        "out_pa out_pb out_normal out_depth out_key count")
+                        "out_pa out_pb out_normal out_depth out_key count particle_work")
 
 
 def _offsets(sizes) -> np.ndarray:
@@ -132,6 +141,7 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
         _joined([g.cell_start for g in meshes], (0,), np.int64),
         _joined([g.cell_tris for g in meshes], (0,), np.int64),
         _joined([g.tri_cells for g in meshes], (0, 6), np.int64),
+        *_topologies(geo, provider is not None and bool(provider.nurbs.any())),
         _offsets([s[0] for s in ssizes]), _offsets([s[1] for s in ssizes]),
         _joined([g.deg for g in surfs], (0, 2), np.int64),
         _joined([g.ncp for g in surfs], (0, 2), np.int64),
@@ -160,8 +170,30 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
                       np.zeros(W, np.bool_), extent, centre, np.zeros(room, np.int64),
                       np.zeros(room, np.int64), np.zeros((room, 3)), np.zeros((room, 3)),
                       np.zeros((room, 3)), np.zeros(room), np.zeros(room, np.int64),
-                      np.zeros(1, np.int64))
+                      np.zeros(1, np.int64),
+                      make_mesh_particle_work(max([0] + [len(g.faces) for g in meshes]),
+                                              int(np.diff(cc.mfo).max(initial=0))))
     return cc, work
+
+
+def _topologies(geo: list, nurbs: bool) -> tuple:
+    """(mfo, mlo, mto (W+1,) offsets per wall, feat, feat_tris, tri_feat_range, tri_feat) of
+    the mesh walls' features among the walls' geometries ``geo``
+    (:func:`~nurbsdem.contact.mesh_particle_compiled.pack_topology`) when NURBS particles
+    meet them (``nurbs``), else none (every triangle without features); a surface wall has
+    none."""
+    def one(g):
+        if nurbs and isinstance(g, MeshWall):
+            return pack_topology(g)
+        T = len(g.faces) if isinstance(g, MeshWall) else 0
+        return (np.zeros((0, 4), np.int64), np.zeros(0, np.int64), np.zeros((T, 2), np.int64),
+                np.zeros(0, np.int64))
+    tops = [one(g) for g in geo]
+    return (_offsets([len(t[0]) for t in tops]), _offsets([len(t[1]) for t in tops]),
+            _offsets([len(t[3]) for t in tops]), _joined([t[0] for t in tops], (0, 4), np.int64),
+            _joined([t[1] for t in tops], (0,), np.int64),
+            _joined([t[2] for t in tops], (0, 2), np.int64),
+            _joined([t[3] for t in tops], (0,), np.int64))
 
 
 def _particles(provider, n: int) -> tuple:
@@ -306,11 +338,34 @@ def _nurbs_rows(cc, w, idx, pos, rot, R, t, rows_f, owner, rank, n):
 
 
 @njit(cache=True)
+def _mesh_nurbs_contacts(cc, wk, w, idx, pos, rot, R, t, c):
+    """The touching contacts of the NURBS particles idx (poses pos, rot) with mesh wall w
+    (:func:`~nurbsdem.contact.mesh_particle_compiled.particle_mesh_rows`, at most
+    ``MAX_PER_WALL`` each, keyed by their rank) into ``wk``'s contacts from c on; returns the
+    new count."""
+    v0, v1, f0, f1 = cc.vo[w], cc.vo[w + 1], cc.fo[w], cc.fo[w + 1]
+    room = idx.shape[0] * MAX_PER_WALL
+    rows_f, rows_i = np.zeros((room, NF)), np.zeros((room, NI), np.int64)
+    owner, rank, count = (np.zeros(room, np.int64), np.zeros(room, np.int64),
+                          np.zeros(1, np.int64))
+    particle_mesh_rows_ptr((idx, cc.body_shape, pos, rot, R, t, cc.ptab, cc.pinfo, cc.pcen,
+                            cc.prad, cc.pseeds, cc.vertices[v0:v1], cc.faces[f0:f1],
+                            cc.normals[f0:f1], cc.two_sided[w], cc.msize[w], cc.grid_origin[w],
+                            cc.grid_cell[w], cc.grid_dims[w], cc.cell_start[cc.co[w]:cc.co[w + 1]],
+                            cc.cell_tris[cc.to[w]:cc.to[w + 1]],
+                            cc.feat[cc.mfo[w]:cc.mfo[w + 1]],
+                            cc.feat_tris[cc.mlo[w]:cc.mlo[w + 1]], cc.tri_feat_range[f0:f1],
+                            cc.tri_feat[cc.mto[w]:cc.mto[w + 1]], MAX_PER_WALL, wk.particle_work,
+                            rows_f, rows_i, owner, rank, count))
+    return _put(cc, wk, w, pos.shape[0] + cc.first + w, c, count[0], rows_f, owner, rank)
+
+
+@njit(cache=True)
 def curved_contacts(cc, wk, time, x, rot, pos, wall_d) -> None:
     """The particles' contacts with the curved walls at time (s) (centroids x (N,3) m, pose
     rotations rot (N,3,3) and origins pos (N,3) m), the walls displaced by wall_d (W_all,3)
     m, into ``wk``: bodies, points, normals, depths (m) and keys, wall by wall in the
-    provider's order (module docstring; a surface wall's NURBS particles after its spheres),
+    provider's order (module docstring; a wall's NURBS particles after its spheres),
     ``wk.count[0]`` of them, −1 where a NURBS particle's contact with a surface wall is
     refused (called through a lazy pointer, :data:`curved_contacts_ptr`)."""
     N = x.shape[0]
@@ -324,6 +379,9 @@ def curved_contacts(cc, wk, time, x, rot, pos, wall_d) -> None:
         if cc.kind[w] == MESH_WALL:
             c = _mesh_contacts(cc, wk, w, mesh, idx, x, R, t, c)
             mesh += 1
+            more = _candidates(x, cc.reach, cc.nurbs, lo, hi) if cc.n_nurbs else idx[:0]
+            if more.shape[0]:
+                c = _mesh_nurbs_contacts(cc, wk, w, more, pos, rot, R, t, c)
             continue
         more = _candidates(x, cc.reach, cc.nurbs, lo, hi) if cc.n_nurbs else idx[:0]
         rows_f = np.zeros((idx.shape[0] + more.shape[0] + 1, NF))

@@ -2,7 +2,7 @@
 particles with triangle-mesh walls and open NURBS surface walls to those of another provider
 (the scene of the particles and the flat walls, :class:`~nurbsdem.contact.scene.SceneContacts`):
 exact spheres by :mod:`nurbsdem.contact.mesh_wall` and :mod:`nurbsdem.contact.surface_wall`,
-NURBS particles by their support mapping (:mod:`nurbsdem.contact.mesh_particle`,
+NURBS particles by their support mapping (:mod:`nurbsdem.contact.mesh_particle_compiled`,
 :mod:`nurbsdem.contact.surface_particle`).
 
 Each curved wall is a body of the system (global index ``N + first_wall + w``) held in its own
@@ -41,7 +41,7 @@ from .contactset import ContactSet
 from .kinds import (MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE, SURFACE_POINT,
                     SURFACE_SUPPORT, pair_solver)
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_particle import particle_mesh_contacts
+from .mesh_particle_compiled import mesh_rows, mesh_work
 from .mesh_wall import (MeshWall, make_lists, make_workspace, mesh_rows_listed,
                         sphere_mesh_rows)
 from .surface_particle import refusal, surface_rows
@@ -250,6 +250,7 @@ class CurvedWallContacts:
         self._mark = 0
         self._skins: dict[int, WallSkin] = {}
         self._near: dict[int, tuple] = {}        # id(wall): (its mesh, the lists)
+        self._particle_work: dict[int, tuple] = {}   # id(wall): (its mesh, the workspace)
         for w in self.walls:
             if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
                 raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
@@ -298,22 +299,15 @@ class CurvedWallContacts:
 
     def _nurbs_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
         """(rows_f, owner, rank) of the NURBS particles ``idx``' contacts with wall w at the
-        pose (R, tv)."""
-        rows, owners, ranks = [], [], []
+        pose (R, tv): a mesh's in one compiled call
+        (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_rows`, at most
+        ``MAX_PER_WALL`` each)."""
         g = w.geometry
         if not isinstance(g, MeshWall):
             return self._nurbs_surface_rows(w, idx, kin, R, tv, w_i)
-        for i in idx.tolist():
-            s = int(self.body_shape[i])
-            rf, _ = particle_mesh_contacts(self.table, s, kin.pose_origin[i], kin.R[i], g,
-                                           R, tv, w.work)
-            rf = rf[:MAX_PER_WALL]
-            rows.append(rf)
-            owners.append(np.full(len(rf), i, np.int64))
-            ranks.append(np.arange(len(rf), dtype=np.int64))
-        if not rows:
-            return np.zeros((0, NF)), np.zeros(0, np.int64), np.zeros(0, np.int64)
-        return np.concatenate(rows), np.concatenate(owners), np.concatenate(ranks)
+        rf, _, owner, rank = mesh_rows(self.table, g, idx, self.body_shape, kin.pose_origin,
+                                       kin.R, R, tv, MAX_PER_WALL, self._mesh_work(w, g))
+        return rf, owner, rank
 
     def _nurbs_surface_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
         """(rows_f, owner, rank) of the NURBS particles ``idx``' active contacts with surface
@@ -375,6 +369,14 @@ class CurvedWallContacts:
         held = self._near.get(id(w))
         if held is None or held[0] is not g or len(held[1][1]) != len(self.radii):
             held = self._near[id(w)] = (g, make_lists(g, len(self.radii)))
+        return held[1]
+
+    def _mesh_work(self, w: CurvedWall, g: MeshWall):
+        """The NURBS particles' workspace against mesh wall w
+        (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_work`)."""
+        held = self._particle_work.get(id(w))
+        if held is None or held[0] is not g:
+            held = self._particle_work[id(w)] = (g, mesh_work(g))
         return held[1]
 
     def _skin(self, w: CurvedWall, g: SurfaceWall) -> WallSkin:

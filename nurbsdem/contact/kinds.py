@@ -35,8 +35,9 @@ CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT = 0, 1, 2, 3
 #: both run by :class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`
 MESH_ROWS, SURFACE_POINT = 4, 5
 #: a NURBS particle against a mesh wall: per face, edge and vertex by its support mapping
-#: (:func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts`); against a surface wall:
-#: Newton over the wall's parameters on the support point along the wall's normal
+#: (:func:`~nurbsdem.contact.mesh_particle_compiled.particle_mesh_into`, the Python
+#: :func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts` its reference); against a
+#: surface wall: Newton over the wall's parameters on the support point along the wall's normal
 #: (:func:`~nurbsdem.contact.surface_particle.particle_surface_row`); run by the same provider
 MESH_SUPPORT, SURFACE_SUPPORT = 6, 7
 NO_SOLVER = -1

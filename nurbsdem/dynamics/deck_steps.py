@@ -54,6 +54,7 @@ from numba import njit
 
 from ..contact.analytic import closed_form_into
 from ..contact.curved_compiled import curved_contacts_ptr, pack_curved, with_curved_contacts
+from ..contact.kinds import MESH_WALL, SURFACE_WALL
 from ..contact.listed import scene_list_ptr, solve_due_into_ptr
 from ..contact.verlet import (active_arrays, active_rows, advance_odometers, carry_rows,
                               due_rows, list_is_stale, near_arrays, near_pairs, renew_certificates,
@@ -231,7 +232,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     ``cc.implicit``).  The active pairs are found among the rows just solved (``due``, list
     positions: :func:`~nurbsdem.contact.verlet.active_rows`); the separated pairs, which only
     the time-step control at the end of a deck step takes, with ``full`` only (else none).
-    The contacts of the spheres with mesh and surface walls ``curved`` at ``time`` (s) follow
+    The contacts of the particles with mesh and surface walls ``curved`` at ``time`` (s) follow
     the scene's (:func:`_with_curved`; ``cwork``: their workspaces; ``spin`` (W,6): each
     wall's angular velocity, rad/s, and centre, m).  Returns (True, the new
     Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
@@ -560,18 +561,13 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
 def _curved_provider(provider):
     """``provider`` when it is a mesh- and surface-wall provider
     (:class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`) the compiled loop takes:
-    exact spheres with any of its walls, NURBS particles with surface walls only (no mesh
-    wall), every wall at rest, turning at a constant rate
-    (:class:`~nurbsdem.contact.curved_walls.WallPose`) or turned by a table (the provider
-    that sets the table's spin hands over the one it wraps:
+    exact spheres and NURBS particles with any of its walls, every wall at rest, turning at
+    a constant rate (:class:`~nurbsdem.contact.curved_walls.WallPose`) or turned by a table
+    (the provider that sets the table's spin hands over the one it wraps:
     :func:`~nurbsdem.dynamics.curved_turns.table_turns`); else None."""
     from ..contact.curved_walls import CurvedWallContacts, WallPose
-    from ..contact.mesh_wall import MeshWall
     provider = getattr(provider, "inner", provider)
     if type(provider) is not CurvedWallContacts:
-        return None
-    if not np.all(provider.spheres) and any(isinstance(w.geometry, MeshWall)
-                                            for w in provider.walls):
         return None
     if not all(isinstance(w.pose, WallPose) for w in provider.walls):
         return None
@@ -593,8 +589,11 @@ class DeckSteps:
         self.provider = curved
         if curved is not None:
             fill_lazy_kernels("curved")      # the mesh and surface walls' kernels
-        if self.curved.n_nurbs:
+        kinds = set(self.curved.kind.tolist())
+        if self.curved.n_nurbs and SURFACE_WALL in kinds:
             fill_lazy_kernels("surface_particles")
+        if self.curved.n_nurbs and MESH_WALL in kinds:
+            fill_lazy_kernels("mesh_particles")
         self.spin = (np.zeros((W, 6)) if s.wall_spin is None
                      else np.ascontiguousarray(s.wall_spin, float))
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
@@ -611,9 +610,8 @@ class DeckSteps:
         cell, that has been called once (any contact law: the Hertz radii of NURBS contacts
         come from the curvature kernel the Python path calls, :func:`_hertz_radii`) whose laws
         are all built in (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with
-        mesh and surface walls (met by exact spheres, or surface walls by NURBS particles), at
-        rest, turning at constant rates or turned by tables (:func:`_curved_provider`); else
-        None."""
+        mesh and surface walls (met by exact spheres and NURBS particles), at rest, turning at
+        constant rates or turned by tables (:func:`_curved_provider`); else None."""
         from ..contact.scene import SceneContacts
         scene, curved = system.provider, _curved_provider(system.provider)
         if curved is not None:
