@@ -146,7 +146,7 @@ def _bilinear(M, x, y):
     return s
 
 
-@kernel(inline="always")
+@kernel
 def _point(tab, info, cen, rad, seeds, sv, d0, d1, d2):
     """The support point along the unit (d0, d1, d2) (mesh frame) into sw[_P], dp/dd into
     sw[_M:_M+3]; whether it converged (:func:`_support`)."""
@@ -155,7 +155,7 @@ def _point(tab, info, cen, rad, seeds, sv, d0, d1, d2):
     return _support(tab, info, cen, rad, seeds, sv)
 
 
-@kernel(inline="always")
+@kernel
 def _separated(tab, info, cen, rad, seeds, sv, d0, d1, d2, x, y):
     """Whether the support plane along the unit d has the points x and y beyond it (pass x
     twice for one point)."""
@@ -199,7 +199,7 @@ def _put(cf, ci, n, sd, p, q, d0, d1, d2, feat, tri, it):
 
 
 # --------------------------------------------------------------------------- start
-@kernel(inline="always")
+@kernel
 def _near(rad, vertices, faces, normals, two_sided, grid_origin, grid_cell, grid_dims,
           cell_start, cell_tris, work):
     """The triangles within ``rad`` of the centroid (the reference's ``_near_triangles``)
@@ -231,7 +231,7 @@ def _key_less(dkey, a, b):
     return False
 
 
-@kernel(inline="always")
+@kernel
 def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, work):
     """Per near triangle m < n, whether the deepest point below its plane may project into
     it (the reference's ``_may_hold``): the support point along each distinct facing normal
@@ -289,7 +289,7 @@ def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, wor
 
 
 # --------------------------------------------------------------------------- iterations
-@kernel(inline="always")
+@kernel
 def _face(tab, info, cen, rad, seeds, vertices, faces, normals, tri, work, nc):
     """The face contact of triangle ``tri`` (the reference's ``_face``: the flat-wall kernel
     against its plane, normal towards the particle) as candidate nc; returns the new count."""
@@ -316,7 +316,7 @@ def _face(tab, info, cen, rad, seeds, vertices, faces, normals, tri, work, nc):
     return nc + 1
 
 
-@kernel(inline="always")
+@kernel
 def _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, th):
     """(g, h, ok) of the edge's f(θ) = h_A(d(θ)) − d(θ) · P0: f' = (p − P0) · d',
     f'' = d'ᵀ (dp/dd) d' − (p − P0) · d, with d(θ) = cos θ e1 + sin θ e2 (in sw[_D]) and p
@@ -333,7 +333,7 @@ def _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, th):
     return g, h, ok
 
 
-@kernel(inline="always")
+@kernel
 def _edge_arc(vertices, faces, feat_tris, t0, t1, i, j, work):
     """(L, lo, hi): the length (m) of edge (i, j), its direction t and a basis e1, e2 of the
     plane normal to it (mv), and the arc [lo, hi] (rad) of its normal cone (the reference's
@@ -370,7 +370,7 @@ def _edge_arc(vertices, faces, feat_tris, t0, t1, i, j, work):
     return L, lo, hi
 
 
-@kernel(inline="always")
+@kernel
 def _edge(tab, info, cen, rad, seeds, vertices, faces, normals, feat_tris, t0, t1, i, j,
           active_only, work, nc):
     """The contact of edge (i, j) with triangles feat_tris[t0:t1] (the reference's ``_edge``
@@ -446,7 +446,7 @@ def _tangent_basis(d0, d1, d2, u1, u2):
     u2[2] = d0 * u1[1] - d1 * u1[0]
 
 
-@kernel(inline="always")
+@kernel
 def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
     """(found, λ, iterations) of the point V against the particle (the reference's
     ``_vertex``): a Newton on the tangent components of p_A(d) − V from the unit d, with the
@@ -484,7 +484,7 @@ def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
     return False, 0.0, MAX_IT
 
 
-@kernel(inline="always")
+@kernel
 def _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat_tris, t0, t1, v,
             active_only, work, nc):
     """The contact of vertex v with triangles feat_tris[t0:t1] (the reference's vertex
@@ -520,7 +520,7 @@ def _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat_tri
     return nc + 1
 
 
-@kernel(inline="always")
+@kernel
 def _features(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat, feat_tris,
               tri_feat_range, tri_feat, n, active_only, work, nc):
     """The edge, then the vertex contacts of the features of the near triangles (first-seen
@@ -562,7 +562,7 @@ def _features(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat, 
 
 
 # --------------------------------------------------------------------------- result
-@kernel(inline="always")
+@kernel
 def _distinct(cf, ci, keep, nc, size):
     """keep[k]: candidate k is not at the point of an earlier kept one, faces first (the
     reference's ``_distinct``: within 1e-12 of the mesh size between faces, 1e-9 else)."""
@@ -587,7 +587,7 @@ def _distinct(cf, ci, keep, nc, size):
             keep[k] = not same
 
 
-@kernel(inline="always")
+@kernel
 def _rows(cf, ci, keep, nc, R, t, active_only, rows_f, rows_i):
     """The kept candidates (touching only with ``active_only``) as rows (world frame, normal
     from the particle to the wall), at most rows_f.shape[0]; returns how many there are."""
