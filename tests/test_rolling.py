@@ -105,6 +105,8 @@ def test_without_rolling_friction_the_sphere_keeps_rolling_and_the_deck_is_uncha
     assert "RollingFriction 0.1" in _sphere_on_floor((0, 0, -G), MU_R).deck_text
 
 
-def test_a_negative_rolling_friction_is_refused_with_the_reason():
+def test_a_rolling_friction_out_of_its_range_is_refused_with_the_reason():
     with pytest.raises(InputError, match="rolling_friction must be >= 0, got -0.1 .*drive"):
         Simulation().add_interface(normal_penalty=1e5, rolling_friction=-0.1)
+    with pytest.raises(InputError, match="RollingFriction 0.5 is out of range.*time-step"):
+        Simulation().add_interface(normal_penalty=1e5, rolling_friction=0.5)
