@@ -3,7 +3,7 @@
 
 The model is the elastic–plastic spring of Ai, Chen, Rotter & Ooi (2011, "Assessment of rolling
 resistance models in discrete element simulations", Powder Technol. 206, model C, the EPSD
-model of LIGGGHTS' ``epsd2``) without its viscous part.  Per contact, with n the unit normal from
+model of LIGGGHTS' ``epsd``) without its viscous part.  Per contact, with n the unit normal from
 A towards B and the contact's rolling radius R_r:
 
 * relative rolling velocity (the twist about n excluded)::
@@ -20,10 +20,10 @@ A towards B and the contact's rolling radius R_r:
 
       |M| <= M_max = μ_r R_r f_n:   else θ = θ* M_max/|M*|, M = M* M_max/|M*|
 
-* stiffness k_r = 2.25 μ_r² R_r² k_n (Iwashita & Oda 1998, as used by Ai et al. and
-  LIGGGHTS ``epsd2``) with k_n the law's tangent normal stiffness: the spring yields at the
-  rotation θ_y = M_max/k_r = f_n/(2.25 μ_r R_r k_n), which for a linear law is
-  d/(2.25 μ_r R_r): a small fraction of a radian while d << R.
+* stiffness k_r = 2.25 μ_r² R_r² k_n (Ai et al.'s choice for 3D, as in LIGGGHTS ``epsd``)
+  with k_n the law's tangent normal stiffness: the spring yields at the rotation
+  θ_y = M_max/k_r = f_n/(2.25 μ_r R_r k_n), for a linear law d/(2.25 μ_r R_r) (4e-4 rad for
+  a 1 cm sphere of the tests at rest with μ_r = 0.1).
 
 A rolling body thus meets a constant torque μ_r R_r f_n against its rolling once the spring has
 yielded (the constant directional torque of Ai's model A), and a body at rest under a torque
@@ -59,7 +59,7 @@ from numba import njit
 NSPRING = 6
 #: first column of the rolling spring and of the rolling torque
 ROLL = 3
-#: k_r = ROLLING_STIFFNESS μ_r² R_r² k_n (Iwashita & Oda 1998)
+#: k_r = ROLLING_STIFFNESS μ_r² R_r² k_n (Ai et al. 2011, 3D)
 ROLLING_STIFFNESS = 2.25
 
 
