@@ -30,6 +30,7 @@ import numpy as np
 
 from .contact.curved_walls import split_wall_contact_key, wall_contact_key
 from .dynamics.flow import Inlet, Outlet
+from .dynamics.rolling import NSPRING
 from .errors import InputError
 from .model import Bodies, Model
 
@@ -190,7 +191,8 @@ def remap_history(keys: np.ndarray, springs: np.ndarray, new_index: np.ndarray,
     (:func:`~nurbsdem.contact.curved_walls.wall_contact_key`).
     Returned sorted by key, as the systems keep them."""
     keys = np.asarray(keys, np.int64)
-    springs = np.asarray(springs, float).reshape(-1, 3)
+    springs = np.asarray(springs, float)     # a row per key, of any width (rolling.NSPRING)
+    springs = springs.reshape(len(keys), -1) if len(keys) else springs.reshape(0, NSPRING)
     n_old = len(new_index)
     nb_old, nb_new = n_old + n_walls, n_new + n_walls
     pair = keys < nb_old * nb_old

@@ -251,9 +251,11 @@ class CurvedWallSpec:
 @dataclass
 class Interface:
     """``Interface ID [Model LinearPenalty] NormalPenalty en [TangentialPenalty et]
-    [NormalDamping cn] [TangentialDamping ct] [Friction mu] [Between particle-particle|particle-wall]
+    [NormalDamping cn] [TangentialDamping ct] [Friction mu] [RollingFriction mu_r]
+    [Between particle-particle|particle-wall]
     [Materials m1 m2 | Materials m]``  (paper Eqs. 16-17), or
-    ``Interface ID Model HertzMindlin Restitution e [Friction mu] [Between ..] [Materials ..]``
+    ``Interface ID Model HertzMindlin Restitution e [Friction mu] [RollingFriction mu_r] [Between ..]
+    [Materials ..]``
     (Hertz–Mindlin with the exact local curvature, :mod:`nurbsdem.dynamics.laws.hertz_mindlin`; the elastic
     constants come from the materials' YoungModulus and PoissonRatio).
 
@@ -264,7 +266,8 @@ class Interface:
     Python API alike.
 
     normal_penalty (N/m), tangential_penalty (N/m), normal_damping (N s/m),
-    tangential_damping (N s/m), friction (Coulomb coefficient, -).
+    tangential_damping (N s/m), friction (Coulomb coefficient, -), rolling_friction (the
+    rolling-resistance coefficient μ_r, -: :mod:`nurbsdem.dynamics.rolling`; 0 none).
     between: ``None`` (all pairs) or one of :data:`PAIR_KINDS`.
     materials: ``None`` (any), ``(m1, m2)`` (particle-particle pairs of these materials,
     unordered) or ``(m,)`` (particle-wall pairs whose particle has material m).
@@ -282,6 +285,7 @@ class Interface:
     model: str = "linear"
     restitution: float = 1.0
     params: dict[str, float] = field(default_factory=dict)
+    rolling_friction: float = 0.0
 
     def applies(self, kind: str, materials: tuple[int, ...]) -> bool:
         """Whether this interface covers a pair of the given kind and material ids

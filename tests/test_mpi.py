@@ -164,6 +164,23 @@ def test_hertz_mindlin_on_two_ranks(tmp_path):
     assert_same_run(tmp_path / "out", tmp_path / "ref")
 
 
+@needs_mpi
+@pytest.mark.slow      # as the Hertz–Mindlin run: the suite's default covers 2 ranks once
+def test_rolling_friction_on_two_ranks(tmp_path):
+    """Rolling friction (the rolling springs in the contacts' history rows, their torques in
+    the loads of the walls and of ghosts) on 2 ranks: the serial results."""
+    text = DECK.read_text().replace("../../../inputs", str(HERE.parent / "inputs"))
+    text = text.replace("TangentialDamping 0 Friction 0.5",
+                        "TangentialDamping 0 Friction 0.5 RollingFriction 0.1")
+    text = text.replace("Step 3 Dynamic Duration 0.15", "Step 3 Dynamic Duration 0.05")
+    assert "RollingFriction" in text
+    deck = tmp_path / "rolling.inp"
+    deck.write_text(text)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "ref"])
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "out"], 2)
+    assert_same_run(tmp_path / "out", tmp_path / "ref")
+
+
 @pytest.fixture(scope="module")
 def implicit_run(tmp_path_factory) -> tuple[Path, Path]:
     """The MPI deck with ``Damping Implicit`` in every dynamic step (``Accuracy`` in the first,

@@ -107,7 +107,7 @@ def _forces_one_thread(a, b, pa, pb, nrm, dep, pos, vel, omg, material, table, s
     _contact_laws_range(a, b, pa, pb, nrm, dep, pos, vel, omg, material, table, spring, h,
                         inv_mass, radius, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs,
                         given, dashpot, slip, 0, a.shape[0])
-    _add_contact_loads(a, b, pos, point, ftot, force, torque)
+    _add_contact_loads(a, b, pos, point, ftot, fet, force, torque)
     total = 0.0
     for c in range(a.shape[0]):
         total += slip[c]
@@ -116,8 +116,8 @@ def _forces_one_thread(a, b, pa, pb, nrm, dep, pos, vel, omg, material, table, s
 
 @pytest.mark.parametrize("model", [0, 1])
 def test_contact_laws_on_threads_have_the_bits_of_one_thread(scene, threads, model):
-    """Linear (Eq. 16-17) and Hertz-Mindlin rows, sliding and sticking contacts: the laws on
-    threads, the loads added in contact order."""
+    """Linear (Eq. 16-17) and Hertz-Mindlin rows with rolling friction, sliding and sticking
+    contacts: the laws on threads, the loads added in contact order."""
     from nurbsdem.dynamics.forces import ContactLaw, InterfaceTable
     from nurbsdem.dynamics.laws.hertz_mindlin import HertzMindlin as HertzMindlinLaw
     s, rng = scene, scene["rng"]
@@ -127,17 +127,18 @@ def test_contact_laws_on_threads_have_the_bits_of_one_thread(scene, threads, mod
     omg = np.concatenate((s["omega"], np.zeros((W, 3))))
     nrm = rng.normal(size=(K, 3))
     nrm /= np.linalg.norm(nrm, axis=1)[:, None]
-    law = (ContactLaw(en=1e5, cn=50.0, et=1e4, ct=5.0, mu=0.3) if model == 0 else
-           HertzMindlinLaw(e_star=1e7, g_star=4e6, restitution=0.6, mu=0.3))
+    law = (ContactLaw(en=1e5, cn=50.0, et=1e4, ct=5.0, mu=0.3, mu_r=0.2) if model == 0 else
+           HertzMindlinLaw(e_star=1e7, g_star=4e6, restitution=0.6, mu=0.3, mu_r=0.2))
     table = InterfaceTable(law).as_array(1)
     args = (s["a"], s["b"], rng.normal(size=(K, 3)), rng.normal(size=(K, 3)), nrm,
             1e-3 * rng.random(K), pos, vel, omg, np.zeros(B, np.int64), table)
-    spring = 1e-3 * rng.normal(size=(K, 3))
+    spring = 1e-3 * rng.normal(size=(K, 6))                 # tangential and rolling springs
     rest = (1e-4, np.concatenate((s["inv_mass"], np.zeros(W))), 0.01 + rng.random(K))
     outs = []
     for fn in (contact_forces, _forces_one_thread):
-        o = [np.zeros((B, 3)), np.zeros((B, 3))] + [np.empty((K, 3)) for _ in range(5)] + [
-            np.empty(K), np.empty((K, 2)), np.empty(K, np.int64), np.empty((K, 4))]
+        o = [np.zeros((B, 3)), np.zeros((B, 3))] + [np.empty((K, 3)) for _ in range(4)] + [
+            np.empty((K, 6)), np.empty(K), np.empty((K, 2)), np.empty(K, np.int64),
+            np.empty((K, 4))]
         sp = spring.copy()
         slip = fn(*args, sp, *rest, *o, np.bool_(False), np.zeros(0))
         outs.append((slip, sp, o))

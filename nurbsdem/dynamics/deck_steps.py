@@ -597,7 +597,7 @@ class DeckSteps:
         self.spin = (np.zeros((W, 6)) if s.wall_spin is None
                      else np.ascontiguousarray(s.wall_spin, float))
         self.sc = SceneConst(scene.tables(), scene.n, scene.radius, scene.skin, scene.margin,
-                             scene.certificates, s.uses_hertz, scene.table.tab[:7],
+                             scene.certificates, s.needs_radius, scene.table.tab[:7],
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
                              np.ones(scene.n, np.bool_), numba.get_num_threads(),

@@ -5,14 +5,15 @@ Per sample (:class:`EnergySample`):
 * ``kinetic_translational`` Σ ½ m v²; ``kinetic_rotational`` Σ ½ πᵀ I⁻¹ π;
 * ``potential`` gravitational, relative to the world origin: −Σ m g·x (g the gravity vector, so
   with g = (0, 0, −9.81) it is Σ m 9.81 z);
-* ``elastic_normal`` Σ ½ εn d², ``elastic_tangential`` Σ ½ εt |s|² over the active contacts;
+* ``elastic_normal`` Σ ½ εn d², ``elastic_tangential`` Σ ½ εt |s|² over the active contacts
+  (plus the rolling springs' ½ k_r |θ|², :mod:`nurbsdem.dynamics.rolling`);
 * ``dissipated_normal`` / ``dissipated_tangential``: work removed by the normal / tangential
   dashpots (incl. the no-tension clip of the normal force; the normal part also takes the
   elastic energy of a contact left out after its contact problem failed twice,
   :mod:`nurbsdem.contact.scene`), ``dissipated_friction``: work done on
-  the tangential springs minus the tangential elastic energy still stored (slip of the Coulomb
-  return mapping, and springs dropped loaded when a contact ends; see
-  :mod:`nurbsdem.dynamics.forces`);
+  the tangential and rolling springs minus their elastic energy still stored (slip of the
+  Coulomb return mapping, the rolling torque's plastic work, and springs dropped loaded when a
+  contact ends; see :mod:`nurbsdem.dynamics.forces`);
 * ``external_work``: work done on the particles by the prescribed-motion walls, ∫ reaction·u dt,
   and the potential energy Σ m g·Δx a wrap into a periodic cell takes off (Δx the
   translation, :mod:`nurbsdem.contact.periodic`);

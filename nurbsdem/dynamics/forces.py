@@ -35,7 +35,9 @@ tangential elastic energy still stored, so it includes slip and the spring energ
 contact ends with a loaded spring, and adds no error of its own to the energy balance.
 
 History is keyed by ``ContactSet.key``: a new contact starts with s = 0, a contact absent from
-the set drops its history (:func:`match_history`).
+the set drops its history (:func:`match_history`).  A contact's history row also holds its
+rolling spring (:mod:`nurbsdem.dynamics.rolling`: the rolling resistance of an interface with
+``RollingFriction``, whose torque enters the loads with the forces').
 
 Contact laws are per interface: a dense table with one row per pair of materials
 (:mod:`nurbsdem.dynamics.laws.table`); the kernel dispatches on the row's law
@@ -52,25 +54,29 @@ from numba import njit, prange
 from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 from .laws import law_normal, law_spring_scale
 from .laws.linear_penalty import LinearPenalty
-from .laws.table import MU, InterfaceTable
+from .laws.table import MU, RF, InterfaceTable
+from .rolling import NSPRING, ROLL, no_rolling, rolling_result
 
 #: the linear penalty law (:class:`~nurbsdem.dynamics.laws.linear_penalty.LinearPenalty`)
 ContactLaw = LinearPenalty
 
 __all__ = ["ContactLaw", "InterfaceTable", "contact_forces", "contact_loads", "match_history",
-           "store_history", "kick_work_terms", "add_kick_work", "wall_loads"]
+           "store_history", "kick_work_terms", "add_kick_work", "add_rolling_work", "wall_loads"]
 
 
 @njit(cache=True)
 def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """Springs (K,3) for the current contacts: the stored one for a persisting key, 0 for a new one.
+    """Springs (K, S) for the current contacts: the stored one for a persisting key, 0 for a
+    new one (S the stored springs' width: :data:`~nurbsdem.dynamics.rolling.NSPRING` in the
+    engine, the tangential spring then the rolling one).
 
     prev_keys must be sorted ascending (as stored by :func:`store_history`).  Current keys in
     ascending order (as the scene gives them: its pairs are sorted by key) are matched by one
     merge of the two lists, others by a binary search each.
     """
     k = keys.shape[0]
-    out = np.zeros((k, 3))
+    width = prev_springs.shape[1]
+    out = np.zeros((k, width))
     m = prev_keys.shape[0]
     if k == 0 or m == 0:
         return out
@@ -80,13 +86,13 @@ def match_history(prev_keys: np.ndarray, prev_springs: np.ndarray, keys: np.ndar
             while j < m and prev_keys[j] < keys[c]:
                 j += 1
             if j < m and prev_keys[j] == keys[c]:
-                for d in range(3):
+                for d in range(width):
                     out[c, d] = prev_springs[j, d]
         return out
     for c in range(k):
         j = min(np.searchsorted(prev_keys, keys[c]), m - 1)
         if prev_keys[j] == keys[c]:
-            for d in range(3):
+            for d in range(width):
                 out[c, d] = prev_springs[j, d]
     return out
 
@@ -163,7 +169,9 @@ def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, ve
     bodies, writes those rows only.  Per contact: the kinematics (:func:`_contact_start`), the
     law of its row (:func:`~nurbsdem.dynamics.laws.law_normal`,
     :func:`~nurbsdem.dynamics.laws.law_spring_scale`), then the part common to all laws: the
-    clip, the spring, the Coulomb return mapping and the results."""
+    clip, the spring, the Coulomb return mapping and the results, and the rolling spring
+    (:mod:`nurbsdem.dynamics.rolling`) where the row has a rolling friction and the arrays
+    its columns."""
     for c in range(lo, hi):
         a = body_a[c]
         b = body_b[c]
@@ -187,6 +195,12 @@ def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, ve
         _tangential_result(c, table[ma, mb, MU], fn, fn - fel, eel_n, et, ct, n0, n1, n2,
                            s0, s1, s2, wt0, wt1, wt2, spring, f_total, f_damp_n, f_damp_t,
                            f_el_t, fn_out, e_el, stick, slip_out)
+        mu_r = table[ma, mb, RF]
+        if mu_r > 0.0 and spring.shape[1] >= NSPRING and f_el_t.shape[1] >= NSPRING:
+            rolling_result(c, mu_r, kn, fn, radius[c], n0, n1, n2, a, b, omg, h, spring,
+                           f_el_t, e_el)
+        else:
+            no_rolling(c, spring, f_el_t)
 
 
 @njit(cache=True, inline="always")
@@ -224,12 +238,32 @@ def _tangential_result(c, mu, fn, fdn, eel_n, et, ct, n0, n1, n2, s0, s1, s2, wt
     slip_out[c] = slip
 
 
+@njit(cache=True, inline="always")
+def _add_rolling_torque(c, a, b, f_el_t, torque) -> None:
+    """Add contact c's rolling torque (f_el_t[c, 3:6], N m on B; −it on A) to the torques,
+    where the array has the column and the torque is not zero (a zero adds nothing, not even
+    the sign of a zero)."""
+    if f_el_t.shape[1] < NSPRING:
+        return
+    m0, m1, m2 = f_el_t[c, ROLL], f_el_t[c, ROLL + 1], f_el_t[c, ROLL + 2]
+    if m0 == 0.0 and m1 == 0.0 and m2 == 0.0:
+        return
+    torque[b, 0] += m0
+    torque[b, 1] += m1
+    torque[b, 2] += m2
+    if a >= 0:
+        torque[a, 0] -= m0
+        torque[a, 1] -= m1
+        torque[a, 2] -= m2
+
+
 @njit(cache=True)
 def _add_contact_loads(body_a: np.ndarray, body_b: np.ndarray, pos: np.ndarray,
-                       point: np.ndarray, f_total: np.ndarray, force: np.ndarray,
-                       torque: np.ndarray) -> None:
-    """Add each contact's force f_total (K,3) on B (−it on A) at its point to the loads (B,3)
-    of its bodies, in contact order: the accumulation of :func:`contact_forces`.  (On one
+                       point: np.ndarray, f_total: np.ndarray, f_el_t: np.ndarray,
+                       force: np.ndarray, torque: np.ndarray) -> None:
+    """Add each contact's force f_total (K,3) on B (−it on A) at its point, and its rolling
+    torque (f_el_t's columns 3–5, :mod:`nurbsdem.dynamics.rolling`), to the loads (B,3) of its
+    bodies, in contact order: the accumulation of :func:`contact_forces`.  (On one
     thread: split into ranges of bodies, each adding from the contacts that touch it, it was
     1.7 x slower on 2.4e5 contacts of 1e5 bodies, the contacts' rows read out of order.)"""
     for c in range(body_a.shape[0]):
@@ -253,6 +287,7 @@ def _add_contact_loads(body_a: np.ndarray, body_b: np.ndarray, pos: np.ndarray,
         torque[a, 0] -= ta0
         torque[a, 1] -= ta1
         torque[a, 2] -= ta2
+        _add_rolling_torque(c, a, b, f_el_t, torque)
 
 
 @njit(cache=True, parallel=True)
@@ -279,15 +314,18 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
     linear penalty law, Hertz–Mindlin).
 
     Inputs (B = N particles + W walls): pos/vel/omg (B,3) centroid (wall: displacement), velocity,
-    angular velocity; material (B,) ids; table (M,M,NCOL); spring (K,3) history from the previous
-    evaluation (updated **in place** to the new spring); h (s) the time since that evaluation
+    angular velocity; material (B,) ids; table (M,M,NCOL); spring (K,S) history from the previous
+    evaluation (updated **in place** to the new spring; S = 6 with the rolling spring,
+    :mod:`nurbsdem.dynamics.rolling`); h (s) the time since that evaluation
     (0 for the initial evaluation: no spring increment); inv_mass (B,) 1/kg (walls 0) and radius
     (K,) the equivalent contact radius (m), both used by the laws that need them (Hertz).
 
     Outputs: force/torque (B,3) are *added to*; per contact: point (K,3) application point,
     f_total (K,3) force on B, f_damp_n / f_damp_t (K,3) its normal/tangential dissipative parts
     (normal: (f_n − elastic) n, includes the clip), f_el_t (K,3) its tangential elastic (spring)
-    part, fn_out (K,) f_n (N), e_el (K,2) normal and tangential elastic energies (J), stick (K,)
+    part ((K,6): then the rolling torque on B (N m) in columns 3–5), fn_out (K,) f_n (N), e_el
+    (K,2) normal and tangential elastic energies (J; the tangential one includes the rolling
+    spring's), stick (K,)
     1 stick / 0 slip, coeffs (K,4) (k_n, c_n, k_t, c_t): the tangent stiffnesses (N/m) and
     damping (N s/m) for the time-step control.  Returns the return mapping's slip-work estimate
     (J) (a diagnostic; the energy ledger uses the exact spring work instead).
@@ -310,7 +348,7 @@ def contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, om
                             material, table, spring, h, inv_mass, radius, point, f_total,
                             f_damp_n, f_damp_t, f_el_t, fn_out, e_el, stick, coeffs,
                             dashpot_given, dashpot, slip, np.int64(0), K)
-    _add_contact_loads(body_a, body_b, pos, point, f_total, force, torque)
+    _add_contact_loads(body_a, body_b, pos, point, f_total, f_el_t, force, torque)
     slip_work = 0.0
     for c in range(K):
         slip_work += slip[c]
@@ -324,14 +362,14 @@ def contact_loads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg
     """:func:`contact_forces` of K contacts into fresh arrays, plus gravity on the N particles
     (mass (N,) kg, gravity (3,) m/s²; bodies ≥ N are walls): the loads of one force
     evaluation (dashpot_given, dashpot: as for contact_forces).  Returns (force, torque (B,3),
-    point, f_total, f_damp_n, f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,),
+    point, f_total, f_damp_n, f_damp_t (K,3), f_el_t (K,6), fn (K,), e_el (K,2), stick (K,),
     coeffs (K,4), slip work)."""
     K = body_a.shape[0]
     B = pos.shape[0]
     force = np.zeros((B, 3))
     torque = np.zeros((B, 3))
     point, f_total = np.empty((K, 3)), np.empty((K, 3))
-    f_damp_n, f_damp_t, f_el_t = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3))
+    f_damp_n, f_damp_t, f_el_t = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, NSPRING))
     fn, e_el, stick = np.empty(K), np.empty((K, 2)), np.empty(K, np.int64)
     coeffs = np.empty((K, 4))
     slip = contact_forces(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
@@ -430,11 +468,43 @@ def add_kick_work(terms: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, n_p
 
 
 @njit(cache=True)
-def wall_loads(body_b: np.ndarray, point: np.ndarray, f_total: np.ndarray, wall_d: np.ndarray,
-               n_particles: int, force: np.ndarray, torque: np.ndarray) -> None:
+def add_rolling_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
+                     omega: np.ndarray, omega_after: np.ndarray, f_el_t: np.ndarray, hk: float,
+                     terms: np.ndarray) -> None:
+    """Add to the T_SPRING column of a half kick's terms (K, N_TERMS) the exact discrete work
+    (J) of the contacts' rolling torques (f_el_t's columns 3–5, N m on B,
+    :mod:`nurbsdem.dynamics.rolling`): hk M·(ω̄_B − ω̄_A), ω̄ the mean of the particles'
+    angular velocities (N,3) rad/s before and after the kick (a kick at fixed orientation
+    changes ω linearly in L, so this is the kinetic energy the torque impulse gives).  Walls
+    do not turn here (a turning wall's share of the rolling work is not booked)."""
+    if f_el_t.shape[1] < NSPRING:
+        return
+    for c in range(body_a.shape[0]):
+        m0, m1, m2 = f_el_t[c, ROLL], f_el_t[c, ROLL + 1], f_el_t[c, ROLL + 2]
+        if m0 == 0.0 and m1 == 0.0 and m2 == 0.0:
+            continue
+        o0 = o1 = o2 = 0.0
+        b = body_b[c]
+        if b < n_particles:
+            o0 += 0.5 * (omega[b, 0] + omega_after[b, 0])
+            o1 += 0.5 * (omega[b, 1] + omega_after[b, 1])
+            o2 += 0.5 * (omega[b, 2] + omega_after[b, 2])
+        a = body_a[c]
+        if a < n_particles:
+            o0 -= 0.5 * (omega[a, 0] + omega_after[a, 0])
+            o1 -= 0.5 * (omega[a, 1] + omega_after[a, 1])
+            o2 -= 0.5 * (omega[a, 2] + omega_after[a, 2])
+        terms[c, T_SPRING] += hk * (m0 * o0 + m1 * o1 + m2 * o2)
+
+
+@njit(cache=True)
+def wall_loads(body_b: np.ndarray, point: np.ndarray, f_total: np.ndarray, f_el_t: np.ndarray,
+               wall_d: np.ndarray, n_particles: int, force: np.ndarray,
+               torque: np.ndarray) -> None:
     """Add to the rows of the walls (bodies >= n_particles) of force/torque (B,3) the loads of
     the contacts whose body B is a wall (point (K,3) application points m, f_total (K,3) N on
-    B, wall_d (W,3) wall displacements m), in contact order: the walls' part of the
+    B, f_el_t (K,3|6) whose columns 3–5 are the rolling torque on B, wall_d (W,3) wall
+    displacements m), in contact order: the walls' part of the
     accumulation of :func:`contact_forces`, same bits (a domain decomposition assembles the
     walls' loads from the contacts of all ranks with it)."""
     for c in range(body_b.shape[0]):
@@ -452,3 +522,4 @@ def wall_loads(body_b: np.ndarray, point: np.ndarray, f_total: np.ndarray, wall_
         torque[b, 0] += tb0
         torque[b, 1] += tb1
         torque[b, 2] += tb2
+        _add_rolling_torque(c, np.int64(-1), b, f_el_t, torque)

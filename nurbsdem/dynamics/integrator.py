@@ -44,7 +44,7 @@ from numba import njit, prange
 
 from ..geometry.rotation import quat_mul
 from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
-from .forces import kick_work_terms
+from .forces import add_rolling_work, kick_work_terms
 from .rigid import omega_world
 
 
@@ -255,7 +255,9 @@ def kick_from(omega: np.ndarray, v: np.ndarray, L: np.ndarray, x: np.ndarray, q:
     (:func:`~nurbsdem.dynamics.rigid.omega_world` of the state before the kick) and the
     per-contact terms (K, N_TERMS) of the exact discrete work of its contact impulses
     (:func:`nurbsdem.dynamics.forces.kick_work_terms`, from the relative contact-point
-    velocities before and after the kick).  Returns (terms, the angular velocities after)."""
+    velocities before and after the kick, and the rolling torques' work from the angular
+    velocities: :func:`~nurbsdem.dynamics.forces.add_rolling_work`).  Returns (terms, the
+    angular velocities after)."""
     K = body_a.shape[0]
     w0 = np.empty((K, 3))
     w1 = np.empty((K, 3))
@@ -263,5 +265,7 @@ def kick_from(omega: np.ndarray, v: np.ndarray, L: np.ndarray, x: np.ndarray, q:
     half_kick(v, L, force, torque, inv_mass, hk)
     omega_after = omega_world(q, L, inv_I)
     _relative_point_velocities(body_a, body_b, point, x, wall_d, v, omega_after, wall_u, w1)
-    return kick_work_terms(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n,
-                           f_damp_t, f_el_t, hk), omega_after
+    terms = kick_work_terms(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n,
+                            f_damp_t, f_el_t, hk)
+    add_rolling_work(body_a, body_b, x.shape[0], omega, omega_after, f_el_t, hk, terms)
+    return terms, omega_after

@@ -130,7 +130,7 @@ class InternalSteps:
         if K and not interfaces_defined(self._bc, a, bb):
             raise InputError("a contact occurred between materials with no contact interface")
         pos, vel, omg = self._all_kinematics()
-        if self.uses_hertz:   # a law that needs the contacts' exact curvature radii (Hertz)
+        if self.needs_radius:   # the contacts' exact curvature radii (Hertz, rolling)
             from ..geometry.curvature import contact_radii_for
             self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:

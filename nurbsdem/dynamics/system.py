@@ -77,7 +77,7 @@ from ..jit import launch_threads
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import EnergyLedger, EnergySample, balance_terms, energy_terms
 from .forces import InterfaceTable
-from .laws import needs_contact_radius
+from .laws import needs_contact_radius, rolls
 from .laws.engine import engine_kernels
 from .monitor import MonitorSample, energy_sample
 from .rigid import PrescribedMotion, RigidBodies, Walls, kind_rows
@@ -87,6 +87,7 @@ from .internal_step import ContactProvider, InternalSteps, Kinematics, _Unstable
 from .step import BodyConst
 from .stepcontrol import REFINE_DECAY_STEPS
 from .substep_control import ModeLimit, SubstepControl
+from .rolling import NSPRING, widened
 from .system_state import SystemState
 
 __all__ = ["DemSystem", "InstabilityError", "Kinematics", "ModeLimit", "StepTally"]
@@ -358,10 +359,10 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         self.alt_prev_v = np.zeros((b.n, 3))
         self.alt_prev_L = np.zeros((b.n, 3))
         self.hist_keys = np.zeros(0, dtype=np.int64)
-        self.hist_springs = np.zeros((0, 3))
-        if self.initial_history is not None:   # tangential springs carried over from a previous step
+        self.hist_springs = np.zeros((0, NSPRING))
+        if self.initial_history is not None:   # springs carried over from a previous step
             self.hist_keys = np.array(self.initial_history[0], dtype=np.int64)
-            self.hist_springs = np.array(self.initial_history[1], dtype=float).reshape(-1, 3)
+            self.hist_springs = widened(self.initial_history[1])
         self.wall_work = np.zeros(self.walls.n)
         self.ledger = EnergyLedger()
         self.c_a = self.c_key = np.zeros(0, np.int64)     # no previous evaluation
@@ -660,3 +661,13 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         if hertz is None:
             hertz = self._hertz_table = needs_contact_radius(self._table)
         return hertz
+
+    @property
+    def needs_radius(self) -> bool:
+        """Whether the force kernel needs each contact's equivalent radius: a Hertz–Mindlin
+        law (:attr:`uses_hertz`) or a rolling friction (the rolling radius,
+        :mod:`nurbsdem.dynamics.rolling`); taken once."""
+        need = self.__dict__.get("_radius_table")
+        if need is None:
+            need = self._radius_table = self.uses_hertz or rolls(self._table)
+        return need

@@ -14,6 +14,7 @@ from ..geometry.rotation import matrix_to_quat
 from .energy import EnergyLedger
 from .monitor import MonitorSample, StateSample, contact_output_of
 from .rigid import body_poses, omega_world
+from .rolling import widened
 
 _STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
                "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
@@ -150,6 +151,7 @@ class SystemState:
             if k in ("x", "q", "v", "L", "ledger") or k not in st:
                 continue
             setattr(self, k, np.array(st[k], copy=True))
+        self.hist_springs = widened(self.hist_springs)   # a checkpoint without rolling springs
         self.ledger = EnergyLedger.from_array(st["ledger"])
         self.step_count = int(st["counters"][0])
         if st["counters"].shape[0] >= 4:

@@ -168,14 +168,17 @@ def curved_wall_entry(w: CurvedWallSpec) -> Entry:
 
 
 def interface_entry(itf: Interface) -> Entry:
-    """An ``Interface`` entry: ``Model`` (but the default law's), every key of its law, then
+    """An ``Interface`` entry: ``Model`` (but the default law's), every key of its law (an
+    optional extra such as ``RollingFriction`` only when it is not its default), then
     ``Materials`` or ``Between``."""
     from ..dynamics.laws import law_named
     from ..dynamics.laws.interface import DEFAULT_LAW
     law = law_named(itf.model)
     values: dict[str, Any] = {} if law.name == DEFAULT_LAW else {"Model": law.name}
     for k in law.keys:
-        values[k.deck] = itf.params[k.attr] if k.attr in itf.params else getattr(itf, k.attr)
+        value = itf.params[k.attr] if k.attr in itf.params else getattr(itf, k.attr)
+        if k.written_at_default or value != k.default:
+            values[k.deck] = value
     if itf.materials:
         values["Materials"] = itf.materials
     elif itf.between:

@@ -228,6 +228,12 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
     ("Contact", "Interface", "TangentialDamping"): KeyDoc(
         "N s/m", "0", "Tangential dashpot (paper's c_t)."),
     ("Contact", "Interface", "Friction"): KeyDoc("-", "0", "Coulomb friction coefficient."),
+    ("Contact", "Interface", "RollingFriction"): KeyDoc(
+        "-", "0 (none)", "Rolling-resistance coefficient mu_r, both laws: an elastic-plastic "
+        "rolling spring (stiffness 2.25 mu_r^2 R_r^2 k_n) whose torque is limited to "
+        "mu_r R_r f_n, R_r the contact's equivalent radius (a sphere on a wall: its radius). "
+        "A sphere rests on an incline while tan(angle) <= mu_r; rolling, it decelerates at "
+        "5/7 mu_r g. Supported up to 0.4."),
     ("Contact", "Interface", "Restitution"): KeyDoc(
         "-", "required by HertzMindlin", "Coefficient of restitution e in (0, 1] of a normal "
         "impact, independent of the impact speed."),

@@ -62,6 +62,7 @@ from ..contact.contactset import ContactSet
 from ..dynamics.energy import EnergyLedger
 from ..dynamics.forces import N_TERMS, match_history, wall_loads
 from ..dynamics.rigid import omega_world
+from ..dynamics.rolling import NSPRING
 from ..dynamics.step import all_kinematics, book_kick
 from ..geometry.rotation import quats_to_matrices
 
@@ -385,7 +386,7 @@ class Domain:
         f, rounds, iterations = s._kernels.dashpots_of_evaluation(   # laws added at run time too
             net["a"], net["b"], net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
             net["n"].reshape(-1, 3), net["d"], pos, vel, omg, bc.material, bc.table,
-            net["s"].reshape(-1, 3), h, bc.inv_mass_all, net["r"], bc.mass, bc.gravity, q, L,
+            net["s"].reshape(-1, NSPRING), h, bc.inv_mass_all, net["r"], bc.mass, bc.gravity, q, L,
             bc.inv_I, quats_to_matrices(q), bc.sq_m, bc.sq_I)
         solves[0] += 1
         solves[1] += rounds
@@ -443,14 +444,14 @@ class Domain:
         for f in ROW_FIELDS:
             setattr(s, f, rows[f])
         hist = merge_by_key([g[1] for g in gathered], "key")
-        s.hist_keys, s.hist_springs = hist["key"], hist["spring"].reshape(-1, 3)
+        s.hist_keys, s.hist_springs = hist["key"], hist["spring"].reshape(-1, NSPRING)
         s.force[N:] = 0.0
         s.torque[N:] = 0.0
-        wall_loads(s.c_b, s.c_point, s.c_ftot, s.wall_d, N, s.force, s.torque)
+        wall_loads(s.c_b, s.c_point, s.c_ftot, s.c_fet, s.wall_d, N, s.force, s.torque)
         merged = self._merged_contacts([g[2] for g in gathered])
         s.last_contacts = merged
         sc.last = merged
-        if s.uses_hertz:
+        if s.needs_radius:
             # the serial count of contacts whose curvature fell back (the radii are the
             # merged rows' again: per contact, the same bits)
             from ..geometry.curvature import contact_radii_for

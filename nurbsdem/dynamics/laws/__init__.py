@@ -33,7 +33,7 @@ from numba import njit
 from . import hertz_mindlin, linear_penalty
 from .hertz_mindlin import HertzMindlin
 from .linear_penalty import LinearPenalty
-from .table import MODEL, InterfaceTable, codes_of
+from .table import MODEL, RF, InterfaceTable, codes_of
 
 #: the built-in laws, their modules in code order
 BUILTIN = (linear_penalty, hertz_mindlin)
@@ -106,6 +106,13 @@ def needs_contact_radius(table: np.ndarray) -> bool:
                if c in LAWS_BY_CODE)
 
 
+def rolls(table: np.ndarray) -> bool:
+    """Whether a dense interface table (M, M, NCOL) has a row with a rolling friction
+    (:mod:`nurbsdem.dynamics.rolling`: the kernel then needs each contact's rolling radius)."""
+    col = np.asarray(table)[..., RF]
+    return bool(np.any(col[np.isfinite(col)] > 0.0))
+
+
 def builtin_only(table: np.ndarray) -> bool:
     """Whether every row of the table is of a built-in law (the cached kernels and the
     compiled deck steps dispatch to these only)."""
@@ -114,4 +121,4 @@ def builtin_only(table: np.ndarray) -> bool:
 
 __all__ = ["LAWS", "LAWS_BY_CODE", "BUILTIN", "LinearPenalty", "HertzMindlin", "InterfaceTable",
            "law_normal", "law_spring_scale", "register", "unregister", "law_named",
-           "needs_contact_radius", "builtin_only"]
+           "needs_contact_radius", "rolls", "builtin_only"]

@@ -1,5 +1,5 @@
 """Hertz–Mindlin contact with the exact local curvature: ``Interface ID Model HertzMindlin
-Restitution e [Friction mu]``.
+Restitution e [Friction mu] [RollingFriction mu_r]``.
 
 Normal force (Hertz, elliptical contact)::
 
@@ -63,8 +63,8 @@ from numba import njit
 
 from ...errors import InputError
 from .keys import LawKey
-from .linear_penalty import FRICTION
-from .table import CN, CT, EN, ET, MODEL, MU, NCOL, P0, P1, P2
+from .linear_penalty import FRICTION, ROLLING_FRICTION
+from .table import CN, CT, EN, ET, MODEL, MU, NCOL, P0, P1, P2, RF
 
 #: the law's code in the table's MODEL column
 CODE = 1
@@ -160,13 +160,15 @@ class HertzMindlin:
 
     e_star, g_star (Pa); restitution (-); mu Coulomb coefficient; ref: the linearisation
     (k_n, c_n, k_t, c_t) used by the a-priori time-step estimate and for pairs not yet in
-    contact (:func:`reference_linearisation`)."""
+    contact (:func:`reference_linearisation`); mu_r the rolling-friction coefficient (-,
+    :mod:`nurbsdem.dynamics.rolling`)."""
 
     e_star: float
     g_star: float
     restitution: float
     mu: float = 0.0
     ref: tuple = field(default=(0.0, 0.0, 0.0, 0.0))
+    mu_r: float = 0.0
 
     #: deck name, the Interface's ``model``, the code of its table rows
     name = "HertzMindlin"
@@ -180,7 +182,7 @@ class HertzMindlin:
     keys = (LawKey("Restitution", "restitution", "", 0.0,
                    "a coefficient of restitution: 0 needs an infinite dashpot, above 1 an "
                    "impact would gain energy", lo_open=True, hi=1.0, required=True),
-            FRICTION)
+            FRICTION, ROLLING_FRICTION)
     #: what the law's row depends on besides its keys (for the messages)
     note = ("its stiffness and damping come from the materials' YoungModulus, PoissonRatio "
             "and the Restitution")
@@ -194,6 +196,9 @@ class HertzMindlin:
                              f"{self.g_star}")
         if not (math.isfinite(self.mu) and self.mu >= 0):
             raise InputError(f"Hertz law: friction must be finite and >= 0, got {self.mu}")
+        if not (math.isfinite(self.mu_r) and self.mu_r >= 0):
+            raise InputError(f"Hertz law: rolling friction must be finite and >= 0, got "
+                             f"{self.mu_r}")
         damping_ratio(self.restitution)
 
     @classmethod
@@ -209,7 +214,8 @@ class HertzMindlin:
         if math.isfinite(pair.m_eff) and pair.radius > 0 and math.isfinite(e_star):
             ref = reference_linearisation(e_star, g_star, zeta, pair.radius, pair.m_eff,
                                           pair.speed)
-        return cls(e_star, g_star, float(itf.restitution), float(itf.friction), ref)
+        return cls(e_star, g_star, float(itf.restitution), float(itf.friction), ref,
+                   float(itf.rolling_friction))
 
     @property
     def zeta(self) -> float:
@@ -226,6 +232,7 @@ class HertzMindlin:
         row[EN], row[CN], row[ET], row[CT] = self.ref
         row[MU], row[MODEL], row[ESTAR], row[GSTAR], row[ZETA] = (
             self.mu, CODE, self.e_star, self.g_star, self.zeta)
+        row[RF] = self.mu_r
         return row
 
 

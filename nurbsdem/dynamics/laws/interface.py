@@ -94,7 +94,8 @@ def interface_text(itf: Interface, number: Callable[[float], str] = repr) -> str
     words = [f"Interface {itf.id}"] + ([] if law.name == DEFAULT_LAW else [f"Model {law.name}"])
     for k in law.keys:
         value = itf.params[k.attr] if k.attr in itf.params else getattr(itf, k.attr)
-        words.append(f"{k.deck} {number(value)}")
+        if k.written_at_default or value != k.default:
+            words.append(f"{k.deck} {number(value)}")
     return " ".join(words)
 
 

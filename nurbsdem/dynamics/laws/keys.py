@@ -18,7 +18,7 @@ class LawKey:
     deck: the deck's spelling (``NormalPenalty``); attr: the Interface attribute and the Python
     argument (``normal_penalty``); unit; lo, hi: the valid range, ``lo_open`` / ``hi_open``
     whether the bound itself is excluded; reason: why values outside are refused; required:
-    the entry must give it (else ``default``)."""
+    the entry must give it (else ``default``); written_at_default: see below."""
 
     deck: str
     attr: str
@@ -30,6 +30,10 @@ class LawKey:
     hi_open: bool = False
     required: bool = False
     default: float = 0.0
+    #: whether a deck written back (:func:`~.interface.interface_text`) names the key when it
+    #: holds its default (False for an optional extra such as RollingFriction: a deck without
+    #: it is written as it was)
+    written_at_default: bool = True
 
     def range_text(self) -> str:
         """``must be > 0`` / ``must be >= 0`` / ``must lie in (0, 1]``."""

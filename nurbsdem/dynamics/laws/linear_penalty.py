@@ -1,6 +1,6 @@
 """The linear penalty law of the paper (Eq. 16–17): ``Interface ID [Model LinearPenalty]
 NormalPenalty en [TangentialPenalty et] [NormalDamping cn] [TangentialDamping ct]
-[Friction mu]``.
+[Friction mu] [RollingFriction mu_r]``.
 
 Normal force f_n = εn d + cn ḋ (clipped at 0 by the kernel), elastic energy ½ εn d²; the
 tangential spring εt with dashpot ct and the Coulomb return mapping are the kernel's common
@@ -17,7 +17,7 @@ from numba import njit
 
 from ...errors import InputError
 from .keys import LawKey
-from .table import CN, CT, EN, ET, MODEL, MU, NCOL
+from .table import CN, CT, EN, ET, MODEL, MU, NCOL, RF
 
 #: the law's code in the table's MODEL column
 CODE = 0
@@ -28,6 +28,11 @@ _MU = "a Coulomb coefficient; a negative one would push along the sliding veloci
 
 #: the Friction key, common to the built-in laws
 FRICTION = LawKey("Friction", "friction", "", 0.0, _MU)
+#: the RollingFriction key, common to the built-in laws (:mod:`nurbsdem.dynamics.rolling`)
+ROLLING_FRICTION = LawKey("RollingFriction", "rolling_friction", "", 0.0,
+                          "a rolling-resistance coefficient (the torque limit over the rolling "
+                          "radius and the normal force); a negative one would drive the rolling",
+                          written_at_default=False)
 
 
 @dataclass(frozen=True)
@@ -43,6 +48,7 @@ class LinearPenalty:
     et: float = 0.0
     ct: float = 0.0
     mu: float = 0.0
+    mu_r: float = 0.0
 
     #: deck name, the Interface's ``model``, the code of its table rows
     name = "LinearPenalty"
@@ -59,12 +65,12 @@ class LinearPenalty:
             LawKey("TangentialPenalty", "tangential_penalty", "N/m", 0.0, _STIFF),
             LawKey("NormalDamping", "normal_damping", "N s/m", 0.0, _DAMP),
             LawKey("TangentialDamping", "tangential_damping", "N s/m", 0.0, _DAMP),
-            FRICTION)
+            FRICTION, ROLLING_FRICTION)
     #: what the law's row depends on besides its keys (for the messages)
     note = "its constants are its keys"
 
     def __post_init__(self) -> None:
-        for name in ("en", "cn", "et", "ct", "mu"):
+        for name in ("en", "cn", "et", "ct", "mu", "mu_r"):
             val = getattr(self, name)
             if not (math.isfinite(val) and val >= 0):
                 raise InputError(f"contact law: {name} must be finite and >= 0, got {val}")
@@ -76,12 +82,13 @@ class LinearPenalty:
         """The law of an :class:`~nurbsdem.model.Interface` (``pair``, the materials'
         :class:`~nurbsdem.model.MaterialPair`, is not used: the constants are the keys)."""
         return cls(en=itf.normal_penalty, cn=itf.normal_damping, et=itf.tangential_penalty,
-                   ct=itf.tangential_damping, mu=itf.friction)
+                   ct=itf.tangential_damping, mu=itf.friction, mu_r=itf.rolling_friction)
 
     def as_row(self) -> np.ndarray:
         row = np.zeros(NCOL)
         row[EN], row[CN], row[ET], row[CT], row[MU] = self.en, self.cn, self.et, self.ct, self.mu
         row[MODEL] = CODE
+        row[RF] = self.mu_r
         return row
 
 

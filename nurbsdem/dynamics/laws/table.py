@@ -11,7 +11,9 @@ Every law fills the same row layout:
 * ``MODEL``: the law's code (:data:`nurbsdem.dynamics.laws.LAWS_BY_CODE`), on which the kernels
   dispatch;
 * ``P0 .. P2``: the law's own parameters (their meaning is the law's: Hertz–Mindlin keeps
-  E*, G*, ζ there).
+  E*, G*, ζ there);
+* ``RF``: the rolling-friction coefficient μ_r (-) of the rolling resistance common to all
+  laws (:mod:`nurbsdem.dynamics.rolling`; 0: none).
 
 A row of NaN marks a pair without an interface (an input error when such a contact occurs).
 """
@@ -25,8 +27,10 @@ from ...errors import InputError
 EN, CN, ET, CT, MU, MODEL = 0, 1, 2, 3, 4, 5
 #: the law's own parameters
 P0, P1, P2 = 6, 7, 8
+#: the rolling-friction coefficient μ_r (-)
+RF = 9
 #: number of columns
-NCOL = 9
+NCOL = 10
 
 
 class InterfaceTable:
