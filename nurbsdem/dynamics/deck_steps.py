@@ -15,7 +15,10 @@ the trajectory is the same to the bit whichever drives it (tested).  After each 
 the loop runs the guards (finite state, energy) and the Gershgorin gate of the
 time-step control; the energies used by the guard are summed in a different order from the
 Python driver's (round-off only).  The time of the search and of the contact rows is taken
-with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time split.
+with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time split.  In a
+periodic cell the search wraps the centroids into it and builds the list through its faces
+inside the loop, and the step's parts take the image bodies of the contacts with images
+(:mod:`nurbsdem.dynamics.periodic_steps`).
 
 The loop returns to Python
 
@@ -67,7 +70,7 @@ from .energy import balance_terms
 from .monitor import record_row, row_width
 from .periodic_steps import (apply_wrap, has_images, image_contact_part, image_kick_part,
                              image_step_start, network_images, pair_images, periodic_const,
-                             periodic_list, shift_rows, solve_images, wrapped)
+                             periodic_list, shift_rows, solve_images, stored_images, wrapped)
 from .step import (all_kinematics, interfaces_defined, kick_part_ptr, spun_contacts,
                    step_start_ptr)
 from .rigid import body_poses, omega_world
@@ -690,18 +693,8 @@ class DeckSteps:
                           np.ascontiguousarray(cs.near_normal, float),
                           np.asarray(cs.near_gap, float), reach, int(cs.monitored),
                           int(cs.degenerated_count), np.ascontiguousarray(cs.depth, float),
-                          np.ascontiguousarray(cs.degenerated, np.int64), *self._images(K, cs))
-
-    def _images(self, K: int, cs) -> tuple[np.ndarray, np.ndarray]:
-        """The translations (m) of B's images of the stored contacts (K,3) and separated
-        pairs, as the loop's Evaluation holds them ((0,3) each without a periodic cell)."""
-        s = self.system
-        if self.scene.cell is None:
-            return np.zeros((0, 3)), np.zeros((0, 3))
-        image = getattr(s, "c_image", np.zeros((0, 3)))
-        near = np.asarray(getattr(cs, "near_image", np.zeros((0, 3))), float).reshape(-1, 3)
-        return (np.ascontiguousarray(image, float) if len(image) == K else np.zeros((K, 3)),
-                np.ascontiguousarray(near))
+                          np.ascontiguousarray(cs.degenerated, np.int64),
+                          *stored_images(s, self.scene.cell, K, cs))
 
     def _control(self) -> Control:
         s = self.system

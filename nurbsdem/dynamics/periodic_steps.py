@@ -47,6 +47,18 @@ def periodic_const(cell) -> PeriodicConst:
                          np.asarray(cell.periodic, np.bool_).copy())
 
 
+def stored_images(system, cell, K: int, cs) -> tuple[np.ndarray, np.ndarray]:
+    """The translations (m) of B's images of a system's stored contacts (K,3) and of the
+    separated pairs of its ContactSet ``cs``, as the loop's Evaluation holds them ((0,3) each
+    without a periodic cell)."""
+    if cell is None:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    image = getattr(system, "c_image", np.zeros((0, 3)))
+    near = np.asarray(getattr(cs, "near_image", np.zeros((0, 3))), float).reshape(-1, 3)
+    return (np.ascontiguousarray(image, float) if len(image) == K else np.zeros((K, 3)),
+            np.ascontiguousarray(near))
+
+
 # --------------------------------------------------------------------------- wrap and build
 @njit(cache=True)
 def wrapped(cell, x: np.ndarray, pos: np.ndarray):
