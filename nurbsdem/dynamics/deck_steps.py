@@ -15,7 +15,10 @@ the trajectory is the same to the bit whichever drives it (tested).  After each 
 the loop runs the guards (finite state, energy) and the Gershgorin gate of the
 time-step control; the energies used by the guard are summed in a different order from the
 Python driver's (round-off only).  The time of the search and of the contact rows is taken
-with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time split.
+with the CPU's cycle counter (:func:`nurbsdem.jit.cycles`) for the run's time split.  In a
+periodic cell the search wraps the centroids into it and builds the list through its faces
+inside the loop, and the step's parts take the image bodies of the contacts with images
+(:mod:`nurbsdem.dynamics.periodic_steps`).
 
 The loop returns to Python
 
@@ -67,8 +70,11 @@ from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
 from .monitor import record_row, row_width
-from .step import (all_kinematics, contact_part_ptr, interfaces_defined, kick_part_ptr,
-                   spun_contacts, step_start_ptr)
+from .periodic_steps import (apply_wrap, has_images, image_contact_part, image_kick_part,
+                             image_step_start, network_images, pair_images, periodic_const,
+                             periodic_list, shift_rows, solve_images, stored_images, wrapped)
+from .step import (all_kinematics, interfaces_defined, kick_part_ptr, spun_contacts,
+                   step_start_ptr)
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
@@ -87,18 +93,20 @@ DONE, CONTROL, GUARD, REFINE, RECOUNT = 0, 1, 2, 3, 4
 #: mesh and surface walls follow them)
 SceneConst = namedtuple("SceneConst", "tables n radius skin margin certificates hertz tab "
                         "first_patch body_shape sphere_radius owned threads all_spheres "
-                        "flat_walls")
+                        "flat_walls cell")
 #: the neighbour list and its per-pair arrays, odometers, the poses it was built at and the
-#: previous poses
+#: previous poses; in a periodic cell the image (L,3) int of each pair's body B
 PairList = namedtuple("PairList", "a b keys mask_a mask_b rows_f rows_i budget odo built_x "
-                      "built_R built_wall built_pos prev_pos prev_R prev_wall prev_x")
+                      "built_R built_wall built_pos prev_pos prev_R prev_wall prev_x shift")
 #: the last force evaluation: per-contact arrays (``depth`` (K,) m and ``deg`` (K,) the
 #: contacts' penetrations and degeneration flags, for the ParaView samples), histories and
 #: loads; the separated pairs (``near_*``) of the last internal step of a deck step only
-#: (the time-step control's network; empty in between)
+#: (the time-step control's network; empty in between); in a periodic cell the translation
+#: (K,3) m of the image of B each contact and separated pair touches (else (0,3))
 Evaluation = namedtuple("Evaluation", "a b point normal ftot fdn fdt fet fn eel stick key coeffs "
                         "radius fallback hist_keys hist_springs force torque slip near_a near_b "
-                        "near_point near_normal near_gap reach monitored degenerated depth deg")
+                        "near_point near_normal near_gap reach monitored degenerated depth deg "
+                        "image near_image")
 #: step-control and guard settings (floats and flags); ``heavy``: the sub-step count from which
 #: the caller warns (once: afterwards larger than any count)
 Control = namedtuple("Control", "dt refine_decay safety dt_apriori forced recheck fall "
@@ -146,29 +154,43 @@ N_COUNTERS = 23
 def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray,
             counters: np.ndarray):
     """One call of the scene's contact search (:meth:`SceneContacts.__call__`): returns the
-    new PairList, the pairs' reach (sum of odometers), the list positions solved (ascending)
-    and whether an LCP failed (the Python path answers it: module docstring)."""
+    new PairList, the pairs' reach (sum of odometers), the list positions solved (ascending),
+    whether an LCP failed (the Python path answers it: module docstring) and the wrap (N,3)
+    m a build in a periodic cell took off the centroids (:mod:`.periodic_steps`; else (0,3))."""
     c0 = cycles()
     odo = advance_odometers(pl.odo, x, pl.prev_x, R, pl.prev_R, sc.radius, wall_d, pl.prev_wall)
     a, b, keys = pl.a, pl.b, pl.keys
     built_x, built_R, built_wall, built_pos = pl.built_x, pl.built_R, pl.built_wall, pl.built_pos
-    mask_a, mask_b = pl.mask_a, pl.mask_b
-    if list_is_stale(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin):
+    mask_a, mask_b, shift, moved = pl.mask_a, pl.mask_b, pl.shift, np.zeros((0, 3))
+    stale = list_is_stale(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
+    if stale and sc.cell.on:        # wrapped into the cell, then built through its faces
+        x, pos, moved = wrapped(sc.cell, x, pos)
+        a, b, keys, mask_a, mask_b, shift = periodic_list(sc.tables, sc.cell, x, pos, R, wall_d,
+                                                          sc.margin + sc.skin)
+        built_x, built_R, built_wall, built_pos = x.copy(), R, wall_d.copy(), pos.copy()
+    elif stale:
         fresh = reposed_bodies(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
         built_x, built_R, built_wall, built_pos = repose(built_x, built_R, built_wall, built_pos,
                                                          x, R, wall_d, pos, fresh)
         a, b, keys, mask_a, mask_b = scene_list_ptr((sc.tables, built_x, built_pos, built_R,
                                                      built_wall, sc.owned, sc.margin + sc.skin,
                                                      pl.keys, pl.mask_a, pl.mask_b, fresh))
+    if stale:
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
+        if moved.shape[0]:
+            shift_rows(rows_f, a, moved)
         counters[BUILDS] += 1
     else:       # updated in place: the loop owns these arrays (copied at its start)
         rows_f, rows_i, budget = pl.rows_f, pl.rows_i, pl.budget
     reach, due = due_rows(a, b, odo, budget, sc.certificates)
     c1 = cycles()
     failed = False
-    if sc.all_spheres:      # closed forms only (what solve_due_into does for them)
+    if sc.cell.on:          # B's images as extra particles
+        points, failed = solve_images(sc.tables, sc.cell, a, b, mask_a, mask_b, rows_f, rows_i,
+                                      due, shift, pos, R, wall_d, sc.threads)
+        counters[POINT_SOLVES] += points
+    elif sc.all_spheres:    # closed forms only (what solve_due_into does for them)
         t = sc.tables
         closed_form_into(rows_f, rows_i, due, a, b, t.n, pos, R, wall_d, t.body_shape,
                          t.sphere_center, t.sphere_radius, t.wall_origin, t.wall_a, t.wall_b,
@@ -182,7 +204,7 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     counters[SEARCH_CYCLES] += (c1 - c0) + (cycles() - c2)
     counters[ROW_CYCLES] += c2 - c1
     return (PairList(a, b, keys, mask_a, mask_b, rows_f, rows_i, budget, odo, built_x, built_R,
-                     built_wall, built_pos, pos, R, wall_d, x), reach, due, failed)
+                     built_wall, built_pos, pos, R, wall_d, x, shift), reach, due, failed, moved)
 
 
 # --------------------------------------------------------------------------- forces
@@ -237,9 +259,9 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     wall's angular velocity, rad/s, and centre, m).  Returns (True, the new
     Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
     error)."""
+    act = active_rows(pl.rows_i, due)
     (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
-     patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys,
-                              active_rows(pl.rows_i, due))
+     patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys, act)
     monitored = due.shape[0]
     if curved.n_walls:             # the provider counts the curved walls' contacts monitored
         K0 = a.shape[0]
@@ -254,6 +276,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     else:
         near, gap = np.empty(0, np.int64), np.empty(0)
     near_a, near_b, near_point, near_normal, gap = near_arrays(pl.rows_f, pl.a, pl.b, near, gap)
+    image, near_image = pair_images(sc.cell, pl.shift, act), pair_images(sc.cell, pl.shift, near)
     if not interfaces_defined(bc, a, b):
         return False, ev
     radius, n_fall = _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R)
@@ -266,9 +289,9 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
                 omg_all[n + w, k] = spin[w, k]
     solves = np.zeros(4, np.int64)
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
-     hist_springs, _) = contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
-                                          ev.hist_keys, ev.hist_springs, pos_all, vel_all,
-                                          omg_all, q, L, h, solves, np.zeros(0)))
+     hist_springs, _) = image_contact_part(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                           ev.hist_keys, ev.hist_springs, pos_all, vel_all,
+                                           omg_all, q, L, h, solves, image)
     counters[DASHPOT_SOLVES] += solves[0]
     counters[DASHPOT_SOLVES + 1] += solves[1]
     counters[DASHPOT_SOLVES + 2] += solves[2]
@@ -276,7 +299,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     return True, Evaluation(a, b, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick, key, coeffs,
                             radius, n_fall, hist_keys, hist_springs, force, torque, slip,
                             near_a, near_b, near_point, near_normal, gap, reach, monitored,
-                            np.count_nonzero(deg), dep, deg)
+                            np.count_nonzero(deg), dep, deg, image, near_image)
 
 
 # --------------------------------------------------------------------------- integration
@@ -334,19 +357,21 @@ def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
                                          speed, cc.dt, bc.g_norm, bc.table, bc.material)
     if cc.implicit:
         coeffs[:, 1] = 0.0      # implicit normal dashpots do not limit the step
+    img = network_images(ev.image, ev.near_image, ev.near_a, ev.near_b, a, b)
     Q = quats_to_matrices(q)
     if not recheck and network_count_stands(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I,
                                             cc.dt, cc.safety, cc.dt_apriori,
                                             estimate[DT_BOUND], cc.bound_slack,
-                                            counters[REFINE], substeps):
+                                            counters[REFINE], substeps, img):
         return True
     dt_bound, dt_network = math.inf, math.inf
     omega2, gamma, body = 0.0, 0.0, -1
     if a.shape[0]:
         wk, wc = network_gershgorin(a, b, p, n, coeffs, x, Q, bc.inv_mass, bc.inv_I,
-                                    np.bool_(False))
+                                    np.bool_(False), img)
         dt_bound = critical_step_from_rates(wk, wc)
-        omega2, gamma, body = network_rates_scaled(a, b, p, n, coeffs, x, Q, bc.sq_m, bc.sq_I)
+        omega2, gamma, body = network_rates_scaled(a, b, p, n, coeffs, x, Q, bc.sq_m, bc.sq_I,
+                                                   img)
         dt_network = critical_step_from_rates(omega2, gamma)
     dt_critical = min(cc.dt_apriori, dt_network)
     need = needed_substeps(cc.dt, cc.safety * dt_critical) * counters[REFINE]
@@ -379,7 +404,7 @@ def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, 
     pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
                        pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_x, pl.built_R,
                        pl.built_wall, pl.built_pos, pl.prev_pos, pl.prev_R, pl.prev_wall,
-                       pl.prev_x)
+                       pl.prev_x, pl.shift)
     return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
                     wall_work.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
                     pl_copy, ev, wall_d, wall_u, peak[0])
@@ -478,21 +503,26 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             d_new, u_new = walls_d[t], walls_u[t]
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
-            kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0], wall_d,
-                                                 u_mean)
-            omega, _, worst, run = step_start_ptr((
-                bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force, ev.torque,
-                x, v, q, L, omega, kick_b, kick_d, kick_u, h, ledger, wall_work, alt_prev_v,
-                alt_prev_L, alt_count, cc.watch_period2, np.bool_(True)))
+            if has_images(ev.image):    # contacts with periodic images (.periodic_steps)
+                omega, worst, run = image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h,
+                                                     ledger, wall_work, alt_prev_v, alt_prev_L,
+                                                     alt_count, cc.watch_period2)
+            else:
+                kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0],
+                                                     wall_d, u_mean)
+                omega, _, worst, run = step_start_ptr((
+                    bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force,
+                    ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, h, ledger, wall_work,
+                    alt_prev_v, alt_prev_L, alt_count, cc.watch_period2, np.bool_(True)))
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             wall_d, wall_u = d_new.copy(), u_new.copy()
             c1 = cycles()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
             c2 = cycles()
-            pl, reach, due, failed = _search(sc, pl, x.copy(), R, pos,   # the flat walls
-                                             wall_d[:sc.flat_walls].copy(), counters)
-            if failed:
+            pl, reach, due, failed, moved = _search(sc, pl, x.copy(), R, pos,  # the flat walls
+                                                    wall_d[:sc.flat_walls].copy(), counters)
+            if failed or not apply_wrap(x, moved, bc.mass, bc.gravity, ledger):
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             counters[EVALS] += 1
             counters[MONITORED] += due.shape[0]
@@ -504,11 +534,16 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             if not ok:
                 return GUARD, j, pl, ev, wall_d, wall_u, states
             c4 = cycles()
-            kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0], wall_d,
-                                                 u_mean)
-            omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
-                                      ev.force, ev.torque, x, v, q, L, omega, kick_b, kick_d,
-                                      kick_u, 0.5 * h, ledger, wall_work, np.bool_(True)))
+            if has_images(ev.image):
+                omega = image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger,
+                                        wall_work)
+            else:
+                kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0],
+                                                     wall_d, u_mean)
+                omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt,
+                                          ev.fet, ev.force, ev.torque, x, v, q, L, omega, kick_b,
+                                          kick_d, kick_u, 0.5 * h, ledger, wall_work,
+                                          np.bool_(True)))
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -601,23 +636,27 @@ class DeckSteps:
                              np.ascontiguousarray(scene.table.info[:, 0], np.int64),
                              scene.body_shape, np.ascontiguousarray(scene.sphere_radius),
                              np.ones(scene.n, np.bool_), numba.get_num_threads(),
-                             bool(scene.is_sphere.all()), W - self.curved.n_walls)
+                             bool(scene.is_sphere.all()), W - self.curved.n_walls,
+                             periodic_const(scene.cell))
         self.bc = s._bc
 
     @staticmethod
     def for_system(system) -> "DeckSteps | None":
-        """The compiled stepper when the provider is a scene on one rank, without a periodic
-        cell, that has been called once (any contact law: the Hertz radii of NURBS contacts
-        come from the curvature kernel the Python path calls, :func:`_hertz_radii`) whose laws
-        are all built in (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene with
-        mesh and surface walls (met by exact spheres and NURBS particles), at rest, turning at
-        constant rates or turned by tables (:func:`_curved_provider`); else None."""
+        """The compiled stepper when the provider is a scene on one rank, in a periodic cell
+        or not (:mod:`.periodic_steps`), that has been called once (any contact law: the Hertz
+        radii of NURBS contacts come from the curvature kernel the Python path calls,
+        :func:`_hertz_radii`) whose laws are all built in
+        (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene without a periodic
+        cell with mesh and surface walls (met by exact spheres and NURBS particles), at rest,
+        turning at constant rates or turned by tables (:func:`_curved_provider`); else
+        None."""
         from ..contact.scene import SceneContacts
         scene, curved = system.provider, _curved_provider(system.provider)
         if curved is not None:
             scene = curved.base
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
-                or scene.cell is not None           # periodic cells: the Python driver
+                or (scene.cell is not None      # the image bodies' kicks: walls at rest
+                    and (curved is not None or system.wall_spin is not None))
                 or scene.prev_pose is None or scene.built_pose is None
                 or not builtin_only(system._table)):    # a law registered at run time
             return None
@@ -640,7 +679,8 @@ class DeckSteps:
                                                    for a in sc.built_pose)
         return PairList(ps.a, ps.b, ps.keys, ps.mask_a, ps.mask_b, ps.rows_f.copy(),
                         ps.rows_i.copy(), ps.budget.copy(), sc.odo, built_x, built_R,
-                        built_wall, built_pos, pos, R, wall, x)
+                        built_wall, built_pos, pos, R, wall, x,
+                        np.ascontiguousarray(sc.pair_shift, np.int64).reshape(-1, 3))
 
     def _evaluation(self) -> Evaluation:
         s, cs = self.system, self.scene.last
@@ -659,7 +699,8 @@ class DeckSteps:
                           np.ascontiguousarray(cs.near_normal, float),
                           np.asarray(cs.near_gap, float), reach, int(cs.monitored),
                           int(cs.degenerated_count), np.ascontiguousarray(cs.depth, float),
-                          np.ascontiguousarray(cs.degenerated, np.int64))
+                          np.ascontiguousarray(cs.degenerated, np.int64),
+                          *stored_images(s, self.scene.cell, K, cs))
 
     def _control(self) -> Control:
         s = self.system
@@ -749,6 +790,8 @@ class DeckSteps:
         s, sc = self.system, self.scene
         sc.pairs = _PairState(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f, pl.rows_i,
                               pl.budget, np.zeros(pl.a.shape[0], bool))
+        if sc.cell is not None:
+            sc.pair_shift = pl.shift
         sc.odo, sc.built_pose = pl.odo, (pl.built_x, pl.built_R, pl.built_wall, pl.built_pos)
         sc.prev_pose = (pl.prev_pos, pl.prev_R, pl.prev_wall, pl.prev_x)
         sc.builds += int(counters[BUILDS])
@@ -764,6 +807,7 @@ class DeckSteps:
         s.c_fdn, s.c_fdt, s.c_fet, s.c_fn, s.c_eel = ev.fdn, ev.fdt, ev.fet, ev.fn, ev.eel
         s.c_stick, s.c_key, s.c_coeffs = ev.stick, ev.key, ev.coeffs
         s.c_radius = ev.radius
+        s.c_image = ev.image if ev.image.shape[0] == ev.a.shape[0] else np.zeros((ev.a.shape[0], 3))
         if self.sc.hertz:
             s.hertz_fallback = int(ev.fallback)
         s.hist_keys, s.hist_springs = ev.hist_keys, ev.hist_springs

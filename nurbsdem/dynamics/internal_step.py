@@ -22,6 +22,7 @@ from ..jit import seconds_per_cycle
 from .energy import EnergyLedger, EnergySample
 from .images import ImageBodies
 from .integrator import state_is_finite
+from .periodic_steps import wrap_work
 from .rigid import body_poses, omega_world
 from .step import interfaces_defined, kick_part, spun_contacts, step_start
 from .stepcontrol import ALTERNATION_STEPS
@@ -171,7 +172,8 @@ class InternalSteps:
     def _apply_wrap(self, cs: Any) -> None:
         """The wrap into the periodic cell that the provider's list build made (its
         ``wrap`` (N,3) m, :class:`~nurbsdem.contact.contactset.ContactSet`), applied to the
-        centroids.  The potential's jump Σ m g·Δx (J; Δx the translation taken off) is booked
+        centroids.  The potential's jump Σ m g·Δx (J; Δx the translation taken off,
+        :func:`~nurbsdem.dynamics.periodic_steps.wrap_work`, as the compiled loop) is booked
         as external work, as an inlet's particles are (:mod:`nurbsdem.flow_run`), so that the
         balance stays closed; at the first evaluation, before the initial mechanical energy
         is taken, it is kept in ``initial_wrap_work`` for the run's ledger
@@ -180,7 +182,8 @@ class InternalSteps:
         if shift is None or len(shift) == 0 or not np.any(shift != 0.0):
             return
         b = self.bodies
-        jump = float(np.sum(b.mass * (shift @ self.gravity)))
+        jump = wrap_work(b.mass, np.ascontiguousarray(shift, float),
+                         np.ascontiguousarray(self.gravity, float))
         b.x -= shift
         if self.ledger.initial_mechanical == self.ledger.initial_mechanical:   # not NaN
             self.ledger.external_work += jump
