@@ -75,11 +75,10 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from ..jit import launch_threads
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
-from .energy import EnergyLedger, EnergySample, balance_terms, energy_terms
+from .energy import EnergyLedger, EnergySample, balance_terms
 from .forces import InterfaceTable
-from .laws import needs_contact_radius, rolls
 from .laws.engine import engine_kernels
-from .monitor import MonitorSample, energy_sample
+from .monitor import MonitorSample
 from .rigid import PrescribedMotion, RigidBodies, Walls, kind_rows
 from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, REFINE,
                          DeckSteps)
@@ -643,31 +642,3 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
                             f"(tolerance {tol:.3g} J)")
         if abs(e.balance_error) > tol:
             raise _Unstable(f"energy balance error {e.balance_error:.4g} J exceeds {tol:.3g} J")
-
-    # ------------------------------------------------------------------ outputs
-    def energy(self) -> EnergySample:
-        """Energies at the current state (J); see :mod:`nurbsdem.dynamics.energy`."""
-        b = self.bodies
-        terms = energy_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
-                             np.ascontiguousarray(self.c_eel, float).reshape(-1, 2))
-        return energy_sample(self.time, *terms, self.ledger)
-
-    @property
-    def uses_hertz(self) -> bool:
-        """Whether the interfaces include a law that needs each contact's equivalent radius
-        (Hertz–Mindlin: :func:`~nurbsdem.dynamics.laws.needs_contact_radius` of the interface
-        table, fixed once the system is built; taken once)."""
-        hertz = self.__dict__.get("_hertz_table")
-        if hertz is None:
-            hertz = self._hertz_table = needs_contact_radius(self._table)
-        return hertz
-
-    @property
-    def needs_radius(self) -> bool:
-        """Whether the force kernel needs each contact's equivalent radius: a Hertz–Mindlin
-        law (:attr:`uses_hertz`) or a rolling friction (the rolling radius,
-        :mod:`nurbsdem.dynamics.rolling`); taken once."""
-        need = self.__dict__.get("_radius_table")
-        if need is None:
-            need = self._radius_table = self.uses_hertz or rolls(self._table)
-        return need

@@ -11,8 +11,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.rotation import matrix_to_quat
-from .energy import EnergyLedger
-from .monitor import MonitorSample, StateSample, contact_output_of
+from .energy import EnergyLedger, EnergySample, energy_terms
+from .laws import needs_contact_radius, rolls
+from .monitor import MonitorSample, StateSample, contact_output_of, energy_sample
 from .rigid import body_poses, omega_world
 from .rolling import widened
 
@@ -167,3 +168,31 @@ class SystemState:
             self.dt_bound, self.dt_network, self.dt_critical = (float(v) for v in st["scalars"][3:6])
         self.acc_last_growth = (float(st["scalars"][6]) if st["scalars"].shape[0] >= 7
                                 else math.inf)
+
+    # ------------------------------------------------------------------ energies, laws
+    def energy(self) -> EnergySample:
+        """Energies at the current state (J); see :mod:`nurbsdem.dynamics.energy`."""
+        b = self.bodies
+        terms = energy_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
+                             np.ascontiguousarray(self.c_eel, float).reshape(-1, 2))
+        return energy_sample(self.time, *terms, self.ledger)
+
+    @property
+    def uses_hertz(self) -> bool:
+        """Whether the interfaces include a law that needs each contact's equivalent radius
+        (Hertz–Mindlin: :func:`~nurbsdem.dynamics.laws.needs_contact_radius` of the interface
+        table, fixed once the system is built; taken once)."""
+        hertz = self.__dict__.get("_hertz_table")
+        if hertz is None:
+            hertz = self._hertz_table = needs_contact_radius(self._table)
+        return hertz
+
+    @property
+    def needs_radius(self) -> bool:
+        """Whether the force kernel needs each contact's equivalent radius: a Hertz–Mindlin
+        law (:attr:`uses_hertz`) or a rolling friction (the rolling radius,
+        :mod:`nurbsdem.dynamics.rolling`); taken once."""
+        need = self.__dict__.get("_radius_table")
+        if need is None:
+            need = self._radius_table = self.uses_hertz or rolls(self._table)
+        return need
