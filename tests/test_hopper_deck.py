@@ -67,3 +67,35 @@ def test_every_sphere_is_poured_and_discharged(run):
     energy = _csv(run / "energy.csv")
     scale = np.abs(energy["external_work"]).max() + np.abs(energy["potential"]).max()
     assert np.abs(energy["balance_error"]).max() < 1e-2 * scale
+
+
+@pytest.mark.slow
+def test_paper_particles_at_rest_in_the_hopper(tmp_path):
+    """inputs/hopper/hopper_paper.inp: the paper's particles A, B, C (7, 4, 9) settle in a
+    conical NURBS hopper (a NURBS surface wall) closed by a flat gate. Over the last 0.2 s
+    the vertical loads of the cone and the gate average to the particles' weight within 1 %
+    (a vertical force balance: at rest the walls hold the weight): not exactly, since the
+    pack still creeps (its residual motion's momentum change, kinetic energy ~1e-5 J, and
+    the dashpot forces of its slowly moving contacts); the cone carries a share of it (its
+    inclined normal and the wall friction: the Janssen-like load); no contact fails; the
+    energy balance closes to 1 % of the energy turned over; the pack ends at rest."""
+    from nurbsdem.io.shapefile import load_shape
+    deck = HOPPER / "hopper_paper.inp"
+    summary = Simulation.from_deck(deck, output=tmp_path / "out").run()
+    mons = tmp_path / "out" / "monitors"
+    cone, gate = _csv(mons / "wall_hopper.csv"), _csv(mons / "wall_gate.csv")
+    shapes = HOPPER.parent / "shapes"
+    volume = sum(n * load_shape(shapes / f"{s}.yaml").volume
+                 for s, n in (("A", 7), ("B", 4), ("C", 9)))
+    weight = volume * 2700.0 * G
+    window = cone["time"] > cone["time"][-1] - 0.2 - 1e-9
+    total = cone["reaction_z"][window] + gate["reaction_z"][window]
+    share = cone["reaction_z"][window].mean() / weight
+    print(f"weight {weight:.6g} N, walls/weight {total.mean() / weight:.6f}, cone share "
+          f"{share:.4f}, balance {summary.balance_error:.3g} of {summary.balance_scale:.3g} J")
+    assert total.mean() == pytest.approx(weight, rel=0.01)
+    assert share > 0.05
+    assert summary.failed == 0
+    assert abs(summary.balance_error) < 1e-2 * abs(summary.balance_scale)
+    energy = _csv(mons / "energy.csv")
+    assert energy["kinetic"][-1] < 1e-4 * (energy["potential"][0] - energy["potential"][-1])
