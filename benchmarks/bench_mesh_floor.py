@@ -5,14 +5,16 @@ resting on a floor, gravity on, linear contacts (εn 1e4 N/m, cn 0.5 N·s/m, εt
 μ 0.5); the floor is either a flat `Wall` or a `Mesh` of the same square tessellated into
 2 × k × k triangles (k = 224: 100 352 triangles), a file the benchmark writes.  Both decks
 run the same deck steps (TimeStep 1e-3 s, sub-stepped by the solver) in the compiled deck
-steps; printed for each: the time loop (the run less its set-up and output), its cost per
-internal step and per particle-step, and the ratio mesh / flat.  The error: the floor's
+steps, each ``--repeats`` times, the two decks alternated (one run of 280 internal steps
+varies by tens of per cent on a shared machine); printed for each: the median time loop (the
+run less its set-up and output), its cost per internal step and per particle-step, and the
+median of the paired ratios mesh / flat with their range.  The error: the floor's
 vertical reaction at the end against the flat floor's, relative to the pack's weight (the
 mesh's face contacts are the flat wall's closed form; the positions themselves drift apart
 by round-off amplified in the stacked block, whose contacts are summed in another order).
 
 Usage: .venv/bin/python benchmarks/bench_mesh_floor.py [--n 10000] [--k 224] [--steps 20]
-       [--quick]   (quick: 1 000 spheres, k = 64, 5 deck steps)
+       [--repeats 5] [--quick]   (quick: 1 000 spheres, k = 64, 5 deck steps)
 """
 from __future__ import annotations
 
@@ -101,6 +103,8 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--n", type=int, default=10000)
     ap.add_argument("--k", type=int, default=224)
     ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=5,
+                    help="runs of each deck, alternated; the medians are reported")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args(argv)
     if a.quick:
@@ -115,20 +119,29 @@ def main(argv: list[str]) -> dict:
         for name, line in floors.items():
             (work / f"{name}.inp").write_text(deck(pos, side, line, a.steps))
             run(work / f"{name}.inp", work / f"warm_{name}")      # compiled kernels cached
-            out[name] = run(work / f"{name}.inp", work / f"out_{name}")
+        runs = {name: [] for name in floors}
+        for k in range(max(1, a.repeats)):       # alternated: a slower minute hits both
+            for name in floors:
+                runs[name].append(run(work / f"{name}.inp", work / f"out_{name}_{k}"))
+        ratios = [(m["loop"] / m["substeps"]) / (f["loop"] / f["substeps"])
+                  for f, m in zip(runs["flat"], runs["mesh"])]
+        for name in floors:                      # the run of the median time loop
+            by_loop = sorted(runs[name], key=lambda r: r["loop"])
+            out[name] = by_loop[len(by_loop) // 2]
     n = len(pos)
     weight = len(pos) * 2500.0 * 4.0 / 3.0 * math.pi * R ** 3 * 9.81
     err = abs(out["mesh"]["reaction"] - out["flat"]["reaction"]) / weight
-    print(f"{n} spheres in 3 layers on a floor of side {side:.3f} m, {a.steps} deck steps")
+    print(f"{n} spheres in 3 layers on a floor of side {side:.3f} m, {a.steps} deck steps; "
+          f"each deck run {len(ratios)} times, alternated (medians)")
     for name in ("flat", "mesh"):
         r = out[name]
         per = r["loop"] / r["substeps"]
         label = "flat wall" if name == "flat" else f"mesh, {triangles} triangles"
         print(f"  {label:<26} time loop {r['loop']:.2f} s, {r['substeps']} internal steps, "
               f"{1e3 * per:.2f} ms per step, {1e6 * per / n:.2f} µs per particle-step")
-    ratio = (out["mesh"]["loop"] / out["mesh"]["substeps"]) / (out["flat"]["loop"]
-                                                               / out["flat"]["substeps"])
-    print(f"mesh / flat cost per internal step: {ratio:.3f} (+{100 * (ratio - 1):.1f} %); "
+    ratio = float(np.median(ratios))
+    print(f"mesh / flat cost per internal step: {ratio:.3f} (+{100 * (ratio - 1):.1f} %; pairs "
+          f"{min(ratios):.3f} to {max(ratios):.3f}); "
           f"floor reactions at the end differ by {err:.2e} of the weight "
           f"({out['flat']['reaction'] / weight:.4f} x the weight on the flat floor)")
     return dict(n=n, triangles=triangles, ratio=ratio, error=err,
