@@ -292,7 +292,7 @@ def test_lcp_sweep_near_convex_grazing_zero_failures(sweep_table):
     assert not np.any(i[:, I_FAIL]) and not np.any(iw[:, I_FAIL])
 
 
-#: the seeds of the issue-13 sweep (README, Limitations): 12 seeds × 200 poses × 3 regimes,
+#: the seeds of the convexity sweep (README, Limitations): 12 seeds × 200 poses × 3 regimes,
 #: cold and warm = 14 400 solves
 SWEEP_SEEDS = tuple(range(100, 112))
 
