@@ -31,9 +31,10 @@ Synchronisation
   its list and plans its ghosts anew (an all-to-all of the ghost requests).
 * At the end of each deck step (:meth:`Domain.end_of_deck_step`) the owners' state of every
   particle and every rank's *counted* contacts (those whose body A it owns: each contact is
-  counted by exactly one rank) are gathered and merged in the order of their pair keys, the
-  serial order; the walls' loads are summed from them in that order; the energy ledger replays
-  the exact-work terms of every half kick of the deck step in that order
+  counted by exactly one rank) are gathered and merged in the serial order (their pair keys';
+  with mesh and surface walls the provider's order, :meth:`Domain.order`); the walls' loads
+  are summed from them in that order; the energy ledger replays the exact-work terms of every
+  half kick of the deck step in that order
   (:func:`~nurbsdem.dynamics.forces.add_kick_work`).  After it, every rank holds the serial
   system's state bit for bit: energies, guards, the time-step control (Lanczos over the whole
   network), monitors, output and checkpoints run unchanged.
@@ -361,8 +362,8 @@ class Domain:
         """The implicit normal dashpot forces (K,) N of this rank's contacts (a, b, their
         points, normals, depths, keys and Hertz radii), solved over the whole contact network
         as the serial run solves it (collective, every internal step with ``Damping
-        Implicit``): the counted contacts of all ranks merged in key order (the serial order)
-        and every particle's state from its owner, then the serial kernel
+        Implicit``): the counted contacts of all ranks merged in the serial order
+        (:meth:`order`) and every particle's state from its owner, then the serial kernel
         (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`, or its copy for laws
         registered at run time: ``DemSystem._kernels``) on every rank, each
         taking its contacts' forces by key.  The solve's figures are added to ``solves``
