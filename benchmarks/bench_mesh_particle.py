@@ -13,10 +13,10 @@ Usage: .venv/bin/python benchmarks/bench_mesh_particle.py
 """
 from __future__ import annotations
 
-import time
 
 import numpy as np
 
+from common import best_per_item
 from nurbsdem import shapes
 from nurbsdem.contact.detect import table_of
 from nurbsdem.contact.lcp import NF
@@ -62,16 +62,6 @@ def poses(table, mesh_name: str, n: int, rng) -> list[tuple[np.ndarray, np.ndarr
     return out
 
 
-def per_query(fn, items, repeat: int = 3) -> tuple[float, list]:
-    """The best time (s) per item of fn over items, and the last results."""
-    best, res = np.inf, []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        res = [fn(*it) for it in items]
-        best = min(best, (time.perf_counter() - t) / len(items))
-    return best, res
-
-
 def main() -> None:
     rng = np.random.default_rng(1)
     for mesh_name, mesh in meshes().items():
@@ -88,12 +78,12 @@ def main() -> None:
             def ref(pos, R):
                 return particle_mesh_contacts(table, 0, pos, R, mesh)[0][:PER]
             one(*ps[0])
-            t_one, rows = per_query(one, ps)
-            t_ref, rows_ref = per_query(ref, ps, repeat=1)
+            t_one, rows = best_per_item(one, ps)
+            t_ref, rows_ref = best_per_item(ref, ps, repeat=1)
             P = np.array([p for p, _ in ps])
             Rs = np.array([r for _, r in ps])
             idx, shape_of = np.arange(len(ps)), np.zeros(len(ps), np.int64)
-            t_batch = per_query(lambda: mesh_rows(table, mesh, idx, shape_of, P, Rs, np.eye(3),
+            t_batch = best_per_item(lambda: mesh_rows(table, mesh, idx, shape_of, P, Rs, np.eye(3),
                                                   np.zeros(3), PER), [()] * 20)[0] / len(ps)
             same = all(len(a) == len(b) for a, b in zip(rows, rows_ref))
             diff = max((float(np.abs(a - b)[:, :NF].max()) for a, b in zip(rows, rows_ref)

@@ -12,11 +12,11 @@ Usage: .venv/bin/python benchmarks/bench_surface_particle.py
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 
+from common import best_per_item
 from nurbsdem import shapes
 from nurbsdem.contact.detect import table_of
 from nurbsdem.contact.lcp import F_SD, NF
@@ -41,16 +41,6 @@ def poses(table, n: int, rng) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def per_contact(fn, items, repeat: int = 3) -> tuple[float, list]:
-    """The best time (s) per item of fn over items, and the last results."""
-    best, res = np.inf, []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        res = [fn(*it) for it in items]
-        best = min(best, (time.perf_counter() - t) / len(items))
-    return best, res
-
-
 def main() -> None:
     drum = build_surface_wall(read_patches(DRUM)[0])
     rng = np.random.default_rng(1)
@@ -61,15 +51,15 @@ def main() -> None:
         one = lambda pos, R: particle_surface_row(table, 0, pos, R, drum)       # noqa: E731
         ref = lambda pos, R: particle_surface_row_reference(table, 0, pos, R, drum)  # noqa
         one(*ps[0])
-        t_one, rows = per_contact(one, ps)
-        t_ref, rows_ref = per_contact(ref, ps, repeat=1)
+        t_one, rows = best_per_item(one, ps)
+        t_ref, rows_ref = best_per_item(ref, ps, repeat=1)
         P = np.array([p for p, _ in ps])
         Rs = np.array([r for _, r in ps])
         idx, shape_of = np.arange(len(ps)), np.zeros(len(ps), np.int64)
         batch = lambda: surface_rows(table, drum, idx, shape_of, P, Rs, np.eye(3),  # noqa
                                      np.zeros(3))
         batch()
-        t_batch = per_contact(batch, [()] * 20)[0] / len(ps)
+        t_batch = best_per_item(batch, [()] * 20)[0] / len(ps)
         diff = max(float(np.abs(a[0] - b[0])[:NF].max()) for a, b in zip(rows, rows_ref))
         touching = sum(bool(r[2] and r[0][F_SD] < 0) for r in rows)
         print(f"{name}: compiled {t_one * 1e6:.1f} us per call, {t_batch * 1e6:.1f} us per "

@@ -23,6 +23,7 @@ import datetime as _dt
 import os
 import platform
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -223,3 +224,13 @@ def ensure_repo_on_path() -> None:
     """Make ``benchmarks`` importable as plain modules (``import bench_facets``)."""
     if str(BENCH_DIR) not in sys.path:
         sys.path.insert(0, str(BENCH_DIR))
+
+
+def best_per_item(fn, items, repeat: int = 3) -> tuple[float, list]:
+    """The best time (s) per item of fn over items, and the last results."""
+    best, res = np.inf, []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        res = [fn(*it) for it in items]
+        best = min(best, (time.perf_counter() - t) / len(items))
+    return best, res
