@@ -55,7 +55,7 @@ from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 from .laws import law_normal, law_spring_scale
 from .laws.linear_penalty import LinearPenalty
 from .laws.table import MU, RF, InterfaceTable
-from .rolling import NSPRING, ROLL, no_rolling, rolling_result
+from .rolling import NSPRING, ROLL, no_rolling, rolling_result, spring_in_plane
 
 #: the linear penalty law (:class:`~nurbsdem.dynamics.laws.linear_penalty.LinearPenalty`)
 ContactLaw = LinearPenalty
@@ -148,15 +148,7 @@ def _contact_start(c, body_a, body_b, point_a, point_b, normal, pos, vel, omg, p
 def _rotated_spring(spring, c, n0, n1, n2):
     """Step 1 of the tangential force: the stored spring of contact c rotated into the
     current tangent plane, keeping its length."""
-    s0, s1, s2 = spring[c, 0], spring[c, 1], spring[c, 2]
-    smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    sn = s0 * n0 + s1 * n1 + s2 * n2
-    s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
-    spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    if spm > 0.0:
-        sc = smag / spm
-        s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
-    return s0, s1, s2
+    return spring_in_plane(spring, c, 0, n0, n1, n2)
 
 
 @njit(cache=True)

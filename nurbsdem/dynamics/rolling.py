@@ -64,20 +64,29 @@ ROLLING_STIFFNESS = 2.25
 
 
 @njit(cache=True, inline="always")
+def spring_in_plane(spring, c, col, n0, n1, n2):
+    """The spring spring[c, col:col+3] of contact c rotated into the tangent plane of the unit
+    normal n, keeping its length (the tangential spring from column 0, the rolling spring from
+    :data:`ROLL`)."""
+    s0, s1, s2 = spring[c, col], spring[c, col + 1], spring[c, col + 2]
+    smag = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    sn = s0 * n0 + s1 * n1 + s2 * n2
+    s0, s1, s2 = s0 - sn * n0, s1 - sn * n1, s2 - sn * n2
+    spm = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    if spm > 0.0:
+        sc = smag / spm
+        s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
+    return s0, s1, s2
+
+
+@njit(cache=True, inline="always")
 def rolling_result(c, mu_r, kn, fn, radius, n0, n1, n2, a, b, omg, h, spring, f_el_t, e_el):
     """The rolling spring of contact c (module docstring): updates spring[c, 3:6] (rad),
     writes the torque on B into f_el_t[c, 3:6] (N m) and adds ½ k_r |θ|² to e_el[c, 1] (J).
     mu_r (-); kn the law's tangent normal stiffness (N/m); fn the normal force (N); radius
     the rolling radius (m); n the unit normal; a, b the bodies (omg (B,3) rad/s); h (s)."""
     kr = ROLLING_STIFFNESS * mu_r * mu_r * radius * radius * kn
-    r0, r1, r2 = spring[c, ROLL], spring[c, ROLL + 1], spring[c, ROLL + 2]
-    rmag = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-    rn = r0 * n0 + r1 * n1 + r2 * n2
-    r0, r1, r2 = r0 - rn * n0, r1 - rn * n1, r2 - rn * n2
-    rpm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-    if rpm > 0.0:
-        sc = rmag / rpm
-        r0, r1, r2 = r0 * sc, r1 * sc, r2 * sc
+    r0, r1, r2 = spring_in_plane(spring, c, ROLL, n0, n1, n2)
     o0 = omg[b, 0] - omg[a, 0]
     o1 = omg[b, 1] - omg[a, 1]
     o2 = omg[b, 2] - omg[a, 2]
