@@ -74,6 +74,18 @@ def kernel(func: Callable | None = None, *, inline: str = "never"):
     return jit(func) if func is not None else jit
 
 
+def internal(func: Callable | None = None, *, inline: str = "never"):
+    """``numba.njit(cache=True)`` for a kernel that only other kernels call (usable bare or
+    with ``inline=...``): numba builds no CPython or C entry for it.  Those entries unpack
+    and box every argument; for the kernels that take the compiled loop's named tuples of
+    arrays they are most of the kernel's compile time.  Such a kernel cannot be called from
+    Python (the process would crash: there is no entry to call), so only private kernels
+    of the compiled loop use it; ``tests/test_architecture.py`` checks that Python code of
+    the package never calls one."""
+    jit = njit(cache=True, inline=inline, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+    return jit(func) if func is not None else jit
+
+
 #: the time-stamp counter is read only on x86-64 (on other CPUs the cycle counter may be
 #: closed to user programs: reading it would raise SIGILL)
 HAS_CYCLE_COUNTER = platform.machine().lower() in ("x86_64", "amd64")

@@ -189,3 +189,74 @@ def test_file_readers_do_not_import_the_solver(reader):
     bad = sorted(m for m in reachable(graph, reader)
                  if any(m == p or m.startswith(p + ".") for p in SOLVER_PARTS))
     assert bad == [], f"{reader} imports {bad}"
+
+
+# --------------------------------------------------------------------------- internal kernels
+#: decorators that compile a function (its body runs compiled, so it may call an internal one)
+COMPILED = {"njit", "jit", "kernel", "internal", "vectorize", "guvectorize", "stencil"}
+
+
+def _decorator_names(func: ast.AST) -> set[str]:
+    names = set()
+    for d in getattr(func, "decorator_list", []):
+        d = d.func if isinstance(d, ast.Call) else d
+        names.add(d.attr if isinstance(d, ast.Attribute) else getattr(d, "id", ""))
+    return names
+
+
+def _internal_kernels() -> set[tuple[str, str]]:
+    """(module, name) of every kernel compiled with :func:`nurbsdem.jit.internal`."""
+    out = set()
+    for name, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef) and "internal" in _decorator_names(node):
+                out.add((name, node.name))
+    return out
+
+
+def _python_calls(path: Path, module: str, internal: set[tuple[str, str]]) -> list[str]:
+    """Calls in ``path`` (module ``module``; "" outside the package) of internal kernels made
+    by Python code: outside any function compiled by numba."""
+    tree = ast.parse(path.read_text())
+    bound = {n for (m, n) in internal if m == module}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module is not None:
+            base = node.module
+            if node.level:
+                pkg = module.split(".")[:-node.level] if module else []
+                base = ".".join(pkg + [node.module])
+            bound |= {a.asname or a.name for a in node.names if (base, a.name) in internal}
+    bad = []
+
+    def visit(node, compiled):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            compiled = bool(_decorator_names(node) & COMPILED)
+        if (not compiled and isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in bound):
+            bad.append(f"{path.name}:{node.lineno} {node.func.id}")
+        for child in ast.iter_child_nodes(node):
+            visit(child, compiled)
+    visit(tree, False)
+    return bad
+
+
+def test_python_code_never_calls_an_internal_kernel():
+    """A kernel compiled by :func:`nurbsdem.jit.internal` has no entry for Python: called
+    from Python it would crash the process, so only compiled code calls it (package, tests,
+    benchmarks and examples are checked)."""
+    internal = _internal_kernels()
+    assert ("nurbsdem.dynamics.deck_steps", "_evaluate") in internal    # the scan sees them
+    files = [(m, p) for m, p in _modules().items()]
+    top = PACKAGE.parent
+    files += [("", p) for d in ("tests", "benchmarks", "examples") for p in (top / d).rglob("*.py")]
+    bad = [b for m, p in files for b in _python_calls(p, m, internal)]
+    assert not bad, f"internal kernels called from Python: {bad}"
+
+
+def test_the_internal_kernel_check_sees_a_python_call(tmp_path):
+    internal = {("nurbsdem.dynamics.deck_steps", "_kept")}
+    f = tmp_path / "t.py"
+    f.write_text("from numba import njit\nfrom nurbsdem.dynamics.deck_steps import _kept\n"
+                 "@njit\ndef ok(a):\n    return _kept(a)\n"
+                 "def bad(a):\n    return _kept(a)\n")
+    assert _python_calls(f, "", internal) == ["t.py:7 _kept"]

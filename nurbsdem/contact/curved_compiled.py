@@ -28,7 +28,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from ..jit import PointerKernel
+from ..jit import PointerKernel, internal
 
 from .curved_walls import (MAX_PER_WALL, _surface_rows_of, wall_contact_key, wall_pose_at,
                            world_box)
@@ -208,7 +208,7 @@ def _particles(provider, n: int) -> tuple:
             np.ascontiguousarray(provider.nurbs, np.bool_), shape, int(provider.nurbs.sum()))
 
 
-@njit(cache=True)
+@internal
 def _candidates(x, r, kind, lo, hi):
     """The particles of ``kind`` (N,) bool (ascending) whose bounding boxes (centre ± r) meet
     the box [lo, hi]."""
@@ -227,7 +227,7 @@ def _candidates(x, r, kind, lo, hi):
     return out[:n]
 
 
-@njit(cache=True)
+@internal
 def _advance(wk, w, R, t):
     """Surface wall w's odometer moved on by its motion to pose (R, t) (wall_skin)."""
     if wk.posed[w]:
@@ -237,14 +237,14 @@ def _advance(wk, w, R, t):
     wk.posed[w] = True
 
 
-@njit(cache=True)
+@internal
 def _surface_due(wk, w, idx, x):
     """The spheres of idx whose certificate against surface wall w fails."""
     out = np.empty(idx.shape[0], np.int64)
     return out[:due_spheres(idx, x, wk.gap[w], wk.x0[w], wk.odo0[w], wk.odo[w], out)]
 
 
-@njit(cache=True)
+@internal
 def _mesh_contacts(cc, wk, w, mesh, idx, x, R, t, c):
     """The touching contacts of spheres idx with mesh wall w (the ``mesh``-th mesh) as the
     provider keeps them (the kernel's rows with negative signed distance, keyed by their rank
@@ -273,7 +273,7 @@ def _mesh_contacts(cc, wk, w, mesh, idx, x, R, t, c):
     return _put(cc, wk, w, x.shape[0] + cc.first + w, c, n, rows_f, owner, rank)
 
 
-@njit(cache=True)
+@internal
 def _put(cc, wk, w, body, c, n, rows_f, owner, rank):
     """The n rows of rows_f (owner, rank) with wall w (body ``body``) as ``wk``'s contacts
     from c on; returns the new count."""
@@ -290,7 +290,7 @@ def _put(cc, wk, w, body, c, n, rows_f, owner, rank):
     return c
 
 
-@njit(cache=True)
+@internal
 def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank):
     """The active rows of the spheres idx not certified apart from surface wall w into
     rows_f, owner, rank (their certificates renewed); returns their count."""
@@ -311,7 +311,7 @@ def _surface_rows(cc, wk, w, idx, x, R, t, rows_f, owner, rank):
     return n
 
 
-@njit(cache=True)
+@internal
 def _nurbs_rows(cc, w, idx, pos, rot, R, t, rows_f, owner, rank, n):
     """The active rows of the NURBS particles idx (poses pos, rot) with surface wall w
     appended to rows_f, owner, rank from row n
@@ -337,7 +337,7 @@ def _nurbs_rows(cc, w, idx, pos, rot, R, t, rows_f, owner, rank, n):
     return n
 
 
-@njit(cache=True)
+@internal
 def _mesh_nurbs_contacts(cc, wk, w, idx, pos, rot, R, t, c):
     """The touching contacts of the NURBS particles idx (poses pos, rot) with mesh wall w
     (:func:`~nurbsdem.contact.mesh_particle_compiled.particle_mesh_rows`, at most

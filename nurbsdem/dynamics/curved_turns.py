@@ -17,7 +17,8 @@ Lengths in metres, angles in radians, times in seconds.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..jit import internal
 
 
 def table_turns(provider, cc, spin: np.ndarray, times: np.ndarray) -> tuple:
@@ -48,7 +49,7 @@ def table_turns(provider, cc, spin: np.ndarray, times: np.ndarray) -> tuple:
     return which, R, shift, spins
 
 
-@njit(cache=True)
+@internal
 def turn_walls(cc, spin, turns, t: int) -> None:
     """Before the loop's evaluation at its t-th time: the table-turned walls' poses into the
     rest poses of ``cc`` and the spin rows into ``spin`` (``turns``: :func:`table_turns`)."""

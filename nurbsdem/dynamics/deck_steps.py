@@ -63,7 +63,7 @@ from ..contact.verlet import (active_arrays, active_rows, advance_odometers, car
                               repose, reposed_bodies)
 from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
-from ..jit import PointerKernel, cycles, fill_lazy_kernels, seconds_per_cycle
+from ..jit import PointerKernel, cycles, fill_lazy_kernels, internal, seconds_per_cycle
 from .curved_turns import table_turns, turn_walls
 from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
@@ -91,7 +91,7 @@ from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
 
 
 # --------------------------------------------------------------------------- contact search
-@njit(cache=True, inline="always")
+@internal(inline="always")
 def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray,
             counters: np.ndarray):
     """One call of the scene's contact search (:meth:`SceneContacts.__call__`): returns the
@@ -149,7 +149,7 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
 
 
 # --------------------------------------------------------------------------- forces
-@njit(cache=True)
+@internal
 def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
     """Equivalent Hertz radii (K,) of the active contacts and the number of fallbacks
     (:func:`~nurbsdem.geometry.curvature.scene_contact_radii`, as the Python path calls it;
@@ -165,7 +165,7 @@ def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
     return r_eff, n_fall
 
 
-@njit(cache=True)
+@internal
 def _with_curved(curved, cwork, time, x, R, pos, wall_d, a, b, pa, pb, nrm, dep, key, deg,
                  params, patch_a, patch_b):
     """The scene's active contact arrays followed by those of the particles with the mesh and
@@ -184,7 +184,7 @@ def _with_curved(curved, cwork, time, x, R, pos, wall_d, a, b, pa, pb, nrm, dep,
             np.concatenate((patch_b, np.full(k, -1, patch_b.dtype))))
 
 
-@njit(cache=True)
+@internal
 def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev,
               x: np.ndarray, v: np.ndarray, q: np.ndarray, L: np.ndarray, omega: np.ndarray,
               R: np.ndarray, pos: np.ndarray, wall_d: np.ndarray, wall_u: np.ndarray, h: float,
@@ -244,7 +244,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
 
 
 # --------------------------------------------------------------------------- integration
-@njit(cache=True)
+@internal
 def _all_finite(arr: np.ndarray) -> bool:
     """Whether every entry of the 2-D array is finite (a loop: ``np.isfinite(a).all()``
     makes a temporary array)."""
@@ -255,13 +255,13 @@ def _all_finite(arr: np.ndarray) -> bool:
     return True
 
 
-@njit(cache=True)
+@internal
 def _finite(x, v, q, L, force) -> bool:
     return (_all_finite(x) and _all_finite(v) and _all_finite(q) and _all_finite(L)
             and _all_finite(force))
 
 
-@njit(cache=True)
+@internal
 def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> tuple[bool, float]:
     """DemSystem._check_energy (the same energy_terms), then the peak of kinetic + elastic
     energy is raised.  Returns (passed, the balance error in J, which the accuracy control
@@ -278,7 +278,7 @@ def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> tuple[bool, 
     return ok, balance
 
 
-@njit(cache=True)
+@internal
 def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
                   estimate) -> bool:
     """DemSystem._control_step after a deck step: True when the present sub-step count stands
@@ -329,13 +329,13 @@ def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
     return True
 
 
-@njit(cache=True)
+@internal
 def _balance(bc, ev, x, v, q, L, ledger) -> float:
     """The energy-balance error (J) of the present state (DemSystem._balance)."""
     return balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger)[1]
 
 
-@njit(cache=True)
+@internal
 def _kept(j: int, x, q, v, L, wall_d, ev):
     """What the loop keeps of deck step j's end for the ParaView and results output: the body
     state, the walls and the contact arrays the writers take (not the whole Evaluation: its
@@ -344,7 +344,7 @@ def _kept(j: int, x, q, v, L, wall_d, ev):
             ev.deg, ev.coeffs, ev.radius)
 
 
-@njit(cache=True)
+@internal
 def _kick_walls(n_curved: int, spin, ev, n: int, wall_d, u_mean):
     """(body_b, wall_d, u_mean) of the stored contacts for a half kick's work terms: as they
     are, or with turning walls each contact with one at its point velocity

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from collections import namedtuple
 
-from numba import njit
+from ..jit import internal
+
 
 #: the loop did all its deck steps / stopped for the time-step control / a guard fired /
 #: the accuracy control rolled deck step ``done`` back to repeat it with twice the internal
@@ -83,7 +84,7 @@ Snapshot = namedtuple("Snapshot", "x v q L ledger wall_work alt_prev_v alt_prev_
                       "alt_count pl ev wall_d wall_u peak")
 
 
-@njit(cache=True)
+@internal
 def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, pl,
               ev, wall_d, wall_u, peak):
     """The state at the start of a deck step (copies of what the loop changes in place)."""
@@ -96,7 +97,7 @@ def _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, 
                     pl_copy, ev, wall_d, wall_u, peak[0])
 
 
-@njit(cache=True)
+@internal
 def _restore(sn, x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, peak):
     """Write a :class:`Snapshot` back into the arrays the caller holds."""
     x[:] = sn.x

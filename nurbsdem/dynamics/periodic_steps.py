@@ -29,6 +29,7 @@ from numba import njit
 
 from ..contact.listed import SceneTables, scene_list_ptr, solve_due_into_ptr
 from ..contact.lcp import F_PA, F_PB
+from ..jit import internal
 from .rigid import omega_world
 from .step import BodyConst, L_EXTERNAL, L_INITIAL, contact_part_ptr, kick_part_ptr, step_start_ptr
 
@@ -60,7 +61,7 @@ def stored_images(system, cell, K: int, cs) -> tuple[np.ndarray, np.ndarray]:
 
 
 # --------------------------------------------------------------------------- wrap and build
-@njit(cache=True)
+@internal
 def wrapped(cell, x: np.ndarray, pos: np.ndarray):
     """Centroids x (N,3) and pose positions pos (N,3) m wrapped into the cell, and the
     translation d (N,3) m taken off them (:func:`~nurbsdem.contact.periodic.wrap`: d = s∘L,
@@ -87,7 +88,7 @@ def wrap_work(mass: np.ndarray, d: np.ndarray, gravity: np.ndarray) -> float:
     return total
 
 
-@njit(cache=True)
+@internal
 def apply_wrap(x: np.ndarray, d: np.ndarray, mass: np.ndarray, gravity: np.ndarray,
                ledger: np.ndarray) -> bool:
     """The build's wrap d (N,3) m applied to the centroids x in place and its jump booked as
@@ -105,7 +106,7 @@ def apply_wrap(x: np.ndarray, d: np.ndarray, mass: np.ndarray, gravity: np.ndarr
     return True
 
 
-@njit(cache=True)
+@internal
 def ghost_images(x: np.ndarray, reach: float, cell):
     """The images of wrapped centroids x (N,3) within ``reach`` (m) of a periodic face: their
     positions (M,3), owners (M,) and shifts (M,3) int, in the order of
@@ -154,7 +155,7 @@ def ghost_images(x: np.ndarray, reach: float, cell):
     return gx, gown, gsft
 
 
-@njit(cache=True)
+@internal
 def extended_tables(st, own: np.ndarray):
     """The scene's tables with G extra particles after the N bodies, copies of the particles
     ``own`` (G,) (:func:`~nurbsdem.contact.periodic_scene.extended_tables`)."""
@@ -169,7 +170,7 @@ def extended_tables(st, own: np.ndarray):
                        st.depth_wall, st.nb + G)
 
 
-@njit(cache=True)
+@internal
 def _lexsorted(keys: np.ndarray, s: np.ndarray) -> np.ndarray:
     """``np.lexsort((s[:, 2], s[:, 1], s[:, 0], keys))``: stable, keys first."""
     order = np.arange(keys.shape[0])
@@ -179,7 +180,7 @@ def _lexsorted(keys: np.ndarray, s: np.ndarray) -> np.ndarray:
     return order[np.argsort(keys[order], kind="mergesort")]
 
 
-@njit(cache=True)
+@internal
 def periodic_list(st, cell, x, pos, R, wall_d, m: float):
     """The neighbour list through the cell at the wrapped poses (centroids x, pose positions
     pos (N,3) m, rotations R, walls wall_d (W,3) m) within m (margin plus skin, m):
@@ -237,7 +238,7 @@ def periodic_list(st, cell, x, pos, R, wall_d, m: float):
     return (i[sel], j[sel], keys[first], ma2[sel], mb2[sel], s[sel])
 
 
-@njit(cache=True)
+@internal
 def shift_rows(rows_f: np.ndarray, a: np.ndarray, d: np.ndarray) -> None:
     """The rows' points moved with body A by the wrap d (N,3) m (a row's points lie in A's
     frame), in place."""
@@ -248,7 +249,7 @@ def shift_rows(rows_f: np.ndarray, a: np.ndarray, d: np.ndarray) -> None:
             rows_f[r, F_PB + k] -= d[a[r], k]
 
 
-@njit(cache=True)
+@internal
 def image_scene(st, cell, b: np.ndarray, shift: np.ndarray, pos: np.ndarray, R: np.ndarray):
     """The dispatch's view of the periodic list (bodies b (L,), image shifts (L,3) int): each
     pair whose B is an image has an extra particle at B's pose translated by s∘L (m).  Returns
@@ -269,7 +270,7 @@ def image_scene(st, cell, b: np.ndarray, shift: np.ndarray, pos: np.ndarray, R: 
             np.concatenate((R, R[own])))
 
 
-@njit(cache=True)
+@internal
 def solve_images(st, cell, a, b, mask_a, mask_b, rows_f, rows_i, due, shift, pos, R, wall_d,
                  threads: int):
     """The rows ``due`` of the periodic list solved in place with B's images as extra
@@ -280,7 +281,7 @@ def solve_images(st, cell, a, b, mask_a, mask_b, rows_f, rows_i, due, shift, pos
                                wall_d, threads))
 
 
-@njit(cache=True)
+@internal
 def pair_images(cell, shift: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """The translation s∘L (m) of B's image for the list positions ``rows`` ((0,3) without a
     cell)."""
@@ -294,7 +295,7 @@ def pair_images(cell, shift: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- image bodies
-@njit(cache=True)
+@internal
 def has_images(image: np.ndarray) -> bool:
     """Whether a contact touches an image (a non-zero translation)."""
     for c in range(image.shape[0]):
@@ -304,7 +305,7 @@ def has_images(image: np.ndarray) -> bool:
     return False
 
 
-@njit(cache=True)
+@internal
 def image_bodies(n: int, b: np.ndarray, image: np.ndarray):
     """(own (G,), offset (G,3) m, body B of each contact in the extended numbering) of the
     contacts whose B is a particle's image (:class:`~nurbsdem.dynamics.images.ImageBodies`)."""
@@ -321,25 +322,25 @@ def image_bodies(n: int, b: np.ndarray, image: np.ndarray):
     return own, offset, b_ext
 
 
-@njit(cache=True)
+@internal
 def _particles(arr, own):
     """A particle array with its images' rows after it."""
     return np.concatenate((arr, arr[own]))
 
 
-@njit(cache=True)
+@internal
 def _positions(x, own, offset):
     """Centroids (N,3) m with the images' after them."""
     return np.concatenate((x, x[own] + offset))
 
 
-@njit(cache=True)
+@internal
 def _bodies(arr, own, n: int):
     """An array over all bodies with the images' rows between the particles and the walls."""
     return np.concatenate((arr[:n], arr[own], arr[n:]))
 
 
-@njit(cache=True)
+@internal
 def _const(bc, own, n: int):
     """The step's constants with the image bodies' rows."""
     return BodyConst(_particles(bc.mass, own), _particles(bc.inv_mass, own),
@@ -351,7 +352,7 @@ def _const(bc, own, n: int):
                      _particles(bc.sq_I, own))
 
 
-@njit(cache=True)
+@internal
 def _fold(loads, own, n: int):
     """Loads (N+G+W, 3) of the extended bodies as loads (N+W, 3): each image's added to its
     owner's, in image order."""
@@ -363,7 +364,7 @@ def _fold(loads, own, n: int):
     return out
 
 
-@njit(cache=True)
+@internal
 def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys,
                        hist_springs, pos, vel, omg, q, L, h, solves, image):
     """:func:`~nurbsdem.dynamics.step.contact_part` (bodies' pos, vel, omg (B,3)), with the
@@ -385,7 +386,7 @@ def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_k
             stick, coeffs, slip, keys, springs, repeated)
 
 
-@njit(cache=True)
+@internal
 def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, alt_prev_v,
                      alt_prev_L, alt_count, watch):
     """:func:`~nurbsdem.dynamics.step.step_start` with the stored contacts' image bodies
@@ -416,7 +417,7 @@ def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, a
     return omega[:n].copy(), worst, run
 
 
-@njit(cache=True)
+@internal
 def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work):
     """:func:`~nurbsdem.dynamics.step.kick_part` of length hk (s) with the stored contacts'
     image bodies, the particles' velocities and momenta written back.  Returns ω (N,3)
@@ -435,7 +436,7 @@ def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work):
     return omega[:n].copy()
 
 
-@njit(cache=True)
+@internal
 def network_images(image, near_image, near_a, near_b, a, b) -> np.ndarray:
     """The translation (M,3) m of B's image for each pair (a, b) of the time-step control's
     network: its K contacts (``image``) then the separated pairs it took, a subsequence of
