@@ -21,8 +21,9 @@ run: $(STAMP)
 	$(BIN)/nurbsdem solve inputs/paper/compaction_quick.inp
 	$(BIN)/python postproc/plot_monitors.py inputs/paper/results/quick
 
+# compiles the kernels, then runs the tests in one pytest process per core (tests/run_parallel.py)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python tests/run_parallel.py -q
 
 # Drops every compiled kernel (import nurbsdem already drops those whose sources changed).
 clean-cache:

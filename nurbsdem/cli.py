@@ -578,18 +578,21 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Stages compiled at the same time, each in its own process "
                    "(default: the usable cores).")
-def warmup(jobs: int | None) -> None:
+@click.option("--all", "everything", is_flag=True,
+              help="Also the kernels of mesh and surface walls.")
+def warmup(jobs: int | None, everything: bool) -> None:
     """Compile the solver's kernels into numba's cache now, so that the first run starts at
     once (after an install, an upgrade or an edit of the kernels' sources)."""
-    from .warmup import STAGES, warm_up
-    total = sum(s.weight for s in STAGES)
+    from .warmup import ALL_STAGES, STAGES, warm_up
+    stages = ALL_STAGES if everything else STAGES
+    total = sum(s.weight for s in stages)
     with click.progressbar(length=1000, label="compiling the kernels", show_eta=False,
                            file=sys.stderr) as bar:
         def done(name: str, seconds: float) -> None:
             bar.label = f"compiled {name} ({seconds:.0f} s)"
-            weight = next(s.weight for s in STAGES if s.name == name)
+            weight = next(s.weight for s in stages if s.name == name)
             bar.update(round(1000 * weight / total))
-        times = warm_up(jobs, on_done=done)
+        times = warm_up(jobs, on_done=done, stages=stages)
     click.echo(f"kernels compiled in {len(times)} stages: "
                + ", ".join(f"{name} {seconds:.0f} s" for name, seconds in times.items()))
 

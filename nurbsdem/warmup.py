@@ -152,6 +152,59 @@ def _output() -> None:
     encode_repeated(np.arange(6.0).reshape(2, 3), np.array([3, 2]))
 
 
+def _walls_deck(folder: Path) -> Path:
+    """A small deck in ``folder``: an ellipsoid and an exact sphere in a turning exact NURBS
+    drum with a triangle-mesh baffle and flat end plates (the kinds of pair of mesh and
+    surface walls: sphere and NURBS particle against each)."""
+    import numpy as np
+    import trimesh
+
+    from .geometry.surfaces import cylinder_patch
+    from .io.shapefile import save_shape
+    save_shape(folder / "drum.yaml", [cylinder_patch(0.06, 0.04, axis=(0, 0, 1))])
+    v = np.array([[-0.02, -0.02, -0.045], [0.02, -0.02, -0.045], [0.02, 0.02, -0.045],
+                  [-0.02, 0.02, -0.045]])
+    trimesh.Trimesh(v, np.array([[0, 1, 2], [0, 2, 3]]), process=False).export(
+        folder / "baffle.stl")
+    text = f"""Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2500
+Shapes
+  Shape 1 Ellipsoid SemiAxes 0.008 0.0065 0.005
+  Shape 2 Sphere Radius 0.005
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.0 0.03 -0.038
+  Particle 2 Shape 2 Material 1 Position 0.0 -0.03 -0.044
+Walls
+  Surface 1 Name drum File drum.yaml Rotation 0 1.5707963267948966 0 Position -0.02 0 0
+  Mesh 2 Name baffle File baffle.stl
+  Wall 3 Name plate_x_min Point -0.02 0 0 Normal 1 0 0 Size 0.15 0.15
+  Wall 4 Name plate_x_max Point 0.02 0 0 Normal -1 0 0 Size 0.15 0.15
+Contact
+  Interface 1 NormalPenalty 2e4 NormalDamping 6 TangentialPenalty 2e4 Friction 0.5
+Steps
+  Step 1 MoveWall drum Rotate AngularVelocity 4 0 0 Center 0 0 0 Duration 0.004 TimeStep 1e-3
+Output
+  Directory {folder / 'results'}
+  VTK Every 1.0 Resolution 4
+  Monitors Every 0.002
+"""
+    (folder / "walls.inp").write_text(text)
+    return folder / "walls.inp"
+
+
+def _walls() -> None:
+    """The mesh and surface walls' kernels as the Python driver calls them (:func:`_walls_deck`,
+    no output)."""
+    from .simulation import Simulation
+    with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
+        sim = Simulation.from_deck(_walls_deck(Path(tmp)), quiet=True)
+        sim.solver.compiled_steps = False
+        sim.solver.write_output = False
+        sim.run()
+
+
 def _loop() -> None:
     """The compiled time loop with its output: loads the kernels the other stages cached."""
     _run_deck(compiled_steps=True, output=True)
@@ -175,6 +228,13 @@ STAGES = (
     Stage("ParaView output", _output, 0.03),
     Stage("contact detection", _contacts, 0.33, after=("LCP batches", "wall contacts")),
     Stage("time loop", _loop, 0.38, after=("contact detection", "ParaView output")),
+)
+
+
+#: :data:`STAGES` and the kernels of mesh and surface walls (``nurbsdem warmup --all``; the
+#: test runner's warm-up): a stage of its own, beside the contact detection and the loop
+ALL_STAGES = STAGES + (
+    Stage("mesh and surface walls", _walls, 0.25, after=("LCP batches", "wall contacts")),
 )
 
 

@@ -68,6 +68,21 @@ def test_the_warmup_deck_is_valid(tmp_path):
     assert out.returncode == 0, out.stderr
 
 
+def test_the_walls_deck_is_valid_and_has_both_curved_kinds(tmp_path):
+    """The deck of the mesh and surface walls' stage passes ``nurbsdem check`` and holds a
+    NURBS surface, a mesh, a NURBS particle and a sphere (the stage is in ``--all`` only)."""
+    deck = warmup._walls_deck(tmp_path)
+    text = deck.read_text()
+    for word in ("Surface 1", "Mesh 2", "Ellipsoid", "Sphere", "Rotate"):
+        assert word in text
+    out = subprocess.run([sys.executable, "-m", "nurbsdem", "check", str(deck)],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    names = [s.name for s in warmup.ALL_STAGES]
+    assert names[:len(warmup.STAGES)] == [s.name for s in warmup.STAGES]
+    assert "mesh and surface walls" in names
+
+
 @njit
 def _callee(x):
     return x + 1.0

@@ -1,0 +1,90 @@
+"""The test suite on every usable core: what ``make test`` (and so CI) runs.
+
+1. The kernels are compiled into numba's cache first (:func:`nurbsdem.warmup.warm_up`, its
+   independent stages in parallel processes, the mesh and surface walls' kernels included),
+   so that the test processes load them instead of each compiling them again.
+2. One pytest process per usable core then shares the test files (``tests/conftest.py``:
+   each claims whole files as it reaches them, so the load balances itself).
+3. Each process's report is printed; the exit status is the first non-zero one, and a file
+   no process ran fails the run.
+
+Arguments are passed to every pytest process (``python tests/run_parallel.py -x -k mpi``).
+A plain ``pytest`` runs the same tests in one process.  pytest-xdist would do step 2, but it
+is not among the project's dependencies, and a run here needs the warm-up step anyway.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+TESTS = Path(__file__).resolve().parent
+T0 = time.perf_counter()
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:          # not Linux
+        return os.cpu_count() or 1
+
+
+def _warm_up() -> None:
+    """Compile the kernels into numba's cache; a failure is reported and the tests go on
+    (they show the error where it matters)."""
+    from nurbsdem.warmup import ALL_STAGES, warm_up
+    t0 = time.perf_counter()
+    try:
+        times = warm_up(stages=ALL_STAGES)
+    except Exception as exc:        # noqa: BLE001 - the tests report it properly
+        print(f"run_parallel: the warm-up failed ({type(exc).__name__}: {exc}); "
+              "the tests compile what they need", flush=True)
+        return
+    print(f"run_parallel: kernels compiled in {time.perf_counter() - t0:.0f} s ("
+          + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + ")", flush=True)
+
+
+def main(argv: list[str]) -> int:
+    _warm_up()
+    n = _cores()
+    with tempfile.TemporaryDirectory(prefix="nurbsdem-tests-") as tmp:
+        claims = Path(tmp) / "claims"
+        claims.mkdir()
+        procs, logs = [], []
+        for k in range(n):
+            log = open(Path(tmp) / f"worker{k}.log", "w+", encoding="utf-8")
+            env = dict(os.environ, NURBSDEM_TEST_CLAIMS=str(claims),
+                       NURBSDEM_TEST_WORKER=f"{k}/{n}")
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
+                 f"--basetemp={Path(tmp) / f'basetemp{k}'}", *argv],
+                cwd=TESTS.parent, env=env, stdout=log, stderr=subprocess.STDOUT))
+            logs.append(log)
+        codes = [p.wait() for p in procs]
+        summaries = []
+        for k, log in enumerate(logs):
+            log.seek(0)
+            text = log.read()
+            log.close()
+            print(f"\n===== pytest worker {k + 1} of {n} (exit status {codes[k]}) =====")
+            print(text, end="", flush=True)
+            last = [ln.strip("= ") for ln in text.splitlines() if ln.startswith("=")]
+            summaries.append(last[-1] if last else "no summary")
+        listed = claims / "files.txt"
+        files = listed.read_text().split() if listed.is_file() else []
+        missed = [f for f in files
+                  if not (claims / (f.replace(os.sep, "__") + ".claim")).is_file()]
+    if missed:
+        print(f"run_parallel: no worker ran {', '.join(missed)}")
+        return 1
+    print("run_parallel: " + "; ".join(f"worker {k + 1}: {t}" for k, t in enumerate(summaries))
+          + f"; {time.perf_counter() - T0:.0f} s in all, the warm-up included", flush=True)
+    failed = [c for c in codes if c != 0]
+    return failed[0] if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
