@@ -4,7 +4,9 @@ the wall along the unit direction d until its smallest distance to the particles
 The travel s* (m) is the first s, coming from far behind along d, at which the wall moved by
 s d comes within g of a particle, the wall standing where earlier steps left it (its pose
 ``R``, ``t``; the travel is added to the wall's displacement, as a ``Displacement`` step's
-is).  The distance is to the wall's surface, from either side; it is the flat wall's
+is).  The distance is to the wall's surface, from either side of a two-sided mesh or a
+surface wall and from the front of a one-sided mesh (``OneSided``: a particle the wall meets
+from behind passes through it, as in the wall's contacts); it is the flat wall's
 ``ToContact`` on a planar mesh.
 
 * Exact spheres against a mesh: a sphere swept along the line against the triangles, in
@@ -131,7 +133,8 @@ def _spheres(geom, x: np.ndarray, r: np.ndarray, g: float, R, t, d, along) -> fl
     if isinstance(geom, MeshWall):
         centres = np.ascontiguousarray((x - t) @ R)          # Rᵀ (x − t), row by row
         return float(sweep_entries(centres, r + g, np.ascontiguousarray(R.T @ d),
-                                   geom.vertices, geom.faces, geom.normals).min())
+                                   geom.vertices, geom.faces, geom.normals,
+                                   bool(geom.two_sided)).min())
     from .contact.lcp import F_N, F_SD
     from .contact.surface_wall import sphere_contact
 

@@ -172,3 +172,25 @@ Output
     assert_same_final_state(out, ref, monitors=("wall_floor.csv",))
     rows = np.genfromtxt(out / "monitors" / "wall_floor.csv", delimiter=",", names=True)
     assert rows["displacement_z"][-1] == pytest.approx(0.3 + 0.02 - 0.01 - 0.0005, rel=1e-14)
+
+
+def test_a_one_sided_mesh_stops_only_at_particles_in_front(tmp_path):
+    """Two facets at z = 0 lowered along −z: one facing down (x < 0) over a sphere 8 cm
+    below, one facing up (x > 0) over a sphere 3 cm below.  Two-sided, the nearer sphere
+    stops the wall; one-sided, the up-facing facet meets its sphere from behind and lets it
+    through, so the wall stops at the farther one (travel centre depth − r − gap)."""
+    import trimesh
+    down = [[-0.2, -0.1, 0], [-0.2, 0.1, 0], [-0.01, 0.1, 0], [-0.01, -0.1, 0]]
+    up = [[0.01, -0.1, 0], [0.2, -0.1, 0], [0.2, 0.1, 0], [0.01, 0.1, 0]]
+    trimesh.Trimesh(down + up, [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]],
+                    process=False).export(tmp_path / "facets.stl")
+    spheres = [((-0.1, 0.0, -0.08), 0.01), ((0.1, 0.0, -0.03), 0.01)]
+    gap, moved = 1e-3, {}
+    for one_sided in (False, True):
+        sim = _sim(spheres)
+        sim.add_mesh_wall("facets", tmp_path / "facets.stl", one_sided=one_sided)
+        sim.move_wall("facets", to_contact=True, gap=gap, direction=(0, 0, -1))
+        moved[one_sided] = sim.wall_displacements["facets"]
+    assert moved[False][2] == pytest.approx(-(0.03 - 0.01 - gap), rel=1e-13)
+    assert moved[True][2] == pytest.approx(-(0.08 - 0.01 - gap), rel=1e-13)
+    assert moved[True][0] == moved[True][1] == 0.0

@@ -14,8 +14,10 @@ on one of these pieces, where the line enters that piece's plane, cylinder or sp
 smaller root of its linear or quadratic equation) at a point that passes the piece's test
 (inside the triangle, between the edge's ends); every such entry lies in the set.  The first
 entry is therefore the least of the pieces' valid entries, and over the mesh the least over
-its triangles: the first s with dist(c(s), mesh) = ρ.  Both sides of each triangle count
-(the distance to the mesh's surface).
+its triangles: the first s with dist(c(s), mesh) = ρ.  On a two-sided mesh both sides of
+each triangle count (the distance to the mesh's surface); on a one-sided mesh only entries in
+front of the triangle's plane (the side its normal points to), as the mesh's contacts count
+only spheres whose centre is in front: a triangle met from behind lets the sphere through.
 
 Lengths in metres.
 """
@@ -95,23 +97,37 @@ def _cap_entry(c, d, a, b, cc, n, rho):
     return s
 
 
+@njit(cache=True, inline="always")
+def _in_front(s, c, d, a, n, rho, two_sided):
+    """s, or inf where the mesh is one-sided and the entry point c − s d lies behind the
+    triangle's plane (through a, normal n), by more than round-off of ρ."""
+    if two_sided or not s < math.inf:
+        return s
+    side = (n[0] * (c[0] - s * d[0] - a[0]) + n[1] * (c[1] - s * d[1] - a[1])
+            + n[2] * (c[2] - s * d[2] - a[2]))
+    return s if side >= -SLACK * rho else math.inf
+
+
 @njit(cache=True)
-def triangle_entry(c, d, a, b, cc, n, rho):
+def triangle_entry(c, d, a, b, cc, n, rho, two_sided=True):
     """First s (m) at which the point c − s d (c (3,) m, d (3,) unit) comes within ρ (m) of
-    the triangle (a, b, cc) with unit normal n (module docstring); inf if it never does."""
-    s = _cap_entry(c, d, a, b, cc, n, rho)
-    s = min(s, _edge_entry(c, d, a, b, rho), _edge_entry(c, d, b, cc, rho),
-            _edge_entry(c, d, cc, a, rho))
+    the triangle (a, b, cc) with unit normal n (module docstring); inf if it never does.  Not
+    ``two_sided``: only entries in front of the triangle (the side n points to)."""
+    s = _in_front(_cap_entry(c, d, a, b, cc, n, rho), c, d, a, n, rho, two_sided)
+    for p, q in ((a, b), (b, cc), (cc, a)):
+        s = min(s, _in_front(_edge_entry(c, d, p, q, rho), c, d, a, n, rho, two_sided))
     for v in (a, b, cc):
-        s = min(s, _sphere_entry(c[0] - v[0], c[1] - v[1], c[2] - v[2], d[0], d[1], d[2], rho))
+        s = min(s, _in_front(_sphere_entry(c[0] - v[0], c[1] - v[1], c[2] - v[2], d[0], d[1],
+                                           d[2], rho), c, d, a, n, rho, two_sided))
     return s
 
 
 @njit(cache=True)
-def sweep_entries(centres, rho, d, vertices, faces, normals):
+def sweep_entries(centres, rho, d, vertices, faces, normals, two_sided=True):
     """(N,) first travel s (m) at which each point c − s d comes within rho[i] (m) of the mesh
     (vertices (V,3), faces (T,3), unit normals (T,3); centres (N,3) and d (3,) unit in the
-    mesh's frame); inf where the line never does."""
+    mesh's frame); inf where the line never does.  Not ``two_sided``: from the front of the
+    triangles only (module docstring)."""
     T = faces.shape[0]
     ball = np.empty((T, 4))              # each triangle's bounding ball: centre, radius
     for t in range(T):
@@ -136,6 +152,7 @@ def sweep_entries(centres, rho, d, vertices, faces, normals):
             if w0 * w0 + w1 * w1 + w2 * w2 - wd * wd > reach * reach * (1.0 + 1e-9):
                 continue
             best = min(best, triangle_entry(c, d, vertices[faces[t, 0]], vertices[faces[t, 1]],
-                                            vertices[faces[t, 2]], normals[t], rho[i]))
+                                            vertices[faces[t, 2]], normals[t], rho[i],
+                                            two_sided))
         out[i] = best
     return out
