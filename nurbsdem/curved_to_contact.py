@@ -94,6 +94,7 @@ def curved_to_contact(model, bodies, wall_offset: np.ndarray, step, curved,
     :class:`~nurbsdem.curved_wall_motion.CurvedWallMotion` (the wall's rest pose and
     geometry) at time ``time`` (s)."""
     from .contact.curved_walls import CurvedWall
+    from .contact.surface_particle import ContactNotUnique
     from .io.deck_curved import sphere_radii
     k = model.wall_names.index(step.wall)
     c = k - len(model.walls)
@@ -116,8 +117,12 @@ def curved_to_contact(model, bodies, wall_offset: np.ndarray, step, curved,
         travel = _spheres(geom, bodies.position[spheres], radius[spheres], step.gap, R, t, d,
                           along)
     if not spheres.all():
-        travel = min(travel, _nurbs(model, bodies, ~spheres, geom, step.gap, R, t, d, along,
-                                    f"{model.path}:{step.line}: {where}"))
+        try:
+            travel = min(travel, _nurbs(model, bodies, ~spheres, geom, step.gap, R, t, d,
+                                        along, f"{where}: surface wall {step.wall!r}"))
+        except ContactNotUnique as exc:      # the wall curves more tightly than a particle
+            raise model.error(f"{exc}; move the wall by a Displacement instead",
+                              step.line) from None
     if not math.isfinite(travel):
         raise model.error(f"{where}: the wall meets no particle along the direction "
                           f"{np.round(d, 6).tolist()}", step.line)

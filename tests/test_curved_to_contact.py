@@ -194,3 +194,24 @@ def test_a_one_sided_mesh_stops_only_at_particles_in_front(tmp_path):
     assert moved[False][2] == pytest.approx(-(0.03 - 0.01 - gap), rel=1e-13)
     assert moved[True][2] == pytest.approx(-(0.08 - 0.01 - gap), rel=1e-13)
     assert moved[True][0] == moved[True][1] == 0.0
+
+
+def test_a_refused_contact_in_the_root_find_is_a_one_line_input_error(tmp_path, monkeypatch):
+    """Where a particle's contact with the surface wall has no unique solution during the
+    root find (the wall curving more tightly than the particle), the step fails with an
+    InputError naming the step, the wall and what to do instead, not the solver's error."""
+    import nurbsdem.curved_to_contact as ctc
+    from nurbsdem.contact.surface_particle import NOT_UNIQUE, refusal
+
+    def refused(*args):
+        raise refusal(args[-1], np.zeros(3), 0, NOT_UNIQUE)
+    monkeypatch.setattr(ctc, "_nurbs", refused)
+    save_shape(tmp_path / "drum.yaml", [cylinder_patch(0.1, 0.3, axis=(1, 0, 0))])
+    sim = _sim([])
+    sim.add_particle(shapes.ellipsoid(0.02, 0.015, 0.01), 1, (0, 0, 0))
+    sim.add_surface_wall("drum", tmp_path / "drum.yaml", position=(-0.1, 0.0, 0.5))
+    with pytest.raises(InputError) as err:
+        sim.move_wall("drum", to_contact=True, gap=1e-3, direction=(0, 0, -1))
+    text = str(err.value)
+    assert "MoveWall drum ToContact: surface wall 'drum'" in text and "not unique" in text
+    assert "Displacement" in text and "\n" not in text
