@@ -262,44 +262,25 @@ def _taylor(ev, du, dv):
 
 
 # --------------------------------------------------------------------------- the solver
-@kernel
-def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, wf, w4, out):
-    """Minimise f1 (paper Eq. 5) from the state in ``ist``/``fst`` rows 0 (A) and 1 (B)
-    (module docstring). ``scale`` (m): length scale of the pair (sum of bounding radii).
+#: what a trust-region pass of :func:`stage1` leads to: the next pass, the end of the
+#: iteration (no progress within rounding), or the stationary point's tests
+_NEXT, _STOP, _STATIONARY = 0, 1, 2
 
-    On return the state holds the final patches/parameters, ``wf[S1_ROW + 24]`` /
-    ``wf[S1_ROW + 25]`` the world points on A / B, ``wf[S1_ROW + 26]`` the gap g (m),
-    ``wf[S1_ROW + 27:31]`` the world tangents (columns of J) and ``out`` the summary
-    (f1 (m²), λmax, λmin of the reduced scaled Hessian, scaled gradient norm, |g| (m)).
-    Returns (classification, iterations, patch evaluations)."""
-    r0 = S1_ROW
-    evA = wf[r0 + _EVA:r0 + _EVA + 6]
-    evB = wf[r0 + _EVB:r0 + _EVB + 6]
-    teA = wf[r0 + _TEA:r0 + _TEA + 6]
-    teB = wf[r0 + _TEB:r0 + _TEB + 6]
-    pA = wf[r0 + _PAW]
-    pB = wf[r0 + _PBW]
-    g = wf[r0 + _G]
-    C = wf[r0 + _C:r0 + _C + 4]
-    e = wf[r0 + _E]
-    tmp = wf[r0 + _TMP]
-    ev2 = wf[r0 + _EV2:r0 + _EV2 + 6]
-    tpA = wf[r0 + _TPA]
-    tpB = wf[r0 + _TPB]
-    Hs = w4[_HS:_HS + 4]
-    Q = w4[_Q:_Q + 4]
-    lam = w4[_LAM]
-    gr = w4[_GR]
-    xn = w4[_XN]
-    wd = w4[_WD]
-    st = w4[_ST]
-    Hr = w4[_HR:_HR + 4]
-    gs = w4[_GS]
-    y = w4[_Y]
-    idx = w4[_IDX]
-    sr = w4[_DIAG]
-    domA = tabA[6]
-    domB = tabB[6]
+
+@kernel(inline="always")
+def _gap(pA, pB, g):
+    """g = pA − pB (m, world) and f1 = |g|²/2 (m², paper Eq. 5)."""
+    f = 0.0
+    for a in range(3):
+        g[a] = pA[a] - pB[a]
+        f += g[a] * g[a]
+    return 0.5 * f
+
+
+@kernel(inline="always")
+def _start(tabA, posA, RA, tabB, posB, RB, ist, fst, ws, evA, evB, pA, pB, C, g, out):
+    """The start of :func:`stage1`: the state clamped to its patches with every parameter free,
+    both points evaluated (world points pA, pB, tangents C).  Returns f1 (m²)."""
     for k in range(N_OUT):
         out[k] = 0.0
     _clamp_state(tabA, ist[0], fst[0])
@@ -310,14 +291,255 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
     ist[1, 2] = FREE
     evaluate(tabA, ist[0, 0], fst[0, 0], fst[0, 1], 2, ws, evA)
     evaluate(tabB, ist[1, 0], fst[1, 0], fst[1, 1], 2, ws, evB)
-    nev = 2
     _world(posA, RA, evA, 1.0, pA, C[0], C[1])
     _world(posB, RB, evB, -1.0, pB, C[2], C[3])
-    f = 0.0
+    return _gap(pA, pB, g)
+
+
+@kernel(inline="always")
+def _bounds_pass(tabA, posA, RA, tabB, posB, RB, ist, fst, gr, gl, g, ws, evA, evB, pA, pB, C,
+                 e, ev2, tmp):
+    """The bounds of A, then (if A's point stays) of B: clamp, migrate or fix (paper 3.2.2,
+    3.2.3); a moved point is evaluated again.  Returns (moved, patch evaluations)."""
+    mv, nev = _bounds(tabA, ist[0], fst[0], gr[0], gr[1], gl, g, posA, RA, 1.0, ws, evA, e,
+                      ev2, tmp)
+    if mv:
+        evaluate(tabA, ist[0, 0], fst[0, 0], fst[0, 1], 2, ws, evA)
+        nev += 1
+        _world(posA, RA, evA, 1.0, pA, C[0], C[1])
+    else:
+        mv, ne = _bounds(tabB, ist[1], fst[1], gr[2], gr[3], gl, g, posB, RB, -1.0, ws, evB, e,
+                         ev2, tmp)
+        nev += ne
+        if mv:
+            evaluate(tabB, ist[1, 0], fst[1, 0], fst[1, 1], 2, ws, evB)
+            nev += 1
+            _world(posB, RB, evB, -1.0, pB, C[2], C[3])
+    return mv, nev
+
+
+@kernel(inline="always")
+def _reduced_hessian(domA, domB, ist, RA, RB, g, C, evA, evB, gr, wd, Hs, gs, idx, sr, Hr, Q,
+                     lam):
+    """The scaled Hessian Hs and gradient gs of f1 (paper Eq. 5 differentiated twice, each
+    parameter scaled by its patch's width wd), and the reduced problem on the free parameters
+    (P_s, Eq. 12–13: Hr, sr over the indices idx) with its eigen-decomposition (Q, lam).
+    Returns (free parameters n, |reduced gradient|, λref = max(|λ|, max diag), λmin)."""
+    wd[0] = domA[ist[0, 0], 1] - domA[ist[0, 0], 0]
+    wd[1] = domA[ist[0, 0], 3] - domA[ist[0, 0], 2]
+    wd[2] = domB[ist[1, 0], 1] - domB[ist[1, 0], 0]
+    wd[3] = domB[ist[1, 0], 3] - domB[ist[1, 0], 2]
+    for i in range(4):
+        for j in range(i, 4):
+            Hs[i, j] = dot3(C[i], C[j])
+    # curvature terms: g · Γ'' (file frame: Rᵀ g)
+    gA0 = RA[0, 0] * g[0] + RA[1, 0] * g[1] + RA[2, 0] * g[2]
+    gA1 = RA[0, 1] * g[0] + RA[1, 1] * g[1] + RA[2, 1] * g[2]
+    gA2 = RA[0, 2] * g[0] + RA[1, 2] * g[1] + RA[2, 2] * g[2]
+    gB0 = RB[0, 0] * g[0] + RB[1, 0] * g[1] + RB[2, 0] * g[2]
+    gB1 = RB[0, 1] * g[0] + RB[1, 1] * g[1] + RB[2, 1] * g[2]
+    gB2 = RB[0, 2] * g[0] + RB[1, 2] * g[1] + RB[2, 2] * g[2]
+    Hs[0, 0] += gA0 * evA[3, 0] + gA1 * evA[3, 1] + gA2 * evA[3, 2]
+    Hs[0, 1] += gA0 * evA[4, 0] + gA1 * evA[4, 1] + gA2 * evA[4, 2]
+    Hs[1, 1] += gA0 * evA[5, 0] + gA1 * evA[5, 1] + gA2 * evA[5, 2]
+    Hs[2, 2] -= gB0 * evB[3, 0] + gB1 * evB[3, 1] + gB2 * evB[3, 2]
+    Hs[2, 3] -= gB0 * evB[4, 0] + gB1 * evB[4, 1] + gB2 * evB[4, 2]
+    Hs[3, 3] -= gB0 * evB[5, 0] + gB1 * evB[5, 1] + gB2 * evB[5, 2]
+    dmax = 0.0
+    for i in range(4):
+        for j in range(i, 4):
+            Hs[i, j] *= wd[i] * wd[j]
+            Hs[j, i] = Hs[i, j]
+        gs[i] = gr[i] * wd[i]
+        dmax = max(dmax, abs(Hs[i, i]))
+    n = np.int64(0)         # not a literal: one specialisation of jacobi_eig
+    for k in range(4):
+        fx = ist[k // 2, 1 + k % 2]
+        if fx == FREE:
+            idx[n] = k
+            n += 1
+    gn = 0.0
+    for i in range(n):
+        ki = int(idx[i])
+        sr[i] = gs[ki]
+        gn += gs[ki] * gs[ki]
+        for j in range(n):
+            Hr[i, j] = Hs[ki, int(idx[j])]
+    gn = math.sqrt(gn)
+    jacobi_eig(Hr, n, Q, lam)
+    lref = dmax
+    lmin = 1e300
+    for i in range(n):
+        lref = max(lref, abs(lam[i]))
+        lmin = min(lmin, lam[i])
+    return n, gn, lref, lmin
+
+
+@kernel(inline="always")
+def _trust_step(tabA, posA, RA, tabB, posB, RB, ist, fst, ws, wf, w4, n, delta, xtol, f, gl,
+                pscale, gn, lref):
+    """One trust-region pass of :func:`stage1` (radius delta in scaled parameters; the
+    workspaces' named rows as there): the step clamped to the patches' rectangles, then a
+    snap onto a bound, a last second-order Taylor update in the quadratic-convergence region,
+    or a trial point accepted on its ratio of actual to predicted decrease.  Returns (_NEXT,
+    _STOP or _STATIONARY, f1 (m²), delta, |reduced gradient|, patch evaluations)."""
+    r0 = S1_ROW
+    evA, evB = wf[r0 + _EVA:r0 + _EVA + 6], wf[r0 + _EVB:r0 + _EVB + 6]
+    teA, teB = wf[r0 + _TEA:r0 + _TEA + 6], wf[r0 + _TEB:r0 + _TEB + 6]
+    pA, pB, g, tpA, tpB = wf[r0 + _PAW], wf[r0 + _PBW], wf[r0 + _G], wf[r0 + _TPA], wf[r0 + _TPB]
+    C = wf[r0 + _C:r0 + _C + 4]
+    Hs, Q = w4[_HS:_HS + 4], w4[_Q:_Q + 4]
+    lam, xn, wd, st, gs, y, idx, sr = (w4[_LAM], w4[_XN], w4[_WD], w4[_ST], w4[_GS], w4[_Y],
+                                       w4[_IDX], w4[_DIAG])
+    domA, domB = tabA[6], tabB[6]
+    newton = tr_step_eig(lam, Q, sr, n, delta, y, xn, w4[22])
+    for k in range(4):
+        st[k] = 0.0
+    for i in range(n):
+        ki = int(idx[i])
+        st[ki] = xn[i] * wd[ki]
+    # clamp to the rectangles
+    uA = min(max(fst[0, 0] + st[0], domA[ist[0, 0], 0]), domA[ist[0, 0], 1])
+    vA = min(max(fst[0, 1] + st[1], domA[ist[0, 0], 2]), domA[ist[0, 0], 3])
+    uB = min(max(fst[1, 0] + st[2], domB[ist[1, 0], 0]), domB[ist[1, 0], 1])
+    vB = min(max(fst[1, 1] + st[3], domB[ist[1, 0], 2]), domB[ist[1, 0], 3])
+    clamped = (uA != fst[0, 0] + st[0] or vA != fst[0, 1] + st[1]
+               or uB != fst[1, 0] + st[2] or vB != fst[1, 1] + st[3])
+    st[0] = uA - fst[0, 0]
+    st[1] = vA - fst[0, 1]
+    st[2] = uB - fst[1, 0]
+    st[3] = vB - fst[1, 1]
+    lx = 0.0
     for a in range(3):
-        g[a] = pA[a] - pB[a]
-        f += g[a] * g[a]
-    f *= 0.5
+        t = C[0, a] * st[0] + C[1, a] * st[1] + C[2, a] * st[2] + C[3, a] * st[3]
+        lx += t * t
+    lx = math.sqrt(lx)
+    xs = 0.0
+    for k in range(4):
+        xs += (st[k] / wd[k]) ** 2
+    xs = math.sqrt(xs)
+    if clamped and lx <= xtol:
+        # a tiny step cut by a bound: snap onto the bound, the next pass sees the edge
+        fst[0, 0] = uA
+        fst[0, 1] = vA
+        fst[1, 0] = uB
+        fst[1, 1] = vB
+        return _NEXT, f, delta, gn, 0
+    if newton and not clamped and (xs <= TAYLOR_STEP1 or lx <= xtol):
+        # quadratic-convergence region: last step by a second-order Taylor update
+        _taylor(evA, st[0], st[1])
+        _taylor(evB, st[2], st[3])
+        fst[0, 0] = uA
+        fst[0, 1] = vA
+        fst[1, 0] = uB
+        fst[1, 1] = vB
+        for a in range(3):
+            pA[a] = posA[a] + RA[a, 0] * evA[0, 0] + RA[a, 1] * evA[0, 1] + RA[a, 2] * evA[0, 2]
+            pB[a] = posB[a] + RB[a, 0] * evB[0, 0] + RB[a, 1] * evB[0, 1] + RB[a, 2] * evB[0, 2]
+        # the gradient after the Newton step is second order
+        return _STATIONARY, _gap(pA, pB, g), delta, 0.0, 0
+    # predicted decrease of the (clamped) step on the scaled model
+    pred = 0.0
+    for i in range(4):
+        si = st[i] / wd[i]
+        pred -= gs[i] * si
+        for j in range(4):
+            pred -= 0.5 * si * Hs[i, j] * st[j] / wd[j]
+    evaluate(tabA, ist[0, 0], uA, vA, 2, ws, teA)
+    evaluate(tabB, ist[1, 0], uB, vB, 2, ws, teB)
+    fn = 0.0
+    for a in range(3):
+        tpA[a] = posA[a] + RA[a, 0] * teA[0, 0] + RA[a, 1] * teA[0, 1] + RA[a, 2] * teA[0, 2]
+        tpB[a] = posB[a] + RB[a, 0] * teB[0, 0] + RB[a, 1] * teB[0, 1] + RB[a, 2] * teB[0, 2]
+        fn += (tpA[a] - tpB[a]) ** 2
+    fn *= 0.5
+    actual = f - fn
+    noise = 4e-16 * pscale * (gl + 1e-16 * pscale)
+    if pred > noise:
+        rho = actual / pred
+    else:
+        rho = 1.0 if actual >= -noise else -1.0
+    if rho > ETA and fn == fn:
+        fst[0, 0] = uA
+        fst[0, 1] = vA
+        fst[1, 0] = uB
+        fst[1, 1] = vB
+        for r in range(6):
+            for a in range(3):
+                evA[r, a] = teA[r, a]
+                evB[r, a] = teB[r, a]
+        _world(posA, RA, evA, 1.0, pA, C[0], C[1])
+        _world(posB, RB, evB, -1.0, pB, C[2], C[3])
+        f = _gap(pA, pB, g)
+        if rho > 0.75 and xs >= 0.9 * delta:
+            delta = min(2.0 * delta, DELTA_MAX)
+    if rho < 0.25:
+        delta = 0.25 * xs
+        if delta < 1e-15:
+            # no further progress within rounding: stationary if the gradient is small on
+            # the scale of the rounding, otherwise not converged
+            if gn < 1e-8 * lref:
+                return _STATIONARY, f, delta, gn, 2
+            return _STOP, f, delta, gn, 2
+    return _NEXT, f, delta, gn, 2
+
+
+@kernel(inline="always")
+def _retest(tabA, posA, RA, tabB, posB, RB, ist, fst, g, gl, ws, e, ev2, tmp, evA, evB, pA, pB,
+            C):
+    """At a stationary point: the creases of A, then (if A's point stays) of B, tested again;
+    a moved point is evaluated again.  Returns (moved, patch evaluations)."""
+    mv, ne = _retest_creases(tabA, ist[0], fst[0], g, gl, RA, 1.0, ws, e, ev2, tmp)
+    if not mv:
+        mv, ne2 = _retest_creases(tabB, ist[1], fst[1], g, gl, RB, -1.0, ws, e, ev2, tmp)
+        ne += ne2
+        if mv:
+            evaluate(tabB, ist[1, 0], fst[1, 0], fst[1, 1], 2, ws, evB)
+            _world(posB, RB, evB, -1.0, pB, C[2], C[3])
+    else:
+        evaluate(tabA, ist[0, 0], fst[0, 0], fst[0, 1], 2, ws, evA)
+        _world(posA, RA, evA, 1.0, pA, C[0], C[1])
+    return mv, ne
+
+
+@kernel(inline="always")
+def _classify(f, lref, lmin, gn, n, pscale):
+    """The class of a stationary point of f1 (m²): intersecting, degenerate (the gradient not
+    small relative to |g|), separated (a minimum) or a saddle, from the reduced Hessian's
+    λref, λmin and the reduced gradient's norm gn."""
+    gl = math.sqrt(2.0 * f)
+    rel = gn <= math.sqrt(lref) * max(1e2 * REL_TOL * gl, 1e-13 * pscale)
+    if f < F_TOL * lref:
+        return S1_INTERSECTING
+    if not rel and n > 0:
+        return S1_DEGENERATE
+    if n == 0 or lmin >= EIG_TOL * lref:
+        return S1_SEPARATED
+    if lmin <= -EIG_TOL * lref:
+        return S1_SADDLE
+    return S1_DEGENERATE
+
+
+@kernel
+def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, wf, w4, out):
+    """Minimise f1 (paper Eq. 5) from the state in ``ist``/``fst`` rows 0 (A) and 1 (B)
+    (module docstring). ``scale`` (m): length scale of the pair (sum of bounding radii).
+
+    On return the state holds the final patches/parameters, ``wf[S1_ROW + 24]`` /
+    ``wf[S1_ROW + 25]`` the world points on A / B, ``wf[S1_ROW + 26]`` the gap g (m),
+    ``wf[S1_ROW + 27:31]`` the world tangents (columns of J) and ``out`` the summary
+    (f1 (m²), λmax, λmin of the reduced scaled Hessian, scaled gradient norm, |g| (m)).
+    Returns (classification, iterations, patch evaluations)."""
+    r0 = S1_ROW                 # the named rows of the workspaces
+    evA, evB = wf[r0 + _EVA:r0 + _EVA + 6], wf[r0 + _EVB:r0 + _EVB + 6]
+    pA, pB, g = wf[r0 + _PAW], wf[r0 + _PBW], wf[r0 + _G]
+    C = wf[r0 + _C:r0 + _C + 4]
+    e, tmp, ev2 = wf[r0 + _E], wf[r0 + _TMP], wf[r0 + _EV2:r0 + _EV2 + 6]
+    Hs, Q, Hr = w4[_HS:_HS + 4], w4[_Q:_Q + 4], w4[_HR:_HR + 4]
+    lam, gr, wd, gs, idx, sr = w4[_LAM], w4[_GR], w4[_WD], w4[_GS], w4[_IDX], w4[_DIAG]
+    domA, domB = tabA[6], tabB[6]
+    f = _start(tabA, posA, RA, tabB, posB, RB, ist, fst, ws, evA, evB, pA, pB, C, g, out)
+    nev = 2
     pscale = max(scale, math.sqrt(dot3(pA, pA)))
     xtol = 1e-13 * scale
     delta = delta0
@@ -332,79 +554,15 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
         gl = math.sqrt(2.0 * f)
         for k in range(4):
             gr[k] = dot3(C[k], g)
-        # ---- bounds: clamp / migrate / fix (paper 3.2.2, 3.2.3)
-        if gl > 0.0:
-            mv, ne = _bounds(tabA, ist[0], fst[0], gr[0], gr[1], gl, g, posA, RA, 1.0, ws, evA,
-                             e, ev2, tmp)
+        if gl > 0.0:                # bounds: clamp / migrate / fix (paper 3.2.2, 3.2.3)
+            mv, ne = _bounds_pass(tabA, posA, RA, tabB, posB, RB, ist, fst, gr, gl, g, ws,
+                                  evA, evB, pA, pB, C, e, ev2, tmp)
             nev += ne
             if mv:
-                evaluate(tabA, ist[0, 0], fst[0, 0], fst[0, 1], 2, ws, evA)
-                nev += 1
-                _world(posA, RA, evA, 1.0, pA, C[0], C[1])
-            else:
-                mv, ne = _bounds(tabB, ist[1], fst[1], gr[2], gr[3], gl, g, posB, RB, -1.0, ws,
-                                 evB, e, ev2, tmp)
-                nev += ne
-                if mv:
-                    evaluate(tabB, ist[1, 0], fst[1, 0], fst[1, 1], 2, ws, evB)
-                    nev += 1
-                    _world(posB, RB, evB, -1.0, pB, C[2], C[3])
-            if mv:
-                f = 0.0
-                for a in range(3):
-                    g[a] = pA[a] - pB[a]
-                    f += g[a] * g[a]
-                f *= 0.5
+                f = _gap(pA, pB, g)
                 continue
-        # ---- scaled Hessian and gradient (paper Eq. 5 differentiated twice)
-        wd[0] = domA[ist[0, 0], 1] - domA[ist[0, 0], 0]
-        wd[1] = domA[ist[0, 0], 3] - domA[ist[0, 0], 2]
-        wd[2] = domB[ist[1, 0], 1] - domB[ist[1, 0], 0]
-        wd[3] = domB[ist[1, 0], 3] - domB[ist[1, 0], 2]
-        for i in range(4):
-            for j in range(i, 4):
-                Hs[i, j] = dot3(C[i], C[j])
-        # curvature terms: g · Γ'' (file frame: Rᵀ g)
-        gA0 = RA[0, 0] * g[0] + RA[1, 0] * g[1] + RA[2, 0] * g[2]
-        gA1 = RA[0, 1] * g[0] + RA[1, 1] * g[1] + RA[2, 1] * g[2]
-        gA2 = RA[0, 2] * g[0] + RA[1, 2] * g[1] + RA[2, 2] * g[2]
-        gB0 = RB[0, 0] * g[0] + RB[1, 0] * g[1] + RB[2, 0] * g[2]
-        gB1 = RB[0, 1] * g[0] + RB[1, 1] * g[1] + RB[2, 1] * g[2]
-        gB2 = RB[0, 2] * g[0] + RB[1, 2] * g[1] + RB[2, 2] * g[2]
-        Hs[0, 0] += gA0 * evA[3, 0] + gA1 * evA[3, 1] + gA2 * evA[3, 2]
-        Hs[0, 1] += gA0 * evA[4, 0] + gA1 * evA[4, 1] + gA2 * evA[4, 2]
-        Hs[1, 1] += gA0 * evA[5, 0] + gA1 * evA[5, 1] + gA2 * evA[5, 2]
-        Hs[2, 2] -= gB0 * evB[3, 0] + gB1 * evB[3, 1] + gB2 * evB[3, 2]
-        Hs[2, 3] -= gB0 * evB[4, 0] + gB1 * evB[4, 1] + gB2 * evB[4, 2]
-        Hs[3, 3] -= gB0 * evB[5, 0] + gB1 * evB[5, 1] + gB2 * evB[5, 2]
-        dmax = 0.0
-        for i in range(4):
-            for j in range(i, 4):
-                Hs[i, j] *= wd[i] * wd[j]
-                Hs[j, i] = Hs[i, j]
-            gs[i] = gr[i] * wd[i]
-            dmax = max(dmax, abs(Hs[i, i]))
-        # ---- reduced problem on the free parameters (P_s, Eq. 12–13)
-        n = np.int64(0)         # not a literal: one specialisation of jacobi_eig
-        for k in range(4):
-            fx = ist[k // 2, 1 + k % 2]
-            if fx == FREE:
-                idx[n] = k
-                n += 1
-        gn = 0.0
-        for i in range(n):
-            ki = int(idx[i])
-            sr[i] = gs[ki]
-            gn += gs[ki] * gs[ki]
-            for j in range(n):
-                Hr[i, j] = Hs[ki, int(idx[j])]
-        gn = math.sqrt(gn)
-        jacobi_eig(Hr, n, Q, lam)
-        lref = dmax
-        lmin = 1e300
-        for i in range(n):
-            lref = max(lref, abs(lam[i]))
-            lmin = min(lmin, lam[i])
+        n, gn, lref, lmin = _reduced_hessian(domA, domB, ist, RA, RB, g, C, evA, evB, gr, wd,
+                                             Hs, gs, idx, sr, Hr, Q, lam)
         if f < F_TOL * lref:
             cls = S1_INTERSECTING
             break
@@ -415,146 +573,26 @@ def stage1(tabA, posA, RA, tabB, posB, RB, scale, ist, fst, max_it, delta0, ws, 
         stationary = n == 0 or (gn < GRAD_TOL * lref and rel and lmin >= -EIG_TOL * lref)
         if not stationary and it < max_it:
             it += 1
-            newton = tr_step_eig(lam, Q, sr, n, delta, y, xn, w4[22])
-            for k in range(4):
-                st[k] = 0.0
-            for i in range(n):
-                ki = int(idx[i])
-                st[ki] = xn[i] * wd[ki]
-            # clamp to the rectangles
-            uA = min(max(fst[0, 0] + st[0], domA[ist[0, 0], 0]), domA[ist[0, 0], 1])
-            vA = min(max(fst[0, 1] + st[1], domA[ist[0, 0], 2]), domA[ist[0, 0], 3])
-            uB = min(max(fst[1, 0] + st[2], domB[ist[1, 0], 0]), domB[ist[1, 0], 1])
-            vB = min(max(fst[1, 1] + st[3], domB[ist[1, 0], 2]), domB[ist[1, 0], 3])
-            clamped = (uA != fst[0, 0] + st[0] or vA != fst[0, 1] + st[1]
-                       or uB != fst[1, 0] + st[2] or vB != fst[1, 1] + st[3])
-            st[0] = uA - fst[0, 0]
-            st[1] = vA - fst[0, 1]
-            st[2] = uB - fst[1, 0]
-            st[3] = vB - fst[1, 1]
-            lx = 0.0
-            for a in range(3):
-                t = C[0, a] * st[0] + C[1, a] * st[1] + C[2, a] * st[2] + C[3, a] * st[3]
-                lx += t * t
-            lx = math.sqrt(lx)
-            xs = 0.0
-            for k in range(4):
-                xs += (st[k] / wd[k]) ** 2
-            xs = math.sqrt(xs)
-            if clamped and lx <= xtol:
-                # a tiny step cut by a bound: snap onto the bound, the next pass sees the edge
-                fst[0, 0] = uA
-                fst[0, 1] = vA
-                fst[1, 0] = uB
-                fst[1, 1] = vB
+            step, f, delta, gn, ne = _trust_step(tabA, posA, RA, tabB, posB, RB, ist, fst, ws,
+                                                 wf, w4, n, delta, xtol, f, gl, pscale, gn,
+                                                 lref)
+            nev += ne
+            if step == _NEXT:
                 continue
-            if newton and not clamped and (xs <= TAYLOR_STEP1 or lx <= xtol):
-                # quadratic-convergence region: last step by a second-order Taylor update
-                _taylor(evA, st[0], st[1])
-                _taylor(evB, st[2], st[3])
-                fst[0, 0] = uA
-                fst[0, 1] = vA
-                fst[1, 0] = uB
-                fst[1, 1] = vB
-                for a in range(3):
-                    pA[a] = posA[a] + RA[a, 0] * evA[0, 0] + RA[a, 1] * evA[0, 1] + RA[a, 2] * evA[0, 2]
-                    pB[a] = posB[a] + RB[a, 0] * evB[0, 0] + RB[a, 1] * evB[0, 1] + RB[a, 2] * evB[0, 2]
-                f = 0.0
-                for a in range(3):
-                    g[a] = pA[a] - pB[a]
-                    f += g[a] * g[a]
-                f *= 0.5
-                gn = 0.0          # the gradient after the Newton step is second order
-                stationary = True
-            else:
-                # predicted decrease of the (clamped) step on the scaled model
-                pred = 0.0
-                for i in range(4):
-                    si = st[i] / wd[i]
-                    pred -= gs[i] * si
-                    for j in range(4):
-                        pred -= 0.5 * si * Hs[i, j] * st[j] / wd[j]
-                evaluate(tabA, ist[0, 0], uA, vA, 2, ws, teA)
-                evaluate(tabB, ist[1, 0], uB, vB, 2, ws, teB)
-                nev += 2
-                fn = 0.0
-                for a in range(3):
-                    tpA[a] = posA[a] + RA[a, 0] * teA[0, 0] + RA[a, 1] * teA[0, 1] + RA[a, 2] * teA[0, 2]
-                    tpB[a] = posB[a] + RB[a, 0] * teB[0, 0] + RB[a, 1] * teB[0, 1] + RB[a, 2] * teB[0, 2]
-                    fn += (tpA[a] - tpB[a]) ** 2
-                fn *= 0.5
-                actual = f - fn
-                noise = 4e-16 * pscale * (gl + 1e-16 * pscale)
-                if pred > noise:
-                    rho = actual / pred
-                else:
-                    rho = 1.0 if actual >= -noise else -1.0
-                if rho > ETA and fn == fn:
-                    fst[0, 0] = uA
-                    fst[0, 1] = vA
-                    fst[1, 0] = uB
-                    fst[1, 1] = vB
-                    for r in range(6):
-                        for a in range(3):
-                            evA[r, a] = teA[r, a]
-                            evB[r, a] = teB[r, a]
-                    _world(posA, RA, evA, 1.0, pA, C[0], C[1])
-                    _world(posB, RB, evB, -1.0, pB, C[2], C[3])
-                    f = 0.0
-                    for a in range(3):
-                        g[a] = pA[a] - pB[a]
-                        f += g[a] * g[a]
-                    f *= 0.5
-                    if rho > 0.75 and xs >= 0.9 * delta:
-                        delta = min(2.0 * delta, DELTA_MAX)
-                if rho < 0.25:
-                    delta = 0.25 * xs
-                    if delta < 1e-15:
-                        # no further progress within rounding: stationary if the gradient is
-                        # small on the scale of the rounding, otherwise not converged
-                        if gn < 1e-8 * lref:
-                            stationary = True
-                        else:
-                            break
-                if not stationary:
-                    continue
+            if step == _STOP:
+                break
         elif not stationary:
             break      # iteration limit
-        # ---- stationary: re-test creases, then classify
-        if nretest < 4:
-            gl = math.sqrt(2.0 * f)
-            mv, ne = _retest_creases(tabA, ist[0], fst[0], g, gl, RA, 1.0, ws, e, ev2, tmp)
-            if not mv:
-                mv, ne2 = _retest_creases(tabB, ist[1], fst[1], g, gl, RB, -1.0, ws, e, ev2, tmp)
-                ne += ne2
-                if mv:
-                    evaluate(tabB, ist[1, 0], fst[1, 0], fst[1, 1], 2, ws, evB)
-                    _world(posB, RB, evB, -1.0, pB, C[2], C[3])
-            else:
-                evaluate(tabA, ist[0, 0], fst[0, 0], fst[0, 1], 2, ws, evA)
-                _world(posA, RA, evA, 1.0, pA, C[0], C[1])
+        if nretest < 4:             # stationary: re-test creases, then classify
+            mv, ne = _retest(tabA, posA, RA, tabB, posB, RB, ist, fst, g, math.sqrt(2.0 * f),
+                             ws, e, ev2, tmp, evA, evB, pA, pB, C)
             nev += ne
             if mv:
                 nretest += 1
                 nev += 1
-                f = 0.0
-                for a in range(3):
-                    g[a] = pA[a] - pB[a]
-                    f += g[a] * g[a]
-                f *= 0.5
+                f = _gap(pA, pB, g)
                 continue
-        gl = math.sqrt(2.0 * f)
-        rel = gn <= math.sqrt(lref) * max(1e2 * REL_TOL * gl, 1e-13 * pscale)
-        if f < F_TOL * lref:
-            cls = S1_INTERSECTING
-        elif not rel and n > 0:
-            cls = S1_DEGENERATE
-        elif n == 0 or lmin >= EIG_TOL * lref:
-            cls = S1_SEPARATED
-        elif lmin <= -EIG_TOL * lref:
-            cls = S1_SADDLE
-        else:
-            cls = S1_DEGENERATE
+        cls = _classify(f, lref, lmin, gn, n, pscale)
         break
     out[O_F1] = f
     out[O_LREF] = lref
