@@ -256,6 +256,216 @@ def support_derivatives(tab, ip, u, v, e, fixu, fixv, scale, ws, ev, ev2, out_M,
                 out_M[a, c2] = src[k, a] * out_G[row, c2]
 
 
+#: what the Newton part of an iteration of :func:`support_map` leads to: a step snapped
+#: onto a bound (the next iteration sees the edge), the final point, or a trial point
+_SNAP, _FINISH, _TRIAL = 0, 1, 2
+
+
+@kernel(inline="always")
+def _start_point(tab, ip, fst, ws, ev):
+    """The start of :func:`support_map`: (u, v) clamped to patch ``ip``'s rectangle, the trust
+    radius (fst[2]; a quarter of the patch's width by default, at least 5 % of it) and the
+    point evaluated into ev.  Returns (u, v, the patch's width, the trust radius)."""
+    dom = tab[6]
+    u = min(max(fst[0], dom[ip, 0]), dom[ip, 1])
+    v = min(max(fst[1], dom[ip, 2]), dom[ip, 3])
+    width = max(dom[ip, 1] - dom[ip, 0], dom[ip, 3] - dom[ip, 2])
+    delta = fst[2]
+    if not delta > 0.0:
+        delta = 0.25 * width
+    elif delta < 0.05 * width:
+        delta = 0.05 * width
+    evaluate(tab, ip, u, v, 2, ws, ev)
+    return u, v, width, delta
+
+
+@kernel(inline="always")
+def _boundary(tab, ip, u, v, e, out_u, out_v, fixu, fixv, nmig, npole, ws, ev2, tmp):
+    """At a rectangle's edge with the gradient pointing out (``out_u``, ``out_v``): the u
+    (zeta) neighbour first, then v (theta): migrate to the neighbour patch, escape a pole, or
+    fix the parameter (crease, pole, open edge; paper 3.2.2, 3.2.3).  Returns (moved, patch,
+    u, v, fixu, fixv, migrations, pole escapes, evaluations)."""
+    dom = tab[6]
+    nev = 0
+    moved = False
+    for k in range(2):
+        if k == 0 and not (out_u and fixu == FREE):
+            continue
+        if k == 1 and not (out_v and fixv == FREE):
+            continue
+        if k == 0:
+            edge = 0 if u <= dom[ip, 0] else 1
+        else:
+            edge = 2 if v <= dom[ip, 2] else 3
+        code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+        nev += 1 if code == 0 or code == 1 else 0
+        if code == 0 and nmig < MAX_MIGRATIONS:
+            nmig += 1
+            ip = j
+            u = uj
+            v = vj
+            moved = True
+            break
+        if code == 2:
+            if npole < 3:
+                npole += 1
+                ok, uu, vv = pole_escape(tab, ip, u, v, edge, e, ws, ev2, tmp)
+                nev += POLE_SAMPLES + 2
+                if ok:
+                    u = uu
+                    v = vv
+                    moved = True
+                    break
+            fx = POLE_FIX
+        elif code == 3:
+            fx = OPEN_FIX
+        else:
+            fx = CREASE
+        if k == 0:
+            fixu = fx
+        else:
+            fixv = fx
+    return moved, ip, u, v, fixu, fixv, nmig, npole, nev
+
+
+@kernel(inline="always")
+def _pole_restart(tab, ip, u, v, e, npole, ws, ev2, tmp):
+    """Near a pole the (u, v) parametrisation is singular and Newton is slow: a restart from
+    the pole along the best meridian.  Returns (moved, u, v, pole escapes, evaluations)."""
+    dom = tab[6]
+    moved = False
+    nev = 0
+    for edge in range(4):
+        if tab[7][ip, edge, 0] != -2:
+            continue
+        lo = dom[ip, 0] if edge == 0 else dom[ip, 1]
+        w = dom[ip, 1] - dom[ip, 0]
+        pv = u
+        if edge >= 2:
+            lo = dom[ip, 2] if edge == 2 else dom[ip, 3]
+            w = dom[ip, 3] - dom[ip, 2]
+            pv = v
+        if abs(pv - lo) < 0.02 * w:
+            npole += 1
+            if edge < 2:
+                uu, vv = lo, v
+            else:
+                uu, vv = u, lo
+            ok, uu, vv = pole_escape(tab, ip, uu, vv, edge, e, ws, ev2, tmp)
+            nev += POLE_SAMPLES + 2
+            if ok:
+                u = uu
+                v = vv
+                moved = True
+            break
+    return moved, u, v, npole, nev
+
+
+@kernel(inline="always")
+def _newton_step(tab, ip, u, v, e, gu, gv, fixu, fixv, delta, width, xtol, f, ev, ev2):
+    """The trust-region Newton step on the free parameters (reduced by P_s, Eq. 12-13),
+    clamped to the rectangle.  Returns (_SNAP, _FINISH or _TRIAL, u, v, the step's end un,
+    vn, its parts xu, xv and length xn (parameter units), f): a tiny step cut by a bound
+    snaps onto it; a step below xtol (m), none (both parameters fixed) or one in the
+    quadratic-convergence region (taken by a second-order Taylor update of the point, without
+    a new evaluation) finishes."""
+    dom = tab[6]
+    u0, u1, v0, v1 = dom[ip, 0], dom[ip, 1], dom[ip, 2], dom[ip, 3]
+    hu = dot3(e, ev[3])
+    huv = dot3(e, ev[4])
+    hv = dot3(e, ev[5])
+    xu = 0.0
+    xv = 0.0
+    if fixu == FREE and fixv == FREE:
+        xu, xv, _ = tr_step2(-hu, -huv, -hv, -gu, -gv, delta, ev2)  # ev2: free here
+    elif fixu == FREE:
+        xu, _ = tr_step1(-hu, -gu, delta)
+    elif fixv == FREE:
+        xv, _ = tr_step1(-hv, -gv, delta)
+    else:
+        return _FINISH, u, v, u, v, 0.0, 0.0, 0.0, f
+    un = min(max(u + xu, u0), u1)
+    vn = min(max(v + xv, v0), v1)
+    clamped = un != u + xu or vn != v + xv
+    xu = un - u
+    xv = vn - v
+    lx = 0.0
+    for c in range(3):
+        t = ev[1, c] * xu + ev[2, c] * xv
+        lx += t * t
+    xn = math.sqrt(xu * xu + xv * xv)
+    if math.sqrt(lx) <= xtol and clamped:
+        # a tiny step cut by the bound: snap onto the bound (no new evaluation) so that the
+        # next iteration sees the edge (migration / degeneration)
+        return _SNAP, un, vn, un, vn, xu, xv, xn, f
+    if math.sqrt(lx) <= xtol:
+        return _FINISH, u, v, un, vn, xu, xv, xn, f
+    if (xn <= TAYLOR_STEP * width and xn < 0.99 * delta and not clamped
+            and hu * hv - huv * huv > 0.0 and hu < 0.0):
+        # quadratic-convergence region: the Newton step leaves an error ~|x|^2; take it
+        # without re-evaluating (second-order Taylor for the point)
+        for c in range(3):
+            ev[0, c] += (ev[1, c] * xu + ev[2, c] * xv
+                         + 0.5 * (ev[3, c] * xu * xu + 2.0 * ev[4, c] * xu * xv
+                                  + ev[5, c] * xv * xv))
+        return _FINISH, un, vn, un, vn, xu, xv, xn, dot3(e, ev[0])
+    return _TRIAL, u, v, un, vn, xu, xv, xn, f
+
+
+@kernel(inline="always")
+def _retest_crease(tab, ip, u, v, e, fixu, fixv, ws, ev2, tmp):
+    """A parameter fixed at a crease, tested again at the final point (the crease decision
+    was taken where the point first reached the edge): the migration's (code, patch, u, v)
+    (code 0: migrate) and the evaluations."""
+    dom = tab[6]
+    if fixu == CREASE:
+        edge = 0 if u <= dom[ip, 0] else 1
+        code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+        nev = 1
+        if code != 0 and fixv == CREASE:
+            edge = 2 if v <= dom[ip, 2] else 3
+            code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+            nev += 1
+        return code, j, uj, vj, nev
+    edge = 2 if v <= dom[ip, 2] else 3
+    code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
+    return code, j, uj, vj, 1
+
+
+@kernel(inline="always")
+def _trial(tab, ip, e, u, v, un, vn, xu, xv, xn, gu, gv, f, delta, scale, ws, ev, ev2):
+    """The trial point (un, vn) accepted or not on its ratio of actual to predicted ascent,
+    the trust radius updated.  Returns (u, v, f, delta, stop: no improvement is possible
+    within rounding, not converged)."""
+    dom = tab[6]
+    hu = dot3(e, ev[3])
+    huv = dot3(e, ev[4])
+    hv = dot3(e, ev[5])
+    pred = gu * xu + gv * xv + 0.5 * (hu * xu * xu + 2.0 * huv * xu * xv + hv * xv * xv)
+    evaluate(tab, ip, un, vn, 2, ws, ev2)
+    fn = dot3(e, ev2[0])
+    actual = fn - f
+    noise = 1e-15 * scale
+    if pred > noise:
+        rho = actual / pred
+    else:
+        rho = 1.0 if actual >= -4.0 * noise else -1.0
+    if rho > 0.1:
+        u = un
+        v = vn
+        f = fn
+        for a in range(6):
+            for c in range(3):
+                ev[a, c] = ev2[a, c]
+        if rho > 0.75 and xn >= 0.9 * delta:
+            delta = 2.0 * delta
+    stop = False
+    if rho < 0.25:
+        delta = 0.25 * xn
+        stop = delta < 1e-14 * max(dom[ip, 1] - dom[ip, 0], dom[ip, 3] - dom[ip, 2])
+    return u, v, f, delta, stop
+
+
 @kernel
 def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
     """Support point of a closed multi-patch body along the unit direction ``e`` (file frame).
@@ -274,81 +484,30 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
     """
     dom = tab[6]
     ip = ist[0]
-    u = fst[0]
-    v = fst[1]
-    u = min(max(u, dom[ip, 0]), dom[ip, 1])
-    v = min(max(v, dom[ip, 2]), dom[ip, 3])
-    width = max(dom[ip, 1] - dom[ip, 0], dom[ip, 3] - dom[ip, 2])
-    delta = fst[2]
-    if not delta > 0.0:
-        delta = 0.25 * width
-    elif delta < 0.05 * width:
-        delta = 0.05 * width
+    u, v, width, delta = _start_point(tab, ip, fst, ws, ev)
     fixu = np.int64(FREE)       # not literals: one specialisation of support_derivatives
     fixv = np.int64(FREE)
     nmig = 0
     npole = 0
     nretest = 0
-    evaluate(tab, ip, u, v, 2, ws, ev)
     nev = 1
     f = dot3(e, ev[0])
     xtol = 1e-13 * scale
     converged = False
     for it in range(MAX_SUPPORT_IT):
-        u0 = dom[ip, 0]
-        u1 = dom[ip, 1]
-        v0 = dom[ip, 2]
-        v1 = dom[ip, 3]
         gu = dot3(e, ev[1])
         gv = dot3(e, ev[2])
         # zero thresholds relative to the longer tangent (at a pole one tangent vanishes)
         tu = COS_TOL * max(norm3(ev[1]), norm3(ev[2]))
-        tv = tu
-        out_u = (u <= u0 and gu < -tu) or (u >= u1 and gu > tu)
-        out_v = (v <= v0 and gv < -tv) or (v >= v1 and gv > tv)
+        out_u = (u <= dom[ip, 0] and gu < -tu) or (u >= dom[ip, 1] and gu > tu)
+        out_v = (v <= dom[ip, 2] and gv < -tu) or (v >= dom[ip, 3] and gv > tu)
         if not out_u:
             fixu = FREE
         if not out_v:
             fixv = FREE
-        moved = False
-        # ---- boundary handling: the u (zeta) neighbour first, then v (theta)
-        for k in range(2):
-            if k == 0 and not (out_u and fixu == FREE):
-                continue
-            if k == 1 and not (out_v and fixv == FREE):
-                continue
-            if k == 0:
-                edge = 0 if u <= u0 else 1
-            else:
-                edge = 2 if v <= v0 else 3
-            code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
-            nev += 1 if code == 0 or code == 1 else 0
-            if code == 0 and nmig < MAX_MIGRATIONS:
-                nmig += 1
-                ip = j
-                u = uj
-                v = vj
-                moved = True
-                break
-            if code == 2:
-                if npole < 3:
-                    npole += 1
-                    ok, uu, vv = pole_escape(tab, ip, u, v, edge, e, ws, ev2, tmp)
-                    nev += POLE_SAMPLES + 2
-                    if ok:
-                        u = uu
-                        v = vv
-                        moved = True
-                        break
-                fx = POLE_FIX
-            elif code == 3:
-                fx = OPEN_FIX
-            else:
-                fx = CREASE
-            if k == 0:
-                fixu = fx
-            else:
-                fixv = fx
+        moved, ip, u, v, fixu, fixv, nmig, npole, ne = _boundary(
+            tab, ip, u, v, e, out_u, out_v, fixu, fixv, nmig, npole, ws, ev2, tmp)
+        nev += ne
         if moved:
             fixu = FREE
             fixv = FREE
@@ -357,102 +516,23 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
             f = dot3(e, ev[0])
             delta = max(delta, 0.05 * max(dom[ip, 1] - dom[ip, 0], dom[ip, 3] - dom[ip, 2]))
             continue
-        # ---- near a pole the (u, v) parametrisation is singular and Newton is slow:
-        # after a few iterations, restart from the pole along the best meridian
         if it == 8 and npole < 3:
-            for edge in range(4):
-                if tab[7][ip, edge, 0] != -2:
-                    continue
-                lo = dom[ip, 0] if edge == 0 else dom[ip, 1]
-                w = u1 - u0
-                pv = u
-                if edge >= 2:
-                    lo = dom[ip, 2] if edge == 2 else dom[ip, 3]
-                    w = v1 - v0
-                    pv = v
-                if abs(pv - lo) < 0.02 * w:
-                    npole += 1
-                    if edge < 2:
-                        uu, vv = lo, v
-                    else:
-                        uu, vv = u, lo
-                    ok, uu, vv = pole_escape(tab, ip, uu, vv, edge, e, ws, ev2, tmp)
-                    nev += POLE_SAMPLES + 2
-                    if ok:
-                        u = uu
-                        v = vv
-                        moved = True
-                    break
+            moved, u, v, npole, ne = _pole_restart(tab, ip, u, v, e, npole, ws, ev2, tmp)
+            nev += ne
             if moved:
                 evaluate(tab, ip, u, v, 2, ws, ev)
                 nev += 1
                 f = dot3(e, ev[0])
                 continue
-        # ---- Newton step on the free parameters (reduced by P_s, Eq. 12-13)
-        hu = dot3(e, ev[3])
-        huv = dot3(e, ev[4])
-        hv = dot3(e, ev[5])
-        xu = 0.0
-        xv = 0.0
-        mval = 0.0
-        finish = False
-        if fixu == FREE and fixv == FREE:
-            xu, xv, mval = tr_step2(-hu, -huv, -hv, -gu, -gv, delta, ev2)  # ev2: free here
-        elif fixu == FREE:
-            xu, mval = tr_step1(-hu, -gu, delta)
-        elif fixv == FREE:
-            xv, mval = tr_step1(-hv, -gv, delta)
-        else:
-            finish = True
-        if not finish:
-            un = min(max(u + xu, u0), u1)
-            vn = min(max(v + xv, v0), v1)
-            clamped = un != u + xu or vn != v + xv
-            xu = un - u
-            xv = vn - v
-            lx = 0.0
-            for c in range(3):
-                t = ev[1, c] * xu + ev[2, c] * xv
-                lx += t * t
-            xn = math.sqrt(xu * xu + xv * xv)
-            if math.sqrt(lx) <= xtol and clamped:
-                # a tiny step cut by the bound: snap onto the bound (no new evaluation) so
-                # that the next iteration sees the edge (migration / degeneration)
-                u = un
-                v = vn
-                continue
-            if math.sqrt(lx) <= xtol:
-                finish = True
-            elif (xn <= TAYLOR_STEP * width and xn < 0.99 * delta and not clamped
-                  and hu * hv - huv * huv > 0.0 and hu < 0.0):
-                # quadratic-convergence region: the Newton step leaves an error ~|x|^2;
-                # take it without re-evaluating (second-order Taylor for the point)
-                for c in range(3):
-                    ev[0, c] += (ev[1, c] * xu + ev[2, c] * xv
-                                 + 0.5 * (ev[3, c] * xu * xu + 2.0 * ev[4, c] * xu * xv
-                                          + ev[5, c] * xv * xv))
-                u = un
-                v = vn
-                f = dot3(e, ev[0])
-                finish = True
-        if finish:
-            # a parameter fixed at a crease is re-tested at the final point: the crease
-            # decision was taken where the point first reached the edge
+        step, u, v, un, vn, xu, xv, xn, f = _newton_step(tab, ip, u, v, e, gu, gv, fixu, fixv,
+                                                         delta, width, xtol, f, ev, ev2)
+        if step == _SNAP:
+            continue
+        if step == _FINISH:
             if (fixu == CREASE or fixv == CREASE) and nmig < MAX_MIGRATIONS and nretest < 4:
                 nretest += 1
-                edge = -1
-                if fixu == CREASE:
-                    edge = 0 if u <= u0 else 1
-                    code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
-                    nev += 1
-                    if code != 0 and fixv == CREASE:
-                        edge = 2 if v <= v0 else 3
-                        code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
-                        nev += 1
-                else:
-                    edge = 2 if v <= v0 else 3
-                    code, j, uj, vj = try_migrate(tab, ip, u, v, edge, e, ws, ev2, tmp)
-                    nev += 1
+                code, j, uj, vj, ne = _retest_crease(tab, ip, u, v, e, fixu, fixv, ws, ev2, tmp)
+                nev += ne
                 if code == 0:
                     nmig += 1
                     ip = j
@@ -466,29 +546,11 @@ def support_map(tab, e, ist, fst, scale, ws, ev, ev2, tmp, out_p, out_M, out_G):
                     continue
             converged = True
             break
-        pred = gu * xu + gv * xv + 0.5 * (hu * xu * xu + 2.0 * huv * xu * xv + hv * xv * xv)
-        evaluate(tab, ip, un, vn, 2, ws, ev2)
+        u, v, f, delta, stop = _trial(tab, ip, e, u, v, un, vn, xu, xv, xn, gu, gv, f, delta,
+                                      scale, ws, ev, ev2)
         nev += 1
-        fn = dot3(e, ev2[0])
-        actual = fn - f
-        noise = 1e-15 * scale
-        if pred > noise:
-            rho = actual / pred
-        else:
-            rho = 1.0 if actual >= -4.0 * noise else -1.0
-        if rho > 0.1:
-            u = un
-            v = vn
-            f = fn
-            for a in range(6):
-                for c in range(3):
-                    ev[a, c] = ev2[a, c]
-            if rho > 0.75 and xn >= 0.9 * delta:
-                delta = 2.0 * delta
-        if rho < 0.25:
-            delta = 0.25 * xn
-            if delta < 1e-14 * max(u1 - u0, v1 - v0):
-                break   # cannot improve any further within rounding: not converged
+        if stop:
+            break   # cannot improve any further within rounding: not converged
     ist[0] = ip
     ist[1] = fixu
     ist[2] = fixv
