@@ -15,6 +15,7 @@ is not among the project's dependencies, and a run here needs the warm-up step a
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -71,7 +72,8 @@ def main(argv: list[str]) -> int:
             log.close()
             print(f"\n===== pytest worker {k + 1} of {n} (exit status {codes[k]}) =====")
             print(text, end="", flush=True)
-            last = [ln.strip("= ") for ln in text.splitlines() if ln.startswith("=")]
+            last = [ln.strip("= ") for ln in text.splitlines()
+                    if re.search(r"\d+ (passed|failed|errors?|skipped|deselected)", ln)]
             summaries.append(last[-1] if last else "no summary")
         listed = claims / "files.txt"
         files = listed.read_text().split() if listed.is_file() else []
