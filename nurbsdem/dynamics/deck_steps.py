@@ -398,6 +398,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     # the balance error at the start of the deck step (then carried from its end)
     balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
     states = [_kept(np.int64(0), x, q, v, L, wall_d, ev) for _ in range(0)]   # typed by items
+    status, done = DONE, n_deck     # one exit: the code of each return is large
     for j in range(n_deck):
         if accuracy:
             sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
@@ -419,7 +420,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                     ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, h, ledger, wall_work,
                     alt_prev_v, alt_prev_L, alt_count, cc.watch_period2, np.bool_(True)))
             if worst >= 0 and run >= ALTERNATION_STEPS:
-                return GUARD, j, pl, ev, wall_d, wall_u, states
+                status = GUARD
+                break
             wall_d, wall_u = d_new.copy(), u_new.copy()
             c1 = cycles()
             R, pos = body_poses(q, bc.P, x, bc.centroid)
@@ -427,7 +429,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             pl, reach, due, failed, moved = _search(sc, pl, x.copy(), R, pos,  # the flat walls
                                                     wall_d[:sc.flat_walls].copy(), counters)
             if failed or not apply_wrap(x, moved, bc.mass, bc.gravity, ledger):
-                return GUARD, j, pl, ev, wall_d, wall_u, states
+                status = GUARD
+                break
             counters[EVALS] += 1
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
@@ -436,7 +439,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                                     omega, R, pos, wall_d, wall_u, h, counters, curved, cwork,
                                     spin, times[t]))
             if not ok:
-                return GUARD, j, pl, ev, wall_d, wall_u, states
+                status = GUARD
+                break
             c4 = cycles()
             if has_images(ev.image):
                 omega = image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger,
@@ -451,11 +455,16 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
-                return GUARD, j, pl, ev, wall_d, wall_u, states
+                status = GUARD
+                break
+        if status != DONE:          # a guard fired in deck step j
+            done = j
+            break
         counters[STEP_COUNT] += 1
         ok, balance = _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak)
         if not ok:
-            return GUARD, j, pl, ev, wall_d, wall_u, states
+            status, done = GUARD, j
+            break
         acc = counters[ACC_REFINE]
         if accuracy:
             growth = abs(balance - balance0)
@@ -468,7 +477,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 counters[ACC_CALM] = 0
                 counters[ACC_REPEATS] += 1
                 acc_growth[0] = growth
-                return REFINE, j, sn.pl, sn.ev, sn.wall_d, sn.wall_u, states
+                status, done = REFINE, j
+                pl, ev, wall_d, wall_u = sn.pl, sn.ev, sn.wall_d, sn.wall_u
+                break
             acc_growth[0] = np.inf
             balance0 = balance
             counters[ACC_REFINE], counters[ACC_CALM] = after_accepted(growth, budget, acc,
@@ -491,10 +502,12 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                                     estimate))
         counters[CONTROL_CYCLES] += cycles() - c0
         if not stands:
-            return CONTROL, j + 1, pl, ev, wall_d, wall_u, states
+            status, done = CONTROL, j + 1
+            break
         if counters[ACC_REFINE] != acc:
-            return RECOUNT, j + 1, pl, ev, wall_d, wall_u, states
-    return DONE, n_deck, pl, ev, wall_d, wall_u, states
+            status, done = RECOUNT, j + 1
+            break
+    return status, done, pl, ev, wall_d, wall_u, states
 
 
 def _curved_provider(provider):
