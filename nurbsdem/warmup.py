@@ -5,10 +5,8 @@ numba compiles each kernel at its first call and keeps the machine code in its o
 kernel's sources compiles before it starts.  :func:`warm_up` compiles them ahead by running
 small scenes of the kinds a deck builds, in stages (:data:`STAGES`): the stages without
 kernels in common run at the same time in separate processes (numba compiles in one thread
-per process, under a lock), each writing its kernels into the shared cache.  A scene of
-exact spheres compiles the Python path without the LCP (its kernels are lazy) beside the
-LCP's batch kernels; the compiled time loop, which calls nearly all of them, follows and
-loads theirs from the cache, beside what the Python path of particles still needs.
+per process, under a lock), each writing its kernels into the shared cache; the compiled
+time loop, which calls nearly all of them, comes last and loads theirs from the cache.
 
 :class:`CompileReport` tells the user, one line per kernel that starts compiling at the top
 (a kernel called by another compiles within its caller), which one it is and how many of the
@@ -40,11 +38,11 @@ ENTRY_KERNELS = {
 }
 
 
-def _deck(folder: Path, output: bool, spheres: bool = False) -> Path:
+def _deck(folder: Path, output: bool) -> Path:
     """A small deck in ``folder``: two of the paper's particles, an exact sphere and a box of
     flat walls, one lid (the kinds of pair a deck has: NURBS-NURBS, NURBS-wall, sphere-NURBS,
     sphere-wall), ``Damping Implicit`` with ``Accuracy`` as the paper example; VTU output
-    when ``output``; with ``spheres`` the two particles are exact spheres too."""
+    when ``output``."""
     from .io.shapefile import save_shape
     from .shapes import paper_particle
     for kind in "AB":
@@ -73,32 +71,20 @@ Output
   VTK Every {0.002 if output else 1.0} Resolution 4
   Monitors Every 0.001
 """
-    if spheres:
-        text = text.replace("Shape 1 File A.yaml", "Shape 1 Sphere Radius 0.03").replace(
-            "Shape 2 File B.yaml", "Shape 2 Sphere Radius 0.025")
     (folder / "warmup.inp").write_text(text)
     return folder / "warmup.inp"
 
 
-def _run_deck(compiled_steps: bool, output: bool, spheres: bool = False) -> None:
-    """Solve the small deck (:func:`_deck`) in a temporary folder (``spheres``: its two
-    particles as exact spheres, a scene that compiles no LCP)."""
+def _run_deck(compiled_steps: bool, output: bool) -> None:
+    """Solve the small deck (:func:`_deck`) in a temporary folder."""
     from .simulation import Simulation
     with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
-        deck = _deck(Path(tmp), output, spheres)
+        deck = _deck(Path(tmp), output)
         sim = Simulation.from_deck(deck, quiet=True)
         sim.solver.compiled_steps = compiled_steps
         if not output:
             sim.solver.write_output = False
         sim.run()
-
-
-def _spheres() -> None:
-    """The Python path's kernels that do not reach the LCP (the neighbour list, the contact
-    rows' dispatch, the step's parts, the time-step control, the energy): the small deck with
-    exact spheres only, no output.  The LCP's kernels are lazy (:class:`~nurbsdem.jit.PointerKernel`),
-    so this stage and the LCP batches compile side by side."""
-    _run_deck(compiled_steps=False, output=False, spheres=True)
 
 
 def _contacts() -> None:
@@ -237,22 +223,18 @@ class Stage:
 
 #: the stages of :func:`warm_up` (weights: their shares of a cold compilation, rounded)
 STAGES = (
-    Stage("spheres", _spheres, 0.25),
-    Stage("LCP batches", _lcp_batches, 0.12),
-    Stage("wall contacts", _wall_batches, 0.07),
-    Stage("ParaView output", _output, 0.02),
-    Stage("time loop", _loop, 0.45, after=("spheres", "LCP batches", "wall contacts",
-                                           "ParaView output")),
-    Stage("contact detection", _contacts, 0.09, after=("spheres", "LCP batches",
-                                                       "wall contacts")),
+    Stage("LCP batches", _lcp_batches, 0.18),
+    Stage("wall contacts", _wall_batches, 0.08),
+    Stage("ParaView output", _output, 0.03),
+    Stage("contact detection", _contacts, 0.33, after=("LCP batches", "wall contacts")),
+    Stage("time loop", _loop, 0.38, after=("contact detection", "ParaView output")),
 )
 
 
 #: :data:`STAGES` and the kernels of mesh and surface walls (``nurbsdem warmup --all``; the
 #: test runner's warm-up): a stage of its own, beside the contact detection and the loop
 ALL_STAGES = STAGES + (
-    Stage("mesh and surface walls", _walls, 0.25, after=("spheres", "LCP batches",
-                                                          "wall contacts")),
+    Stage("mesh and surface walls", _walls, 0.25, after=("LCP batches", "wall contacts")),
 )
 
 

@@ -48,6 +48,22 @@ def _warm_up() -> None:
           + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + ")", flush=True)
 
 
+def _wait(procs: list, claims: Path, every: float = 30.0) -> list[int]:
+    """Wait for the workers, saying every ``every`` s how many test files they have started
+    (the reports come at the end); returns their exit statuses."""
+    listed = claims / "files.txt"
+    said = -1
+    while any(p.poll() is None for p in procs):
+        time.sleep(every if said >= 0 else 1.0)
+        started = len(list(claims.glob("*.claim")))
+        if started != said and listed.is_file():
+            total = len(listed.read_text().split())
+            print(f"run_parallel: {started} of {total} test files started, "
+                  f"{time.perf_counter() - T0:.0f} s", flush=True)
+            said = started
+    return [p.wait() for p in procs]
+
+
 def main(argv: list[str]) -> int:
     _warm_up()
     n = _cores()
@@ -64,7 +80,7 @@ def main(argv: list[str]) -> int:
                  f"--basetemp={Path(tmp) / f'basetemp{k}'}", *argv],
                 cwd=TESTS.parent, env=env, stdout=log, stderr=subprocess.STDOUT))
             logs.append(log)
-        codes = [p.wait() for p in procs]
+        codes = _wait(procs, claims)
         summaries = []
         for k, log in enumerate(logs):
             log.seek(0)

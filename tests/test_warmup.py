@@ -66,12 +66,6 @@ def test_the_warmup_deck_is_valid(tmp_path):
     out = subprocess.run([sys.executable, "-m", "nurbsdem", "check", str(folder / "warmup.inp")],
                          capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    folder = tmp_path / "spheres"       # the stage that compiles no LCP
-    folder.mkdir()
-    sim = Simulation.from_deck(warmup._deck(folder, False, spheres=True), quiet=True)
-    from nurbsdem.io.deck_curved import sphere_radii
-    model = sim.solver.model
-    assert sphere_radii(model, list(model.shapes))[1].all()
 
 
 def test_the_walls_deck_is_valid_and_has_both_curved_kinds(tmp_path):
