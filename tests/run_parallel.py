@@ -3,8 +3,9 @@
 1. The kernels are compiled into numba's cache first (:func:`nurbsdem.warmup.warm_up`, its
    independent stages in parallel processes, the mesh and surface walls' kernels included),
    so that the test processes load them instead of each compiling them again.
-2. One pytest process per usable core then shares the test files (``tests/conftest.py``:
-   each claims whole files as it reaches them, so the load balances itself).
+2. One pytest process per usable core (at most :data:`MAX_WORKERS`) then shares the test
+   files (``tests/conftest.py``: each claims whole files as it reaches them, so the load
+   balances itself).  Progress is told every 30 s, the reports at the end.
 3. Each process's report is printed; the exit status is the first non-zero one, and a file
    no process ran fails the run.
 
@@ -24,6 +25,11 @@ from pathlib import Path
 
 TESTS = Path(__file__).resolve().parent
 T0 = time.perf_counter()
+
+
+#: at most this many pytest processes (each holds the compiled kernels, ~1 GB, and starts
+#: numba's threads on every core)
+MAX_WORKERS = 4
 
 
 def _cores() -> int:
@@ -66,7 +72,7 @@ def _wait(procs: list, claims: Path, every: float = 30.0) -> list[int]:
 
 def main(argv: list[str]) -> int:
     _warm_up()
-    n = _cores()
+    n = min(_cores(), MAX_WORKERS)
     with tempfile.TemporaryDirectory(prefix="nurbsdem-tests-") as tmp:
         claims = Path(tmp) / "claims"
         claims.mkdir()
