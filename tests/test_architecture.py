@@ -219,6 +219,7 @@ def _python_calls(path: Path, module: str, internal: set[tuple[str, str]]) -> li
     by Python code: outside any function compiled by numba."""
     tree = ast.parse(path.read_text())
     bound = {n for (m, n) in internal if m == module}
+    aliases: dict[str, str] = {}        # a module's name here -> its dotted name
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module is not None:
             base = node.module
@@ -226,14 +227,36 @@ def _python_calls(path: Path, module: str, internal: set[tuple[str, str]]) -> li
                 pkg = module.split(".")[:-node.level] if module else []
                 base = ".".join(pkg + [node.module])
             bound |= {a.asname or a.name for a in node.names if (base, a.name) in internal}
+            aliases.update({a.asname or a.name: f"{base}.{a.name}" for a in node.names})
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                aliases[a.asname or a.name.split(".")[0]] = a.name if a.asname else \
+                    a.name.split(".")[0]
     bad = []
+
+    def dotted(node) -> str | None:
+        """``x.y.z`` of a chain of names, its first name resolved through the imports."""
+        if isinstance(node, ast.Name):
+            return aliases.get(node.id)
+        if isinstance(node, ast.Attribute):
+            head = dotted(node.value)
+            return None if head is None else f"{head}.{node.attr}"
+        return None
+
+    def calls_internal(call) -> str | None:
+        f = call.func
+        if isinstance(f, ast.Name) and f.id in bound:
+            return f.id
+        if isinstance(f, ast.Attribute) and (dotted(f.value), f.attr) in internal:
+            return f.attr
+        return None
 
     def visit(node, compiled):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             compiled = bool(_decorator_names(node) & COMPILED)
-        if (not compiled and isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
-                and node.func.id in bound):
-            bad.append(f"{path.name}:{node.lineno} {node.func.id}")
+        name = calls_internal(node) if isinstance(node, ast.Call) and not compiled else None
+        if name is not None:
+            bad.append(f"{path.name}:{node.lineno} {name}")
         for child in ast.iter_child_nodes(node):
             visit(child, compiled)
     visit(tree, False)
@@ -257,6 +280,7 @@ def test_the_internal_kernel_check_sees_a_python_call(tmp_path):
     internal = {("nurbsdem.dynamics.deck_steps", "_kept")}
     f = tmp_path / "t.py"
     f.write_text("from numba import njit\nfrom nurbsdem.dynamics.deck_steps import _kept\n"
-                 "@njit\ndef ok(a):\n    return _kept(a)\n"
-                 "def bad(a):\n    return _kept(a)\n")
-    assert _python_calls(f, "", internal) == ["t.py:7 _kept"]
+                 "import nurbsdem.dynamics.deck_steps as ds\nfrom nurbsdem.dynamics import "
+                 "deck_steps\n@njit\ndef ok(a):\n    return _kept(a) + ds._kept(a)\n"
+                 "def bad(a):\n    return _kept(a) + ds._kept(a) + deck_steps._kept(a)\n")
+    assert _python_calls(f, "", internal) == ["t.py:9 _kept", "t.py:9 _kept", "t.py:9 _kept"]
