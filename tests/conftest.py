@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+TESTS = Path(__file__).resolve().parent
+BENCHMARKS = TESTS.parent / "benchmarks"
 if str(BENCHMARKS) not in sys.path:
     sys.path.append(str(BENCHMARKS))
 
@@ -34,7 +35,7 @@ def _worker() -> tuple[int, int]:
 
 
 def _file_key(item) -> str:
-    return str(Path(item.path).relative_to(Path(__file__).resolve().parent))
+    return str(Path(item.path).relative_to(TESTS))
 
 
 @pytest.hookimpl(trylast=True)
