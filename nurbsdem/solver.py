@@ -241,7 +241,8 @@ class Solver:
             if smp.hertz is not None:          # Hertz–Mindlin interfaces (not linear laws)
                 writers.monitors.hertz(t, *smp.hertz)
         if self.model.wall_names:
-            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction, smp.wall_torque)
+            writers.monitors.walls(t, smp.wall_displacement, smp.wall_reaction, smp.wall_torque,
+                                   smp.wall_work)
 
     def _sample(self, writers: OutputWriters, force: bool = False,
                 samples: tuple[MonitorSample, ...] = (),

@@ -83,7 +83,7 @@ def test_outputs_are_what_paraview_and_scripts_read(lid_run):
     with open(out / "monitors" / "wall_lid.csv") as fh:
         assert fh.readline().strip() == ("time,displacement_x,displacement_y,displacement_z,"
                                          "reaction_x,reaction_y,reaction_z,"
-                                         "torque_x,torque_y,torque_z")
+                                         "torque_x,torque_y,torque_z,work,power")
     with h5py.File(out / "results.h5") as h5:
         assert h5.attrs["nurbsdem_version"] == nurbsdem.__version__
         assert "Step 3 MoveWall lid" in h5.attrs["deck"]

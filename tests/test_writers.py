@@ -135,7 +135,8 @@ def test_monitor_headers_and_rows(tmp_path):
     err = m.energy(0.001, kinetic=0.5, potential=2.0, elastic=0.5, dissipated=0.25, external_work=0.0)
     assert err == pytest.approx(-0.25)
     m.contacts(0.001, 10, 4, 1, 0)
-    m.wall("lid", 0.001, [0, 0, -0.001], [0, 0, 12.5], [0.5, -0.25, 0])
+    m.wall("lid", 0.001, [0, 0, -0.001], [0, 0, 12.5], [0.5, -0.25, 0], 0.125)
+    m.wall("lid", 0.003, [0, 0, -0.002], [0, 0, 12.5], [0.5, -0.25, 0], 0.25)
     d = tmp_path / "monitors"
     assert _rows(d / "energy.csv")[0] == \
         "time,kinetic,potential,elastic,dissipated,external_work,mechanical,balance_error"
@@ -143,14 +144,18 @@ def test_monitor_headers_and_rows(tmp_path):
     for name in ("bottom", "lid"):
         assert _rows(d / f"wall_{name}.csv")[0] == ("time,displacement_x,displacement_y,"
                                                     "displacement_z,reaction_x,reaction_y,reaction_z,"
-                                                    "torque_x,torque_y,torque_z")
+                                                    "torque_x,torque_y,torque_z,work,power")
     assert ",".join(ENERGY_COLUMNS) == _rows(d / "energy.csv")[0]
     assert ",".join(CONTACT_COLUMNS) == _rows(d / "contacts.csv")[0]
     assert ",".join(WALL_COLUMNS) == _rows(d / "wall_lid.csv")[0]
     # rows are flushed as written (readable before close)
     assert _rows(d / "contacts.csv")[1] == "0.001,10,4,1,0"
     assert _rows(d / "energy.csv")[2] == "0.001,0.5,2.0,0.5,0.25,0.0,3.0,-0.25"
-    assert _rows(d / "wall_lid.csv")[1] == "0.001,0.0,0.0,-0.001,0.0,0.0,12.5,0.5,-0.25,0.0"
+    # the power: the work's mean rate since the wall's previous row (0 on the first)
+    assert _rows(d / "wall_lid.csv")[1] == \
+        "0.001,0.0,0.0,-0.001,0.0,0.0,12.5,0.5,-0.25,0.0,0.125,0.0"
+    assert _rows(d / "wall_lid.csv")[2] == \
+        "0.003,0.0,0.0,-0.002,0.0,0.0,12.5,0.5,-0.25,0.0,0.25,62.5"
     data = np.genfromtxt(d / "energy.csv", delimiter=",", names=True)
     assert data["mechanical"][0] == 3.5
     m.close()
@@ -178,6 +183,28 @@ def test_monitor_restart_truncates(tmp_path):
     m3.contacts(0.004, 4, 4, 0, 0)
     m3.close()
     assert len(_rows(tmp_path / "monitors" / "contacts.csv")) == 6
+
+
+def test_a_restart_keeps_the_rows_of_a_wall_monitor_without_the_work_columns(tmp_path):
+    """A wall monitor written before the work and power columns existed: its rows up to the
+    restart stay, those columns NaN; the power of the first new row is NaN too (no work
+    before it), the next one's is the work's rate."""
+    d = tmp_path / "monitors"
+    d.mkdir()
+    old = ",".join(WALL_COLUMNS[:-2])
+    (d / "wall_lid.csv").write_text(old + "\n" + "".join(
+        f"{0.001 * k!r},0.0,0.0,0.0,0.0,0.0,{k}.0,0.0,0.0,0.0\n" for k in range(4)))
+    m = MonitorWriter(tmp_path, ["lid"], restart_time=0.002)
+    m.wall("lid", 0.003, [0, 0, 0], [0, 0, 3.0], [0, 0, 0], 1.0)
+    m.wall("lid", 0.004, [0, 0, 0], [0, 0, 4.0], [0, 0, 0], 1.5)
+    m.close()
+    rows = _rows(d / "wall_lid.csv")
+    assert rows[0] == ",".join(WALL_COLUMNS)
+    assert rows[1:4] == [f"{0.001 * k!r},0.0,0.0,0.0,0.0,0.0,{k}.0,0.0,0.0,0.0,nan,nan"
+                         for k in range(3)]
+    assert rows[4].endswith(",1.0,nan")
+    data = np.genfromtxt(d / "wall_lid.csv", delimiter=",", names=True)
+    assert data["power"][-1] == pytest.approx(500.0, rel=1e-12)
 
 
 def test_results_h5(tmp_path):
@@ -224,7 +251,7 @@ def test_output_writers_from_paper_model(tmp_path):
     out = OutputWriters(m)
     out.paraview.write(0.0, m.bodies, np.zeros((6, 3)), None)
     out.monitors.energy(0.0, 0, 1, 0, 0, 0)
-    out.monitors.wall("lid", 0.0, [0, 0, 0], [0, 0, 0], [0, 0, 0])
+    out.monitors.wall("lid", 0.0, [0, 0, 0], [0, 0, 0], [0, 0, 0], 0.0)
     out.results.append(0.0, m.bodies)
     out.sync()
     out.close()
@@ -405,9 +432,9 @@ def test_plot_monitors(tmp_path):
         t = k * 0.01
         m.energy(t, np.exp(-t), -t, 0.1, t / 2, 0.0)
         m.contacts(t, 20 + k, 10 + k // 2, k // 10, 0)
-        m.wall("bottom", t, [0, 0, 0], [0, 0, 5.0], [0, 0, 0])
+        m.wall("bottom", t, [0, 0, 0], [0, 0, 5.0], [0, 0, 0], 0.0)
         dz = -0.08 * min(k, 25) / 25 + 0.08 * max(k - 25, 0) / 25
-        m.wall("lid", t, [0, 0, dz], [0, 0, 100 * -dz + (5 if k < 25 else 0)], [0, 0, 0])
+        m.wall("lid", t, [0, 0, dz], [0, 0, 100 * -dz + (5 if k < 25 else 0)], [0, 0, 0], 0.0)
     m.close()
     res = subprocess.run([sys.executable, str(ROOT / "postproc" / "plot_monitors.py"),
                           str(tmp_path)], capture_output=True, text=True)

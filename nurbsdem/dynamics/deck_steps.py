@@ -346,12 +346,12 @@ def _kept(j: int, x, q, v, L, wall_d, ev):
 
 @internal
 def _kick_walls(n_curved: int, spin, ev, n: int, wall_d, u_mean):
-    """(body_b, wall_d, u_mean) of the stored contacts for a half kick's work terms: as they
-    are, or with turning walls each contact with one at its point velocity
-    (:func:`spun_contacts`; the Python driver's ``_kick_walls``)."""
+    """(body_b, wall_d, u_mean, wall_w) of the stored contacts for a half kick's work terms: as
+    they are (walls that do not turn), or with turning walls each contact with one at its
+    point velocity (:func:`spun_contacts`; the Python driver's ``_kick_walls``)."""
     if n_curved and ev.a.shape[0]:
         return spun_contacts(ev.a, ev.b, ev.point, n, spin, wall_d, u_mean)
-    return ev.b, wall_d, u_mean
+    return ev.b, wall_d, u_mean, np.zeros((wall_d.shape[0], 3))
 
 
 # --------------------------------------------------------------------------- the loop
@@ -413,12 +413,13 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                                                      ledger, wall_work, alt_prev_v, alt_prev_L,
                                                      alt_count, cc.watch_period2)
             else:
-                kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0],
-                                                     wall_d, u_mean)
+                kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
+                                                             x.shape[0], wall_d, u_mean)
                 omega, _, worst, run = step_start_ptr((
                     bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force,
-                    ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, h, ledger, wall_work,
-                    alt_prev_v, alt_prev_L, alt_count, cc.watch_period2, np.bool_(True)))
+                    ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, kick_w, h, ledger,
+                    wall_work, alt_prev_v, alt_prev_L, alt_count, cc.watch_period2,
+                    np.bool_(True)))
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 status = GUARD
                 break
@@ -446,11 +447,11 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 omega = image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger,
                                         wall_work)
             else:
-                kick_b, kick_d, kick_u = _kick_walls(curved.n_walls, spin, ev, x.shape[0],
-                                                     wall_d, u_mean)
+                kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
+                                                             x.shape[0], wall_d, u_mean)
                 omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt,
                                           ev.fet, ev.force, ev.torque, x, v, q, L, omega, kick_b,
-                                          kick_d, kick_u, 0.5 * h, ledger, wall_work,
+                                          kick_d, kick_u, kick_w, 0.5 * h, ledger, wall_work,
                                           np.bool_(True)))
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
@@ -494,7 +495,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         counters[DEGENERATED_SUM] += ev.degenerated
         if sample_at[j]:
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
-                       ev.monitored, active, ev.degenerated, wall_d, ev.force, ev.torque)
+                       ev.monitored, active, ev.degenerated, wall_d, ev.force, ev.torque,
+                       wall_work)
         if state_at[j]:
             states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         c0 = cycles()

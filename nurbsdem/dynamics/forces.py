@@ -462,13 +462,16 @@ def add_kick_work(terms: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, n_p
 @njit(cache=True)
 def add_rolling_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
                      omega: np.ndarray, omega_after: np.ndarray, f_el_t: np.ndarray, hk: float,
-                     terms: np.ndarray) -> None:
-    """Add to the T_SPRING column of a half kick's terms (K, N_TERMS) the exact discrete work
-    (J) of the contacts' rolling torques (f_el_t's columns 3–5, N m on B,
-    :mod:`nurbsdem.dynamics.rolling`): hk M·(ω̄_B − ω̄_A), ω̄ the mean of the particles'
-    angular velocities (N,3) rad/s before and after the kick (a kick at fixed orientation
-    changes ω linearly in L, so this is the kinetic energy the torque impulse gives).  Walls
-    do not turn here (a turning wall's share of the rolling work is not booked)."""
+                     wall_w: np.ndarray, terms: np.ndarray) -> None:
+    """Add to a half kick's terms (K, N_TERMS) the exact discrete work (J) of the contacts'
+    rolling torques (f_el_t's columns 3–5, M N m on B, −M on A,
+    :mod:`nurbsdem.dynamics.rolling`).  A kick at fixed orientation changes ω linearly in L,
+    so with ω̄ the mean of a particle's angular velocities (N,3) rad/s before and after the
+    kick, and ω_w the angular velocity of a wall (wall_w (W,3) rad/s, rows as body_b's wall
+    indices), the torque's work on the rolling spring, in T_SPRING, is hk M·(ω_B − ω_A) (ω̄
+    for a particle, ω_w for a wall), and a turning wall's drive does the external work
+    −hk M·ω_w as body B (T_WALL_B), hk M·ω_w as body A (T_WALL_A): their sum is the kinetic
+    energy the torque impulse gives the particles."""
     if f_el_t.shape[1] < NSPRING:
         return
     for c in range(body_a.shape[0]):
@@ -481,11 +484,21 @@ def add_rolling_work(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
             o0 += 0.5 * (omega[b, 0] + omega_after[b, 0])
             o1 += 0.5 * (omega[b, 1] + omega_after[b, 1])
             o2 += 0.5 * (omega[b, 2] + omega_after[b, 2])
+        else:
+            k = b - n_particles
+            ww = m0 * wall_w[k, 0] + m1 * wall_w[k, 1] + m2 * wall_w[k, 2]
+            o0, o1, o2 = o0 + wall_w[k, 0], o1 + wall_w[k, 1], o2 + wall_w[k, 2]
+            terms[c, T_WALL_B] -= hk * ww
         a = body_a[c]
         if a < n_particles:
             o0 -= 0.5 * (omega[a, 0] + omega_after[a, 0])
             o1 -= 0.5 * (omega[a, 1] + omega_after[a, 1])
             o2 -= 0.5 * (omega[a, 2] + omega_after[a, 2])
+        else:
+            k = a - n_particles
+            ww = m0 * wall_w[k, 0] + m1 * wall_w[k, 1] + m2 * wall_w[k, 2]
+            o0, o1, o2 = o0 - wall_w[k, 0], o1 - wall_w[k, 1], o2 - wall_w[k, 2]
+            terms[c, T_WALL_A] += hk * ww
         terms[c, T_SPRING] += hk * (m0 * o0 + m1 * o1 + m2 * o2)
 
 

@@ -248,7 +248,7 @@ def _relative_point_velocities(body_a: np.ndarray, body_b: np.ndarray, point: np
 def kick_from(omega: np.ndarray, v: np.ndarray, L: np.ndarray, x: np.ndarray, q: np.ndarray,
               inv_I: np.ndarray, inv_mass: np.ndarray, force: np.ndarray, torque: np.ndarray,
               hk: float, body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
-              wall_d: np.ndarray, wall_u: np.ndarray, f_total: np.ndarray,
+              wall_d: np.ndarray, wall_u: np.ndarray, wall_w: np.ndarray, f_total: np.ndarray,
               f_damp_n: np.ndarray, f_damp_t: np.ndarray,
               f_el_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`half_kick` of length hk (s) from angular velocities ``omega`` (N,3) rad/s
@@ -256,8 +256,9 @@ def kick_from(omega: np.ndarray, v: np.ndarray, L: np.ndarray, x: np.ndarray, q:
     per-contact terms (K, N_TERMS) of the exact discrete work of its contact impulses
     (:func:`nurbsdem.dynamics.forces.kick_work_terms`, from the relative contact-point
     velocities before and after the kick, and the rolling torques' work from the angular
-    velocities: :func:`~nurbsdem.dynamics.forces.add_rolling_work`).  Returns (terms, the
-    angular velocities after)."""
+    velocities: :func:`~nurbsdem.dynamics.forces.add_rolling_work`; wall_d, wall_u, wall_w
+    (W,3) the walls' displacements m, velocities m/s and angular velocities rad/s as
+    body_b's wall indices see them).  Returns (terms, the angular velocities after)."""
     K = body_a.shape[0]
     w0 = np.empty((K, 3))
     w1 = np.empty((K, 3))
@@ -267,5 +268,5 @@ def kick_from(omega: np.ndarray, v: np.ndarray, L: np.ndarray, x: np.ndarray, q:
     _relative_point_velocities(body_a, body_b, point, x, wall_d, v, omega_after, wall_u, w1)
     terms = kick_work_terms(body_a, body_b, x.shape[0], w0, w1, wall_u, f_total, f_damp_n,
                             f_damp_t, f_el_t, hk)
-    add_rolling_work(body_a, body_b, x.shape[0], omega, omega_after, f_el_t, hk, terms)
+    add_rolling_work(body_a, body_b, x.shape[0], omega, omega_after, f_el_t, hk, wall_w, terms)
     return terms, omega_after

@@ -104,10 +104,11 @@ class InternalSteps:
             omg[b.n:] = self.wall_spin[:, :3]
         return pos, vel, omg
 
-    def _spun_contacts(self, wall_u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(body_b, wall_d, wall_u) for the kick's work terms when walls turn: each contact
-        with a turning wall gets a wall of its own (index W + j) that moves at that wall's
-        point velocity (:func:`~nurbsdem.dynamics.step.spun_contacts`)."""
+    def _spun_contacts(self, wall_u: np.ndarray) -> tuple:
+        """(body_b, wall_d, wall_u, wall_w) for the kick's work terms when walls turn: each
+        contact with a turning wall gets a wall of its own (index W + j) that moves at that
+        wall's point velocity and turns at its angular velocity
+        (:func:`~nurbsdem.dynamics.step.spun_contacts`)."""
         return spun_contacts(self.c_a, self.c_b, np.ascontiguousarray(self.c_point, float),
                              self.bodies.n, np.ascontiguousarray(self.wall_spin, float),
                              np.ascontiguousarray(self.wall_d, float), wall_u)
@@ -206,15 +207,16 @@ class InternalSteps:
         if gone.any():
             self.ledger.dissipated_normal += float(self.c_eel[gone, 0].sum())
 
-    def _kick_walls(self, u_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(body_b, wall_d, wall_u) of the stored contacts for a half kick's work terms: the
-        walls' mean velocity over the internal step, u_mean (W,3) = (d(t+h) − d(t))/h, so
-        that the external work adds up to force × the walls' exact displacement (trapezoidal
-        in the force, no error at kinks of a piecewise-linear motion); a turning wall's
-        contacts at its point velocities (:meth:`_spun_contacts`)."""
+    def _kick_walls(self, u_mean: np.ndarray) -> tuple:
+        """(body_b, wall_d, wall_u, wall_w) of the stored contacts for a half kick's work
+        terms: the walls' mean velocity over the internal step, u_mean (W,3) = (d(t+h) −
+        d(t))/h, so that the external work adds up to force × the walls' exact displacement
+        (trapezoidal in the force, no error at kinks of a piecewise-linear motion), and their
+        angular velocities (zero); a turning wall's contacts at its point velocities and
+        spin (:meth:`_spun_contacts`)."""
         if self.wall_spin is not None and self.c_a.shape[0]:
             return self._spun_contacts(np.ascontiguousarray(u_mean))
-        return self.c_b, self.wall_d, np.ascontiguousarray(u_mean)
+        return self.c_b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3))
 
     def _kick_arguments(self, im: "ImageBodies | None" = None) -> tuple:
         """The stored contacts' arrays and loads as the step's parts take them (with image
@@ -261,8 +263,9 @@ class InternalSteps:
             _, terms = kick_part(*self._kick_arguments(im), im.positions(b.x), v,
                                  im.particles(b.q), L, omega_world(im.particles(b.q), L,
                                                                    im.particles(self._inv_I)),
-                                 im.b, self.wall_d, np.ascontiguousarray(u_mean), 0.5 * h,
-                                 ledger, self.wall_work, True)
+                                 im.b, self.wall_d, np.ascontiguousarray(u_mean),
+                                 np.zeros((self.walls.n, 3)), 0.5 * h, ledger, self.wall_work,
+                                 True)
             b.v[:], b.L[:] = v[:b.n], L[:b.n]
         else:
             _, terms = kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
@@ -285,8 +288,8 @@ class InternalSteps:
                                                      self.alt_count))
         _, terms, worst, run = step_start(
             *self._kick_arguments(im), x, v, q, L, omega_world(q, L, im.particles(self._inv_I)),
-            im.b, self.wall_d, np.ascontiguousarray(u_mean), h, ledger, self.wall_work, pv, pL,
-            count, self.watch_period2, True)
+            im.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)), h,
+            ledger, self.wall_work, pv, pL, count, self.watch_period2, True)
         b.x[:], b.v[:], b.q[:], b.L[:] = x[:n], v[:n], q[:n], L[:n]
         self.alt_prev_v[:], self.alt_prev_L[:], self.alt_count[:] = pv[:n], pL[:n], count[:n]
         worst = int(worst)

@@ -21,13 +21,13 @@ from .energy import EnergyLedger, EnergySample, energy_terms
 
 #: columns of a recorded row: the five energy terms of energy_terms, the five ledger entries
 #: (EnergyLedger.to_array order), the monitored / active / degenerated counts, then W×3 wall
-#: displacements, W×3 wall reactions and W×3 wall torques
+#: displacements, W×3 wall reactions, W×3 wall torques and the W walls' work
 ROW_TERMS, ROW_LEDGER, ROW_MONITORED, ROW_ACTIVE, ROW_DEGENERATED, ROW_WALLS = 0, 5, 10, 11, 12, 13
 
 
 def row_width(n_walls: int) -> int:
     """Length of a recorded row for ``n_walls`` walls."""
-    return ROW_WALLS + 9 * n_walls
+    return ROW_WALLS + 10 * n_walls
 
 
 @dataclass(frozen=True)
@@ -35,7 +35,10 @@ class MonitorSample:
     """One sample of the monitors at time ``time`` (s): energies, contact counts (monitored
     pairs, active, degenerated and failed contacts of the last evaluation), wall displacements
     (W,3) m, reactions (W,3) N and torques (W,3) N m (of the particles' contact forces on each
-    wall, about its reference point: :attr:`~nurbsdem.dynamics.system.DemSystem.wall_torque`);
+    wall, about its reference point: :attr:`~nurbsdem.dynamics.system.DemSystem.wall_torque`),
+    the work (W,) J each wall's motion has done on the particles since the start (the
+    external work of the energy ledger, wall by wall: its contact forces and rolling
+    torques);
     ``hertz`` (active, fallbacks, radii (K,) m, normal
     stiffnesses (K,) N/m) with Hertz–Mindlin interfaces, else None."""
 
@@ -48,6 +51,7 @@ class MonitorSample:
     wall_displacement: np.ndarray
     wall_reaction: np.ndarray
     wall_torque: np.ndarray
+    wall_work: np.ndarray
     hertz: tuple | None = None
 
     @staticmethod
@@ -57,11 +61,11 @@ class MonitorSample:
         energy = energy_sample(time, et, er, pot, en, etan,
                                EnergyLedger.from_array(row[ROW_LEDGER:ROW_LEDGER + 5]))
         W = n_walls
-        walls = row[ROW_WALLS:ROW_WALLS + 9 * W]
+        walls = row[ROW_WALLS:ROW_WALLS + 10 * W]
         return MonitorSample(time, energy, int(row[ROW_MONITORED]), int(row[ROW_ACTIVE]),
                              int(row[ROW_DEGENERATED]), 0, walls[:3 * W].reshape(W, 3).copy(),
                              walls[3 * W:6 * W].reshape(W, 3).copy(),
-                             walls[6 * W:].reshape(W, 3).copy())
+                             walls[6 * W:9 * W].reshape(W, 3).copy(), walls[9 * W:].copy())
 
 
 def energy_sample(time: float, et: float, er: float, pot: float, en: float, etan: float,
@@ -82,10 +86,11 @@ def energy_sample(time: float, et: float, er: float, pot: float, en: float, etan
 def record_row(row: np.ndarray, mass: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray,
                L: np.ndarray, inv_I: np.ndarray, gravity: np.ndarray, eel: np.ndarray,
                ledger: np.ndarray, monitored: int, active: int, degenerated: int,
-               wall_d: np.ndarray, force: np.ndarray, torque: np.ndarray) -> None:
+               wall_d: np.ndarray, force: np.ndarray, torque: np.ndarray,
+               wall_work: np.ndarray) -> None:
     """Write the monitor row of the present state (columns ROW_*); force, torque (N+W,3):
     the last evaluation's loads, the walls' force rows negated are their reactions, their
-    torque rows their torques."""
+    torque rows their torques; wall_work (W,) J."""
     et, er, pot, en, etan = energy_terms(mass, x, v, q, L, inv_I, gravity, eel)
     row[ROW_TERMS] = et
     row[ROW_TERMS + 1] = er
@@ -103,6 +108,7 @@ def record_row(row: np.ndarray, mass: np.ndarray, x: np.ndarray, v: np.ndarray, 
             row[ROW_WALLS + 3 * w + k] = wall_d[w, k]
             row[ROW_WALLS + 3 * W + 3 * w + k] = -force[N + w, k]
             row[ROW_WALLS + 6 * W + 3 * w + k] = torque[N + w, k]
+        row[ROW_WALLS + 9 * W + w] = wall_work[w]
 
 
 @dataclass(frozen=True)

@@ -404,7 +404,8 @@ def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, a
     omega, _, worst, run = step_start_ptr((
         bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, _bodies(ev.force, own, n),
         _bodies(ev.torque, own, n), x_e, v_e, q_e, L_e, omega_world(q_e, L_e, bc_e.inv_I), b_ext,
-        wall_d, u_mean, h, ledger, wall_work, pv, pL, count, watch, np.bool_(True)))
+        wall_d, u_mean, np.zeros((wall_d.shape[0], 3)), h, ledger, wall_work, pv, pL, count,
+        watch, np.bool_(True)))
     x[:] = x_e[:n]
     v[:] = v_e[:n]
     q[:] = q_e[:n]
@@ -429,8 +430,9 @@ def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work):
     omega, _ = kick_part_ptr((bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
                               _bodies(ev.force, own, n), _bodies(ev.torque, own, n),
                               _positions(x, own, offset), v_e, q_e, L_e,
-                              omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean, hk,
-                              ledger, wall_work, np.bool_(True)))
+                              omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean,
+                              np.zeros((wall_d.shape[0], 3)), hk, ledger, wall_work,
+                              np.bool_(True)))
     v[:] = v_e[:n]
     L[:] = L_e[:n]
     return omega[:n].copy()

@@ -60,17 +60,19 @@ def book_kick(terms, a, b, n_particles, ledger, wall_work) -> None:
 
 @njit(cache=True)
 def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
-              wall_d, u_mean, hk, ledger, wall_work, book):
+              wall_d, u_mean, wall_w, hk, ledger, wall_work, book):
     """Half kick of length hk (s) from the loads force, torque (B,3) of the contacts a, b
     (their per-contact arrays: point, total, damping and tangential elastic forces (K,3)),
     from the angular velocities omega (N,3) rad/s of the state before it.  body_b (K,): the
     body B of each contact as the work terms see it (a turning wall's contacts each have a
-    wall index of their own, moving at wall_d, u_mean (m, m/s) of that index).  With ``book``
+    wall index of their own, moving at wall_d, u_mean (m, m/s) of that index and turning at
+    wall_w (rad/s), :func:`spun_contacts`).  With ``book``
     the work is booked in ledger and wall_work (one MPI rank; several ranks log the terms and
     book them at the deck step's end, in the serial order).  Returns (the angular velocities
     after the kick, the terms)."""
     terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, force, torque, hk,
-                                   a, body_b, point, wall_d, u_mean, ftot, fdn, fdt, fet)
+                                   a, body_b, point, wall_d, u_mean, wall_w, ftot, fdn, fdt,
+                                   fet)
     if book:
         book_kick(terms, a, b, x.shape[0], ledger, wall_work)
     return omega_after, terms
@@ -78,15 +80,16 @@ def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, o
 
 @njit(cache=True)
 def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
-               wall_d, u_mean, h, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count, watch,
-               book):
+               wall_d, u_mean, wall_w, h, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
+               watch, book):
     """Parts 1 of the internal step (module docstring): the half kick (:func:`kick_part`), the
     period-2 watch (with ``watch``) and the drift by h (s).  Returns (the angular velocities
     after the drift, the kick's terms, the particle with the longest run of reversals or −1,
     and that run's length: the caller's guard fires at
     :data:`~nurbsdem.dynamics.stepcontrol.ALTERNATION_STEPS`)."""
     omega, terms = kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L,
-                             omega, body_b, wall_d, u_mean, 0.5 * h, ledger, wall_work, book)
+                             omega, body_b, wall_d, u_mean, wall_w, 0.5 * h, ledger, wall_work,
+                             book)
     worst, run = -1, 0
     if watch and x.shape[0]:
         worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count, bc.alt_floor_x,
@@ -117,11 +120,14 @@ def all_kinematics(x, v, omega, wall_d, wall_u):
 
 @njit(cache=True)
 def spun_contacts(a, b, point, n: int, spin, wall_d, u_mean):
-    """(body_b, wall_d, u_mean) for a half kick's work terms with turning walls: each contact
-    with a turning wall gets a wall of its own (index W + j) moving at that wall's point
-    velocity u + ω × (p − c − d) at the contact point p (``spin`` (W,6): ω rad/s, c m;
-    both drivers call it)."""
+    """(body_b, wall_d, u_mean, wall_w) for a half kick's work terms with turning walls: each
+    contact with a turning wall gets a wall of its own (index W + j) moving at that wall's
+    point velocity u + ω × (p − c − d) at the contact point p and turning at its ω (wall_w,
+    rad/s, the rolling torque's work: :func:`~nurbsdem.dynamics.forces.add_rolling_work`)
+    (``spin`` (W,6): ω rad/s, c m; both drivers call it)."""
     W = wall_d.shape[0]
+    wall_w = np.empty((W, 3))
+    wall_w[:] = spin[:, :3]
     turning = np.zeros(b.shape[0], np.bool_)
     count = 0
     for c in range(b.shape[0]):
@@ -130,12 +136,14 @@ def spun_contacts(a, b, point, n: int, spin, wall_d, u_mean):
             turning[c] = True
             count += 1
     if count == 0:
-        return b, wall_d, u_mean
+        return b, wall_d, u_mean, wall_w
     body_b = b.copy()
     d_out = np.empty((W + count, 3))
     u_out = np.empty((W + count, 3))
+    w_out = np.empty((W + count, 3))
     d_out[:W] = wall_d
     u_out[:W] = u_mean
+    w_out[:W] = wall_w
     j = 0
     for c in range(b.shape[0]):
         if not turning[c]:
@@ -145,12 +153,13 @@ def spun_contacts(a, b, point, n: int, spin, wall_d, u_mean):
         arm1 = point[c, 1] - spin[w, 4] - wall_d[w, 1]
         arm2 = point[c, 2] - spin[w, 5] - wall_d[w, 2]
         d_out[W + j] = wall_d[w]
+        w_out[W + j] = wall_w[w]
         u_out[W + j, 0] = u_mean[w, 0] + (spin[w, 1] * arm2 - spin[w, 2] * arm1)
         u_out[W + j, 1] = u_mean[w, 1] + (spin[w, 2] * arm0 - spin[w, 0] * arm2)
         u_out[W + j, 2] = u_mean[w, 2] + (spin[w, 0] * arm1 - spin[w, 1] * arm0)
         body_b[c] = n + W + j
         j += 1
-    return body_b, d_out, u_out
+    return body_b, d_out, u_out, w_out
 
 
 @njit(cache=True)

@@ -40,7 +40,8 @@ class SystemState:
                              int(getattr(cs, "active", 0) or 0),
                              int(getattr(cs, "degenerated_count", 0) or 0),
                              int(getattr(cs, "failed", 0) or 0), self.wall_displacement,
-                             self.wall_reaction, self.wall_torque, hertz)
+                             self.wall_reaction, self.wall_torque, self.wall_work.copy(),
+                             hertz)
 
     def body_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The particles' state as the model and the writers hold it (copies): centroids

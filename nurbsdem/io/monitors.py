@@ -1,6 +1,6 @@
 """The monitor files ``monitors/*.csv`` (:class:`MonitorWriter`): energies, contact counts,
-Hertz radii and each wall's displacement, reaction and torque, one row per sample, each file a
-:class:`CsvMonitor`."""
+Hertz radii and each wall's displacement, reaction, torque, work and power, one row per
+sample, each file a :class:`CsvMonitor`."""
 from __future__ import annotations
 
 from contextlib import contextmanager
@@ -21,7 +21,8 @@ CONTACT_COLUMNS = ("time", "monitored", "active", "degenerated", "failed")
 HERTZ_COLUMNS = ("time", "active", "fallback_radius", "radius_min", "radius_median",
                  "radius_max", "stiffness_normal_max")
 WALL_COLUMNS = ("time", "displacement_x", "displacement_y", "displacement_z",
-                "reaction_x", "reaction_y", "reaction_z", "torque_x", "torque_y", "torque_z")
+                "reaction_x", "reaction_y", "reaction_z", "torque_x", "torque_y", "torque_z",
+                "work", "power")
 
 _float_repr = float.__repr__
 
@@ -39,7 +40,9 @@ class CsvMonitor:
     """A CSV file with a fixed header, one row per sample, each row flushed when written.
 
     restart_time: ``None`` (fresh file, header only) or a time (s): rows after it, and an
-    incomplete or malformed trailing row, are removed (atomic rewrite) before appending.
+    incomplete or malformed trailing row, are removed (atomic rewrite) before appending.  A
+    file whose header lacks trailing columns of ``columns`` (written by an earlier version)
+    keeps its rows, those columns NaN.
     """
 
     def __init__(self, path: str | Path, columns: Sequence[str],
@@ -59,14 +62,16 @@ class CsvMonitor:
     def _kept_rows(self, restart_time: float) -> list[str]:
         text = self.path.read_text(encoding="utf-8", errors="replace")
         lines = text.split("\n")
-        if not lines or lines[0].strip() != self.header:
+        old = lines[0].strip().split(",") if lines else []
+        if not old or tuple(old) != self.columns[:len(old)]:
             return []
+        pad = ",nan" * (len(self.columns) - len(old))
         complete = lines[1:-1] if not text.endswith("\n") else lines[1:]
         kept = []
         limit = restart_time + time_tol(restart_time)
         for line in complete:
             parts = line.split(",")
-            if len(parts) != len(self.columns):
+            if len(parts) != len(old):
                 break
             try:
                 vals = [float(p) for p in parts]
@@ -74,7 +79,7 @@ class CsvMonitor:
                 break
             if vals[0] > limit:
                 break
-            kept.append(line)
+            kept.append(line + pad)
         return kept
 
     def append(self, values: Sequence[Any]) -> None:
@@ -139,7 +144,9 @@ class MonitorWriter:
     wall on its path: minus the total force the particles exert on it, world frame), torques
     in N m (of the particles' contact forces on the wall about its reference point: the
     rotation centre of a turning wall, else the point its displacement carries from the
-    world origin; world frame).
+    world origin; world frame), a wall's work in J (what its motion has done on the
+    particles since the start: its share of the energy balance's external work) and power
+    in W (the work's mean rate since the previous row; 0 on a file's first row).
     """
 
     def __init__(self, outdir: str | Path, wall_names: Sequence[str] = (),
@@ -155,6 +162,9 @@ class MonitorWriter:
         #: ``inlet_<name>.csv`` and ``outlet_<name>.csv`` by file name, made by their first row
         self.flow_csv: dict[str, CsvMonitor] = {}
         self._restart_time = restart_time
+        #: each wall's (time, work) of its last row, for the power column
+        self._last_work = {name: tuple(csv.rows_at_start[-1][i] for i in (0, -2))
+                           for name, csv in self.wall_csv.items() if csv.rows_at_start}
         self._reference: float | None = None
         if self.energy_csv.rows_at_start:
             r = self.energy_csv.rows_at_start[0]
@@ -204,25 +214,30 @@ class MonitorWriter:
         self.hertz_csv.append([time, int(active), int(fallback), *stats])
 
     def wall(self, name: str, time: float, displacement: Sequence[float],
-             reaction: Sequence[float], torque: Sequence[float]) -> None:
+             reaction: Sequence[float], torque: Sequence[float], work: float) -> None:
         """Append a row to ``wall_<name>.csv``: displacement from the deck position (m),
         reaction (N): the force that holds the wall on its prescribed path, i.e. minus the
-        sum of the contact forces the particles exert on it, and torque (N m): that of the
-        particles' contact forces on the wall about its reference point."""
+        sum of the contact forces the particles exert on it, torque (N m): that of the
+        particles' contact forces on the wall about its reference point, and the work (J)
+        the wall's motion has done on the particles since the start; the power (W) is the
+        work's mean rate since the wall's previous row."""
         d = np.asarray(displacement, float).reshape(3).tolist()
         r = np.asarray(reaction, float).reshape(3).tolist()
         m = np.asarray(torque, float).reshape(3).tolist()
-        self.wall_csv[name].append_floats([float(time), *d, *r, *m])
+        t, work = float(time), float(work)
+        t0, w0 = self._last_work.get(name, (t, work))
+        power = (work - w0) / (t - t0) if t > t0 else 0.0
+        self._last_work[name] = (t, work)
+        self.wall_csv[name].append_floats([t, *d, *r, *m, work, power])
 
     def walls(self, time: float, displacement: np.ndarray, reaction: np.ndarray,
-              torque: np.ndarray) -> None:
-        """:meth:`wall` rows of every wall at once: displacement, reaction, torque (W, 3) in
-        the order of the wall names given at construction."""
-        t = float(time)
-        for csv, d, r, m in zip(self.wall_csv.values(), np.asarray(displacement, float).tolist(),
-                                np.asarray(reaction, float).tolist(),
-                                np.asarray(torque, float).tolist()):
-            csv.append_floats([t, *d, *r, *m])
+              torque: np.ndarray, work: np.ndarray) -> None:
+        """:meth:`wall` rows of every wall at once: displacement, reaction, torque (W, 3) and
+        work (W,) in the order of the wall names given at construction."""
+        for name, d, r, m, w in zip(self.wall_csv, np.asarray(displacement, float),
+                                    np.asarray(reaction, float), np.asarray(torque, float),
+                                    np.asarray(work, float).tolist()):
+            self.wall(name, time, d, r, m, w)
 
     def flow(self, name: str, columns: Sequence[str], row: Sequence[Any]) -> None:
         """Append ``row`` to the inlet or outlet monitor ``name`` (its ``columns`` given with

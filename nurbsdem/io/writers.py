@@ -35,7 +35,7 @@ Typical use by the solver (see :class:`OutputWriters`)::
     out.monitors.energy(t, kinetic=..., potential=..., elastic=..., dissipated=...,
                         external_work=...)                              # every Monitors Every
     out.monitors.contacts(t, monitored, active, degenerated, failed)
-    out.monitors.wall("lid", t, displacement, reaction, torque)
+    out.monitors.wall("lid", t, displacement, reaction, torque, work)
     out.results.append(t, bodies)                                       # every Results Every
     out.checkpoint(save, *args)   # results.h5 flushed, CSVs fsynced, then save(*args)
     out.close()
