@@ -15,7 +15,6 @@ the world (see docs/conventions.md: pose position = position - R @ centroid_file
 """
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
@@ -24,6 +23,7 @@ from numba import njit
 from .errors import InputError
 from .geometry.overlap import bodies_overlap, sampled_surface as _sampled
 from .geometry.rotation import quat_from_rotvec, random_quaternions
+from .geometry.sphere_grid import add_sphere, add_spheres, is_clear, sphere_grid
 from .model import Bodies
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -92,67 +92,6 @@ _DRAW_BLOCK = 3 * 4096
 
 
 @njit(cache=True)
-def _slot(keys: np.ndarray, used: np.ndarray, i: int, j: int, k: int) -> int:
-    """The slot of cell (i, j, k) in the open-addressing table (keys (cap,3), used (cap,);
-    cap a power of two): where it is, or the free slot where it goes."""
-    mask = used.shape[0] - 1
-    h = ((i * 73856093) ^ (j * 19349663) ^ (k * 83492791)) & mask
-    while used[h] and not (keys[h, 0] == i and keys[h, 1] == j and keys[h, 2] == k):
-        h = (h + 1) & mask
-    return h
-
-
-@njit(cache=True)
-def _add_sphere(grid, s: int, x: float, y: float, z: float, r: float) -> None:
-    """Sphere s (centre m, radius m) into the grid: its cell's list."""
-    keys, used, head, spheres, nxt, cell = grid
-    i, j, k = math.floor(x / cell), math.floor(y / cell), math.floor(z / cell)
-    h = _slot(keys, used, i, j, k)
-    if not used[h]:
-        used[h] = True
-        keys[h, 0], keys[h, 1], keys[h, 2] = i, j, k
-        head[h] = -1
-    spheres[s, 0], spheres[s, 1], spheres[s, 2], spheres[s, 3] = x, y, z, r
-    nxt[s] = head[h]
-    head[h] = s
-
-
-@njit(cache=True)
-def _add_spheres(grid, centres: np.ndarray, radii: np.ndarray) -> None:
-    """The spheres (centres (K,3), radii (K,), m) into the grid as spheres 0 .. K-1."""
-    for s in range(radii.shape[0]):
-        _add_sphere(grid, s, centres[s, 0], centres[s, 1], centres[s, 2], radii[s])
-
-
-@njit(cache=True)
-def _clear(grid, x: float, y: float, z: float, r: float) -> bool:
-    """Whether a sphere (x, y, z, r) is clear of every sphere in the grid, |c − c_j| ≥ r_j + r:
-    the spheres of its 27 neighbouring cells (the cells are at least as large as any two
-    radii together, so no other sphere can overlap it)."""
-    keys, used, head, spheres, nxt, cell = grid
-    i, j, k = math.floor(x / cell), math.floor(y / cell), math.floor(z / cell)
-    for di in range(-1, 2):
-        for dj in range(-1, 2):
-            for dk in range(-1, 2):
-                h = _slot(keys, used, i + di, j + dj, k + dk)
-                s = head[h] if used[h] else -1
-                while s >= 0:
-                    dx, dy, dz = spheres[s, 0] - x, spheres[s, 1] - y, spheres[s, 2] - z
-                    if math.sqrt(dx * dx + dy * dy + dz * dz) < spheres[s, 3] + r:
-                        return False
-                    s = nxt[s]
-    return True
-
-
-def _sphere_grid(n_spheres: int, cell: float) -> tuple:
-    """An empty grid for n_spheres spheres with cells of side ``cell`` (m): a hash table of
-    cells (at most one per sphere, at most half full) with a list of spheres each."""
-    cap = 1 << max(4, int(2 * max(n_spheres, 1) - 1).bit_length())
-    return (np.zeros((cap, 3), np.int64), np.zeros(cap, np.bool_), np.full(cap, -1, np.int64),
-            np.zeros((n_spheres, 4)), np.full(n_spheres, -1, np.int64), float(cell))
-
-
-@njit(cache=True)
 def _place_from(grid, order: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 draws: np.ndarray, at: int, start: int, tried: int, max_attempts: int,
                 first_sphere: int, position: np.ndarray) -> tuple[int, int, int, int]:
@@ -179,13 +118,13 @@ def _place_from(grid, order: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: 
             z = z0 + ((hi[2] - r) - z0) * draws[at + 2]
             at += 3
             attempts += 1
-            if _clear(grid, x, y, z, r):
+            if is_clear(grid, x, y, z, r):
                 ok = True
                 break
         if not ok:
             return p, attempts, at, _FAILED
         position[k, 0], position[k, 1], position[k, 2] = x, y, z
-        _add_sphere(grid, first_sphere + p, x, y, z, r)
+        add_sphere(grid, first_sphere + p, x, y, z, r)
     return order.shape[0], 0, at, _PLACED
 
 
@@ -215,9 +154,9 @@ def place_random_group(model: "Model", group: "RandomGroup",
     centres = np.asarray(obstacles[0], float).reshape(-1, 3)
     obstacle_radii = np.asarray(obstacles[1], float).reshape(-1)
     radii_all = np.concatenate([obstacle_radii, radii])
-    grid = _sphere_grid(radii_all.shape[0], 2.0 * float(radii_all.max()) if radii_all.size
+    grid = sphere_grid(radii_all.shape[0], 2.0 * float(radii_all.max()) if radii_all.size
                         else 1.0)
-    _add_spheres(grid, centres, obstacle_radii)
+    add_spheres(grid, centres, obstacle_radii)
     position = np.zeros((n, 3))
     quats = random_quaternions(rng, n)
     order = np.argsort(-radii, kind="stable")

@@ -4,10 +4,10 @@
 given by a centre, an axis and a radius, with a thickness) at a rate (particles/s, or kg/s
 through the mean mass of the mix) until a count, a mass or a time is reached.  Each new
 particle draws its shape from the mix by the given fractions, a uniformly random orientation
-and the inlet's velocity.  Its position is drawn uniformly in the region and accepted only
-when its bounding sphere overlaps neither a particle already there nor one placed in the
-same call (a k-d tree over the bounding spheres near the region: scipy's ``cKDTree``, the
-well-tested neighbour search, since an insertion touches few bodies).  When the region has
+and the inlet's velocity.  Its position is the first of ``max_attempts`` uniform draws in the
+region where its bounding sphere overlaps neither a particle already there nor one placed in
+the same call (the compiled sphere grid of the ``Random`` placement over the bounding spheres
+near the region, :mod:`nurbsdem.geometry.sphere_grid`).  When the region has
 no room, the particles wait for the next call and :attr:`Inlet.waiting` says how many
 (the driver reports it once).
 
@@ -22,9 +22,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
-
 from ..geometry.rotation import random_quaternions
+from ..geometry.sphere_grid import add_sphere, add_spheres, first_clear, sphere_grid
 
 
 @dataclass
@@ -218,19 +217,14 @@ class Inlet:
         n = self.due(t)
         kinds = self._draw_shapes(n)
         r_new = self.radii[kinds]
-        lo, hi = self.region.bounds()
-        reach = (float(radii.max()) if len(radii) else 0.0) + (float(r_new.max()) if n else 0.0)
-        near = np.flatnonzero(np.all((centers >= lo - reach) & (centers <= hi + reach),
-                                     axis=1)) if len(centers) else np.zeros(0, np.int64)
-        tree = cKDTree(centers[near]) if len(near) else None
-        r_near = radii[near]
-        placed_x, placed_r, taken = np.empty((n, 3)), np.empty(n), []
+        grid, n_near = self._obstacles(centers, radii, r_new)
+        placed_x, taken = np.empty((n, 3)), []
         for k in range(n):
-            x = self._place_one(r_new[k], tree, r_near, placed_x[:k], placed_r[:k], reach)
+            x = self._place_one(float(r_new[k]), grid)
             if x is None:
                 break                      # the region is full: the rest waits, in order
             placed_x[k] = x
-            placed_r[k] = r_new[k]
+            add_sphere(grid, n_near + k, x[0], x[1], x[2], float(r_new[k]))
             taken.append(kinds[k])
         m = len(taken)
         self._queue = self._queue[m:]
@@ -242,20 +236,31 @@ class Inlet:
                             random_quaternions(self._rng, m),
                             np.repeat(np.asarray(self.velocity, float)[None], m, axis=0))
 
-    def _place_one(self, r, tree, r_near, placed_x, placed_r, reach):
-        """A position for a particle of bounding radius r clear of the present particles and
-        of those placed in this call (placed_x (k,3), placed_r (k,) m), or None after
-        ``max_attempts`` draws."""
-        for _ in range(self.max_attempts):
-            x = self.region.sample(self._rng, 1, np.array([r]))[0]
-            if tree is not None:
-                idx = tree.query_ball_point(x, r + reach)
-                if any(np.linalg.norm(tree.data[i] - x) < r + r_near[i] for i in idx):
-                    continue
-            if len(placed_r) and np.any(np.linalg.norm(placed_x - x, axis=1) < r + placed_r):
-                continue
-            return x
-        return None
+    def _obstacles(self, centers: np.ndarray, radii: np.ndarray,
+                   r_new: np.ndarray) -> tuple[tuple, int]:
+        """The sphere grid (:mod:`nurbsdem.geometry.sphere_grid`) of the bounding spheres
+        that a new particle of radii ``r_new`` in the region could meet, with room for the
+        new ones after them; and their count."""
+        lo, hi = self.region.bounds()
+        reach = (float(radii.max()) if len(radii) else 0.0) + (float(r_new.max())
+                                                                if len(r_new) else 0.0)
+        near = np.flatnonzero(np.all((centers >= lo - reach) & (centers <= hi + reach),
+                                     axis=1)) if len(centers) else np.zeros(0, np.int64)
+        largest = max(float(radii[near].max()) if len(near) else 0.0,
+                      float(r_new.max()) if len(r_new) else 0.0)
+        grid = sphere_grid(len(near) + len(r_new), 2.0 * largest if largest > 0.0 else 1.0)
+        add_spheres(grid, np.ascontiguousarray(centers[near], float),
+                    np.ascontiguousarray(radii[near], float))
+        return grid, len(near)
+
+    def _place_one(self, r: float, grid: tuple) -> np.ndarray | None:
+        """A position for a particle of bounding radius r clear of the spheres of ``grid``
+        (the particles present and those placed in this call): the first of ``max_attempts``
+        uniform draws in the region that is, or None."""
+        candidates = self.region.sample(self._rng, self.max_attempts,
+                                        np.full(self.max_attempts, r))
+        k = first_clear(grid, np.ascontiguousarray(candidates, float), r)
+        return candidates[k] if k >= 0 else None
 
 
 @dataclass
