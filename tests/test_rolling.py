@@ -110,3 +110,32 @@ def test_a_rolling_friction_out_of_its_range_is_refused_with_the_reason():
         Simulation().add_interface(normal_penalty=1e5, rolling_friction=-0.1)
     with pytest.raises(InputError, match="RollingFriction 0.5 is out of range.*time-step"):
         Simulation().add_interface(normal_penalty=1e5, rolling_friction=0.5)
+
+
+@pytest.mark.parametrize("wall", [True, False])
+def test_the_rolling_radius_is_at_most_the_lever_arms(wall):
+    """A contact whose equivalent radius is that of a nearly flat face (1 m) on a particle
+    whose contact point lies 1 cm from its centroid: the yielded rolling torque is
+    μ_r f_n × 1 cm (the lever arm; with a second particle, 2 cm away: the arms' combination
+    1·2/(1 + 2) cm), not μ_r f_n × 1 m.  A sphere's arm is its radius: the same R_r."""
+    from nurbsdem.dynamics.forces import ContactLaw, InterfaceTable, contact_forces
+    from nurbsdem.dynamics.rolling import ROLL
+    table = InterfaceTable(ContactLaw(en=1e5, cn=0.0, et=1e4, ct=0.0, mu=0.5, mu_r=MU_R)
+                           ).as_array(1)
+    depth = 1e-4
+    pos = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.03 + depth]])   # B below A
+    point_a, point_b = np.array([[0.0, 0.0, -0.01]]), np.array([[0.0, 0.0, -0.01 + depth]])
+    inv_mass = np.array([1.0, 0.0 if wall else 1.0])
+    omg = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])     # A rolls: the spring yields
+    K, B = 1, 2
+    out = [np.zeros((B, 3)), np.zeros((B, 3))] + [np.empty((K, 3)) for _ in range(4)] + [
+        np.empty((K, 6)), np.empty(K), np.empty((K, 2)), np.empty(K, np.int64), np.empty((K, 4))]
+    contact_forces(np.array([0]), np.array([1]), point_a, point_b, np.array([[0.0, 0.0, -1.0]]),
+                   np.array([depth]), pos, np.zeros((B, 3)), omg, np.zeros(B, np.int64), table,
+                   np.zeros((K, 6)), 1.0, inv_mass, np.array([1.0]), *out, np.bool_(False),
+                   np.zeros(0))
+    fn = out[7][0]
+    assert fn == pytest.approx(1e5 * depth, rel=1e-12)
+    arm = 0.01 if wall else 0.01 * 0.02 / 0.03
+    torque = np.linalg.norm(out[6][0, ROLL:ROLL + 3])
+    assert torque == pytest.approx(MU_R * arm * fn, rel=1e-12)

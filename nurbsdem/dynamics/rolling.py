@@ -32,8 +32,14 @@ below M_max stays at rest without chatter (the spring holds it, which model A ca
 Rolling radius: the contact's equivalent radius that the Hertz–Mindlin law uses (the
 force-equivalent radius of both surfaces' principal curvatures at the contact points,
 :mod:`nurbsdem.geometry.curvature`: R_a R_b/(R_a + R_b) for two spheres, the sphere's radius
-against a flat wall; a degenerated contact takes the bounding-sphere radius).  A contact
-without a radius (a contact provider that gives none) has no rolling resistance.
+against a flat wall; a degenerated contact takes the bounding-sphere radius), at most the
+lever arms' ℓ_A ℓ_B/(ℓ_A + ℓ_B), ℓ the distance from a particle's centroid to its contact
+point (a wall's ℓ infinite: ℓ of the particle), the rolling radius of EDEM's rolling friction
+(:func:`rolling_radius`).  For spheres both are the radii's combination; on a flat or nearly
+flat face of a NURBS particle the curvature radius grows without bound, the torque a rolling
+spring could hold with it exceeds what the particle's size can carry, and the lever arm
+bounds it.  A contact without a radius (a contact provider that gives none) has no rolling
+resistance.
 
 Energy: the rolling torque's work enters the ledger as the tangential spring's does (the exact
 discrete work of the half kicks, :func:`nurbsdem.dynamics.integrator.kick_from`), its elastic
@@ -79,6 +85,25 @@ def spring_in_plane(spring, c, col, n0, n1, n2):
         sc = smag / spm
         s0, s1, s2 = s0 * sc, s1 * sc, s2 * sc
     return s0, s1, s2
+
+
+@njit(cache=True, inline="always")
+def rolling_radius(c, radius, a, b, point_a, point_b, pos, inv_mass):
+    """The rolling radius R_r (m) of contact c between bodies a and b (module docstring): the
+    contact's equivalent radius ``radius`` (m), at most ℓ_A ℓ_B/(ℓ_A + ℓ_B) with ℓ the
+    distance from a particle's centroid (pos (B,3) m) to its contact point (point_a, point_b
+    (K,3) m); a wall (inv_mass 0) has no arm of its own."""
+    la = math.sqrt((point_a[c, 0] - pos[a, 0]) ** 2 + (point_a[c, 1] - pos[a, 1]) ** 2
+                   + (point_a[c, 2] - pos[a, 2]) ** 2)
+    lb = math.sqrt((point_b[c, 0] - pos[b, 0]) ** 2 + (point_b[c, 1] - pos[b, 1]) ** 2
+                   + (point_b[c, 2] - pos[b, 2]) ** 2)
+    if inv_mass[a] == 0.0:
+        cap = lb
+    elif inv_mass[b] == 0.0:
+        cap = la
+    else:
+        cap = la * lb / (la + lb)
+    return min(radius, cap)
 
 
 @njit(cache=True, inline="always")

@@ -231,7 +231,8 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
     ("Contact", "Interface", "RollingFriction"): KeyDoc(
         "-", "0 (none)", "Rolling-resistance coefficient mu_r, both laws: an elastic-plastic "
         "rolling spring (stiffness 2.25 mu_r^2 R_r^2 k_n) whose torque is limited to "
-        "mu_r R_r f_n, R_r the contact's equivalent radius (a sphere on a wall: its radius). "
+        "mu_r R_r f_n, R_r the contact's equivalent radius (a sphere on a wall: its radius), "
+        "at most the lever arms' combination (centroid to contact point). "
         "A sphere rests on an incline while tan(angle) <= mu_r; rolling, it decelerates at "
         "5/7 mu_r g. Supported up to 0.4."),
     ("Contact", "Interface", "Restitution"): KeyDoc(
