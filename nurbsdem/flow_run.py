@@ -61,7 +61,8 @@ class FlowRun:
                      np.array([e.bounding_radius for e in entries], float),
                      np.array([e.mass(rho) for e in entries], float), spec.rate,
                      velocity=np.asarray(spec.velocity, float), count=spec.count,
-                     seed=spec.seed)
+                     seed=spec.seed,
+                     cell=None if self.model.periodic is None else self.model.periodic.cell())
 
     @property
     def active(self) -> bool:

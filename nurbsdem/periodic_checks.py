@@ -12,8 +12,10 @@ PeriodicSpec`) against the rest of a model: one-line errors naming the deck line
   cell periodic in x and y is the usual case.  Checked at the walls' deck positions.
 * Each particle starts inside the cell, clear of its periodic faces: the placement does not
   see overlaps through a face (:func:`check_periodic_bodies`).
-* Inlets and outlets, mesh and surface walls, ``Damping Implicit`` and several MPI ranks are
-  refused with a periodic cell.
+* An inlet's region lies inside the cell along its periodic axes (a new particle is placed
+  clear of the images across the faces of the cell it is in, :mod:`nurbsdem.dynamics.flow`).
+* Mesh and surface walls, ``Damping Implicit`` and several MPI ranks are refused with a
+  periodic cell.
 
 Lengths in metres.
 """
@@ -59,9 +61,7 @@ def check_periodic(model: "Model") -> None:
     p = model.periodic
     if p is None:
         return
-    if model.inlets or model.outlets:
-        raise model.error("Periodic: a periodic cell cannot be combined with inlets and "
-                          "outlets (block Flow)", p.line)
+    _check_inlets(model)
     if model.curved_walls:
         w = model.curved_walls[0]
         raise model.error(f"wall {w.name}: mesh and surface walls cannot be combined with a "
@@ -72,6 +72,21 @@ def check_periodic(model: "Model") -> None:
                               f"periodic cell (line {p.line})", s.line)
     check_cell_reach(model, periodic_reach(model))
     _check_walls(model)
+
+
+def _check_inlets(model: "Model") -> None:
+    """An inlet's region lies inside the cell along its periodic axes: a new particle is
+    placed clear of the images across the faces of the cell it is in (there is no other)."""
+    p = model.periodic
+    for spec in model.inlets:
+        lo, hi = spec.region().bounds()
+        out = p.axes & ((lo < p.lo) | (hi > p.hi))
+        if out.any():
+            axis = "XYZ"[int(np.flatnonzero(out)[0])]
+            raise model.error(f"Inlet {spec.name}: its region reaches outside the periodic cell "
+                              f"along {axis} ({lo[out][0]:.6g} .. {hi[out][0]:.6g} m against "
+                              f"{p.lo[out][0]:.6g} .. {p.hi[out][0]:.6g} m, line {p.line})",
+                              spec.line)
 
 
 def _check_walls(model: "Model") -> None:

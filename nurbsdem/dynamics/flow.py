@@ -7,9 +7,9 @@ particle draws its shape from the mix by the given fractions, a uniformly random
 and the inlet's velocity.  Its position is the first of ``max_attempts`` uniform draws in the
 region where its bounding sphere overlaps neither a particle already there nor one placed in
 the same call (the compiled sphere grid of the ``Random`` placement over the bounding spheres
-near the region, :mod:`nurbsdem.geometry.sphere_grid`).  When the region has
-no room, the particles wait for the next call and :attr:`Inlet.waiting` says how many
-(the driver reports it once).
+near the region, :mod:`nurbsdem.geometry.sphere_grid`); in a periodic cell, with the images
+across its faces of the particles near them.  When the region has no room, the particles
+wait for the next call and :attr:`Inlet.waiting` says how many (the driver reports it once).
 
 **Outlets** remove the particles whose centroid is in a box or beyond a plane, and count
 them and their mass (:class:`Outlet`, with the rows of ``monitors/outlet_<name>.csv``).
@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from ..contact.periodic import PeriodicCell, ghost_images
 from ..geometry.rotation import random_quaternions
 from ..geometry.sphere_grid import add_sphere, add_spheres, first_clear, sphere_grid
 
@@ -136,7 +137,10 @@ class Inlet:
     (``rate_is_mass``: kg/s); limits: ``count``, ``mass`` (kg), ``until`` (s), any of them
     None; ``start`` (s) when its rate clock starts, ``base`` the particles (a real number)
     it owed then (:meth:`restart_clock`); ``seed`` for its own random stream;
-    ``max_attempts`` draws per particle before it waits.
+    ``max_attempts`` draws per particle before it waits; ``cell``: the scene's periodic cell
+    (:class:`~nurbsdem.contact.periodic.PeriodicCell`, the region inside it along its
+    periodic axes), whose images of the particles near its faces a new particle must clear
+    too, or None.
     """
 
     region: InsertionRegion
@@ -154,6 +158,7 @@ class Inlet:
     base: float = 0.0
     seed: int = 0
     max_attempts: int = 50
+    cell: PeriodicCell | None = None
     inserted: int = 0
     inserted_mass: float = 0.0
     waiting: int = 0
@@ -239,11 +244,17 @@ class Inlet:
     def _obstacles(self, centers: np.ndarray, radii: np.ndarray,
                    r_new: np.ndarray) -> tuple[tuple, int]:
         """The sphere grid (:mod:`nurbsdem.geometry.sphere_grid`) of the bounding spheres
-        that a new particle of radii ``r_new`` in the region could meet, with room for the
-        new ones after them; and their count."""
+        that a new particle of radii ``r_new`` in the region could meet, with room for the new
+        ones after them; and their count.  In a periodic cell these include the images across
+        its faces of the particles near them; two new particles, both inside the region and
+        so inside the cell, cannot meet through a face."""
         lo, hi = self.region.bounds()
         reach = (float(radii.max()) if len(radii) else 0.0) + (float(r_new.max())
                                                                 if len(r_new) else 0.0)
+        if self.cell is not None and len(centers):
+            images, owner, _ = ghost_images(np.asarray(centers, float), reach, self.cell)
+            centers = np.concatenate([centers, images])
+            radii = np.concatenate([radii, radii[owner]])
         near = np.flatnonzero(np.all((centers >= lo - reach) & (centers <= hi + reach),
                                      axis=1)) if len(centers) else np.zeros(0, np.int64)
         largest = max(float(radii[near].max()) if len(near) else 0.0,
