@@ -4,11 +4,14 @@ A turning drum (an exact NURBS cylinder, a triangle-mesh baffle inside, flat end
 ellipsoids and exact spheres: the ranks solve the wall contacts of the particles they own and
 merge them in the serial order (the spheres' contacts with a wall before the NURBS
 particles', :func:`nurbsdem.contact.curved_walls.serial_order`), so results.h5, every monitor
-(the walls' loads among them) and the checkpoint equal the serial run's exactly.
+(the walls' loads among them) and the checkpoint equal the serial run's exactly: with the
+linear law, with rolling resistance, with Hertz–Mindlin and with ``Damping Implicit`` (whose
+dashpot solve over the gathered network sees the drum's spin as the serial run does).
 """
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from nurbsdem.contact.curved_walls import serial_order, wall_contact_key
 from test_curved_steps import _drum_deck
@@ -29,13 +32,29 @@ PARTICLES = """Particles
 """
 
 
-def _deck(folder):
+#: the drum's contact laws: the linear law; with rolling resistance (the drum's turning
+#: spin in the rolling springs and in the drum's work); Hertz–Mindlin (the contacts' radii
+#: from the curvatures of both surfaces, walls rigid); the implicit normal dashpots
+LAWS = {"linear": {},
+        "rolling": {"Friction 0.5": "Friction 0.5 RollingFriction 0.2"},
+        "hertz": {"Material 1 Density 2500": "Material 1 Density 2500 YoungModulus 5e6 "
+                                             "PoissonRatio 0.3",
+                  "Interface 1 NormalPenalty 2e4 NormalDamping 6 TangentialPenalty 2e4 "
+                  "Friction 0.5": "Interface 1 Model HertzMindlin Restitution 0.5 "
+                                  "Friction 0.5"},
+        "implicit": {"TimeStep 1e-3\n": "TimeStep 1e-3 Damping Implicit\n"}}
+
+
+def _deck(folder, law: str = "linear"):
     text = _drum_deck(folder).replace(
         "  Shape 1 Sphere Radius 0.006", "  Shape 1 Ellipsoid SemiAxes 0.008 0.0065 0.005"
     ).replace("Step 1 Dynamic Duration 0.08", "Step 1 Dynamic Duration 0.04").replace(
         "Center 0 0 0 Duration 0.08", "Center 0 0 0 Duration 0.03").replace(
         "Step 3 Dynamic Duration 0.02", "Step 3 Dynamic Duration 0.01").replace(
         "NormalDamping 2", "NormalDamping 6")
+    for old, new in LAWS[law].items():
+        assert old in text, old
+        text = text.replace(old, new)
     head, rest = text.split("Particles\n")
     deck = folder / "drum.inp"
     deck.write_text(head + PARTICLES + rest[rest.index("Walls"):])
@@ -55,8 +74,9 @@ def test_the_serial_order_puts_a_walls_spheres_before_its_nurbs_particles():
 
 
 @needs_mpi
-def test_a_turning_drum_with_a_mesh_baffle_on_two_ranks(tmp_path):
-    deck = _deck(tmp_path)
+@pytest.mark.parametrize("law", list(LAWS))
+def test_a_turning_drum_with_a_mesh_baffle_on_two_ranks(tmp_path, law):
+    deck = _deck(tmp_path, law)
     _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
     log = _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "two", "--verbose"], 2)
     assert any("owned [4, 4]" in line for line in log.splitlines())

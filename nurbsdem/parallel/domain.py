@@ -383,6 +383,9 @@ class Domain:
         self._from_owners([x, q, v, L])
         omega = omega_world(q, L, s._inv_I)
         pos, vel, omg = all_kinematics(x, v, omega, s.wall_d, s.wall_u)
+        if s.wall_spin is not None:      # turning walls, as the serial driver's kinematics
+            pos[len(x):] += s.wall_spin[:, 3:]
+            omg[len(x):] = s.wall_spin[:, :3]
         bc = s._bc
         f, rounds, iterations = s._kernels.dashpots_of_evaluation(   # laws added at run time too
             net["a"], net["b"], net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
