@@ -14,8 +14,7 @@ PeriodicSpec`) against the rest of a model: one-line errors naming the deck line
   see overlaps through a face (:func:`check_periodic_bodies`).
 * An inlet's region lies inside the cell along its periodic axes (a new particle is placed
   clear of the images across the faces of the cell it is in, :mod:`nurbsdem.dynamics.flow`).
-* Mesh and surface walls, ``Damping Implicit`` and several MPI ranks are refused with a
-  periodic cell.
+* Mesh and surface walls and several MPI ranks are refused with a periodic cell.
 
 Lengths in metres.
 """
@@ -66,10 +65,6 @@ def check_periodic(model: "Model") -> None:
         w = model.curved_walls[0]
         raise model.error(f"wall {w.name}: mesh and surface walls cannot be combined with a "
                           f"periodic cell (line {p.line}); flat walls can", w.line)
-    for s in model.steps:
-        if getattr(s, "damping", "explicit") == "implicit":
-            raise model.error(f"Step {s.id}: Damping Implicit cannot be combined with a "
-                              f"periodic cell (line {p.line})", s.line)
     check_cell_reach(model, periodic_reach(model))
     _check_walls(model)
 

@@ -51,6 +51,35 @@ def test_a_collision_through_the_face_equals_the_same_collision_in_the_middle(ki
     assert abs(face.energy().balance_error - mid.energy().balance_error) < 1e-12
 
 
+DAMPED = ContactLaw(en=1e5, cn=40.0, et=0.0, ct=0.0, mu=0.0)
+
+
+def test_implicit_dashpots_through_the_face_equal_those_in_the_middle():
+    """Two spheres press on a third from both sides with ``Damping Implicit`` (the dashpots
+    solved over the network, nurbsdem.dynamics.implicit): in the middle of the cell, and with
+    the middle one on the periodic face, so that it meets one partner directly and the other
+    through the face.  The solve couples the two contacts through that sphere, which the
+    image contact must reach as the same body: the bounces equal each other to round-off."""
+    runs = []
+    for shift in (0.0, -0.1):
+        s = DemSystem(dt=1e-4, gravity=(0, 0, 0), interfaces=InterfaceTable(default=DAMPED),
+                      implicit_damping=True)
+        for x, v in ((0.0605, 0.5), (0.1, 0.0), (0.1395, -0.5)):     # touching already
+            s.add_particle(M, sphere_inertia(M, R), [(x + shift) % L, 0.1, 0.1], v=[v, 0, 0],
+                           radius=R)
+        s.set_contact_provider(SceneContacts([sphere(R)], np.zeros(3, np.int64),
+                                             cell=make_cell((0, 0, 0), (L, 0.2, 0.2),
+                                                            (1, 0, 0))))
+        for _ in range(300):
+            s.step()
+        runs.append(s)
+    mid, face = runs
+    assert mid.dashpot_solves[0] > 10 and face.dashpot_solves[0] == mid.dashpot_solves[0]
+    assert mid.bodies.v[0, 0] < 0.0 < mid.bodies.v[2, 0]             # pushed apart
+    np.testing.assert_allclose(face.bodies.v, mid.bodies.v, rtol=0, atol=1e-12)
+    assert abs(face.energy().dissipated - mid.energy().dissipated) < 1e-12
+
+
 def periodic_pack(rng):
     """32 spheres touching in a 4 x 4 x 2 lattice that fills a cell periodic in x and y, on a
     frictionless floor under a frictionless lid, with random velocities."""

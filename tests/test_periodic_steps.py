@@ -1,10 +1,12 @@
 """Periodic cells on the compiled deck steps (nurbsdem.dynamics.periodic_steps): spheres and
 ellipsoids thrown sideways in a cell periodic in x and y, pressed by a lid, cross its faces
 (wraps at the list builds) and touch each other's images; the compiled loop runs them and
-gives the Python driver's monitors and results bit for bit."""
+gives the Python driver's monitors and results bit for bit, with explicit and with implicit
+normal dashpots."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from nurbsdem.dynamics import images as images_module
 from nurbsdem.dynamics import internal_step
@@ -48,7 +50,11 @@ Output
 """)
 
 
-def test_a_periodic_cell_gives_the_same_bits_on_the_compiled_loop(tmp_path, monkeypatch):
+@pytest.mark.parametrize("damping", ["explicit", "implicit"])
+def test_a_periodic_cell_gives_the_same_bits_on_the_compiled_loop(tmp_path, monkeypatch,
+                                                                  damping):
+    """With ``Damping Implicit`` too: the dashpots solved over the network in which an image
+    is its owner (nurbsdem.dynamics.implicit.implicit_dashpots)."""
     used = _counting_steps(monkeypatch)
     wraps, images = [], []
     apply_wrap, of = internal_step.InternalSteps._apply_wrap, images_module.ImageBodies.of
@@ -64,7 +70,11 @@ def test_a_periodic_cell_gives_the_same_bits_on_the_compiled_loop(tmp_path, monk
         return im
     monkeypatch.setattr(internal_step.InternalSteps, "_apply_wrap", counting_wrap)
     monkeypatch.setattr(images_module.ImageBodies, "of", staticmethod(counting_images))
-    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "cell.inp", _periodic_deck())
+    deck = _periodic_deck()
+    if damping == "implicit":
+        deck = deck.replace("TimeStep 1e-3\n", "TimeStep 1e-3 Damping Implicit\n")
+        assert deck.count("Damping Implicit") == 2
+    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "cell.inp", deck)
     assert not any(used[:s_py.steps]) and all(used[s_py.steps:])    # Python, then compiled
     assert sum(wraps) >= 3 and sum(images) >= 20       # the Python run crossed the faces
     _same_bits(py, cc, s_py, s_cc, ("energy.csv", "contacts.csv", "wall_lid.csv"))

@@ -52,7 +52,8 @@ def test_a_free_body_under_gravity_follows_the_parabola_and_books_no_work():
                                           wall_work, alt_v, alt_L, alt_n, True, True)
         pos, vel, omg = all_kinematics(x, v, omega, no_walls, no_walls)
         out = contact_part(bc, False, a, b, pa, pb, nrm, dep, key, np.zeros(0), keys, springs,
-                           pos, vel, omg, q, L, h, np.zeros(4, np.int64), np.zeros(0))
+                           pos, vel, omg, q, L, h, np.zeros(4, np.int64), np.zeros(0),
+                           np.zeros(0, np.int64))
         force, torque = out[0], out[1]
         omega, _ = kick_part(bc, a, b, e3, e3, e3, e3, e3, force, torque, x, v, q, L, omega, b,
                              no_walls, no_walls, no_walls, 0.5 * h, ledger, wall_work, True)

@@ -345,20 +345,55 @@ def solve_dashpots_from(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray
 
 
 @njit(cache=True)
+def _shared_by_images(loads: np.ndarray, own: np.ndarray, n: int) -> np.ndarray:
+    """Loads (n+G+W, 3) of a system whose bodies n .. n+G−1 are images of the particles
+    ``own`` (G,): each image's row added to its owner's (in image order), and the owner's
+    total copied to the image, since a particle and its images are one body."""
+    out = loads.copy()
+    for g in range(own.shape[0]):
+        for k in range(3):
+            out[own[g], k] += loads[n + g, k]
+    for g in range(own.shape[0]):
+        for k in range(3):
+            out[n + g, k] = out[own[g], k]
+    return out
+
+
+@njit(cache=True)
+def _owners(body: np.ndarray, own: np.ndarray, n: int) -> np.ndarray:
+    """The bodies (K,) with each image n + g replaced by its owner own[g]."""
+    out = body.copy()
+    for c in range(body.shape[0]):
+        if n <= body[c] < n + own.shape[0]:
+            out[c] = own[body[c] - n]
+    return out
+
+
+@njit(cache=True)
 def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
                       normal: np.ndarray, fn: np.ndarray, f_damp_n: np.ndarray, cn: np.ndarray,
                       force: np.ndarray, torque: np.ndarray, x: np.ndarray, v: np.ndarray,
                       q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, inv_mass: np.ndarray,
                       wall_d: np.ndarray, wall_u: np.ndarray, Q: np.ndarray, sq_m: np.ndarray,
-                      sq_I: np.ndarray, h: float) -> tuple[np.ndarray, int, int]:
+                      sq_I: np.ndarray, h: float, own: np.ndarray) -> tuple[np.ndarray, int, int]:
     """The implicit normal dashpot forces (K,) N of one force evaluation at the end of an
-    internal step h (s), acting through its closing and the next opening half kick, from the explicit evaluation of the same contacts (``fn`` (K,) N,
-    ``f_damp_n`` (K,3) its normal dashpot vector, ``force``/``torque`` (B,3) its loads,
-    gravity included, :func:`~nurbsdem.dynamics.forces.contact_loads`) and the half-step
-    state (v, q, L of the N particles; walls at wall_d moving at wall_u).  Returns (f, active-set
-    rounds, CG iterations); pass f to contact_loads as the given dashpots."""
+    internal step h (s), acting through its closing and the next opening half kick, from the
+    explicit evaluation of the same contacts (``fn`` (K,) N, ``f_damp_n`` (K,3) its normal
+    dashpot vector, ``force``/``torque`` (B,3) its loads, gravity included,
+    :func:`~nurbsdem.dynamics.forces.contact_loads`) and the half-step state (v, q, L of the N
+    particles; walls at wall_d moving at wall_u).  In a periodic cell the last G of the N
+    particles are images of the particles ``own`` (G,) (empty: none,
+    :mod:`nurbsdem.dynamics.periodic_steps`): each contact keeps its image's lever arm, while
+    the loads, the predicted velocities and the solve take an image as its owner, one body.
+    Returns (f, active-set rounds, CG iterations); pass f to contact_loads as the given
+    dashpots."""
     K = body_a.shape[0]
     N = x.shape[0]
+    G = own.shape[0]
+    n = N - G
+    if G:
+        force = _shared_by_images(force, own, n)
+        torque = _shared_by_images(torque, own, n)
     f = np.empty(K)
     f_el = np.empty(K)
     for c in range(K):
@@ -381,13 +416,16 @@ def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     lever_arms(body_a, body_b, point, x, r_a, r_b)
     rows = np.empty((K, 2, 6))
     normal_rows(body_a, body_b, r_a, r_b, normal, Q, sq_m, sq_I, rows)
+    sa, sb = body_a, body_b
+    if G:
+        sa, sb = _owners(body_a, own, n), _owners(body_b, own, n)
     gf = np.empty(K)
-    delassus_apply(f, np.ones(K, np.bool_), body_a, body_b, rows, np.empty(6 * N), gf)
+    delassus_apply(f, np.ones(K, np.bool_), sa, sb, rows, np.empty(6 * n), gf)
     w0 = np.empty(K)
     for c in range(K):
         w0[c] = (w3[c, 0] * normal[c, 0] + w3[c, 1] * normal[c, 1] + w3[c, 2] * normal[c, 2]
                  - h * gf[c])
-    rounds, iterations = solve_dashpots_from(body_a, body_b, rows, N, cn, f_el, w0, h, f, gf)
+    rounds, iterations = solve_dashpots_from(sa, sb, rows, n, cn, f_el, w0, h, f, gf)
     return f, rounds, iterations
 
 
@@ -395,12 +433,13 @@ def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
 def dashpots_of_evaluation(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg,
                            material, table, spring, h, inv_mass_all, radius, mass, gravity,
                            q: np.ndarray, L: np.ndarray, inv_I: np.ndarray, Q: np.ndarray,
-                           sq_m: np.ndarray, sq_I: np.ndarray) -> tuple[np.ndarray, int, int]:
+                           sq_m: np.ndarray, sq_I: np.ndarray,
+                           own: np.ndarray) -> tuple[np.ndarray, int, int]:
     """The implicit normal dashpot forces (K,) N of a force evaluation given by the arguments
     of :func:`~nurbsdem.dynamics.forces.contact_loads` (pos, vel (B,3): the N particles then
     the walls): its explicit evaluation on a copy of the tangential springs, then
     :func:`implicit_dashpots` with the particles' q, L (N,4), (N,3), 1/I, Q (principal frames)
-    and √m, √I.  Returns (f, active-set rounds, CG iterations).  The one entry of the Python
+    and √m, √I (the last G of them images of the particles ``own`` (G,), empty: none).  Returns (f, active-set rounds, CG iterations).  The one entry of the Python
     path and the compiled sphere loop, so that both give the same bits."""
     N = mass.shape[0]
     force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
@@ -409,4 +448,4 @@ def dashpots_of_evaluation(body_a, body_b, point_a, point_b, normal, depth, pos,
     return implicit_dashpots(body_a, body_b, point, normal, fn, fdn,
                              np.ascontiguousarray(coeffs[:, 1]), force, torque, pos[:N],
                              vel[:N], q, L, inv_I, inv_mass_all[:N], pos[N:], vel[N:], Q, sq_m,
-                             sq_I, h)
+                             sq_I, h, own)

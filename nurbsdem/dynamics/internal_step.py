@@ -153,7 +153,8 @@ class InternalSteps:
         (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
          self.last_slip_work, keys, springs, repeated) = self._kernels.contact_part(
              bc, self.implicit_damping, a, b_part, pa, pb, nrm, dep, key, self.c_radius,
-             self.hist_keys, self.hist_springs, pos, vel, omg, q, L, h, solves, dashpot)
+             self.hist_keys, self.hist_springs, pos, vel, omg, q, L, h, solves, dashpot,
+             np.zeros(0, np.int64) if im is None else im.own)
         if im is not None:
             force, torque = im.fold(force), im.fold(torque)
         if repeated:

@@ -372,7 +372,8 @@ def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_k
     their loads folded onto their owners (the Python driver's ``_evaluate``)."""
     if not has_images(image):
         return contact_part_ptr((bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys,
-                                 hist_springs, pos, vel, omg, q, L, h, solves, np.zeros(0)))
+                                 hist_springs, pos, vel, omg, q, L, h, solves, np.zeros(0),
+                                 np.zeros(0, np.int64)))
     n = q.shape[0]
     own, offset, b_ext = image_bodies(n, b, image)
     pos_e = np.concatenate((pos[:n], pos[own] + offset, pos[n:]))
@@ -381,7 +382,7 @@ def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_k
                                    key, radius, hist_keys, hist_springs, pos_e,
                                    _bodies(vel, own, n), _bodies(omg, own, n),
                                    _particles(q, own), _particles(L, own), h, solves,
-                                   np.zeros(0)))
+                                   np.zeros(0), own))
     return (_fold(force, own, n), _fold(torque, own, n), point, ftot, fdn, fdt, fet, fn, eel,
             stick, coeffs, slip, keys, springs, repeated)
 

@@ -184,7 +184,7 @@ def stored_history(key: np.ndarray, spring: np.ndarray):
 
 @njit(cache=True)
 def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, hist_springs,
-                 pos_all, vel_all, omg_all, q, L, h, solves, dashpot):
+                 pos_all, vel_all, omg_all, q, L, h, solves, dashpot, own):
     """Part 3 of the internal step (module docstring) for the active contacts a, b (their
     surface points pa, pb, normals, depths and keys; Hertz–Mindlin radii, zeros for linear
     laws), from the stored springs (hist_keys ascending, hist_springs) and the kinematics of
@@ -192,7 +192,9 @@ def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, h
     solved implicitly first; their solves, active-set rounds, CG iterations and cycles are
     added to ``solves`` (4,) int64; ``dashpot`` (K,) N gives them instead (solved over the
     whole network by the MPI ranks together: :meth:`~nurbsdem.parallel.domain.Domain.
-    implicit_dashpots`; empty: solved here).  Returns (force, torque (B,3), point, f_total,
+    implicit_dashpots`; empty: solved here); ``own`` (G,): the owners of the last G
+    particles, images in a periodic cell (empty: none; the dashpot solve takes an image as its
+    owner, :func:`~nurbsdem.dynamics.implicit.implicit_dashpots`).  Returns (force, torque (B,3), point, f_total,
     f_damp_n, f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip
     work J, the stored springs' keys and springs, whether a key repeats)."""
     spring = match_history(hist_keys, hist_springs, key)
@@ -202,7 +204,7 @@ def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, h
         dashpot, rounds, iterations = dashpots_of_evaluation(
             a, b, pa, pb, nrm, dep, pos_all, vel_all, omg_all, bc.material, bc.table, spring, h,
             bc.inv_mass_all, radius, bc.mass, bc.gravity, q, L, bc.inv_I,
-            quats_to_matrices(q), bc.sq_m, bc.sq_I)
+            quats_to_matrices(q), bc.sq_m, bc.sq_I, own)
         solves[0] += 1
         solves[1] += rounds
         solves[2] += iterations

@@ -391,7 +391,7 @@ class Domain:
             net["a"], net["b"], net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
             net["n"].reshape(-1, 3), net["d"], pos, vel, omg, bc.material, bc.table,
             net["s"].reshape(-1, NSPRING), h, bc.inv_mass_all, net["r"], bc.mass, bc.gravity, q, L,
-            bc.inv_I, quats_to_matrices(q), bc.sq_m, bc.sq_I)
+            bc.inv_I, quats_to_matrices(q), bc.sq_m, bc.sq_I, np.zeros(0, np.int64))
         solves[0] += 1
         solves[1] += rounds
         solves[2] += iterations
