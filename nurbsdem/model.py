@@ -252,7 +252,7 @@ class CurvedWallSpec:
 class Interface:
     """``Interface ID [Model LinearPenalty] NormalPenalty en [TangentialPenalty et]
     [NormalDamping cn] [TangentialDamping ct] [Friction mu] [RollingFriction mu_r]
-    [Between particle-particle|particle-wall]
+    [RollingDamping eta_r] [Between particle-particle|particle-wall]
     [Materials m1 m2 | Materials m]``  (paper Eqs. 16-17), or
     ``Interface ID Model HertzMindlin Restitution e [Friction mu] [RollingFriction mu_r] [Between ..]
     [Materials ..]``
@@ -267,7 +267,8 @@ class Interface:
 
     normal_penalty (N/m), tangential_penalty (N/m), normal_damping (N s/m),
     tangential_damping (N s/m), friction (Coulomb coefficient, -), rolling_friction (the
-    rolling-resistance coefficient μ_r, -: :mod:`nurbsdem.dynamics.rolling`; 0 none).
+    rolling-resistance coefficient μ_r, -: :mod:`nurbsdem.dynamics.rolling`; 0 none),
+    rolling_damping (the rolling spring's damping ratio η_r, -; 0 none).
     between: ``None`` (all pairs) or one of :data:`PAIR_KINDS`.
     materials: ``None`` (any), ``(m1, m2)`` (particle-particle pairs of these materials,
     unordered) or ``(m,)`` (particle-wall pairs whose particle has material m).
@@ -286,6 +287,7 @@ class Interface:
     restitution: float = 1.0
     params: dict[str, float] = field(default_factory=dict)
     rolling_friction: float = 0.0
+    rolling_damping: float = 0.0
 
     def applies(self, kind: str, materials: tuple[int, ...]) -> bool:
         """Whether this interface covers a pair of the given kind and material ids

@@ -61,6 +61,9 @@ RANGES: dict[str, Range] = {
                              "below ~0.3; above 0.42 the rolling spring (k_r = 2.25 μ_r² R_r² "
                              "k_n), which the time-step control does not see, turns a sphere "
                              "faster than its normal spring"),
+    "RollingDamping": Range(0.0, 0.3, "", "the damping ratio of the rolling spring, which the "
+                            "time-step control does not see: up to 0.3 its step stays stable "
+                            "at RollingFriction 0.4"),
     "ConvexityTolerance": Range(0.0, 0.1, "", "a surface further than a tenth of its size from "
                                 "convex is not a convex particle: the contact search finds one "
                                 "contact point per pair", nonnegative=True),

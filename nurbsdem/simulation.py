@@ -167,7 +167,8 @@ class Simulation:
                       friction: float | None = None, between: str | None = None,
                       materials: Sequence[int] | None = None, id: int | None = None,
                       model: str = "LinearPenalty", restitution: float | None = None,
-                      rolling_friction: float | None = None, **law_keys: float) -> int:
+                      rolling_friction: float | None = None,
+                      rolling_damping: float | None = None, **law_keys: float) -> int:
         """``Interface``: contact law of the pairs it covers.
 
         ``model="LinearPenalty"`` (paper Eqs. 16-17): normal_penalty, tangential_penalty (N/m),
@@ -175,7 +176,8 @@ class Simulation:
         (0 < e <= 1), the stiffness from the materials' young_modulus and poisson_ratio (walls:
         the ``material`` of add_box / add_wall, default rigid). Both: friction (Coulomb, -),
         rolling_friction (μ_r, -: a rolling-resistance torque up to μ_r R_r f_n,
-        :mod:`nurbsdem.dynamics.rolling`; default 0, none);
+        :mod:`nurbsdem.dynamics.rolling`; default 0, none), rolling_damping (η_r, -: the
+        rolling spring's damping ratio while it holds; default 0, none);
         between: ``None`` (all pairs), ``"particle-particle"`` or ``"particle-wall"``;
         materials: ``(m1, m2)`` or ``(m,)`` as in the deck; a law added at run time takes its
         keys by their Python names (``law_keys``). Later interfaces override earlier ones.
@@ -187,7 +189,8 @@ class Simulation:
         given = dict(normal_penalty=normal_penalty, tangential_penalty=tangential_penalty,
                      normal_damping=normal_damping, tangential_damping=tangential_damping,
                      friction=friction, restitution=restitution,
-                     rolling_friction=rolling_friction, **law_keys)
+                     rolling_friction=rolling_friction, rolling_damping=rolling_damping,
+                     **law_keys)
         return self._scene.add_interface(given, between, materials, id, model)
 
     def add_particle(self, shape: Any, material: int, position: Sequence[float],

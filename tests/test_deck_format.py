@@ -48,7 +48,7 @@ Walls
 Contact
   Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 Friction 0.5
   Interface 2 Model HertzMindlin Restitution 0.6 Friction 0.2 Materials 1 2
-  Interface 3 NormalPenalty 2e5 RollingFriction 0.05 Between particle-wall
+  Interface 3 NormalPenalty 2e5 RollingFriction 0.05 RollingDamping 0.2 Between particle-wall
 Steps
   Step 1 Dynamic Duration 0.1 TimeStep 1e-3 Damping Implicit Accuracy 3e-5 Safety 0.7
   Step 2 Replicate Layers 3 Height 0.1

@@ -23,7 +23,8 @@ MASS = RHO * 4.0 / 3.0 * math.pi * R ** 3
 MU_R = 0.1
 
 
-def _sphere_on_floor(gravity, mu_r, velocity=(0.0, 0.0, 0.0), law="LinearPenalty"):
+def _sphere_on_floor(gravity, mu_r, velocity=(0.0, 0.0, 0.0), law="LinearPenalty",
+                     eta_r=None):
     """One sphere resting (at its static overlap) on a level floor, rolling at ``velocity``
     without slip; ``gravity`` (3,) m/s²."""
     sim = Simulation(gravity=gravity)
@@ -34,7 +35,8 @@ def _sphere_on_floor(gravity, mu_r, velocity=(0.0, 0.0, 0.0), law="LinearPenalty
     else:
         sim.add_material(1, RHO)
         sim.add_interface(normal_penalty=KN, tangential_penalty=1e4, normal_damping=20,
-                          tangential_damping=5, friction=0.5, rolling_friction=mu_r)
+                          tangential_damping=5, friction=0.5, rolling_friction=mu_r,
+                          rolling_damping=eta_r)
         d0 = MASS * abs(gravity[2]) / KN
     sim.add_wall("floor", (0, 0, 0), (0, 0, 1), (1.0, 1.0))
     spin = (-velocity[1] / R, velocity[0] / R, 0.0)           # ω × (−R e_z) = −v: no slip
@@ -139,3 +141,47 @@ def test_the_rolling_radius_is_at_most_the_lever_arms(wall):
     arm = 0.01 if wall else 0.01 * 0.02 / 0.03
     torque = np.linalg.norm(out[6][0, ROLL:ROLL + 3])
     assert torque == pytest.approx(MU_R * arm * fn, rel=1e-12)
+
+
+def test_the_rolling_damper_adds_its_torque_while_the_spring_holds():
+    """One contact of a particle (1 kg, its contact point 1 cm from its centroid) with a wall,
+    turning at 2 rad/s over a step short enough that the rolling spring holds: the torque on
+    the wall is −k_r θ − C_r ω_r with θ = h ω_r, C_r = 2 η_r √(I_r k_r), I_r = 1.4 m ℓ²."""
+    from nurbsdem.dynamics.forces import ContactLaw, InterfaceTable, contact_forces
+    from nurbsdem.dynamics.rolling import ROLL
+    eta_r, kn, depth, h, arm = 0.25, 1e5, 1e-4, 1e-6, 0.01
+    table = InterfaceTable(ContactLaw(en=kn, mu=0.5, mu_r=MU_R, eta_r=eta_r)).as_array(1)
+    pos = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    point_a, point_b = np.array([[0.0, 0.0, -arm]]), np.array([[0.0, 0.0, -arm + depth]])
+    omega = np.array([2.0, 0.0, 0.0])
+    K, B = 1, 2
+    out = [np.zeros((B, 3)), np.zeros((B, 3))] + [np.empty((K, 3)) for _ in range(4)] + [
+        np.empty((K, 6)), np.empty(K), np.empty((K, 2)), np.empty(K, np.int64), np.empty((K, 4))]
+    contact_forces(np.array([0]), np.array([1]), point_a, point_b, np.array([[0.0, 0.0, -1.0]]),
+                   np.array([depth]), pos, np.zeros((B, 3)), np.array([omega, [0.0, 0.0, 0.0]]),
+                   np.zeros(B, np.int64), table, np.zeros((K, 6)), h, np.array([1.0, 0.0]),
+                   np.array([arm]), *out, np.bool_(False), np.zeros(0))
+    k_r = 2.25 * MU_R ** 2 * arm ** 2 * kn
+    w_r = -omega                                        # ω_B − ω_A, in the tangent plane
+    c_r = 2.0 * eta_r * math.sqrt(1.4 * arm ** 2 * k_r)
+    expected = -k_r * h * w_r - c_r * w_r
+    assert np.linalg.norm(-k_r * h * w_r) < MU_R * arm * kn * depth      # the spring holds
+    np.testing.assert_allclose(out[6][0, ROLL:ROLL + 3], expected, rtol=1e-12, atol=0)
+
+
+def test_the_rolling_damper_stills_the_rocking_and_the_balance_closes():
+    """The rolling sphere of the first test, stopped by its rolling torque, rocks on its
+    rolling spring (no damper: it keeps rocking); with RollingDamping 0.3 the rocking dies
+    out, the damper's work is dissipated, and the linear law's balance still closes."""
+    rock = {}
+    for eta_r in (0.0, 0.3):
+        sim = _sphere_on_floor((0, 0, -G), MU_R, velocity=(0.2, 0, 0), eta_r=eta_r or None)
+        sim.run_dynamic(0.3, 1e-3)                          # stopped at 0.285 s
+        spins = []
+        for _ in range(60):
+            sim.run_dynamic(1e-3, 1e-3)
+            spins.append(sim.angular_velocities[0, 1])
+        rock[eta_r] = float(np.sqrt(np.mean(np.square(spins))))
+        e = sim.energy()
+        assert abs(e["balance_error"]) < 1e-9 * 0.7 * MASS * 0.2 ** 2
+    assert rock[0.3] < 0.1 * rock[0.0]

@@ -54,8 +54,8 @@ from numba import njit, prange
 from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 from .laws import law_normal, law_spring_scale
 from .laws.linear_penalty import LinearPenalty
-from .laws.table import MU, RF, InterfaceTable
-from .rolling import NSPRING, ROLL, no_rolling, rolling_radius, rolling_result, spring_in_plane
+from .laws.table import MU, RD, RF, InterfaceTable
+from .rolling import NSPRING, ROLL, no_rolling, rolling_geometry, rolling_result, spring_in_plane
 
 #: the linear penalty law (:class:`~nurbsdem.dynamics.laws.linear_penalty.LinearPenalty`)
 ContactLaw = LinearPenalty
@@ -189,9 +189,10 @@ def _contact_laws_range(body_a, body_b, point_a, point_b, normal, depth, pos, ve
                            f_el_t, fn_out, e_el, stick, slip_out)
         mu_r = table[ma, mb, RF]
         if mu_r > 0.0 and spring.shape[1] >= NSPRING and f_el_t.shape[1] >= NSPRING:
-            r_roll = rolling_radius(c, radius[c], a, b, point_a, point_b, pos, inv_mass)
-            rolling_result(c, mu_r, kn, fn, r_roll, n0, n1, n2, a, b, omg, h, spring,
-                           f_el_t, e_el)
+            r_roll, i_roll = rolling_geometry(c, radius[c], a, b, point_a, point_b, pos,
+                                              inv_mass)
+            rolling_result(c, mu_r, table[ma, mb, RD], kn, fn, r_roll, i_roll, n0, n1, n2, a,
+                           b, omg, h, spring, f_el_t, e_el)
         else:
             no_rolling(c, spring, f_el_t)
 

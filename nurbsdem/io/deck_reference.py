@@ -235,6 +235,11 @@ KEYS: dict[tuple[str, str, str], KeyDoc] = {
         "at most the lever arms' combination (centroid to contact point). "
         "A sphere rests on an incline while tan(angle) <= mu_r; rolling, it decelerates at "
         "5/7 mu_r g. Supported up to 0.4."),
+    ("Contact", "Interface", "RollingDamping"): KeyDoc(
+        "-", "0 (none)", "Damping ratio eta_r of the rolling spring of RollingFriction, both "
+        "laws: a viscous torque C_r w_r, C_r = 2 eta_r sqrt(I_r k_r) with I_r = 1.4 m l^2 "
+        "(l the lever arm), while the spring holds (as LIGGGHTS' epsd); a sphere's rocking "
+        "on a floor then decays with the damping ratio eta_r. Supported up to 0.3."),
     ("Contact", "Interface", "Restitution"): KeyDoc(
         "-", "required by HertzMindlin", "Coefficient of restitution e in (0, 1] of a normal "
         "impact, independent of the impact speed."),

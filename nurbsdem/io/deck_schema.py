@@ -63,7 +63,8 @@ SCHEMA: dict[str, dict[str, EntrySpec]] = {
     "Contact": {"Interface": EntrySpec(True, {
         "NormalPenalty": F1, "TangentialPenalty": F1, "NormalDamping": F1,
         "TangentialDamping": F1, "Friction": F1, "Between": S1, "Materials": IN,
-        "Model": S1, "Restitution": F1, "RollingFriction": F1})},
+        "Model": S1, "Restitution": F1, "RollingFriction": F1,
+        "RollingDamping": F1})},
     "Flow": {
         "Inlet": EntrySpec(True, {"Name": S1, "Shapes": IN, "Fractions": FN, "Material": I1,
                                   "Box": F6, "Disc": F3, "Normal": F3, "Radius": F1,

@@ -1,5 +1,5 @@
 """Hertz–Mindlin contact with the exact local curvature: ``Interface ID Model HertzMindlin
-Restitution e [Friction mu] [RollingFriction mu_r]``.
+Restitution e [Friction mu] [RollingFriction mu_r] [RollingDamping eta_r]``.
 
 Normal force (Hertz, elliptical contact)::
 
@@ -63,8 +63,8 @@ from numba import njit
 
 from ...errors import InputError
 from .keys import LawKey
-from .linear_penalty import FRICTION, ROLLING_FRICTION
-from .table import CN, CT, EN, ET, MODEL, MU, NCOL, P0, P1, P2, RF
+from .linear_penalty import FRICTION, ROLLING_DAMPING, ROLLING_FRICTION
+from .table import CN, CT, EN, ET, MODEL, MU, NCOL, P0, P1, P2, RD, RF
 
 #: the law's code in the table's MODEL column
 CODE = 1
@@ -160,8 +160,8 @@ class HertzMindlin:
 
     e_star, g_star (Pa); restitution (-); mu Coulomb coefficient; ref: the linearisation
     (k_n, c_n, k_t, c_t) used by the a-priori time-step estimate and for pairs not yet in
-    contact (:func:`reference_linearisation`); mu_r the rolling-friction coefficient (-,
-    :mod:`nurbsdem.dynamics.rolling`)."""
+    contact (:func:`reference_linearisation`); mu_r, eta_r the rolling-friction coefficient
+    and the rolling spring's damping ratio (-, :mod:`nurbsdem.dynamics.rolling`)."""
 
     e_star: float
     g_star: float
@@ -169,6 +169,7 @@ class HertzMindlin:
     mu: float = 0.0
     ref: tuple = field(default=(0.0, 0.0, 0.0, 0.0))
     mu_r: float = 0.0
+    eta_r: float = 0.0
 
     #: deck name, the Interface's ``model``, the code of its table rows
     name = "HertzMindlin"
@@ -182,7 +183,7 @@ class HertzMindlin:
     keys = (LawKey("Restitution", "restitution", "", 0.0,
                    "a coefficient of restitution: 0 needs an infinite dashpot, above 1 an "
                    "impact would gain energy", lo_open=True, hi=1.0, required=True),
-            FRICTION, ROLLING_FRICTION)
+            FRICTION, ROLLING_FRICTION, ROLLING_DAMPING)
     #: what the law's row depends on besides its keys (for the messages)
     note = ("its stiffness and damping come from the materials' YoungModulus, PoissonRatio "
             "and the Restitution")
@@ -199,6 +200,9 @@ class HertzMindlin:
         if not (math.isfinite(self.mu_r) and self.mu_r >= 0):
             raise InputError(f"Hertz law: rolling friction must be finite and >= 0, got "
                              f"{self.mu_r}")
+        if not (math.isfinite(self.eta_r) and self.eta_r >= 0):
+            raise InputError(f"Hertz law: rolling damping must be finite and >= 0, got "
+                             f"{self.eta_r}")
         damping_ratio(self.restitution)
 
     @classmethod
@@ -215,7 +219,7 @@ class HertzMindlin:
             ref = reference_linearisation(e_star, g_star, zeta, pair.radius, pair.m_eff,
                                           pair.speed)
         return cls(e_star, g_star, float(itf.restitution), float(itf.friction), ref,
-                   float(itf.rolling_friction))
+                   float(itf.rolling_friction), float(itf.rolling_damping))
 
     @property
     def zeta(self) -> float:
@@ -233,6 +237,7 @@ class HertzMindlin:
         row[MU], row[MODEL], row[ESTAR], row[GSTAR], row[ZETA] = (
             self.mu, CODE, self.e_star, self.g_star, self.zeta)
         row[RF] = self.mu_r
+        row[RD] = self.eta_r
         return row
 
 

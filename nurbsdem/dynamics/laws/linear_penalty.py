@@ -1,6 +1,6 @@
 """The linear penalty law of the paper (Eq. 16–17): ``Interface ID [Model LinearPenalty]
 NormalPenalty en [TangentialPenalty et] [NormalDamping cn] [TangentialDamping ct]
-[Friction mu] [RollingFriction mu_r]``.
+[Friction mu] [RollingFriction mu_r] [RollingDamping eta_r]``.
 
 Normal force f_n = εn d + cn ḋ (clipped at 0 by the kernel), elastic energy ½ εn d²; the
 tangential spring εt with dashpot ct and the Coulomb return mapping are the kernel's common
@@ -17,7 +17,7 @@ from numba import njit
 
 from ...errors import InputError
 from .keys import LawKey
-from .table import CN, CT, EN, ET, MODEL, MU, NCOL, RF
+from .table import CN, CT, EN, ET, MODEL, MU, NCOL, RD, RF
 
 #: the law's code in the table's MODEL column
 CODE = 0
@@ -33,6 +33,10 @@ ROLLING_FRICTION = LawKey("RollingFriction", "rolling_friction", "", 0.0,
                           "a rolling-resistance coefficient (the torque limit over the rolling "
                           "radius and the normal force); a negative one would drive the rolling",
                           written_at_default=False)
+#: the RollingDamping key, common to the built-in laws (:mod:`nurbsdem.dynamics.rolling`)
+ROLLING_DAMPING = LawKey("RollingDamping", "rolling_damping", "", 0.0,
+                         "a damping ratio of the rolling spring; a negative one would drive "
+                         "the rolling", written_at_default=False)
 
 
 @dataclass(frozen=True)
@@ -40,7 +44,9 @@ class LinearPenalty:
     """Penalty law of one interface (paper Eq. 16–17; the example: 1e5, 1e2, 1e4, 0, 0.5).
 
     en: normal penalty εn (N/m); cn: normal damping (N s/m); et: tangential penalty εt (N/m);
-    ct: tangential damping (N s/m); mu: Coulomb friction coefficient (-).
+    ct: tangential damping (N s/m); mu: Coulomb friction coefficient (-); mu_r, eta_r: the
+    rolling friction coefficient and the rolling spring's damping ratio (-,
+    :mod:`nurbsdem.dynamics.rolling`).
     """
 
     en: float
@@ -49,6 +55,7 @@ class LinearPenalty:
     ct: float = 0.0
     mu: float = 0.0
     mu_r: float = 0.0
+    eta_r: float = 0.0
 
     #: deck name, the Interface's ``model``, the code of its table rows
     name = "LinearPenalty"
@@ -65,12 +72,12 @@ class LinearPenalty:
             LawKey("TangentialPenalty", "tangential_penalty", "N/m", 0.0, _STIFF),
             LawKey("NormalDamping", "normal_damping", "N s/m", 0.0, _DAMP),
             LawKey("TangentialDamping", "tangential_damping", "N s/m", 0.0, _DAMP),
-            FRICTION, ROLLING_FRICTION)
+            FRICTION, ROLLING_FRICTION, ROLLING_DAMPING)
     #: what the law's row depends on besides its keys (for the messages)
     note = "its constants are its keys"
 
     def __post_init__(self) -> None:
-        for name in ("en", "cn", "et", "ct", "mu", "mu_r"):
+        for name in ("en", "cn", "et", "ct", "mu", "mu_r", "eta_r"):
             val = getattr(self, name)
             if not (math.isfinite(val) and val >= 0):
                 raise InputError(f"contact law: {name} must be finite and >= 0, got {val}")
@@ -82,13 +89,15 @@ class LinearPenalty:
         """The law of an :class:`~nurbsdem.model.Interface` (``pair``, the materials'
         :class:`~nurbsdem.model.MaterialPair`, is not used: the constants are the keys)."""
         return cls(en=itf.normal_penalty, cn=itf.normal_damping, et=itf.tangential_penalty,
-                   ct=itf.tangential_damping, mu=itf.friction, mu_r=itf.rolling_friction)
+                   ct=itf.tangential_damping, mu=itf.friction, mu_r=itf.rolling_friction,
+                   eta_r=itf.rolling_damping)
 
     def as_row(self) -> np.ndarray:
         row = np.zeros(NCOL)
         row[EN], row[CN], row[ET], row[CT], row[MU] = self.en, self.cn, self.et, self.ct, self.mu
         row[MODEL] = CODE
         row[RF] = self.mu_r
+        row[RD] = self.eta_r
         return row
 
 

@@ -13,7 +13,8 @@ Every law fills the same row layout:
 * ``P0 .. P2``: the law's own parameters (their meaning is the law's: Hertz–Mindlin keeps
   E*, G*, ζ there);
 * ``RF``: the rolling-friction coefficient μ_r (-) of the rolling resistance common to all
-  laws (:mod:`nurbsdem.dynamics.rolling`; 0: none).
+  laws (:mod:`nurbsdem.dynamics.rolling`; 0: none);
+* ``RD``: the rolling spring's damping ratio η_r (-) (0: none).
 
 A row of NaN marks a pair without an interface (an input error when such a contact occurs).
 """
@@ -29,8 +30,10 @@ EN, CN, ET, CT, MU, MODEL = 0, 1, 2, 3, 4, 5
 P0, P1, P2 = 6, 7, 8
 #: the rolling-friction coefficient μ_r (-)
 RF = 9
+#: the rolling spring's damping ratio η_r (-)
+RD = 10
 #: number of columns
-NCOL = 10
+NCOL = 11
 
 
 class InterfaceTable:
