@@ -439,8 +439,9 @@ def dashpots_of_evaluation(body_a, body_b, point_a, point_b, normal, depth, pos,
     of :func:`~nurbsdem.dynamics.forces.contact_loads` (pos, vel (B,3): the N particles then
     the walls): its explicit evaluation on a copy of the tangential springs, then
     :func:`implicit_dashpots` with the particles' q, L (N,4), (N,3), 1/I, Q (principal frames)
-    and √m, √I (the last G of them images of the particles ``own`` (G,), empty: none).  Returns (f, active-set rounds, CG iterations).  The one entry of the Python
-    path and the compiled sphere loop, so that both give the same bits."""
+    and √m, √I (the last G of them images of the particles ``own`` (G,), empty: none).
+    Returns (f, active-set rounds, CG iterations).  The one entry of the Python path and the
+    compiled loop, so that both give the same bits."""
     N = mass.shape[0]
     force, torque, point, _, fdn, _, _, fn, _, _, coeffs, _ = contact_loads(
         body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg, material, table,

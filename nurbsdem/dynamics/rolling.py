@@ -52,12 +52,12 @@ spring could hold with it exceeds what the particle's size can carry, and the le
 bounds it.  A contact without a radius (a contact provider that gives none) has no rolling
 resistance.
 
-Energy: the rolling torque's work (the damper's included) enters the ledger as the tangential spring's does (the exact
-discrete work of the half kicks, :func:`nurbsdem.dynamics.integrator.kick_from`), its elastic
-energy ½ k_r |θ|² is booked with the tangential spring's, so the plastic part and the damper's work appear as
-friction dissipation (:mod:`nurbsdem.dynamics.energy`); against a turning wall the torque's
-work on the wall's spin is that wall's external work
-(:func:`nurbsdem.dynamics.forces.add_rolling_work`).
+Energy: the rolling torque's work (the damper's included) enters the ledger as the tangential
+spring's does (the exact discrete work of the half kicks,
+:func:`nurbsdem.dynamics.integrator.kick_from`), its elastic energy ½ k_r |θ|² is booked with
+the tangential spring's, so the plastic part and the damper's work appear as friction
+dissipation (:mod:`nurbsdem.dynamics.energy`); against a turning wall the torque's work on the
+wall's spin is that wall's external work (:func:`nurbsdem.dynamics.forces.add_rolling_work`).
 
 Time step: the rolling spring is not in the time-step control's network.  Its frequency for a
 sphere on a wall, √(k_r / I) with I = 2/5 m R², is 2.37 μ_r √(k_n/m): below the normal
