@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..jit import internal
+
 #: the fields of the step's constants (:class:`~nurbsdem.dynamics.step.BodyConst`) over the
 #: particles, and over all bodies (particles then walls)
 _PARTICLE_FIELDS = ("mass", "inv_mass", "inv_I", "P", "centroid", "ell", "alt_floor_x",
@@ -72,3 +74,35 @@ class ImageBodies:
         out = np.concatenate((loads[:n], loads[n + G:]))
         np.add.at(out, self.own, loads[n:n + G])
         return out
+
+
+@internal
+def image_particles(arr, own):
+    """A particle array with the rows of the images of the particles ``own`` (G,) after it
+    (compiled :meth:`ImageBodies.particles`)."""
+    return np.concatenate((arr, arr[own]))
+
+
+@internal
+def image_positions(x, own, offset):
+    """Centroids (N,3) m with the images' after them, translated by ``offset`` (G,3) m."""
+    return np.concatenate((x, x[own] + offset))
+
+
+@internal
+def image_rows(arr, own, n: int):
+    """An array over all bodies (N+W, ...) with the images' rows between the n particles and
+    the walls (compiled :meth:`ImageBodies.bodies`)."""
+    return np.concatenate((arr[:n], arr[own], arr[n:]))
+
+
+@internal
+def fold_images(loads, own, n: int):
+    """Loads (N+G+W, 3) of the extended bodies as loads (N+W, 3): each image's added to its
+    owner's, in image order (compiled :meth:`ImageBodies.fold`, the same bits)."""
+    G = own.shape[0]
+    out = np.concatenate((loads[:n], loads[n + G:]))
+    for g in range(G):
+        for k in range(3):
+            out[own[g], k] += loads[n + g, k]
+    return out

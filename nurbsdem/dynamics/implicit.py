@@ -55,6 +55,7 @@ from numba import njit, prange
 
 from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
 from .forces import contact_loads
+from .images import fold_images, image_rows
 from .integrator import _relative_point_velocities
 from .rigid import omega_world
 
@@ -345,21 +346,6 @@ def solve_dashpots_from(body_a: np.ndarray, body_b: np.ndarray, rows: np.ndarray
 
 
 @njit(cache=True)
-def _shared_by_images(loads: np.ndarray, own: np.ndarray, n: int) -> np.ndarray:
-    """Loads (n+G+W, 3) of a system whose bodies n .. n+G−1 are images of the particles
-    ``own`` (G,): each image's row added to its owner's (in image order), and the owner's
-    total copied to the image, since a particle and its images are one body."""
-    out = loads.copy()
-    for g in range(own.shape[0]):
-        for k in range(3):
-            out[own[g], k] += loads[n + g, k]
-    for g in range(own.shape[0]):
-        for k in range(3):
-            out[n + g, k] = out[own[g], k]
-    return out
-
-
-@njit(cache=True)
 def _owners(body: np.ndarray, own: np.ndarray, n: int) -> np.ndarray:
     """The bodies (K,) with each image n + g replaced by its owner own[g]."""
     out = body.copy()
@@ -392,8 +378,9 @@ def implicit_dashpots(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     G = own.shape[0]
     n = N - G
     if G:
-        force = _shared_by_images(force, own, n)
-        torque = _shared_by_images(torque, own, n)
+        # a particle and its images are one body: each takes the summed loads
+        force = image_rows(fold_images(force, own, n), own, n)
+        torque = image_rows(fold_images(torque, own, n), own, n)
     f = np.empty(K)
     f_el = np.empty(K)
     for c in range(K):

@@ -30,6 +30,8 @@ from numba import njit
 from ..contact.listed import SceneTables, scene_list_ptr, solve_due_into_ptr
 from ..contact.lcp import F_PA, F_PB
 from ..jit import internal
+from .images import fold_images as _fold, image_particles as _particles, \
+    image_positions as _positions, image_rows as _bodies
 from .rigid import omega_world
 from .step import BodyConst, L_EXTERNAL, L_INITIAL, contact_part_ptr, kick_part_ptr, step_start_ptr
 
@@ -323,24 +325,6 @@ def image_bodies(n: int, b: np.ndarray, image: np.ndarray):
 
 
 @internal
-def _particles(arr, own):
-    """A particle array with its images' rows after it."""
-    return np.concatenate((arr, arr[own]))
-
-
-@internal
-def _positions(x, own, offset):
-    """Centroids (N,3) m with the images' after them."""
-    return np.concatenate((x, x[own] + offset))
-
-
-@internal
-def _bodies(arr, own, n: int):
-    """An array over all bodies with the images' rows between the particles and the walls."""
-    return np.concatenate((arr[:n], arr[own], arr[n:]))
-
-
-@internal
 def _const(bc, own, n: int):
     """The step's constants with the image bodies' rows."""
     return BodyConst(_particles(bc.mass, own), _particles(bc.inv_mass, own),
@@ -350,18 +334,6 @@ def _const(bc, own, n: int):
                      bc.gravity, bc.g_norm, _particles(bc.alt_floor_x, own),
                      _particles(bc.alt_floor_L, own), _particles(bc.sq_m, own),
                      _particles(bc.sq_I, own))
-
-
-@internal
-def _fold(loads, own, n: int):
-    """Loads (N+G+W, 3) of the extended bodies as loads (N+W, 3): each image's added to its
-    owner's, in image order."""
-    G = own.shape[0]
-    out = np.concatenate((loads[:n], loads[n + G:]))
-    for g in range(G):
-        for k in range(3):
-            out[own[g], k] += loads[n + g, k]
-    return out
 
 
 @internal
