@@ -19,7 +19,12 @@ that the energy balance of ``monitors/energy.csv`` stays closed.  Monitors:
 ``monitors/outlet_<name>.csv`` (time, count, mass, mass_rate), one row per segment end and
 step end; cumulative counts and masses (kg), mass rate in kg/s.  The state of
 the inlets (counts, random streams, waiting particles) and outlets is kept in checkpoints.
-Units: SI."""
+
+On several MPI ranks every rank holds the serial system's state at the end of a deck step
+(:mod:`nurbsdem.parallel.domain`), so each runs the same exchange with the same random
+streams and builds the same new system; the new system is cut anew over the ranks, so a new
+particle is owned by the rank whose region it lies in, and the run equals the serial one bit
+for bit.  Units: SI."""
 from __future__ import annotations
 
 import json
@@ -31,7 +36,6 @@ import numpy as np
 from .contact.curved_walls import split_wall_contact_key, wall_contact_key
 from .dynamics.flow import Inlet, Outlet
 from .dynamics.rolling import NSPRING
-from .errors import InputError
 from .model import Bodies, Model
 
 log = logging.getLogger("nurbsdem")
@@ -68,12 +72,6 @@ class FlowRun:
     def active(self) -> bool:
         """Whether the model has inlets or outlets."""
         return bool(self.inlets or self.outlets)
-
-    def refuse_ranks(self, comm) -> None:
-        """Inlets and outlets run on one rank only."""
-        if self.active and comm is not None and int(comm.size) > 1:
-            raise InputError("inlets and outlets (block Flow) run on one MPI rank only; run "
-                             "without mpiexec")
 
     def begin_step(self, t: float) -> None:
         """A timed step begins at t (s): each inlet's rate counts from t
@@ -259,5 +257,6 @@ def _exchange(solver, writers) -> None:
     solver.scene = None
     solver.rebuild(*clock)
     solver.ledger.book_external(solver.system.energy().mechanical - before)
-    log.debug("t = %.6g s: %d particle(s) out, %d in: %d particles", t,
-              int((~keep).sum()), len(added), n_new)
+    log.debug("t = %.6g s: %d particle(s) out, %d in: %d particles%s", t,
+              int((~keep).sum()), len(added), n_new,
+              "" if solver.domain is None else f"; {solver.domain.describe()}")

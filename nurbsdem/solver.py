@@ -120,7 +120,6 @@ class Solver:
         self.rank = int(self.comm.rank) if self.comm is not None else 0
         #: the inlets and outlets (:mod:`nurbsdem.flow_run`)
         self.flow = FlowRun(model)
-        self.flow.refuse_ranks(self.comm)
         refuse_periodic_ranks(model, self.comm)
         if self.comm is not None:
             _share_cores(self.comm)

@@ -197,12 +197,3 @@ def test_history_keys_follow_the_new_particle_count():
     assert k2.tolist() == sorted(expect)
     for key, row in zip(k2.tolist(), s2):
         np.testing.assert_array_equal(row, springs[expect[key]])
-
-
-def test_inlets_refuse_several_ranks():
-    class TwoRanks:
-        size, rank = 2, 0
-    model = build_model(POUR.read_text(), str(POUR))
-    with pytest.raises(InputError, match="one MPI rank"):
-        FlowRun(model).refuse_ranks(TwoRanks())
-    FlowRun(model).refuse_ranks(None)
