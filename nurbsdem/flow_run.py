@@ -11,7 +11,9 @@ Rate × T more particles, and over several steps floor(Rate × their total time)
 
 Between two systems the step engine is of fixed size: the tangential springs of the
 surviving contacts go to the new system under their keys renumbered for the new particle
-count (:func:`remap_history`); the mechanical energy of the new system less that of the
+count (:func:`remap_history`), and its time-step control goes on from the last one's state
+(the exact estimate is taken again only when the gate asks for it,
+:meth:`~nurbsdem.dynamics.substep_control.SubstepControl._first_control_step`); the mechanical energy of the new system less that of the
 last one (the kinetic and potential energy the new particles bring in, less that of the
 particles removed and the elastic energy of their contacts) is booked as external work, so
 that the energy balance of ``monitors/energy.csv`` stays closed.  Monitors:
@@ -98,11 +100,14 @@ class FlowRun:
     def _masses(self, bodies: Bodies) -> np.ndarray:
         """Masses (kg) of ``bodies``, by their shape and material."""
         m = self.model
-        kinds, which = np.unique(np.stack([bodies.shape_id, bodies.material_id], axis=1),
-                                 axis=0, return_inverse=True)
-        mass = np.array([m.shapes[int(s)].mass(m.materials[int(k)].density) for s, k in kinds],
-                        float)
-        return mass[np.ravel(which)] if len(bodies) else np.zeros(0)
+        if not len(bodies):
+            return np.zeros(0)
+        stride = int(bodies.material_id.max()) + 1       # one integer per (shape, material)
+        kinds, which = np.unique(np.asarray(bodies.shape_id, np.int64) * stride
+                                 + bodies.material_id, return_inverse=True)
+        mass = np.array([m.shapes[int(k // stride)].mass(m.materials[int(k % stride)].density)
+                         for k in kinds], float)
+        return mass[np.ravel(which)]
 
     def remove(self, t: float, bodies: Bodies) -> np.ndarray:
         """Bool (N,): the bodies no outlet caught at time t (s) (each outlet counts its own)."""
@@ -244,7 +249,7 @@ def _exchange(solver, writers) -> None:
     sysm = solver.system
     before = sysm.energy().mechanical
     solver.summary.accuracy_repeats += sysm.accuracy_repeats
-    clock = (sysm.t0, sysm.step_count, sysm._warned_heavy)
+    clock = (sysm.t0, sysm.step_count, sysm._warned_heavy, sysm.control_state())
     solver._close_system()
     new_index = np.full(len(bodies), -1, np.int64)
     new_index[keep] = np.arange(int(keep.sum()))

@@ -340,14 +340,19 @@ class Solver:
         self._snapshot()
         self._close_system()
 
-    def rebuild(self, t0: float, step_count: int, warned: bool) -> None:
+    def rebuild(self, t0: float, step_count: int, warned: bool,
+                control: tuple | None = None) -> None:
         """A new system of the present bodies for the running step (inlets and outlets
         changed them), initialised; its clock goes on from the last one's (start ``t0`` s,
-        ``step_count`` deck steps done), so that times stay t0 + k·dt, and it warns of heavy
-        sub-stepping only if the last one did not (``warned``)."""
+        ``step_count`` deck steps done), so that times stay t0 + k·dt, it warns of heavy
+        sub-stepping only if the last one did not (``warned``), and its time-step control
+        goes on from the last one's state ``control``
+        (:meth:`~nurbsdem.dynamics.substep_control.SubstepControl.control_state`; None: a
+        fresh start)."""
         self.system = self._build()
         self.system.t0, self.system.step_count = t0, step_count
         self.system._warned_heavy = warned
+        self.system.carried_control = control
         t0 = time.perf_counter()
         self.system.initialize()
         self.ledger.book_external(self.system.initial_wrap_work)

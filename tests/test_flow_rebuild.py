@@ -82,3 +82,35 @@ def test_an_exchange_with_nothing_to_exchange_builds_no_system(tmp_path, monkeyp
     sim.close()
     assert len(added) == 6 and added.count(0) == 3       # three exchanges of nothing
     assert rebuilt == [2, 4, 6]                          # a system only for the others
+
+
+def test_a_rebuilt_system_goes_on_with_the_last_ones_time_step_control(tmp_path, monkeypatch):
+    """A system built at an exchange takes over the last one's sub-steps, refinement and
+    estimates, and takes the exact (Lanczos) estimate again only where the gate asks for it
+    (:meth:`~nurbsdem.dynamics.substep_control.SubstepControl._first_control_step`)."""
+    seen = []
+    rebuild = Solver.rebuild
+
+    def spy_rebuild(self, t0, step_count, warned, control=None):
+        rebuild(self, t0, step_count, warned, control)
+        s = self.system
+        seen.append((control, s.network_estimates, s.control_state()))
+    monkeypatch.setattr(Solver, "rebuild", spy_rebuild)
+    sim = Simulation(gravity=(0, 0, -9.81), output=tmp_path / "out", quiet=True)
+    sim.add_material(1, density=2500.0)
+    sim.add_interface(normal_penalty=1e4, normal_damping=0.5, tangential_penalty=1e4,
+                      friction=0.3)
+    sim.add_box((0, 0, 0), (0.05, 0.05, 0.15))
+    sim.add_inlet([shapes.sphere(0.004)], 1, (0.004, 0.004, 0.02, 0.046, 0.046, 0.12),
+                  rate=4000, count=40, seed=2, every=0.002, name="feed")
+    sim.run_dynamic(0.04, 1e-3)
+    sim.close()
+    assert len(seen) >= 5 and all(c is not None for c, _, _ in seen)
+    for control, estimates, state in seen:
+        if state[3] < control[3]:        # a smaller a-priori step (here: the first particles)
+            assert estimates == 1                        # a fresh start
+            continue
+        assert state[1:3] == control[1:3]                # the guard's refinement goes on
+        if estimates == 0:                               # the gate let the count stand
+            assert state == control
+    assert sum(e == 0 for _, e, _ in seen) >= 2          # the saving the carry-over is for

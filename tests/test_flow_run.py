@@ -126,14 +126,17 @@ def test_an_outlet_accounts_for_every_particle_and_the_energy_balance_stays_clos
     assert max(abs(e["balance_error"]) for e in energy) < 1e-3 * scale
 
 
-def test_a_pour_deck_restarted_mid_pour_ends_bit_for_bit(tmp_path, monkeypatch):
+@pytest.mark.parametrize("kill_after", [0.03, 0.055], ids=["between", "at_an_exchange"])
+def test_a_pour_deck_restarted_mid_pour_ends_bit_for_bit(tmp_path, monkeypatch, kill_after):
+    """Restarted from the checkpoint at 0.025 s, and from the one at 0.05 s, written just
+    after an exchange (its new system's carried-over time-step control in it)."""
     ref = tmp_path / "ref"
     r = CliRunner().invoke(main, ["solve", str(POUR), "--output", str(ref), "--quiet"])
     assert r.exit_code == 0, r.output
     inlet = rows(ref / "monitors" / "inlet_feed.csv")
     assert inlet[-1]["inserted"] > inlet[0]["inserted"] > 0
     out = tmp_path / "out"
-    killed_and_restarted(POUR, out, 0.03, monkeypatch)       # after the checkpoint at 0.025 s
+    killed_and_restarted(POUR, out, kill_after, monkeypatch)
     assert_same_final_state(out, ref, ("energy.csv", "contacts.csv", "inlet_feed.csv",
                                        "outlet_corner.csv"))
 

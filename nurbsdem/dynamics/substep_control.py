@@ -61,6 +61,10 @@ class SubstepControl:
     #: ω² 1/s², γ 1/s, the mode's body), taken by the next :meth:`_control_step` of that deck
     #: step instead of the same estimate again; None otherwise
     loop_rates: tuple | None = None
+    #: the control's state (:meth:`control_state`) of the system this one replaces within a
+    #: running step (inlets and outlets changed the particles, :mod:`nurbsdem.flow_run`);
+    #: None: a fresh start
+    carried_control: tuple | None = None
 
     def critical_time_step(self) -> tuple[float, list[ModeLimit]]:
         """Estimated explicit critical step (s) over every possible interface and mode (module
@@ -217,6 +221,32 @@ class SubstepControl:
     def _needed_substeps(self, dt_safe: float) -> int:
         """Sub-steps that keep the internal step within the safe step dt_safe (s)."""
         return int(needed_substeps(self.dt, dt_safe))
+
+    def control_state(self) -> tuple:
+        """What a system built anew for the same running step carries over of the control
+        (:attr:`carried_control`): the sub-steps, the guard's refinement and calm count, and
+        the a-priori, bound, network and critical steps (s)."""
+        return (self.substeps, self.refine, self.calm_steps, self.dt_apriori, self.dt_bound,
+                self.dt_network, self.dt_critical)
+
+    def _first_control_step(self) -> None:
+        """The control step of :meth:`initialize`: the exact estimate, or, for a system that
+        replaces another within a running step (:attr:`carried_control`), that system's
+        state taken over and the ordinary gated control step, as if the run had gone on in
+        one system: the Gershgorin gate decides whether the new network needs the exact
+        estimate again (the particles an inlet adds are placed apart; those an outlet takes
+        away soften the network).  A fresh start when the new bodies allow a smaller a-priori
+        step (a new, lighter kind of particle) or the count is forced.  A checkpoint holds
+        the control's state, so a restart continues with the same bits either way."""
+        carried = self.carried_control
+        if (carried is None or self.forced_substeps is not None
+                or self.dt_apriori < carried[3]):
+            self._control_step(initial=True)
+            return
+        (self.substeps, self.refine, self.calm_steps, _, self.dt_bound, self.dt_network,
+         self.dt_critical) = carried
+        self.dt_internal = self.dt / self.substeps
+        self._control_step()
 
     def _control_step(self, initial: bool = False) -> None:
         """Choose the sub-steps of the next deck step from both limits (module docstring);

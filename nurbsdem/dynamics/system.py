@@ -375,7 +375,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         if self.domain is not None:
             self.domain.end_of_deck_step()
         self._apriori_limit()
-        self._control_step(initial=True)
+        self._first_control_step()
         if self.initial_history is not None:
             # carried-over springs bring their stored energy with them: none of it is dissipated
             self.ledger.tangential_spring_work = float(self.c_eel[:, 1].sum()) if self.c_eel.shape[0] else 0.0
