@@ -100,6 +100,13 @@ LEAD, TAIL = 0.35, 0.1                    # fractions of a discharge left out of
 RANGES = {"n": (2.2, 2.8), "k": (1.0, 2.0), "C": (0.5, 0.7)}
 FULL = dict(orifices=(6.0, 7.0, 8.0, 9.5), fill=14.0, discharge=0.28)
 QUICK = dict(orifices=(6.0,), fill=9.0, discharge=0.15)
+#: the runs of the other grains (``--shape ellipsoid | paper``): three orifices, a shallower
+#: fill and shorter discharges (a NURBS particle's contacts cost LCPs)
+SHAPED = dict(orifices=(6.0, 7.0, 8.0), fill=9.0, discharge=0.15)
+#: the grains: exact spheres; ellipsoids of semi-axes ELLIPSOID × r (aspect ratio 1.56,
+#: the sphere's volume); the paper's particles A, B and C scaled to the spheres' volumes
+SHAPES = ("sphere", "ellipsoid", "paper")
+ELLIPSOID = (1.25, 1.0, 0.8)
 
 
 def mean_mass() -> float:
@@ -147,10 +154,42 @@ def side_walls(side: float, height: float) -> str:
                                           ("ymin", (0, -h), "0 1 0"), ("ymax", (0, h), "0 -1 0"))))
 
 
-def _header(shape_lines: str = "") -> str:
-    shapes = "\n".join(f"  Shape {k + 1} Sphere Radius {r}" for k, r in enumerate(RADII))
+def _shape_lines(shape: str) -> str:
+    """The deck's three shapes of the grain ``shape`` (:data:`SHAPES`), each of the volume of
+    the sphere of radius RADII[k]."""
+    if shape == "sphere":
+        return "\n".join(f"  Shape {k + 1} Sphere Radius {r}" for k, r in enumerate(RADII))
+    if shape == "ellipsoid":
+        a, b, c = ELLIPSOID
+        return "\n".join(f"  Shape {k + 1} Ellipsoid SemiAxes {a * r:.17g} {b * r:.17g} "
+                         f"{c * r:.17g}" for k, r in enumerate(RADII))
+    if shape == "paper":
+        return "\n".join(f"  Shape {k + 1} File paper_{k + 1}.yaml" for k in range(len(RADII)))
+    raise ValueError(f"unknown shape {shape!r} (one of {', '.join(SHAPES)})")
+
+
+def write_paper_shapes(folder: Path) -> None:
+    """The paper's particles A, B and C (:func:`nurbsdem.shapes.paper_particle`) scaled to
+    the volumes of the spheres of radii RADII, as shape files ``paper_1.yaml`` … in
+    ``folder`` (their control points scaled about the origin of the file's frame)."""
+    import yaml
+    from nurbsdem.io.shapefile import load_yaml
+    from nurbsdem.shapes import paper_particle_shape
+    for k, (kind, r) in enumerate(zip("ABC", RADII)):
+        entry = paper_particle_shape(kind)
+        volume = float(entry.volume)
+        scale = (4.0 / 3.0 * math.pi * r ** 3 / volume) ** (1.0 / 3.0)
+        data = load_yaml(ROOT / "inputs" / "shapes" / f"{kind}.yaml")
+        for patch in data["patches"]:
+            patch["control_points"] = (np.asarray(patch["control_points"], float)
+                                       * scale).tolist()
+        data["name"] = f"{kind} scaled to d {2 * r * 1e3:.1f} mm"
+        (folder / f"paper_{k + 1}.yaml").write_text(yaml.safe_dump(data))
+
+
+def _header(shape: str = "sphere") -> str:
     return (f"Environment\n  Gravity 0 0 -{G}\nMaterials\n  Material 1 Density {DENSITY}\n"
-            f"Shapes\n{shapes}\n{shape_lines}")
+            f"Shapes\n{_shape_lines(shape)}\n")
 
 
 def _contact() -> str:
@@ -164,7 +203,8 @@ def fill_count(side: float, height: float) -> int:
     return int(round(0.6 * side * side * height / v / 3.0)) * 3
 
 
-def fill_deck(side: float, height: float, count: int) -> tuple[str, float]:
+def fill_deck(side: float, height: float, count: int, shape: str = "sphere"
+              ) -> tuple[str, float]:
     """The fill: an inlet pours ``count`` spheres into the closed silo at 1.5 m/s down over
     ``POUR`` seconds from a slab 11 d thick above the bed's expected top ``height`` (m);
     the run lasts until the last of them has fallen to the floor and ``SETTLE`` seconds more.
@@ -176,7 +216,7 @@ def fill_deck(side: float, height: float, count: int) -> tuple[str, float]:
     T = round((POUR + fall + SETTLE) / EVERY) * EVERY
     box = f"Box {-h} {-h} {height + D_GRAIN} {h} {h} {top}"
     flow = f"Rate {count / POUR:.6g} Count {count} Velocity 0 0 {-v0} Seed 3 Every {EVERY}"
-    deck = _header() + textwrap.dedent(f"""\
+    deck = _header(shape) + textwrap.dedent(f"""\
         Walls
           Wall 1 Name floor Point 0 0 0 Normal 0 0 1 Size {side + 0.02} {side + 0.02}
         """) + side_walls(side, top) + "\n" + _contact() + textwrap.dedent(f"""\
@@ -191,13 +231,13 @@ def fill_deck(side: float, height: float, count: int) -> tuple[str, float]:
     return deck, T
 
 
-def discharge_deck(top: float, side: float, T: float) -> str:
+def discharge_deck(top: float, side: float, T: float, shape: str = "sphere") -> str:
     """The discharge deck for T seconds through the mesh floor ``floor.stl`` of a silo of
     ``side`` filled to ``top`` (m); its particles are the settled bed, which the run sets
     (:data:`RUN`: a state that a settled run left, as a restart does; deck ``Particle``
     lines would be refused by ``check``, which accepts at most 20 times the resting overlap
     of a pair under one weight, while the bottom of the bed carries many)."""
-    return (_header() + "Walls\n" + "  Mesh 1 Name floor File floor.stl\n"
+    return (_header(shape) + "Walls\n" + "  Mesh 1 Name floor File floor.stl\n"
             + side_walls(side, top + D_GRAIN) + "\n" + _contact() + textwrap.dedent(f"""\
         Flow
           Outlet 1 Name below Point 0 0 {-4.0 * D_GRAIN} Normal 0 0 -1 Every {EVERY}
@@ -212,6 +252,13 @@ def discharge_deck(top: float, side: float, T: float) -> str:
 #: a sphere on a floor for a few deck steps, run before each timed run in its process: the
 #: solver's compiled kernels are loaded from numba's cache then (set-up, as for the time loop
 #: of a run whose particles are there from the start), not in the first inlet exchange
+def warm_deck(shape: str = "sphere") -> str:
+    """:data:`WARM` with a grain of ``shape`` (dropped from 1.5 d: a NURBS particle's
+    bounding sphere reaches further than r)."""
+    return WARM.replace(_header(), _header(shape)).replace(
+        f"Position 0 0 {RADII[1]}", f"Position 0 0 {1.5 * D_GRAIN}")
+
+
 WARM = _header() + textwrap.dedent(f"""\
     Particles
       Particle 1 Shape 2 Material 1 Position 0 0 {RADII[1]}
@@ -255,13 +302,15 @@ print(json.dumps(dict(wall=wall, cpu=cpu, loop=wall - tm.get('output', 0.0) - tm
 """
 
 
-def run_nurbsdem(deck_text: str, work: Path, name: str, state: Path | None = None) -> dict:
+def run_nurbsdem(deck_text: str, work: Path, name: str, state: Path | None = None,
+                 shape: str = "sphere") -> dict:
     """Run ``deck_text`` (in ``work``; its particles those of the ``state`` file of another
-    run when given) on one thread: the timers (wall, loop, flow s), internal steps, and the
-    end state (``end``: the arrays of ``out_<name>/end.npz``, which it names ``state``)."""
+    run when given; grains of ``shape``) on one thread: the timers (wall, loop, flow s),
+    internal steps, and the end state (``end``: the arrays of ``out_<name>/end.npz``, which
+    it names ``state``)."""
     deck = work / f"{name}.inp"
     deck.write_text(deck_text)
-    (work / f"{name}_warm.inp").write_text(WARM)
+    (work / f"{name}_warm.inp").write_text(warm_deck(shape))
     out = work / f"out_{name}"
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
     r = subprocess.run([sys.executable, "-c", RUN, str(deck), str(out)]
@@ -396,11 +445,11 @@ def _split(res: dict) -> str:
             f"{sp.get('time-step control', 0.0):.1f}), exchanges {res['flow']:.1f}")
 
 
-def _fill(work: Path, side: float, height: float, count: int) -> dict:
+def _fill(work: Path, side: float, height: float, count: int, shape: str = "sphere") -> dict:
     """Run the fill; write the settled bed to ``work/bed.npz``; its numbers."""
     d = D_GRAIN
-    deck, T_fill = fill_deck(side, height, count)
-    fill = run_nurbsdem(deck, work, "fill")
+    deck, T_fill = fill_deck(side, height, count, shape)
+    fill = run_nurbsdem(deck, work, "fill", shape=shape)
     end = fill.pop("end")
     keep = end["position"][:, 2] > 0.0          # all of them: the floor is closed
     bed = {k: v[keep] for k, v in end.items()}
@@ -416,8 +465,10 @@ def _fill(work: Path, side: float, height: float, count: int) -> dict:
                top=top, timers=fill["timers"], split=fill["split"],
                speed_max=float(speed.max()), speed_mean=float(speed.mean()),
                per_particle_step=fill["loop"] / (n * fill["substeps"]))
-    print(f"fill: {n} spheres (d {d * 1e3:.1f} mm, radii "
-          f"{', '.join(f'{r * 1e3:.1f}' for r in RADII)} mm) poured into a silo "
+    grains = "spheres" if shape == "sphere" else f"{shape} grains (volume-equivalent"
+    print(f"fill: {n} {grains} (d {d * 1e3:.1f} mm, radii "
+          f"{', '.join(f'{r * 1e3:.1f}' for r in RADII)} mm{'' if shape == 'sphere' else ')'}) "
+          f"poured into a silo "
           f"{side * 1e3:.0f} mm square in {T_fill:.2f} s: bed {top * 1e3:.1f} mm "
           f"({top / d:.1f} d) high, bulk density {rho_b:.0f} kg/m^3 (solid fraction "
           f"{rho_b / DENSITY:.3f}); {res['waiting']} still waiting at the inlet, speeds at the "
@@ -428,13 +479,14 @@ def _fill(work: Path, side: float, height: float, count: int) -> dict:
     return res
 
 
-def _discharge(work: Path, side: float, ratio: float, T: float, fill: dict) -> dict:
+def _discharge(work: Path, side: float, ratio: float, T: float, fill: dict,
+               shape: str = "sphere") -> dict:
     """Run the discharge through the orifice ``ratio`` d from the bed of :func:`_fill`."""
     d = D_GRAIN
     D = ratio * d
     write_floor(work / "floor.stl", side, D)
-    res = run_nurbsdem(discharge_deck(fill["top"], side, T), work, f"D{ratio:g}",
-                       work / "bed.npz")
+    res = run_nurbsdem(discharge_deck(fill["top"], side, T, shape), work, f"D{ratio:g}",
+                       work / "bed.npz", shape)
     left = res.pop("end")
     rate = steady_rate(res.pop("out") / "monitors" / "outlet_below.csv", T)
     inside = left["position"][:, 2] > 0
@@ -445,7 +497,7 @@ def _discharge(work: Path, side: float, ratio: float, T: float, fill: dict) -> d
                split=res["split"], C_mid=_c_mid(rate["W"], D, fill["rho_b"]),
                per_particle_step=res["loop"] / (fill["count"] * res["substeps"]), **rate)
     print(f"D = {ratio:g} d (silo {side / D:.2f} D wide): W = {rate['W']:.4f} kg/s (window "
-          f"halves {rate['halves'][0]:.4f}, {rate['halves'][1]:.4f}), {rate['count']} spheres "
+          f"halves {rate['halves'][0]:.4f}, {rate['halves'][1]:.4f}), {rate['count']} grains "
           f"out, bed left {top_end / d:.1f} d high; C at n 2.5, k 1.5: {row['C_mid']:.3f}; "
           f"time loop {res['loop']:.1f} s ({_split(res)}; outlet "
           f"{100 * res['flow'] / res['loop']:.1f} %), {res['substeps']} internal steps, "
@@ -522,27 +574,36 @@ def main(argv: list[str]) -> dict:
     if "--refit" in argv:
         return refit(Path(argv[argv.index("--refit") + 1]))
     quick = "--quick" in argv
-    cfg = QUICK if quick else FULL
+    shape = argv[argv.index("--shape") + 1] if "--shape" in argv else "sphere"
+    _shape_lines(shape)                         # an unknown shape: refused before any run
+    cfg = QUICK if quick else FULL if shape == "sphere" else SHAPED
+    name = "beverloo" + ("" if shape == "sphere" else f"_{shape}") + ("_quick" if quick else "")
     json_path = Path(argv[argv.index("--json") + 1]) if "--json" in argv else (
-        ROOT / "benchmarks" / ".cache" / ("beverloo_quick.json" if quick else "beverloo.json"))
+        ROOT / "benchmarks" / ".cache" / f"{name}.json")
     d = D_GRAIN
     side = 2.5 * max(cfg["orifices"]) * d
     count = fill_count(side, cfg["fill"] * d)
     T = cfg["discharge"]
-    out: dict = dict(quick=quick, d=d, side=side, count=count, radii=RADII, kn=KN,
+    out: dict = dict(quick=quick, shape=shape, d=d, side=side, count=count, radii=RADII, kn=KN,
                      cn=damping(), mu=MU, safety=SAFETY, T=T, lead=LEAD, tail=TAIL,
                      orifices=[])
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        out["fill"] = _fill(work, side, cfg["fill"] * d, count)
+        if shape == "paper":
+            write_paper_shapes(work)
+        out["fill"] = _fill(work, side, cfg["fill"] * d, count, shape)
         for ratio in cfg["orifices"]:
-            out["orifices"].append(_discharge(work, side, ratio, T, out["fill"]))
+            out["orifices"].append(_discharge(work, side, ratio, T, out["fill"], shape))
         dt_yade = out["orifices"][0]["dt"]
-        bed = np.load(work / "bed.npz")
-        write_floor(work / "floor.stl", side, cfg["orifices"][0] * d)
-        out["yade"] = run_yade(bed["position"], bed["shape"], bed["velocity"], side,
-                               cfg["orifices"][0] * d, T, dt_yade, work)
+        if shape == "sphere":
+            bed = np.load(work / "bed.npz")
+            write_floor(work / "floor.stl", side, cfg["orifices"][0] * d)
+            out["yade"] = run_yade(bed["position"], bed["shape"], bed["velocity"], side,
+                                   cfg["orifices"][0] * d, T, dt_yade, work)
+        else:
+            out["yade"] = (f"Yade is not compared for {shape} grains: it has no exact "
+                           f"ellipsoids or NURBS particles")
     out["wall"] = time.perf_counter() - t0
     _fit(out)
     _costs(out, dt_yade)

@@ -138,10 +138,3 @@ def check_periodic_bodies(model: "Model", bodies, support) -> None:
                         f"{-sd:.3g} m across the periodic face {'xyz'[k]} = {face:g} m "
                         f"(Periodic, line {p.line}): particles start inside the cell, clear "
                         f"of its faces", int(bodies.line[i]))
-
-
-def refuse_periodic_ranks(model: "Model", comm) -> None:
-    """A periodic cell runs on one MPI rank only."""
-    if model.periodic is not None and comm is not None and int(comm.size) > 1:
-        raise model.error("Periodic: a periodic cell runs on one MPI rank only; run without "
-                          "mpiexec", model.periodic.line)

@@ -55,7 +55,6 @@ from .dynamics.system import SPLIT_PARTS, InstabilityError
 from .energy_ledger import EnergyLedger
 from .errors import InputError
 from .flow_run import FlowRun, exchange
-from .periodic_checks import refuse_periodic_ranks
 from .instant_steps import mechanical_energy, to_contact
 from .io.intervals import due
 from .io.writers import OutputWriters
@@ -120,7 +119,6 @@ class Solver:
         self.rank = int(self.comm.rank) if self.comm is not None else 0
         #: the inlets and outlets (:mod:`nurbsdem.flow_run`)
         self.flow = FlowRun(model)
-        refuse_periodic_ranks(model, self.comm)
         if self.comm is not None:
             _share_cores(self.comm)
             quiet = quiet or self.rank > 0      # one progress line: rank 0's

@@ -11,8 +11,6 @@ from click.testing import CliRunner
 from nurbsdem import Simulation
 from nurbsdem.cli import main
 from nurbsdem.errors import InputError
-from nurbsdem.io.deck import parse_deck
-from nurbsdem.periodic_checks import refuse_periodic_ranks
 from runs import assert_same_final_state, killed_and_restarted
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,10 +72,3 @@ def test_the_api_checks_as_the_deck_and_writes_the_line_back():
         sim.set_periodic()
     sim.set_periodic(y=(0, 0.5), z=(-0.1, 0.2))
     assert "  Periodic Y 0.0 0.5 Z -0.1 0.2\n" in sim.deck_text
-
-
-def test_several_mpi_ranks_are_refused():
-    class TwoRanks:
-        size = 2
-    with pytest.raises(InputError, match="a periodic cell runs on one MPI rank only"):
-        refuse_periodic_ranks(parse_deck(SHEAR_BOX, place=False), TwoRanks())

@@ -321,6 +321,10 @@ class SceneContacts:
         a, b, keys, mask_a, mask_b, shift = periodic_list(
             self.tables(), self.cell, np.ascontiguousarray(x), np.ascontiguousarray(pos),
             np.ascontiguousarray(R), np.ascontiguousarray(wall), self.margin + self.skin)
+        if self.domain is not None:              # a rank lists the pairs with an owned body
+            keep = self.domain.involves_owned(a, b)
+            a, b, keys, mask_a, mask_b, shift = (np.ascontiguousarray(v[keep]) for v in
+                                                 (a, b, keys, mask_a, mask_b, shift))
         ps = self.pairs.rebuilt(a, b, keys, mask_a, mask_b)
         rows_f = ps.rows_f.copy()
         rows_f[:, F_PA:F_PA + 3] -= moved[ps.a]
@@ -346,18 +350,18 @@ class SceneContacts:
         dom = self.domain
         stale = self._list_is_stale(pose) if dom is None else dom.any(self._list_is_stale(pose))
         wrap_shift = np.zeros((0, 3))
+        if stale and dom is not None:
+            kin = dom.sync_for_build(kin)            # every particle's state from its owner
+            pos, R = np.ascontiguousarray(kin.pose_origin), np.ascontiguousarray(kin.R)
+            pose = (pos, R, pose[2], np.array(kin.x, float))
         if stale and self.cell is not None:      # wrapped into the cell, then built
             pose, wrap_shift = self._wrapped(pose)
             pos = pose[0]
             self._build_periodic(pose, wrap_shift)
         elif stale:
-            if dom is not None:
-                kin = dom.sync_for_build(kin)        # every particle's state from its owner
-                pos, R = np.ascontiguousarray(kin.pose_origin), np.ascontiguousarray(kin.R)
-                pose = (pos, R, pose[2], np.array(kin.x, float))
             self._build_list(kin, pos, R)
-            if dom is not None:
-                dom.after_build(self.pairs.a, self.pairs.b)
+        if stale and dom is not None:
+            dom.after_build(self.pairs.a, self.pairs.b)
         ps = self.pairs
         reach, due = due_rows(ps.a, ps.b, self.odo, ps.budget, np.bool_(self.certificates))
         t1 = time.perf_counter()

@@ -139,12 +139,13 @@ class InternalSteps:
             self.c_radius = np.zeros(K)
         solves = np.zeros(4, np.int64)
         dashpot = np.zeros(0)
-        if self.implicit_damping and h > 0.0 and self.domain is not None:
-            dashpot = self.domain.implicit_dashpots(a, bb, pa, pb, nrm, dep, key, self.c_radius,
-                                                    h, solves)
         image = getattr(cs, "image", None)
         self.c_image = (np.ascontiguousarray(image, float) if image is not None
                         and len(image) == K else np.zeros((K, 3)))
+        if self.implicit_damping and h > 0.0 and self.domain is not None:
+            dashpot = self.domain.implicit_dashpots(
+                a, bb, pa, pb, nrm, dep, key, self.c_radius, h, solves,
+                self.c_image if self.domain.periodic else None)
         im = ImageBodies.of(b.n, bb, self.c_image)
         bc, b_part, q, L = self._bc, bb, b.q, b.L
         if im is not None:                   # contacts with periodic images (.images)
@@ -188,6 +189,9 @@ class InternalSteps:
                          np.ascontiguousarray(self.gravity, float))
         b.x -= shift
         if self.ledger.initial_mechanical == self.ledger.initial_mechanical:   # not NaN
+            if self.domain is not None:     # booked at the deck end, among the kicks' terms
+                self.domain.log_wrap(jump)
+                return
             self.ledger.external_work += jump
         else:
             self.initial_wrap_work += jump
@@ -266,7 +270,7 @@ class InternalSteps:
                                                                    im.particles(self._inv_I)),
                                  im.b, self.wall_d, np.ascontiguousarray(u_mean),
                                  np.zeros((self.walls.n, 3)), 0.5 * h, ledger, self.wall_work,
-                                 True)
+                                 self.domain is None)
             b.v[:], b.L[:] = v[:b.n], L[:b.n]
         else:
             _, terms = kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
@@ -279,7 +283,7 @@ class InternalSteps:
     def _step_start_images(self, im: "ImageBodies", u_mean: np.ndarray, h: float,
                            ledger: np.ndarray) -> tuple[int, int, np.ndarray]:
         """:func:`~nurbsdem.dynamics.step.step_start` with the stored contacts' image bodies
-        (one rank, walls that do not turn): the particles and their images kicked, watched and
+        (walls that do not turn): the particles and their images kicked, watched and
         drifted together, the particles' rows kept.  Returns (worst, run, terms) as
         step_start does, ``worst`` an owner."""
         b, n = self.bodies, self.bodies.n
@@ -290,7 +294,7 @@ class InternalSteps:
         _, terms, worst, run = step_start(
             *self._kick_arguments(im), x, v, q, L, omega_world(q, L, im.particles(self._inv_I)),
             im.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)), h,
-            ledger, self.wall_work, pv, pL, count, self.watch_period2, True)
+            ledger, self.wall_work, pv, pL, count, self.watch_period2, self.domain is None)
         b.x[:], b.v[:], b.q[:], b.L[:] = x[:n], v[:n], q[:n], L[:n]
         self.alt_prev_v[:], self.alt_prev_L[:], self.alt_count[:] = pv[:n], pL[:n], count[:n]
         worst = int(worst)

@@ -39,6 +39,16 @@ Synchronisation
   system's state bit for bit: energies, guards, the time-step control (Lanczos over the whole
   network), monitors, output and checkpoints run unchanged.
 
+Periodic cells
+--------------
+At a list build every rank wraps every particle into the cell (all of them synchronised
+from their owners first, so every rank takes the same wrap) and lists the pairs with an
+owned particle, a pair with the image of its body B across a face among them.  The merged
+rows, contacts and list carry each contact's image translation (:data:`PERIODIC_ROW_FIELDS`
+and the others); a wrap's potential jump is logged and booked at the deck end among the
+kicks' work, in the serial order (:meth:`Domain.log_wrap`); the implicit dashpots of the
+gathered network form its image bodies as the serial solve does.
+
 Global decisions (the period-2 and finite-state guards after every internal step, the rebuild
 of the neighbour list) are reduced over the ranks, so every rank takes the serial run's
 decision at the same point.  A checkpoint holds the gathered (serial) state: it restarts on any
@@ -62,6 +72,7 @@ import numpy as np
 from ..contact.contactset import ContactSet
 from ..dynamics.energy import EnergyLedger
 from ..dynamics.forces import N_TERMS, match_history, wall_loads
+from ..dynamics.images import ImageBodies
 from ..dynamics.rigid import omega_world
 from ..dynamics.rolling import NSPRING
 from ..dynamics.step import all_kinematics, book_kick
@@ -87,6 +98,13 @@ CS_COUNTERS = ("monitored", "failed", "reused", "dropped")
 #: _PairState arrays of the scene's neighbour list
 PAIR_FIELDS = ("list_a", "list_b", "keys", "mask_a", "mask_b", "rows_f", "rows_i", "budget",
                "reused")
+
+#: the same in a periodic cell: each contact's (and separated pair's) image translation of
+#: body B (m), and each listed pair's image (int)
+PERIODIC_ROW_FIELDS = ("c_image",)
+PERIODIC_CS_ACTIVE = ("image",)
+PERIODIC_CS_NEAR = ("near_image",)
+PERIODIC_PAIR_FIELDS = ("pair_shift",)
 
 _TAG_LOADS = 11
 
@@ -205,6 +223,14 @@ class Domain:
         #: seconds in the ghosts' loads exchange, the reductions, and the gathers with their
         #: merges (each including the wait for the slowest rank)
         self.seconds = dict(loads=0.0, reductions=0.0, gathers=0.0)
+        #: whether the scene is a periodic cell (:mod:`nurbsdem.contact.periodic`)
+        self.periodic = periodic = getattr(scene, "cell", None) is not None
+        #: the per-contact, per-separated-pair and per-listed-pair arrays merged by key
+        #: (a periodic cell adds the images)
+        self.row_fields = ROW_FIELDS + (PERIODIC_ROW_FIELDS if periodic else ())
+        self.cs_active = CS_ACTIVE + (PERIODIC_CS_ACTIVE if periodic else ())
+        self.cs_near = CS_NEAR + (PERIODIC_CS_NEAR if periodic else ())
+        self.pair_fields = PAIR_FIELDS + (PERIODIC_PAIR_FIELDS if periodic else ())
 
     def order(self, keys: np.ndarray) -> np.ndarray:
         """Sort values of contact keys that give the serial run's contact order."""
@@ -358,7 +384,8 @@ class Domain:
     @_timed("gathers")
     def implicit_dashpots(self, a: np.ndarray, b: np.ndarray, pa: np.ndarray, pb: np.ndarray,
                           normal: np.ndarray, depth: np.ndarray, key: np.ndarray,
-                          radius: np.ndarray, h: float, solves: np.ndarray) -> np.ndarray:
+                          radius: np.ndarray, h: float, solves: np.ndarray,
+                          image: np.ndarray | None = None) -> np.ndarray:
         """The implicit normal dashpot forces (K,) N of this rank's contacts (a, b, their
         points, normals, depths, keys and Hertz radii), solved over the whole contact network
         as the serial run solves it (collective, every internal step with ``Damping
@@ -367,12 +394,17 @@ class Domain:
         (:func:`~nurbsdem.dynamics.implicit.dashpots_of_evaluation`, or its copy for laws
         registered at run time: ``DemSystem._kernels``) on every rank, each
         taking its contacts' forces by key.  The solve's figures are added to ``solves``
-        (solves, active-set rounds, CG iterations) as the serial run counts them."""
+        (solves, active-set rounds, CG iterations) as the serial run counts them.  In a
+        periodic cell ``image`` (K,3) m is each contact's translation of B's image: the
+        gathered network's image bodies are formed as the serial run forms them
+        (:class:`~nurbsdem.dynamics.images.ImageBodies`)."""
         s = self.system
         spring = match_history(s.hist_keys, s.hist_springs, key)
         sel = self.counted(a)
         mine = dict(key=key[sel], a=a[sel], b=b[sel], pa=pa[sel], pb=pb[sel], n=normal[sel],
                     d=depth[sel], r=radius[sel], s=spring[sel])
+        if image is not None:
+            mine["im"] = image[sel]
         pieces = self.comm.allgather(mine)
         self.sent["gathers"] += _nbytes(mine)
         net = merge_by_key(pieces, "key", self.order)
@@ -386,12 +418,17 @@ class Domain:
         if s.wall_spin is not None:      # turning walls, as the serial driver's kinematics
             pos[len(x):] += s.wall_spin[:, 3:]
             omg[len(x):] = s.wall_spin[:, :3]
-        bc = s._bc
+        bc, net_b, own = s._bc, net["b"], np.zeros(0, np.int64)
+        im = None if image is None else ImageBodies.of(self.n, net_b,
+                                                        net["im"].reshape(-1, 3))
+        if im is not None:               # contacts with periodic images, as the serial run
+            bc, net_b, own, q, L = im.const(bc), im.b, im.own, im.particles(q), im.particles(L)
+            pos, vel, omg = im.bodies(pos, True), im.bodies(vel), im.bodies(omg)
         f, rounds, iterations = s._kernels.dashpots_of_evaluation(   # laws added at run time too
-            net["a"], net["b"], net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
+            net["a"], net_b, net["pa"].reshape(-1, 3), net["pb"].reshape(-1, 3),
             net["n"].reshape(-1, 3), net["d"], pos, vel, omg, bc.material, bc.table,
             net["s"].reshape(-1, NSPRING), h, bc.inv_mass_all, net["r"], bc.mass, bc.gravity, q, L,
-            bc.inv_I, quats_to_matrices(q), bc.sq_m, bc.sq_I, np.zeros(0, np.int64))
+            bc.inv_I, quats_to_matrices(q), bc.sq_m, bc.sq_I, own)
         solves[0] += 1
         solves[1] += rounds
         solves[2] += iterations
@@ -411,12 +448,21 @@ class Domain:
         sel = self.counted(a)
         self.events.append(("dropped", dict(key=key[sel], e=elastic[sel])))
 
+    def log_wrap(self, jump: float) -> None:
+        """Keep the potential's jump (J) of a wrap into the periodic cell (every rank wraps
+        every particle at a list build, so every rank logs the same jump) for the deck end's
+        replay, in its place among the kicks."""
+        self.events.append(("wrap", jump))
+
     def _replay(self, logs: list[list[tuple]]) -> None:
         """The serial ledger updates from all ranks' logs: each event's rows merged in key
         order and booked as one rank books them (:func:`~nurbsdem.dynamics.step.book_kick`,
-        ``DemSystem._book_dropped``)."""
+        ``DemSystem._book_dropped``, ``DemSystem._apply_wrap``)."""
         s = self.system
         for k, (kind, *_) in enumerate(logs[0]):
+            if kind == "wrap":
+                s.ledger.external_work += logs[0][k][1]
+                continue
             rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
             if kind == "kick":
                 ledger = s.ledger.to_array()
@@ -437,7 +483,7 @@ class Domain:
                           + [getattr(s, f) for f in SYSTEM_BODY_FIELDS]
                           + [s.force[:N], s.torque[:N]])
         sel = self.counted(s.c_a)
-        rows = {f: getattr(s, f)[sel] for f in ROW_FIELDS}
+        rows = {f: getattr(s, f)[sel] for f in self.row_fields}
         hsel = self.counted(self.particles_of(s.hist_keys))
         hist = dict(key=s.hist_keys[hsel], spring=s.hist_springs[hsel])
         cs = s.last_contacts
@@ -445,7 +491,7 @@ class Domain:
         self.sent["gathers"] += _nbytes(mine)
         gathered = self.comm.allgather(mine)
         rows = merge_by_key([g[0] for g in gathered], "c_key", self.order)
-        for f in ROW_FIELDS:
+        for f in self.row_fields:
             setattr(s, f, rows[f])
         hist = merge_by_key([g[1] for g in gathered], "key")
         s.hist_keys, s.hist_springs = hist["key"], hist["spring"].reshape(-1, NSPRING)
@@ -474,8 +520,8 @@ class Domain:
         sel = self.counted(cs.body_a)
         near = self.counted(cs.near_a)
         drop = self.counted(self.particles_of(cs.dropped_keys))
-        return dict(active={f: np.asarray(getattr(cs, f))[sel] for f in CS_ACTIVE},
-                    near={f: np.asarray(getattr(cs, f))[near] for f in CS_NEAR},
+        return dict(active={f: np.asarray(getattr(cs, f))[sel] for f in self.cs_active},
+                    near={f: np.asarray(getattr(cs, f))[near] for f in self.cs_near},
                     dropped=np.asarray(cs.dropped_keys, np.int64)[drop],
                     counters=[int(getattr(cs, f)) for f in CS_COUNTERS])
 
@@ -501,7 +547,7 @@ class Domain:
         and its owned particles' odometers and poses (collective)."""
         sel = self.counted(local["list_a"]) if "list_a" in local else None
         mine = self.owned_ids
-        pairs = {f: local[f][sel] for f in PAIR_FIELDS} if sel is not None else None
+        pairs = {f: local[f][sel] for f in self.pair_fields} if sel is not None else None
         per_body = {f: local[f][mine] for f in ("prev_pos", "prev_R", "prev_x") if f in local}
         gathered = self.comm.allgather((pairs, mine, per_body, local["odo"][mine]))
         out = dict(local)
@@ -523,7 +569,7 @@ class Domain:
         keep = self.involves_owned(np.asarray(full["list_a"], np.int64),
                                    np.asarray(full["list_b"], np.int64))
         out = dict(full)
-        out.update({f: np.asarray(full[f])[keep] for f in PAIR_FIELDS})
+        out.update({f: np.asarray(full[f])[keep] for f in self.pair_fields})
         return out
 
     def figures(self) -> dict:

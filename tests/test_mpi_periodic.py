@@ -1,0 +1,83 @@
+"""Periodic cells on several MPI ranks give the serial run bit for bit.
+
+Every rank wraps every particle at a list build (all of them synchronised from their owners
+first) and lists the pairs, images across the faces included, with a particle it owns; the
+contacts' image translations travel with the merged rows, the wraps' potential jumps are
+booked among the kicks' work in the serial order, and the implicit dashpots of the gathered
+network take an image as its owner as the serial solve does (:mod:`nurbsdem.parallel.domain`).
+The shear box of ``inputs/periodic`` (a periodic bulk under a lid that comes down) on two
+ranks equals the serial run in results.h5, every monitor and the checkpoint, with explicit
+and with implicit dashpots, and after a restart on two ranks; so does a pour into a periodic
+box with a sideways velocity, whose particles cross the faces.
+"""
+from __future__ import annotations
+
+import re
+import sys
+
+import pytest
+
+from test_mpi import _run, BIN, HERE, RUN, assert_same_run, needs_mpi
+
+SHEAR_BOX = HERE.parent / "inputs" / "periodic" / "shear_box.inp"
+
+POUR = """Environment
+  Gravity 0 0 -9.81
+  Periodic X 0 0.03 Y 0 0.03
+Materials
+  Material 1 Density 2500
+Shapes
+  Shape 1 Sphere Radius 0.002
+Walls
+  Wall 1 Name floor Point 0.015 0.015 0 Normal 0 0 1 Size 0.06 0.06
+Contact
+  Interface 1 NormalPenalty 1e4 NormalDamping 0.5 TangentialPenalty 1e4 Friction 0.3
+Flow
+  Inlet 1 Name feed Shapes 1 Material 1 Box 0 0 0.02 0.03 0.03 0.04 Rate 4000 Count 40 Velocity 0.3 0.2 -0.5 Seed 7 Every 0.005
+Steps
+  Step 1 Dynamic Duration 0.05 TimeStep 1e-3
+Output
+  Monitors Every 0.005
+  Results Every 0.01
+"""
+
+
+def _deck(folder, implicit: bool):
+    text = SHEAR_BOX.read_text()
+    if implicit:
+        text = text.replace("TimeStep 1e-3\n", "TimeStep 1e-3 Damping Implicit\n")
+        assert text.count("Damping Implicit") == 2
+    deck = folder / "shear_box.inp"
+    deck.write_text(text)
+    return deck
+
+
+@needs_mpi
+@pytest.mark.parametrize("implicit", [False, True], ids=["explicit", "implicit"])
+def test_the_periodic_shear_box_on_two_ranks(tmp_path, implicit):
+    deck = _deck(tmp_path, implicit)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
+    log = _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "two", "--verbose"], 2)
+    ghosts = [tuple(map(int, g)) for g in re.findall(r"ghosts \[(\d+), (\d+)\]", log)]
+    assert ghosts and all(a > 0 and b > 0 for a, b in ghosts)      # pairs across the cut
+    assert_same_run(tmp_path / "two", tmp_path / "serial")
+
+
+@needs_mpi
+def test_the_periodic_shear_box_killed_on_two_ranks_restarts(tmp_path):
+    deck = _deck(tmp_path, False)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
+    out = tmp_path / "out"
+    assert "killed" in _run([sys.executable, RUN, deck, out, "--kill-after", "0.07"], 2)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", out, "--restart",
+          out / "checkpoint.h5"], 2)
+    assert_same_run(out, tmp_path / "serial")
+
+
+@needs_mpi
+def test_a_pour_into_a_periodic_box_on_two_ranks(tmp_path):
+    deck = tmp_path / "pour.inp"
+    deck.write_text(POUR)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "two"], 2)
+    assert_same_run(tmp_path / "two", tmp_path / "serial")
