@@ -56,6 +56,16 @@ def test_kind_rows_equal_particle_rows_bit_for_bit():
         assert np.array_equal(getattr(a.bodies, key), getattr(b.bodies, key)), key
 
 
+def _box(folder):
+    """A simulation of a box 50 mm square with one material and interface, no particles."""
+    sim = Simulation(gravity=(0, 0, -9.81), output=folder / "out", quiet=True)
+    sim.add_material(1, density=2500.0)
+    sim.add_interface(normal_penalty=1e4, normal_damping=0.5, tangential_penalty=1e4,
+                      friction=0.3)
+    sim.add_box((0, 0, 0), (0.05, 0.05, 0.15))
+    return sim
+
+
 def test_an_exchange_with_nothing_to_exchange_builds_no_system(tmp_path, monkeypatch):
     added, rebuilt = [], []
     insert, rebuild = FlowRun.insert, Solver.rebuild
@@ -70,11 +80,7 @@ def test_an_exchange_with_nothing_to_exchange_builds_no_system(tmp_path, monkeyp
         return rebuild(self, *args)
     monkeypatch.setattr(FlowRun, "insert", spy_insert)
     monkeypatch.setattr(Solver, "rebuild", spy_rebuild)
-    sim = Simulation(gravity=(0, 0, -9.81), output=tmp_path / "out", quiet=True)
-    sim.add_material(1, density=2500.0)
-    sim.add_interface(normal_penalty=1e4, normal_damping=0.5, tangential_penalty=1e4,
-                      friction=0.3)
-    sim.add_box((0, 0, 0), (0.05, 0.05, 0.15))
+    sim = _box(tmp_path)
     sim.add_inlet([shapes.sphere(0.004)], 1, (0.004, 0.004, 0.1, 0.046, 0.046, 0.12),
                   rate=1000, count=6, seed=2, every=0.002, name="feed")
     sim.add_outlet((0, 0, -1, 1, 1, -0.5), every=0.002, name="never")
@@ -96,11 +102,7 @@ def test_a_rebuilt_system_goes_on_with_the_last_ones_time_step_control(tmp_path,
         s = self.system
         seen.append((control, s.network_estimates, s.control_state()))
     monkeypatch.setattr(Solver, "rebuild", spy_rebuild)
-    sim = Simulation(gravity=(0, 0, -9.81), output=tmp_path / "out", quiet=True)
-    sim.add_material(1, density=2500.0)
-    sim.add_interface(normal_penalty=1e4, normal_damping=0.5, tangential_penalty=1e4,
-                      friction=0.3)
-    sim.add_box((0, 0, 0), (0.05, 0.05, 0.15))
+    sim = _box(tmp_path)
     sim.add_inlet([shapes.sphere(0.004)], 1, (0.004, 0.004, 0.02, 0.046, 0.046, 0.12),
                   rate=4000, count=40, seed=2, every=0.002, name="feed")
     sim.run_dynamic(0.04, 1e-3)

@@ -18,25 +18,17 @@ import sys
 import pytest
 
 from test_mpi import _run, BIN, HERE, RUN, assert_same_run, needs_mpi
+from test_periodic_flow import DECK
 
 SHEAR_BOX = HERE.parent / "inputs" / "periodic" / "shear_box.inp"
 
-POUR = """Environment
-  Gravity 0 0 -9.81
-  Periodic X 0 0.03 Y 0 0.03
-Materials
-  Material 1 Density 2500
-Shapes
-  Shape 1 Sphere Radius 0.002
-Walls
-  Wall 1 Name floor Point 0.015 0.015 0 Normal 0 0 1 Size 0.06 0.06
-Contact
-  Interface 1 NormalPenalty 1e4 NormalDamping 0.5 TangentialPenalty 1e4 Friction 0.3
-Flow
-  Inlet 1 Name feed Shapes 1 Material 1 Box 0 0 0.02 0.03 0.03 0.04 Rate 4000 Count 40 Velocity 0.3 0.2 -0.5 Seed 7 Every 0.005
-Steps
-  Step 1 Dynamic Duration 0.05 TimeStep 1e-3
-Output
+#: the periodic pour of test_periodic_flow with a sideways velocity, 40 spheres, 0.05 s
+POUR = DECK.replace(
+    "Interface 1 NormalPenalty 1e4 NormalDamping 0.5",
+    "Interface 1 NormalPenalty 1e4 NormalDamping 0.5 TangentialPenalty 1e4 Friction 0.3"
+).replace("Box 0 0 0.02 0.04 0.03 0.04 Rate 1000 Count 10",
+          "Box 0 0 0.02 0.03 0.03 0.04 Rate 4000 Count 40 Velocity 0.3 0.2 -0.5 Seed 7 "
+          "Every 0.005").replace("Duration 0.01", "Duration 0.05") + """Output
   Monitors Every 0.005
   Results Every 0.01
 """
