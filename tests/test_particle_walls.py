@@ -420,3 +420,101 @@ def test_the_compiled_mesh_solve_is_the_python_one_over_a_cube_and_bumps():
         refs, owner = _compiled_equals_reference(table, bumps, poses)
         assert len(refs[0]) == 0 and sum(len(r) > 0 for r in refs) >= n // 2
         assert table is paper or np.bincount(owner).max() >= 2    # a concave fold: two rows
+
+
+def _orifice(side: float = 0.06, D: float = 0.024, segments: int = 64):
+    """A square floor of side ``side`` (m) at z = 0 with a circular orifice of diameter D
+    (a regular polygon), as the silo benchmark writes it."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import tempfile
+    from bench_beverloo import write_floor
+    from nurbsdem.io.meshfile import read_wall_mesh
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "floor.stl"
+        write_floor(path, side, D, segments)
+        mesh = read_wall_mesh(path)
+        return build_mesh_wall(mesh.vertices, mesh.faces)
+
+
+def _slice_reach(c, M, z: float = 0.0) -> float:
+    """How far (m) from the z axis the ellipsoid (centre c, support matrix M = R A² Rᵀ)
+    reaches in the plane z (its section there, an ellipse: the largest radius of its
+    boundary, densely sampled); −inf when it does not reach the plane."""
+    Q = np.linalg.inv(M)                 # the ellipsoid: (x − c)ᵀ Q (x − c) ≤ 1
+    dz = z - c[2]
+    A = Q[:2, :2]
+    b = Q[:2, 2] * dz
+    rhs = 1.0 - Q[2, 2] * dz * dz + b @ np.linalg.solve(A, b)
+    if rhs <= 0.0:
+        return -math.inf
+    centre = c[:2] - np.linalg.solve(A, b)
+    w, V = np.linalg.eigh(A)
+    a = np.linspace(0.0, 2.0 * math.pi, 20001)
+    pts = centre + (V @ (np.sqrt(rhs / w)[:, None] * np.array([np.cos(a), np.sin(a)]))).T
+    return float(np.hypot(pts[:, 0], pts[:, 1]).max())
+
+
+def test_a_tilted_particle_over_the_rim_of_an_orifice_touches_from_its_first_overlap():
+    """An elongated ellipsoid tilted 15° over the rim of a 24 mm orifice, moving outwards
+    (its lower end leading, and its upper end), 0.6 mm off a polygon vertex: it touches the
+    rim exactly when its section in the floor's plane reaches past it, each of the rim's
+    edges it reaches with the depth of the analytic support function against that edge (the
+    least over the edge's normal arc, on either side of the floor: a lower end that dipped
+    through the orifice touches the rim with its upper surface), the deepest growing
+    steadily with the overlap; the compiled kernel gives the reference's rows."""
+    mesh = _orifice()
+    axes = (0.004, 0.0016, 0.0016)
+    table = table_of(shapes.ellipsoid(*axes))
+    for tilt, xs in ((15, np.linspace(0.0075, 0.0095, 11)), (-15, np.linspace(0.0095, 0.0115, 11))):
+        R = _rotation([0.0, math.radians(tilt), 0.0])
+        M = R @ np.diag(np.square(axes)) @ R.T
+        depth, poses = [], []
+        for x in xs:
+            c = np.array([x, 0.0006, 0.0008])
+            pos = c - R @ table.centroid[0]
+            poses.append((pos, R))
+            rf, _ = particle_mesh_contacts(table, 0, pos, R, mesh)
+            reach = _slice_reach(c, M) - 0.012 * math.cos(math.pi / 64)
+            if reach < -1e-5:                                   # short of the rim
+                assert len(rf) == 0
+                depth.append(0.0)
+                continue
+            if reach < 1e-5:
+                continue
+            assert len(rf) >= 1
+            for row in rf:                       # each on a rim edge (several: a polygon)
+                q = row[F_PB:F_PB + 3]
+                k = math.floor(math.atan2(q[1], q[0]) / (2.0 * math.pi / 64))
+                p0, p1 = (mesh.vertices[np.argmin(np.linalg.norm(
+                    mesh.vertices - 0.012 * np.array([math.cos(a), math.sin(a), 0.0]), axis=1))]
+                    for a in (2.0 * math.pi * k / 64, 2.0 * math.pi * (k + 1) / 64))
+                assert abs(np.cross(p1 - p0, q - p0)[2]) < 1e-17 and abs(q[2]) < 1e-15
+                ref = _edge_reference(c, M, p0, p1)
+                assert row[F_SD] == pytest.approx(ref, abs=1e-11 * axes[0])
+            depth.append(-rf[:, F_SD].min())
+        step = np.diff(depth)
+        assert np.all(step >= 0.0) and np.all(step <= 1.05 * (xs[1] - xs[0]))
+        assert depth[-1] > 0.15 * axes[0]                       # deep: 0.6 mm and more
+        _compiled_equals_reference(table, mesh, poses)
+
+
+def test_a_long_particle_through_an_orifice_has_no_contact_under_the_rim():
+    """A long ellipsoid (6.25 : 1) passing through the orifice at 30°, its lower end under
+    the floor beyond the rim while its section in the floor's plane lies inside the
+    orifice: it touches nothing (the face below which its lowest point lies is not reached:
+    the particle passes the plane inside the orifice); the compiled kernel agrees."""
+    mesh = _orifice()
+    axes = (0.005, 0.0008, 0.0008)
+    table = table_of(shapes.ellipsoid(*axes))
+    R = _rotation([0.0, math.radians(30), 0.0])
+    M = R @ np.diag(np.square(axes)) @ R.T
+    poses = []
+    for x in (0.0085, 0.009, 0.0095):
+        c = np.array([x, 0.0006, 0.0005])
+        low = c - M @ np.array([0.0, 0.0, 1.0]) / math.sqrt(M[2, 2])
+        assert np.hypot(*low[:2]) > 0.0125 and low[2] < -0.002      # under the floor
+        assert _slice_reach(c, M) < 0.0119                          # inside the orifice
+        pos = c - R @ table.centroid[0]
+        poses.append((pos, R))
+        assert len(particle_mesh_contacts(table, 0, pos, R, mesh)[0]) == 0
+    _compiled_equals_reference(table, mesh, poses)

@@ -25,7 +25,10 @@ own region of normals, in which the minimum is a contact of that feature:
   around it has the edge as its farthest feature along −d (d · w ≥ 0, w the triangle's
   in-plane normal from the edge inwards): an arc, empty of interior on a flat internal edge
   (there the faces hold every contact).  A safeguarded Newton on f' = 0 inside the arc; a
-  contact when the root's point q = P0 + ((p − P0) · t) t lies on the segment;
+  contact when the root's point q = P0 + ((p − P0) · t) t lies on the segment.  Where the
+  particle may reach over the edge's line (f > 0 at both ends of the arc) the arc is also
+  sampled, and the least of its minima is the contact: deep in a tilted, elongated particle
+  the arc holds two, one on either side of the mesh;
 * **vertex** V: h_X(−d) = −d · V, stationary where p_A(d) − V ∥ d, a Newton on the tangent
   components with the Jacobian (dp/dd)_t − λ I (λ = d · (p_A − V)): the point-to-surface
   problem of :mod:`nurbsdem.contact.point_surface` in the support-function form (it holds
@@ -36,7 +39,14 @@ own region of normals, in which the minimum is a contact of that feature:
 face contact always counts; an edge or vertex contact counts only with its normal in the
 feature's normal cone over all triangles around it, on the particle's side (against the sum
 of its triangles' normals facing the particle's centroid), so a convex fold gives one edge
-contact between the two face regions and a concave fold none (one per face there).
+contact between the two face regions and a concave fold none (one per face there).  An edge
+of the mesh's boundary (one triangle: the rim of an orifice, the end of a chute) has no
+other side: its arc reaches round the edge from face to face, and a particle whose end
+dipped past the plane touches it from whichever side its least penetration lies on.  A face
+contact needs the particle to pass the plane inside the triangle's region: when the segment
+from the centroid to the deepest point crosses the plane beyond a boundary edge (a tilted
+particle through an orifice, its end under the rim), the part under the triangle came round
+the rim, and the face holds no contact.
 Contacts at the same point (within 1e-12 of the mesh size, or 1e-9 for an edge or vertex
 contact, whose point comes from an iteration) are one, the face's first.  The cone and the face tests
 meet at their borders (the deepest point projecting onto an edge or vertex), where the two
@@ -68,6 +78,13 @@ ITERATED_TIE = 1e-9
 MIN_ARC = 1e-12
 #: the largest turn (rad) of a vertex contact's normal per Newton step
 MAX_TURN = 0.5
+#: intervals of an edge's normal arc sampled for its least penetration when the particle may
+#: reach over the edge's line (the edge's line deep in a tilted, elongated particle: two
+#: local minima, on either side of the mesh)
+ARC_SAMPLES = 8
+#: a sample of the arc is another minimum's when it is less than the root's f by this × the
+#: bounding radius (not round-off about the same root)
+DEEPER = 1e-9
 
 __all__ = ["particle_mesh_contacts", "FACE", "EDGE_AB", "VERTEX_A"]
 
@@ -130,7 +147,8 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _face(oracle: SupportOracle, mesh: MeshWall, tri: int):
     """(sd, p, q, d) of the face contact of triangle ``tri`` (module docstring), None when
-    the deepest point projects outside it."""
+    the deepest point projects outside it, or when the particle passes the triangle's plane
+    beyond one of its border edges (:func:`_crosses_beyond_border`)."""
     a, b, c = (mesh.vertices[mesh.faces[tri, k]] for k in range(3))
     n = mesh.normals[tri]
     if np.dot(oracle.centroid - a, n) >= 0.0:
@@ -141,8 +159,39 @@ def _face(oracle: SupportOracle, mesh: MeshWall, tri: int):
     al, be = rf[F_PAR + 2], rf[F_PAR + 3]
     if not (ri[I_VALID] == 1 and al >= 0.0 and be >= 0.0 and al + be <= 1.0):
         return None
-    return (float(rf[F_SD]), rf[F_PA:F_PA + 3].copy(), rf[F_PB:F_PB + 3].copy(),
-            rf[F_N:F_N + 3].copy())
+    p = rf[F_PA:F_PA + 3].copy()
+    if _crosses_beyond_border(mesh, tri, oracle.centroid, p):
+        return None
+    return float(rf[F_SD]), p, rf[F_PB:F_PB + 3].copy(), rf[F_N:F_N + 3].copy()
+
+
+def _crosses_beyond_border(mesh: MeshWall, tri: int, c: np.ndarray, p: np.ndarray) -> bool:
+    """Whether the segment from the particle's centroid c to its deepest point p below the
+    plane of triangle ``tri`` crosses that plane beyond a border edge of the triangle (an
+    edge of the mesh's boundary, :func:`_topology`): then the particle passes the plane
+    outside the mesh (a tilted particle whose end reaches under the rim of an orifice), the
+    segment between c and p lies in it, and the part of it under the triangle came round the
+    rim, not through the triangle: the face holds no contact (the rim's edge does, where the
+    particle reaches it)."""
+    f = mesh.faces[tri].tolist()
+    n = mesh.normals[tri]
+    a = mesh.vertices[f[0]]
+    sc, sp = float(n @ (c - a)), float(n @ (p - a))
+    if not sc * sp < 0.0:
+        return False
+    r = c + (sc / (sc - sp)) * (p - c)
+    border = _topology(mesh)[0]
+    for k in range(3):
+        i, j = f[k], f[(k + 1) % 3]
+        if len(border.get((min(i, j), max(i, j)), ())) != 1:
+            continue
+        x, y, z = mesh.vertices[i], mesh.vertices[j], mesh.vertices[f[(k + 2) % 3]]
+        w = np.cross(n, y - x)
+        if float(w @ (z - x)) < 0.0:
+            w = -w
+        if float(w @ (r - x)) < 0.0:
+            return True
+    return False
 
 
 def _edge_arc(t: np.ndarray, inward: list) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -163,7 +212,10 @@ def _edge(oracle: SupportOracle, p0: np.ndarray, p1: np.ndarray, inward: list,
     """(sd, p, q, d, iterations) of the edge contact of segment (p0, p1) whose triangles
     have the in-plane inward normals ``inward`` (module docstring), None when the minimum
     over its normal arc is not inside the arc or its point is off the segment (or, with
-    ``active_only``, when a support plane separates the segment from the particle)."""
+    ``active_only``, when a support plane separates the segment from the particle).  Where
+    the particle may reach over the edge's line (f > 0 at both ends of the arc) the arc is
+    also sampled (:data:`ARC_SAMPLES`): deep in a tilted, elongated particle the arc holds
+    two local minima, on either side of the mesh, and the least is the contact."""
     L = float(np.linalg.norm(p1 - p0))
     t = (p1 - p0) / L
     e1, e2, lo, hi = _edge_arc(t, inward)
@@ -180,12 +232,36 @@ def _edge(oracle: SupportOracle, p0: np.ndarray, p1: np.ndarray, inward: list,
         r = p - p0
         return float(r @ dd), float(dd @ M @ dd - r @ d), p, d, ok
 
-    g_lo = slope(lo)[0]
-    g_hi = slope(hi)[0]
-    if not (g_lo < 0.0 and g_hi > 0.0):
-        return None
-    th = 0.5 * (lo + hi)
+    g_lo, _, p_lo, d_lo, _ = slope(lo)
+    g_hi, _, p_hi, d_hi, _ = slope(hi)
     tol = TOL * oracle.radius
+    root = _edge_root(slope, lo, hi, tol) if g_lo < 0.0 < g_hi else None
+    if float(d_lo @ (p_lo - p0)) > 0.0 and float(d_hi @ (p_hi - p0)) > 0.0:
+        samples = [slope(lo + k * (hi - lo) / ARC_SAMPLES) for k in range(ARC_SAMPLES + 1)]
+        f = [float(d @ (p - p0)) for _, _, p, d, _ in samples]
+        k = int(np.argmin(f))
+        a, b = max(k - 1, 0), min(k + 1, ARC_SAMPLES)
+        least = None if root is None else float(root[2] @ (root[1] - p0)) - DEEPER * oracle.radius
+        if samples[a][0] < 0.0 < samples[b][0] and (least is None or f[k] < least):
+            other = _edge_root(slope, lo + a * (hi - lo) / ARC_SAMPLES,
+                               lo + b * (hi - lo) / ARC_SAMPLES, tol)
+            if other is not None and (root is None or float(other[2] @ (other[1] - p0))
+                                      < float(root[2] @ (root[1] - p0))):
+                root = other
+    if root is None:
+        return None
+    _, p, d, it = root
+    s = float((p - p0) @ t)
+    if s < 0.0 or s > L:
+        return None
+    q = p0 + s * t
+    return float(d @ (q - p)), p, q, d, it
+
+
+def _edge_root(slope, lo: float, hi: float, tol: float):
+    """(θ, p, d, iterations) of the safeguarded Newton on f'(θ) = 0 in [lo, hi], where f'
+    changes sign from − to + (``slope``: θ → (f', f'', p, d, ok)); None when it fails."""
+    th = 0.5 * (lo + hi)
     for it in range(MAX_IT):
         g, h, p, d, ok = slope(th)
         if not ok:
@@ -202,11 +278,7 @@ def _edge(oracle: SupportOracle, p0: np.ndarray, p1: np.ndarray, inward: list,
             break
     else:
         return None
-    s = float((p - p0) @ t)
-    if s < 0.0 or s > L:
-        return None
-    q = p0 + s * t
-    return float(d @ (q - p)), p, q, d, it
+    return th, p, d, it
 
 
 def _tangent_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -371,7 +443,7 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
             continue
         inward = [_inward(mesh, tri, i, j) for tri in tris]
         e = _edge(oracle, p0, p1, inward, active_only)
-        if e is not None and _on_particle_side(oracle, mesh, tris, e[3]):
+        if e is not None and (len(tris) == 1 or _on_particle_side(oracle, mesh, tris, e[3])):
             out.append(e[:4] + (EDGE_AB, tris[0], e[4]))
     for v, tris in verts.items():
         V = mesh.vertices[v]

@@ -36,7 +36,8 @@ from numba import njit
 
 from ..jit import PointerKernel, kernel
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_FAIL, I_IT, I_PA, I_PB, I_VALID, NF, NI
-from .mesh_particle import (ITERATED_TIE, MAX_IT, MAX_TURN, MIN_ARC, TOL, _topology)
+from .mesh_particle import (ARC_SAMPLES, DEEPER, ITERATED_TIE, MAX_IT, MAX_TURN, MIN_ARC,
+                            TOL, _topology)
 from .mesh_wall import EDGE_AB, FACE, TIE, VERTEX_A, MeshWall, _triangle_candidates, triangles_near
 from .surface_particle_compiled import (_C, _D, _M, _P, _POS, _start as _pose_start, _support,
                                         make_surface_work)
@@ -289,10 +290,49 @@ def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, wor
 
 
 # --------------------------------------------------------------------------- iterations
+@kernel(inline="always")
+def _is_border(feat, tri_feat_range, tri_feat, tri, i, j):
+    """Whether the edge (i, j) of triangle ``tri`` is an edge of the mesh's boundary (a
+    feature with one triangle)."""
+    lo, hi = min(i, j), max(i, j)
+    for r in range(tri_feat_range[tri, 0], tri_feat_range[tri, 1]):
+        f = tri_feat[r]
+        if feat[f, 0] == lo and feat[f, 1] == hi:
+            return feat[f, 3] - feat[f, 2] == 1
+    return False
+
+
+@kernel(inline="always")
+def _crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri, c, p):
+    """The reference's ``_crosses_beyond_border``: whether the segment from the centroid c
+    to the deepest point p crosses the plane of triangle ``tri`` beyond a border edge."""
+    n = normals[tri]
+    a = vertices[faces[tri, 0]]
+    sc, sp = _dot_diff(n, c, a), _dot_diff(n, p, a)
+    if not sc * sp < 0.0:
+        return False
+    s = sc / (sc - sp)
+    r0, r1, r2 = c[0] + s * (p[0] - c[0]), c[1] + s * (p[1] - c[1]), c[2] + s * (p[2] - c[2])
+    for k in range(3):
+        i, j = faces[tri, k], faces[tri, (k + 1) % 3]
+        if not _is_border(feat, tri_feat_range, tri_feat, tri, i, j):
+            continue
+        x, y, z = vertices[i], vertices[j], vertices[faces[tri, (k + 2) % 3]]
+        e0, e1, e2 = y[0] - x[0], y[1] - x[1], y[2] - x[2]
+        w0, w1, w2 = n[1] * e2 - n[2] * e1, n[2] * e0 - n[0] * e2, n[0] * e1 - n[1] * e0
+        if w0 * (z[0] - x[0]) + w1 * (z[1] - x[1]) + w2 * (z[2] - x[2]) < 0.0:
+            w0, w1, w2 = -w0, -w1, -w2
+        if w0 * (r0 - x[0]) + w1 * (r1 - x[1]) + w2 * (r2 - x[2]) < 0.0:
+            return True
+    return False
+
+
 @kernel
-def _face(tab, info, cen, rad, seeds, vertices, faces, normals, tri, work, nc):
+def _face(tab, info, cen, rad, seeds, vertices, faces, normals, feat, tri_feat_range,
+          tri_feat, tri, work, nc):
     """The face contact of triangle ``tri`` (the reference's ``_face``: the flat-wall kernel
-    against its plane, normal towards the particle) as candidate nc; returns the new count."""
+    against its plane, normal towards the particle, and its border test) as candidate nc;
+    returns the new count."""
     sv, mv, cf, ci = work.sv, work.mv, work.cf, work.ci
     ws, wf, wi, wfs, no_mask, sw, rw, wdom, _, prev_f, prev_i, qf, qi, _, _ = sv
     a, b, c = vertices[faces[tri, 0]], vertices[faces[tri, 1]], vertices[faces[tri, 2]]
@@ -310,6 +350,9 @@ def _face(tab, info, cen, rad, seeds, vertices, faces, normals, tri, work, nc):
             prev_i[k] = qi[k]
     al, be = qf[F_PAR + 2], qf[F_PAR + 3]
     if not (qi[I_VALID] == 1 and al >= 0.0 and be >= 0.0 and al + be <= 1.0):
+        return nc
+    if _crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri,
+                              sw[_C], qf[F_PA:F_PA + 3]):
         return nc
     _put(cf, ci, nc, qf[F_SD], qf[F_PA:F_PA + 3], qf[F_PB:F_PB + 3], qf[F_N], qf[F_N + 1],
          qf[F_N + 2], FACE, tri, 1)
@@ -331,6 +374,63 @@ def _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, th):
     g = _dot_diff(dd, p, p0)
     h = _quad(sw[_M:_M + 3], dd) - _dot_diff(d, p, p0)
     return g, h, ok
+
+
+@kernel(inline="always")
+def _least_in_arc(tab, info, cen, rad, seeds, sv, mv, p0, lo, hi):
+    """(found, lo, hi, f): the samples around the least f over ARC_SAMPLES intervals of
+    [lo, hi] and that f (the reference's sampling in ``_edge``), found where f' changes sign
+    across them."""
+    sw = sv[5]
+    best, kbest, g_before, g_after, g_prev = math.inf, -1, 0.0, 0.0, 0.0
+    for k in range(ARC_SAMPLES + 1):
+        g = _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0,
+                        lo + k * (hi - lo) / ARC_SAMPLES)[0]
+        f = _dot_diff(sw[_D], sw[_P], p0)
+        if k == kbest + 1:
+            g_after = g
+        if f < best:
+            best, kbest = f, k
+            g_before = g_prev if k > 0 else g
+            g_after = g                       # k the last sample: its own
+        g_prev = g
+    a, b = max(kbest - 1, 0), min(kbest + 1, ARC_SAMPLES)
+    if not g_before < 0.0 < g_after:
+        return False, lo, hi, best
+    return True, lo + a * (hi - lo) / ARC_SAMPLES, lo + b * (hi - lo) / ARC_SAMPLES, best
+
+
+@kernel(inline="always")
+def _edge_newton(tab, info, cen, rad, seeds, sv, mv, p0, lo, hi, tol):
+    """(converged, iterations) of the safeguarded Newton on f'(θ) = 0 in [lo, hi] (the
+    reference's ``_edge_root``); the root's p and d are left in the support workspace."""
+    th = 0.5 * (lo + hi)
+    it = 0
+    for it in range(MAX_IT):
+        g, h, ok = _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, th)
+        if not ok:
+            return False, it
+        if abs(g) <= tol:
+            return True, it
+        if g < 0.0:
+            lo = th
+        else:
+            hi = th
+        step = th - g / h if h > 0.0 else 0.5 * (lo + hi)
+        th = step if lo < step < hi else 0.5 * (lo + hi)
+        if hi - lo < 1e-15:
+            return True, it
+    return False, it
+
+
+@kernel(inline="always")
+def _keep_root(sw, mv, p0):
+    """Keep an edge root's p and d (in the support workspace) in mv's rows U1, U2 (free while
+    an edge is solved); returns its f = d · (p − P0)."""
+    for k in range(3):
+        mv[_U1, k] = sw[_P, k]
+        mv[_U2, k] = sw[_D, k]
+    return _dot_diff(sw[_D], sw[_P], p0)
 
 
 @kernel
@@ -389,39 +489,33 @@ def _edge(tab, info, cen, rad, seeds, vertices, faces, normals, feat_tris, t0, t
                       cm * e1[1] + sm * e2[1], cm * e1[2] + sm * e2[2], p0, p1):
             return nc
     g_lo = _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, lo)[0]
+    f_lo = _dot_diff(sw[_D], sw[_P], p0)
     g_hi = _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, hi)[0]
-    if not (g_lo < 0.0 and g_hi > 0.0):
-        return nc
-    th = 0.5 * (lo + hi)
+    f_hi = _dot_diff(sw[_D], sw[_P], p0)
     tol = TOL * rad
-    done = False
-    it = 0
-    for it in range(MAX_IT):
-        g, h, ok = _edge_slope(tab, info, cen, rad, seeds, sv, mv, p0, th)
-        if not ok:
-            return nc
-        if abs(g) <= tol:
-            done = True
-            break
-        if g < 0.0:
-            lo = th
-        else:
-            hi = th
-        step = th - g / h if h > 0.0 else 0.5 * (lo + hi)
-        th = step if lo < step < hi else 0.5 * (lo + hi)
-        if hi - lo < 1e-15:
-            done = True
-            break
-    if not done:
+    found, it, f_root = False, 0, math.inf
+    if g_lo < 0.0 and g_hi > 0.0:
+        found, it = _edge_newton(tab, info, cen, rad, seeds, sv, mv, p0, lo, hi, tol)
+        if found:
+            f_root = _keep_root(sw, mv, p0)
+    if f_lo > 0.0 and f_hi > 0.0:                  # the particle may reach over the line
+        other, a_lo, a_hi, f_least = _least_in_arc(tab, info, cen, rad, seeds, sv, mv, p0,
+                                                   lo, hi)
+        if other and (not found or f_least < f_root - DEEPER * rad):
+            other, it2 = _edge_newton(tab, info, cen, rad, seeds, sv, mv, p0, a_lo, a_hi, tol)
+            if other and (not found or _dot_diff(sw[_D], sw[_P], p0) < f_root):
+                found, it = True, it2
+                f_root = _keep_root(sw, mv, p0)
+    if not found:
         return nc
-    p, d, q = sw[_P], sw[_D], mv[_O]
+    p, d, q = mv[_U1], mv[_U2], mv[_O]
     s = _dot_diff(mv[_T], p, p0)
     if s < 0.0 or s > L:
         return nc
     for k in range(3):
         q[k] = p0[k] + s * mv[_T, k]
     _facing_sum(sw[_C], vertices, faces, normals, feat_tris, t0, t1, mv[_S])
-    if not _dot(d, mv[_S]) < 0.0:
+    if t1 - t0 > 1 and not _dot(d, mv[_S]) < 0.0:
         return nc
     _put(cf, ci, nc, _dot_diff(d, q, p), p, q, d[0], d[1], d[2], EDGE_AB, feat_tris[t0], it)
     return nc + 1
@@ -644,7 +738,8 @@ def particle_mesh_into(tab, info, cen, rad, seeds, pos, Rb, R, t, vertices, face
     tris, hold = work.tris, work.hold
     for m in range(n):
         if hold[m]:
-            nc = _face(tab, info, cen, rad, seeds, vertices, faces, normals, tris[m], work, nc)
+            nc = _face(tab, info, cen, rad, seeds, vertices, faces, normals, feat,
+                       tri_feat_range, tri_feat, tris[m], work, nc)
     nc = _features(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat, feat_tris,
                    tri_feat_range, tri_feat, n, active_only, work, nc)
     _distinct(cf, ci, keep, nc, size)
