@@ -56,11 +56,18 @@ placement and the system built anew for the new set of particles) in the timer
 ``inlets + outlets`` of ``summary.timers`` (:func:`nurbsdem.flow_run.exchange`); printed as a
 share of the time loop for the fill (the inlet) and each discharge (the outlet).
 
-Usage: python benchmarks/bench_beverloo.py [--quick] [--json PATH] | --refit PATH
+**Other grains** (``--shape ellipsoid | paper``): the same fill and discharges with grains of
+the spheres' volumes, ellipsoids of semi-axes ``ELLIPSOID`` × r or the paper's particles A,
+B and C scaled (shape files the run writes), through orifices of 6, 7 and 8 d in a silo
+2.5 × 8 d wide filled to 9 d (a NURBS particle's contacts cost LCPs); no Yade run (it has no
+exact ellipsoids or NURBS particles).
+
+Usage: python benchmarks/bench_beverloo.py [--quick] [--shape S] [--json PATH] | --refit PATH
 (quick: one orifice of 6 d in a silo 2.5 × 6 d wide, short runs: a smoke test of the
 pipeline, not a measurement; no Beverloo fit, which needs three orifices).  Writes the JSON
-``benchmarks/.cache/beverloo.json`` (``--quick``: ``beverloo_quick.json``) that
-``benchmarks/report.py`` reads; ``--refit`` fits its rates again.
+``benchmarks/.cache/beverloo.json`` (``--quick``: ``beverloo_quick.json``; other grains:
+``beverloo_<shape>[_quick].json``) that ``benchmarks/report.py`` reads; ``--refit`` fits
+its rates again.
 """
 from __future__ import annotations
 

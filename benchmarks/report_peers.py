@@ -137,6 +137,36 @@ def section_beverloo(rep: Report) -> None:
         rep.headline["beverloo_yade"] = r["ratio"]
     else:
         rep.add(f"{y}.\n")
+    _beverloo_shapes(rep, cache)
+
+
+def _beverloo_shapes(rep: Report, cache: Path) -> None:
+    """The same discharge with ellipsoids and with the paper's particles
+    (``bench_beverloo.py --shape ellipsoid | paper``), when their JSON is there."""
+    import bench_beverloo as bb
+    runs = [json.loads(p.read_text()) for p in (cache / f"beverloo_{shape}.json"
+                                                for shape in bb.SHAPES[1:]) if p.exists()]
+    if not runs:
+        rep.add("Ellipsoids and the paper's particles: not measured (run "
+                "`benchmarks/bench_beverloo.py --shape ellipsoid` and `--shape paper`).\n")
+        return
+    rows = []
+    for r in runs:
+        fit = r.get("fit_n25") or {}
+        for o in r["orifices"]:
+            rows.append([r["shape"], f"{o['ratio']:g}", fmt(o["W"], ".4f"),
+                         fmt(o["C_mid"], ".3f"), f"{r['fill']['rho_b']:.0f}",
+                         fmt(fit.get("k"), ".2f"), fmt(fit.get("C"), ".3f"),
+                         fmt(o["loop"], ".1f"), f"{100 * o['flow'] / o['loop']:.1f}"])
+    rep.add("\nThe same silo (a smaller fill: "
+            f"{runs[0]['count']} grains in a silo {runs[0]['side'] * 1e3:.0f} mm wide, "
+            f"{runs[0]['T']} s per orifice) with grains of the spheres' volumes: ellipsoids "
+            f"of semi-axes {' : '.join(f'{a:g}' for a in bb.ELLIPSOID)} × r, and the paper's "
+            "particles A, B and C scaled (only an exact-geometry code runs these); k and C "
+            "fitted at n = 2.5:\n\n")
+    rep.add(md_table(["grain", "D / d", "W kg/s", "C at n 2.5, k 1.5", "ρ_b kg/m³",
+                      "k (n 2.5)", "C (n 2.5)", "time loop s", "outlet % of loop"], rows)
+            + "\n")
 
 
 def section_pour(rep: Report) -> None:
