@@ -38,3 +38,21 @@ def test_floor_with_orifice(tmp_path, segments):
     assert np.abs(v[outside, :2]).max(axis=1) == pytest.approx(side / 2, rel=1e-6)
     with pytest.raises(ValueError):
         bench_beverloo.write_floor(path, side, D, 12)
+
+
+@pytest.mark.parametrize("shape", bench_beverloo.SHAPES)
+def test_the_grains_of_each_shape_have_the_spheres_volumes(tmp_path, shape):
+    """The fill and discharge decks of each grain parse, and their three shapes have the
+    volumes of the spheres of radii RADII (the paper's particles scaled to them)."""
+    from nurbsdem.io.deck import parse_deck
+    if shape == "paper":
+        bench_beverloo.write_paper_shapes(tmp_path)
+    bench_beverloo.write_floor(tmp_path / "floor.stl", 0.06, 0.024)
+    fill, _ = bench_beverloo.fill_deck(0.06, 0.036, 300, shape)
+    for name, text in (("fill", fill), ("discharge", bench_beverloo.discharge_deck(
+            0.036, 0.06, 0.15, shape)), ("warm", bench_beverloo.warm_deck(shape))):
+        (tmp_path / f"{name}.inp").write_text(text)
+        model = parse_deck(tmp_path / f"{name}.inp", place=name != "discharge")
+        volumes = [model.shapes[k].volume for k in sorted(model.shapes)]
+        np.testing.assert_allclose(volumes, [4 / 3 * math.pi * r ** 3
+                                             for r in bench_beverloo.RADII], rtol=1e-9)
