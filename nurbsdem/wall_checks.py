@@ -240,26 +240,48 @@ def nurbs_crossings(geometry, shapes: Sequence, x: np.ndarray,
     the deepest contact of the solver's kernels, in front of the wall or (a one-sided wall)
     behind it."""
     from .contact.detect import table_of
-    from .contact.lcp import F_N, F_SD, I_ACTIVE, I_PB
-    from .contact.mesh_particle import particle_mesh_contacts
+    from .contact.lcp import F_SD, I_ACTIVE
     from .contact.mesh_wall import MeshWall
     from .contact.surface_particle import particle_surface_row
+    if isinstance(geometry, MeshWall):
+        return _nurbs_mesh_crossings(geometry, shapes, x, R)
     front, back = np.zeros(len(x)), np.zeros(len(x))
     for k, shape in enumerate(shapes):
         pos = x[k] - R[k] @ np.asarray(shape.centroid, float)
-        if isinstance(geometry, MeshWall):
-            rf, _ = particle_mesh_contacts(table_of(shape), 0, pos, R[k], geometry)
-            front[k] = max(0.0, -rf[:, F_SD].min()) if len(rf) else 0.0
-            if not geometry.two_sided:
-                rf, ri = particle_mesh_contacts(table_of(shape), 0, pos, R[k],
-                                                replace(geometry, two_sided=True))
-                behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3],
-                                   geometry.normals[ri[:, I_PB]]) > 0
-                back[k] = max(0.0, -rf[behind, F_SD].min()) if behind.any() else 0.0
-            continue
         res_f, res_i, ok = particle_surface_row(table_of(shape), 0, pos, R[k], geometry)
         if ok and res_f[F_SD] < 0:
             (front if res_i[I_ACTIVE] else back)[k] = -res_f[F_SD]
+    return front, back
+
+
+#: contacts of one NURBS particle with a mesh kept by the check (the deepest is what counts)
+_CHECK_ROWS = 32
+
+
+def _nurbs_mesh_crossings(mesh, shapes: Sequence, x: np.ndarray,
+                          R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nurbs_crossings` against a mesh wall: the compiled contact rows of all the
+    particles in one call (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_rows`, the
+    solver's kernel), the deepest of each; behind a one-sided mesh, those of the two-sided
+    mesh whose normal points along the triangle's front."""
+    from .contact.detect import ContactTable
+    from .contact.lcp import F_N, F_SD, I_PB
+    from .contact.mesh_particle_compiled import mesh_rows
+    kinds: dict = {}
+    body_shape = np.array([kinds.setdefault(id(s), len(kinds)) for s in shapes], np.int64)
+    unique = {i: s for s in shapes for i in (kinds[id(s)],)}
+    table = ContactTable([unique[i] for i in range(len(unique))])
+    pos = np.array([x[k] - R[k] @ np.asarray(s.centroid, float) for k, s in enumerate(shapes)])
+    idx = np.arange(len(shapes), dtype=np.int64)
+    front, back = np.zeros(len(x)), np.zeros(len(x))
+    rf, _, owner, _ = mesh_rows(table, mesh, idx, body_shape, pos, R, np.eye(3), np.zeros(3),
+                                _CHECK_ROWS)
+    np.maximum.at(front, owner, -rf[:, F_SD])
+    if not mesh.two_sided:
+        rf, ri, owner, _ = mesh_rows(table, replace(mesh, two_sided=True), idx, body_shape,
+                                     pos, R, np.eye(3), np.zeros(3), _CHECK_ROWS)
+        behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], mesh.normals[ri[:, I_PB]]) > 0
+        np.maximum.at(back, owner[behind], -rf[behind, F_SD])
     return front, back
 
 
