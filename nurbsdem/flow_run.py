@@ -13,10 +13,11 @@ Between two systems the step engine is of fixed size: the tangential springs of 
 surviving contacts go to the new system under their keys renumbered for the new particle
 count (:func:`remap_history`), and its time-step control goes on from the last one's state
 (the exact estimate is taken again only when the gate asks for it,
-:meth:`~nurbsdem.dynamics.substep_control.SubstepControl._first_control_step`); the mechanical energy of the new system less that of the
-last one (the kinetic and potential energy the new particles bring in, less that of the
-particles removed and the elastic energy of their contacts) is booked as external work, so
-that the energy balance of ``monitors/energy.csv`` stays closed.  Monitors:
+:meth:`~nurbsdem.dynamics.substep_control.SubstepControl._first_control_step`); the
+mechanical energy of the new system less that of the last one (the kinetic and potential
+energy the new particles bring in, less that of the particles removed and the elastic
+energy of their contacts) is booked as external work, so that the energy balance of
+``monitors/energy.csv`` stays closed.  Monitors:
 ``monitors/inlet_<name>.csv`` (time, inserted, mass, waiting) and
 ``monitors/outlet_<name>.csv`` (time, count, mass, mass_rate), one row per segment end and
 step end; cumulative counts and masses (kg), mass rate in kg/s.  The state of
