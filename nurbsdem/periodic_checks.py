@@ -14,7 +14,7 @@ PeriodicSpec`) against the rest of a model: one-line errors naming the deck line
   see overlaps through a face (:func:`check_periodic_bodies`).
 * An inlet's region lies inside the cell along its periodic axes (a new particle is placed
   clear of the images across the faces of the cell it is in, :mod:`nurbsdem.dynamics.flow`).
-* Mesh and surface walls and several MPI ranks are refused with a periodic cell.
+* Mesh and surface walls are refused with a periodic cell.
 
 Lengths in metres.
 """
