@@ -11,7 +11,9 @@ Rate × T more particles, and over several steps floor(Rate × their total time)
 
 Between two systems the step engine is of fixed size: the tangential springs of the
 surviving contacts go to the new system under their keys renumbered for the new particle
-count (:func:`remap_history`), and its time-step control goes on from the last one's state
+count (:func:`remap_history`), so do the last LCP rows and certificates of the listed pairs
+with the bodies' odometers (the new scene's warm starts, :func:`_carried_rows`), and its
+time-step control goes on from the last one's state
 (the exact estimate is taken again only when the gate asks for it,
 :meth:`~nurbsdem.dynamics.substep_control.SubstepControl._first_control_step`); the
 mechanical energy of the new system less that of the last one (the kinetic and potential
@@ -218,6 +220,30 @@ def remap_history(keys: np.ndarray, springs: np.ndarray, new_index: np.ndarray,
     return out[kept][order], springs[kept][order]
 
 
+def _carried_rows(scene, new_index: np.ndarray, n_new: int, n_walls: int) -> tuple | None:
+    """The last LCP rows and certificates of the scene's listed pairs (its whole list: on
+    several ranks the gathered one, collective) under the keys of the new system
+    (:func:`remap_history`: the scene's keys count its flat walls only), and the bodies'
+    odometers renumbered (a new particle's at 0), for the new scene
+    (:meth:`~nurbsdem.contact.scene.SceneContacts.carry_rows`); None without a scene."""
+    if scene is None:
+        return None
+    st = scene.state()
+    if "keys" not in st or not len(st["keys"]):
+        return None
+    rows = np.arange(len(st["keys"]), dtype=float)[:, None]
+    keys, idx = remap_history(st["keys"], rows, new_index, n_new, n_walls, 0)
+    idx = idx[:, 0].astype(np.int64)
+    n_old = len(new_index)
+    odo_old = np.asarray(st["odo"], float)
+    odo = np.zeros(n_new + n_walls)
+    kept = new_index >= 0
+    odo[new_index[kept]] = odo_old[:n_old][kept]
+    odo[n_new:] = odo_old[n_old:n_old + n_walls]
+    return (keys, np.asarray(st["rows_f"])[idx], np.asarray(st["rows_i"])[idx],
+            np.asarray(st["budget"])[idx], odo)
+
+
 def exchange(solver, writers) -> None:
     """The end of a segment or step: bodies out through the outlets and in through the
     inlets, the monitor rows written, and the system built anew when the set changed
@@ -259,6 +285,7 @@ def _exchange(solver, writers) -> None:
     solver.carry_hist = remap_history(keys, springs, new_index, n_new,
                                       len(model.walls) + len(model.curved_walls),
                                       len(model.curved_walls))
+    solver.carry_rows = _carried_rows(solver.scene, new_index, n_new, len(model.walls))
     solver.bodies = Bodies.concatenate([survivors, added])
     solver.scene = None
     solver.rebuild(*clock)

@@ -161,6 +161,9 @@ class Solver:
                        "output": 0.0, "setup": 0.0}
         #: the contact history (keys, springs) the last system left to the next one
         self.carry_hist = None
+        #: the last LCP rows (keys, rows_f, rows_i) an exchange of particles left to the next
+        #: scene (:func:`~nurbsdem.flow_run.exchange`)
+        self.carry_rows = None
         self.sigint = SigintDeferral()
         #: where the walls of the running ``MoveWall`` step started and when (``d0``,
         #: ``offsets``, ``t_start``) and its servo walls' state (``servo``:
@@ -184,6 +187,9 @@ class Solver:
                                     self.safety if safety is None else safety,
                                     self.compiled_steps, implicit_damping, accuracy)
         self.scene = self.assembly.scene(self.scene, self.bodies, self.contact_options)
+        if self.carry_rows is not None:      # an exchange's renumbered rows: warm starts
+            self.scene.carry_rows(*self.carry_rows)
+            self.carry_rows = None
         if model.curved_walls:
             self.curved.attach(sysm, self.curved.contacts(self.scene, self.bodies.shape_id))
         else:

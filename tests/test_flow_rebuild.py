@@ -116,3 +116,42 @@ def test_a_rebuilt_system_goes_on_with_the_last_ones_time_step_control(tmp_path,
         if estimates == 0:                               # the gate let the count stand
             assert state == control
     assert sum(e == 0 for _, e, _ in seen) >= 2          # the saving the carry-over is for
+
+
+def _pour_with_rebuilds(folder, monkeypatch, carry: bool):
+    """A pour of 40 spheres into a box, each rebuild's first evaluation's solved pairs and
+    listed pairs recorded; with ``carry`` False the new scenes start cold."""
+    import nurbsdem.flow_run as flow_run
+    seen = []
+    rebuild = Solver.rebuild
+
+    def spy_rebuild(self, *args):
+        rebuild(self, *args)
+        seen.append((self.scene.timers.lcps, len(self.scene.pairs.keys)))
+    monkeypatch.setattr(Solver, "rebuild", spy_rebuild)
+    if not carry:
+        monkeypatch.setattr(flow_run, "_carried_rows", lambda *args: None)
+    sim = _box(folder)
+    sim.add_inlet([shapes.sphere(0.004)], 1, (0.004, 0.004, 0.02, 0.046, 0.046, 0.12),
+                  rate=4000, count=40, seed=2, every=0.002, name="feed")
+    sim.run_dynamic(0.03, 1e-3)
+    bodies = sim.bodies
+    sim.close()
+    return seen, bodies
+
+
+def test_a_rebuilt_scene_starts_from_the_last_ones_rows_and_certificates(tmp_path,
+                                                                          monkeypatch):
+    """At an exchange the new scene takes the listed pairs' last rows and certificates with
+    the bodies' odometers (:func:`nurbsdem.flow_run._carried_rows`): its first evaluation
+    solves only the pairs that are due, where a cold scene solves every listed pair; exact
+    spheres' rows are closed forms, so the run agrees with the cold one to round-off (not to
+    the bit: a certified pair's gap is a lower bound, and the gaps feed the step control)."""
+    warm, end_warm = _pour_with_rebuilds(tmp_path / "warm", monkeypatch, True)
+    monkeypatch.undo()
+    cold, end_cold = _pour_with_rebuilds(tmp_path / "cold", monkeypatch, False)
+    assert len(warm) == len(cold) >= 5
+    assert all(solved == listed for solved, listed in cold)
+    assert sum(s for s, _ in warm) < 0.8 * sum(s for s, _ in cold)
+    np.testing.assert_allclose(end_warm.position, end_cold.position, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(end_warm.velocity, end_cold.velocity, rtol=0, atol=1e-10)

@@ -233,6 +233,22 @@ class SceneContacts:
             st["pair_shift"] = self.pair_shift
         return st
 
+    def carry_rows(self, keys: np.ndarray, rows_f: np.ndarray, rows_i: np.ndarray,
+                   budget: np.ndarray, odo: np.ndarray) -> None:
+        """Start this (new, unbuilt) scene from another scene's last LCP rows and
+        certificates, under their pair keys (L,) here (sorted; an exchange of particles
+        renumbered them, :mod:`nurbsdem.flow_run`), with the bodies' odometers (nb,) the
+        certificates count against: the first list build carries them over, so that a
+        certified pair stays unsolved and the others start warm instead of from cold."""
+        L = len(keys)
+        keys = np.asarray(keys, np.int64)
+        no = np.zeros((L, self.P), np.bool_)
+        self.pairs = _PairState(keys // self.nb, keys % self.nb, keys, no, no.copy(),
+                                np.ascontiguousarray(rows_f, float),
+                                np.ascontiguousarray(rows_i, np.int64),
+                                np.ascontiguousarray(budget, float), np.zeros(L, bool))
+        self.odo = np.array(odo, float)
+
     def set_local_state(self, st: dict) -> None:
         """Restore :meth:`local_state`."""
         self.pairs = _PairState.from_dict(st, self.P)
