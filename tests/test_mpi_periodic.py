@@ -56,6 +56,7 @@ def test_the_periodic_shear_box_on_two_ranks(tmp_path, implicit):
 
 
 @needs_mpi
+@pytest.mark.slow      # the suite's time: test_mpi_flow restarts a pour on two ranks
 def test_the_periodic_shear_box_killed_on_two_ranks_restarts(tmp_path):
     deck = _deck(tmp_path, False)
     _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
