@@ -14,7 +14,10 @@ PeriodicSpec`) against the rest of a model: one-line errors naming the deck line
   see overlaps through a face (:func:`check_periodic_bodies`).
 * An inlet's region lies inside the cell along its periodic axes (a new particle is placed
   clear of the images across the faces of the cell it is in, :mod:`nurbsdem.dynamics.flow`).
-* Mesh and surface walls are refused with a periodic cell.
+* A mesh or surface wall in a periodic cell stays or translates: one that turns is refused
+  (the kicks of the images across the faces take the walls' velocities, not their spins).
+  Like a flat wall it should cover the cell and its margin along the periodic axes, and its
+  shape there repeat with the cell (its own images are not modelled).
 
 Lengths in metres.
 """
@@ -61,12 +64,25 @@ def check_periodic(model: "Model") -> None:
     if p is None:
         return
     _check_inlets(model)
-    if model.curved_walls:
-        w = model.curved_walls[0]
-        raise model.error(f"wall {w.name}: mesh and surface walls cannot be combined with a "
-                          f"periodic cell (line {p.line}); flat walls can", w.line)
+    _check_turning_walls(model)
     check_cell_reach(model, periodic_reach(model))
     _check_walls(model)
+
+
+def _check_turning_walls(model: "Model") -> None:
+    """A mesh or surface wall in a periodic cell does not turn (``MoveWall … Rotate``, or a
+    table with rotations): the kicks of the particles' images across the faces take the
+    walls' velocities, not their spins."""
+    curved = {w.name for w in model.curved_walls}
+    for step in model.steps:
+        for move in (step.moves() if getattr(step, "kind", "") == "movewall" else ()):
+            table = move.table
+            turns = move.rotate or (table is not None and table.rotation is not None
+                                    and bool(np.any(np.asarray(table.rotation) != 0.0)))
+            if move.wall in curved and turns:
+                raise model.error(f"Step {step.id}: wall {move.wall} turns, and a mesh or "
+                                  f"surface wall in a periodic cell (line {model.periodic.line})"
+                                  f" can only translate", step.line)
 
 
 def _check_inlets(model: "Model") -> None:

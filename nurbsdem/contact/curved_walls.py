@@ -390,6 +390,12 @@ class CurvedWallContacts:
         cs = self.base(self._base_kinematics(kin)) if self.base is not None else None
         cs = ContactSet.empty() if cs is None else cs
         N, nb = kin.n_particles, kin.n_bodies
+        shift = np.asarray(cs.wrap, float)
+        if shift.shape[0] == N and N and np.any(shift != 0.0):
+            # the base scene wrapped the centroids into its periodic cell at this build: the
+            # walls meet the particles where the system puts them (it applies the wrap)
+            kin = replace(kin, x=np.asarray(kin.x, float) - shift,
+                          pose_origin=np.asarray(kin.pose_origin, float) - shift)
         parts = []
         for w_i, w in enumerate(self.walls):
             d = kin.wall_displacement[self.first_wall + w_i]
@@ -422,6 +428,10 @@ def _merged(cs: ContactSet, parts: list) -> ContactSet:
                      failed=cs.failed, reused=cs.reused, dropped=cs.dropped,
                      dropped_keys=cs.dropped_keys, near_a=cs.near_a, near_b=cs.near_b,
                      near_point=cs.near_point, near_normal=cs.near_normal, near_gap=cs.near_gap)
+    out.wrap, out.near_image = cs.wrap, cs.near_image      # a periodic cell's (the walls' rows
+    if len(cs.image) == len(cs.body_a):                     # touch no image)
+        out.image = np.concatenate([np.asarray(cs.image, float).reshape(-1, 3),
+                                    np.zeros((k_new, 3))])
     if len(cs.params) == len(cs.body_a):
         out.params = np.concatenate([np.asarray(cs.params, float).reshape(-1, 4),
                                      np.zeros((k_new, 4))])
