@@ -428,8 +428,9 @@ def _merged(cs: ContactSet, parts: list) -> ContactSet:
                      failed=cs.failed, reused=cs.reused, dropped=cs.dropped,
                      dropped_keys=cs.dropped_keys, near_a=cs.near_a, near_b=cs.near_b,
                      near_point=cs.near_point, near_normal=cs.near_normal, near_gap=cs.near_gap)
-    out.wrap, out.near_image = cs.wrap, cs.near_image      # a periodic cell's (the walls' rows
-    if len(cs.image) == len(cs.body_a):                     # touch no image)
+    # a periodic cell's wrap and images go with the scene's rows (the walls' touch no image)
+    out.wrap, out.near_image = cs.wrap, cs.near_image
+    if len(cs.image) == len(cs.body_a):
         out.image = np.concatenate([np.asarray(cs.image, float).reshape(-1, 3),
                                     np.zeros((k_new, 3))])
     if len(cs.params) == len(cs.body_a):
