@@ -7,14 +7,16 @@ booked among the kicks' work in the serial order, and the implicit dashpots of t
 network take an image as its owner as the serial solve does (:mod:`nurbsdem.parallel.domain`).
 The shear box of ``inputs/periodic`` (a periodic bulk under a lid that comes down) on two
 ranks equals the serial run in results.h5, every monitor and the checkpoint, with explicit
-and with implicit dashpots, and after a restart on two ranks; so does a pour into a periodic
-box with a sideways velocity, whose particles cross the faces.
+and with implicit dashpots, with a mesh floor instead of the flat one, and after a restart
+on two ranks; so does a pour into a periodic box with a sideways velocity, whose particles
+cross the faces.
 """
 from __future__ import annotations
 
 import re
 import sys
 
+import numpy as np
 import pytest
 
 from test_mpi import _run, BIN, HERE, RUN, assert_same_run, needs_mpi
@@ -44,10 +46,28 @@ def _deck(folder, implicit: bool):
     return deck
 
 
+def _mesh_floor(folder, deck):
+    """The shear box's flat floor replaced by a two-triangle mesh covering the cell and a
+    margin of 1.5 cm around it."""
+    import trimesh
+    v = np.array([[-0.015, -0.015, 0], [0.075, -0.015, 0], [0.075, 0.075, 0],
+                  [-0.015, 0.075, 0]], float)
+    trimesh.Trimesh(v, np.array([[0, 1, 2], [0, 2, 3]]), process=False).export(
+        folder / "floor.stl")
+    text = deck.read_text()
+    flat = "  Wall 1 Name floor Point 0.03 0.03 0 Normal 0 0 1 Size 0.09 0.09\n"
+    assert flat in text
+    deck.write_text(text.replace(flat, "").replace("Walls\n",
+                                                   "Walls\n  Mesh 3 Name floor File floor.stl\n"))
+
+
 @needs_mpi
-@pytest.mark.parametrize("implicit", [False, True], ids=["explicit", "implicit"])
-def test_the_periodic_shear_box_on_two_ranks(tmp_path, implicit):
+@pytest.mark.parametrize("implicit, mesh", [(False, False), (True, False), (False, True)],
+                         ids=["explicit", "implicit", "mesh floor"])
+def test_the_periodic_shear_box_on_two_ranks(tmp_path, implicit, mesh):
     deck = _deck(tmp_path, implicit)
+    if mesh:
+        _mesh_floor(tmp_path, deck)
     _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
     log = _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "two", "--verbose"], 2)
     ghosts = [tuple(map(int, g)) for g in re.findall(r"ghosts \[(\d+), (\d+)\]", log)]
