@@ -161,8 +161,9 @@ class Solver:
                        "output": 0.0, "setup": 0.0}
         #: the contact history (keys, springs) the last system left to the next one
         self.carry_hist = None
-        #: the last LCP rows (keys, rows_f, rows_i) an exchange of particles left to the next
-        #: scene (:func:`~nurbsdem.flow_run.exchange`)
+        #: the last LCP rows and certificates with the bodies' odometers (keys, rows_f,
+        #: rows_i, budget, odo) an exchange of particles left to the next scene
+        #: (:func:`~nurbsdem.flow_run._carried_rows`)
         self.carry_rows = None
         self.sigint = SigintDeferral()
         #: where the walls of the running ``MoveWall`` step started and when (``d0``,

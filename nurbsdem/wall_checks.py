@@ -267,10 +267,11 @@ def _nurbs_mesh_crossings(mesh, shapes: Sequence, x: np.ndarray,
     from .contact.detect import ContactTable
     from .contact.lcp import F_N, F_SD, I_PB
     from .contact.mesh_particle_compiled import mesh_rows
-    kinds: dict = {}
-    body_shape = np.array([kinds.setdefault(id(s), len(kinds)) for s in shapes], np.int64)
-    unique = {i: s for s in shapes for i in (kinds[id(s)],)}
-    table = ContactTable([unique[i] for i in range(len(unique))])
+    kinds: dict = {}                 # each distinct shape once, in the order first met
+    for s in shapes:
+        kinds.setdefault(id(s), (len(kinds), s))
+    body_shape = np.array([kinds[id(s)][0] for s in shapes], np.int64)
+    table = ContactTable([s for _, s in kinds.values()])
     pos = np.array([x[k] - R[k] @ np.asarray(s.centroid, float) for k, s in enumerate(shapes)])
     idx = np.arange(len(shapes), dtype=np.int64)
     front, back = np.zeros(len(x)), np.zeros(len(x))

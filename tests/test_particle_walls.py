@@ -465,7 +465,8 @@ def test_a_tilted_particle_over_the_rim_of_an_orifice_touches_from_its_first_ove
     mesh = _orifice()
     axes = (0.004, 0.0016, 0.0016)
     table = table_of(shapes.ellipsoid(*axes))
-    for tilt, xs in ((15, np.linspace(0.0075, 0.0095, 11)), (-15, np.linspace(0.0095, 0.0115, 11))):
+    for tilt, xs in ((15, np.linspace(0.0075, 0.0095, 11)),
+                     (-15, np.linspace(0.0095, 0.0115, 11))):
         R = _rotation([0.0, math.radians(tilt), 0.0])
         M = R @ np.diag(np.square(axes)) @ R.T
         depth, poses = [], []

@@ -194,9 +194,10 @@ def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, h
     whole network by the MPI ranks together: :meth:`~nurbsdem.parallel.domain.Domain.
     implicit_dashpots`; empty: solved here); ``own`` (G,): the owners of the last G
     particles, images in a periodic cell (empty: none; the dashpot solve takes an image as its
-    owner, :func:`~nurbsdem.dynamics.implicit.implicit_dashpots`).  Returns (force, torque (B,3), point, f_total,
-    f_damp_n, f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,), coeffs (K,4), slip
-    work J, the stored springs' keys and springs, whether a key repeats)."""
+    owner, :func:`~nurbsdem.dynamics.implicit.implicit_dashpots`).  Returns (force, torque
+    (B,3), point, f_total, f_damp_n, f_damp_t, f_el_t (K,3), fn (K,), e_el (K,2), stick (K,),
+    coeffs (K,4), slip work J, the stored springs' keys and springs, whether a key
+    repeats)."""
     spring = match_history(hist_keys, hist_springs, key)
     given = implicit and h > 0.0 and a.shape[0] > 0
     if given and dashpot.shape[0] != a.shape[0]:

@@ -48,7 +48,8 @@ ENTRIES: dict[tuple[str, str], str] = {
         "Flat walls lie along every periodic axis and cover the cell along it, plus the "
         "largest bounding radius and the skin beyond each face (a floor with normal z under "
         "a cell periodic in x and y). An inlet's region lies inside the cell along its "
-        "periodic axes. Not with mesh or surface walls or several MPI ranks."),
+        "periodic axes. A mesh or surface wall may lie in the cell as a flat one does, "
+        "staying or translating, not turning."),
     ("Materials", "Material"): "A material; particles, walls and interfaces name it by its id.",
     ("Shapes", "Shape"): (
         "A particle shape: exactly one of `File`, `Sphere`, `Ellipsoid`. Mass and inertia "
