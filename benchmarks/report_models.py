@@ -180,7 +180,8 @@ def section_mpi(rep: Report) -> None:
                      "yes" if r["same"] else "**no**"])
     rep.add(f"`benchmarks/bench_mpi.py`: a pack of {n} paper particles settled for {settle} s "
             f"(once, on 2 ranks, from a checkpoint kept in `benchmarks/.cache/`), then {measure} "
-            "deck steps of 1e-3 s from its checkpoint on each configuration (`mpiexec -n P`, "
+            "deck steps of 1e-3 s from its checkpoint on each configuration, after "
+            f"{bench_mpi.WARM_STEPS} deck steps that load the cached kernels (`mpiexec -n P`, "
             "`NUMBA_NUM_THREADS` threads per rank); time of the time loop per deck step, "
             "including the communication and the wait for the slowest rank.\n\n" +
             md_table(["ranks", "threads", "s per deck step", "speed-up", "efficiency",

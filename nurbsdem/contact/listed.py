@@ -221,8 +221,9 @@ def scene_list(st, x, pos, R, wall_d, owned, m, old_keys, old_mask_a, old_mask_b
     any other pair has the poses and m of the old list's build (old_keys sorted, old_mask_a,
     old_mask_b), so it is listed with the old masks if the old list held it and left out if
     not, the same bits as testing it again; the bounding spheres (level 1) likewise, where
-    few bodies are fresh (:func:`_body_pairs`).  A full build: ``fresh`` all True.  (Several MPI
-    ranks build in full: a rank's old list lacks the pairs of particles it did not own.)"""
+    few bodies are fresh (:func:`_body_pairs`).  A full build: ``fresh`` all True.  (An MPI
+    rank builds in full after its owned particles changed: its old list lacks the pairs of
+    particles it did not own.)"""
     N, P = st.n, st.n_patches
     pairs = _body_pairs(st, x, m, old_keys, fresh)
     mine = np.zeros(pairs.shape[0], np.bool_)

@@ -203,6 +203,9 @@ class SceneContacts:
         #: each pair's body B (:mod:`nurbsdem.contact.periodic_scene`)
         self.cell = cell
         self.pair_shift = np.zeros((0, 3), np.int64)
+        #: on several ranks, the owned particles (N,) bool the list holds the pairs of (None:
+        #: not known, the next build is a full one)
+        self._list_owned: np.ndarray | None = None
 
     # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
@@ -252,6 +255,7 @@ class SceneContacts:
     def set_local_state(self, st: dict) -> None:
         """Restore :meth:`local_state`."""
         self.pairs = _PairState.from_dict(st, self.P)
+        self._list_owned = None
         self.odo = np.array(st.get("odo", np.zeros(self.nb)), float)
         # (a checkpoint of an older version has "built_odo", "built_pose" or no "built_pos":
         # the list is built again)
@@ -308,9 +312,11 @@ class SceneContacts:
             built = repose(*self.built_pose, x, R, wall, pos, fresh)
         if self.domain is None:
             owned = np.ones(self.n, np.bool_)
-        else:                   # a rank's old list lacks the pairs of particles it did not own
+        else:
             owned = np.ascontiguousarray(self.domain.owned, np.bool_)
-            fresh = np.ones(self.nb, np.bool_)
+            if self._list_owned is None or not np.array_equal(self._list_owned, owned):
+                fresh = np.ones(self.nb, np.bool_)   # the old list lacks the newly owned pairs
+            self._list_owned = owned.copy()
         ps = self.pairs
         a, b, keys, mask_a, mask_b = scene_list(
             self.tables(), built[0], built[3], built[1], built[2], owned, self.margin + self.skin,
