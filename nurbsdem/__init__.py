@@ -18,10 +18,9 @@ from .errors import GeometryError, InputError, NurbsdemError
 
 # numba's parallel kernels (the LCP batches) run on OpenMP where the GNU OpenMP runtime is
 # there, else on numba's own work queue, unless the user chose a layer. OpenMP's workers wait
-# for the next batch briefly spinning. Measured in the paper example's compaction on 2 cores
-# (an LCP batch of ~200 pairs every ~1 ms): CPU time / wall time of a batch 1.1 on the work
-# queue (its workers sleep between batches and woke too late to share them), 1.85 on OpenMP;
-# the batches' wall time 0.63 x. Not TBB (picked first by numba whenever a
+# for the next batch briefly spinning, so they share the short, frequent LCP batches of a time
+# loop; the work queue's workers sleep between batches and wake too late to share them (on 2
+# cores a batch then runs on about one). Not TBB (picked first by numba whenever a
 # libtbb is installed, e.g. by Debian's yade; last here, and never reached: the work queue is
 # always there): a long run was seen to hang at interpreter exit, spinning in TBB's finaliser
 # after all its output was written. Effective when nurbsdem is imported before numba.

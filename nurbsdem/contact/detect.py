@@ -279,7 +279,8 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
 #: Below this many pairs the batch runs on the calling thread: launching the parallel
 #: region costs more than it saves for a handful of LCPs.
 PARALLEL_MIN_PAIRS = 32
-#: pairs a thread of a parallel batch takes at a time (:func:`next_chunk`): ~50 us of LCPs
+#: pairs a thread of a parallel batch takes at a time (:func:`next_chunk`): enough LCPs that
+#: the shared counter's atomic add is negligible, few enough that the threads end together
 CHUNK_PAIRS = 8
 
 

@@ -61,9 +61,9 @@ from .rigid import omega_world
 
 #: relative residual of the conjugate gradients: |A f + w₀|₂ on the free set ≤ this × scale √K
 #: (scale: the largest |w₀| or f_el/cn, m/s): the velocities after the step 1e-10 of the
-#: scale from the law's, far below what the contact geometry resolves.  1e-12 took 11.9 CG
-#: iterations per solve in the quick paper deck, this 9.7 (the energy ledger takes the work
-#: of the forces applied, so its balance does not see the residual)
+#: scale from the law's, far below what the contact geometry resolves; 1e-12 costs about a
+#: fifth more CG iterations per solve for nothing the balance sees (the energy ledger takes
+#: the work of the forces applied, so its balance does not see the residual)
 CG_TOLERANCE = 1e-10
 #: conjugate-gradient iterations per active-set round (a safeguard; a few tens suffice)
 CG_MAX_ITERATIONS = 500

@@ -552,8 +552,9 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
     def _changed_in_place(self) -> dict[str, np.ndarray]:
         """Copies of the arrays the compiled loop changes in place (:data:`_LOOP_IN_PLACE`):
         what a GUARD return restores.  The loop replaces the rest of the state only when it
-        does not return GUARD (:meth:`DeckSteps.run`), so the rest needs no copy (the 29
-        arrays of :meth:`get_state` took 0.5 ms per call of the loop)."""
+        does not return GUARD (:meth:`DeckSteps.run`), so the rest needs no copy (copying
+        all the arrays of :meth:`get_state` at every call of the loop is the larger cost
+        where the loop returns often, for output)."""
         b = self.bodies
         kept = {k: getattr(self, k).copy() for k in _LOOP_IN_PLACE}
         kept.update(x=b.x.copy(), q=b.q.copy(), v=b.v.copy(), L=b.L.copy())

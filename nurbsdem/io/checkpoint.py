@@ -24,10 +24,10 @@ Layout (format 2): two datasets, ``data`` (uint8: the bytes of every array and b
 one after the other) and ``manifest`` (uint8: JSON UTF-8, the nested structure with each
 leaf's kind, and for arrays their dtype descriptor, shape, offset and length in ``data``;
 floats as ``float.hex``).  Format 1 (a group per dict or list and a dataset per value, each
-tagged with its kind) is still read.  Why: HDF5 creates a dataset or an attribute in ~0.2 ms
-of the interpreter's time; a run's checkpoint of ~70 values took 15-23 ms of CPU in the
-output worker, holding the GIL from the time loop (the paper deck: 67 checkpoints, ~3 s of its
-~25 s wall time); packed, ~1 ms.
+tagged with its kind) is still read.  Why: HDF5 creates each dataset or attribute in the
+interpreter, holding the GIL; a checkpoint of ~70 values written one by one in the output
+worker kept the time loop waiting for a sizeable share of a run that checkpoints often,
+while two datasets are written at once.
 """
 from __future__ import annotations
 

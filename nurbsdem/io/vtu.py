@@ -6,16 +6,15 @@ Why not meshio's writer
 A sample of the paper example's particles holds 67 200 points; meshio compresses every array
 of every sample and base64-encodes it, and three quarters of those bytes never change while the
 bodies stay the same (the connectivity, cell offsets and types, particle and shape ids, patch
-ids): 57 ms per sample, 650 samples, on the one worker thread that competes with the LCP
-threads for the two cores.  :class:`Reuse` keeps each such array's encoded bytes for as long as
+ids), on the one worker thread that competes with the LCP threads for the cores.  :class:`Reuse` keeps each such array's encoded bytes for as long as
 its owner's key (the bodies' ids and shapes) stays the same, so only the points and velocities
 are compressed again.  The arrays are stored in the file's ``AppendedData`` section as raw
 bytes (``encoding="raw"``), each a UInt32 header of block count, block size, last block size
 and compressed sizes followed by its zlib blocks of 32768 bytes: the layout of VTK's own
 writer (``vtkXMLUnstructuredGridWriter`` in its default appended mode), read by ParaView and
 meshio (tests).  Raw instead of base64 (meshio's ``format="binary"``, which earlier versions
-wrote): a quarter smaller files and no encoding pass (the points' base64 was 1.7 of the 7 ms
-a particles sample took); the pieces are written one after the other, never joined.  The
+wrote): a quarter smaller files and no encoding pass (a quarter of a particles sample's
+writing time); the pieces are written one after the other, never joined.  The
 points are stored in zlib's uncompressed blocks (:data:`POINTS_LEVEL`): float coordinates
 hardly compress, and compressing them was most of what was left.
 """
@@ -33,7 +32,7 @@ BLOCK = 32768
 #: zlib level: 1 is ~4 x faster than the default 6 for files ~15 % larger
 LEVEL = 1
 #: the points' coordinates are stored (level 0: zlib's stored blocks): float32 coordinates
-#: shrink by only ~24 % at level 1, for 28 ms of the 37 ms a particles sample took
+#: shrink by only ~24 % at level 1, for three quarters of a particles sample's writing time
 POINTS_LEVEL = 0
 #: VTK cell type codes of the cells the writers produce
 CELL_TYPES = {"vertex": 1, "line": 3, "triangle": 5, "quad": 9}
