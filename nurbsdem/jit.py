@@ -188,6 +188,11 @@ class PointerKernel:
     walls' kernels ("curved"), which a scene without them never calls, so that a first run
     does not compile them.  A call through an empty slot raises ``RuntimeError`` naming the
     kernel.
+
+    :meth:`redirect` points every slot at another kernel of the same signatures and results
+    (the force kernels' copies whose dispatch includes contact laws registered at run time,
+    :func:`~nurbsdem.dynamics.laws.engine.engine_kernels`): callers already compiled or
+    loaded call it from then on.
     """
 
     def __init__(self, dispatcher, name: str, lazy: bool | str = False) -> None:
@@ -198,12 +203,25 @@ class PointerKernel:
         #: the lazy group (None: not lazy)
         self.lazy = ("lcp" if lazy is True else lazy) or None
         self._slots: dict[tuple, tuple] = {}
+        #: the kernel the slots hold (:meth:`redirect`; the dispatcher's own by default)
+        self.target = dispatcher
         _POINTER_KERNELS[name] = self
         if config.DISABLE_JIT:
-            func = dispatcher
-            self.call = lambda args: func(*args)
+            self.call = lambda args: self.target(*args)
         else:
             self.call = _pointer_call(self)
+
+    def redirect(self, target=None) -> None:
+        """Put ``target`` (a kernel taking the same arguments and returning the same types;
+        None: the kernel's own) in every slot, filled now and from now on."""
+        target = self.dispatcher if target is None else target
+        if target is self.target:
+            return
+        self.target = target
+        for argtypes, (slot, _) in list(self._slots.items()):
+            if slot.value:
+                slot.value = 0
+                self.fill(argtypes)
 
     def symbol(self, argtypes: tuple) -> str:
         """The name of the slot of the kernel compiled for ``argtypes``."""
@@ -225,8 +243,11 @@ class PointerKernel:
             self._slots[argtypes] = (slot, types.none)
         slot, restype = self._slots[argtypes]
         if not slot.value and (self.lazy is None or self.lazy in _LAZY_WANTED):
-            self.dispatcher.compile(argtypes)
-            cres = self.dispatcher.overloads[argtypes]
+            self.target.compile(argtypes)
+            cres = self.target.overloads[argtypes]
+            if restype != types.none and cres.signature.return_type != restype:
+                raise TypeError(f"{self.target} returns {cres.signature.return_type}, not "
+                                f"the {restype} of the pointer kernel {self.name}")
             restype = cres.signature.return_type
             if self.lazy is not None and restype != types.none:
                 raise TypeError(f"the lazy pointer kernel {self.name} returns {restype}")

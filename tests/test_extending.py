@@ -136,3 +136,85 @@ def test_registered_law_goes_through_the_interface_front_end(spring_law):
     with pytest.raises(InputError, match="normal_penalty does not apply to a UndampedSpring"):
         build_interface(1, "UndampedSpring", {"Stiffness": 1.0, "NormalPenalty": 1.0}, None,
                         None, front)
+
+
+@dataclass(frozen=True)
+class StiffLinearisation(UndampedSpring):
+    """The spring with a linearisation 1.5 k in EN (the time-step control's, on the safe side):
+    a kernel that fell back to the linear law would push with 1.5 k."""
+
+    name = "StiffLinearisation"
+    model = "stifflinearisation"
+
+    def as_row(self) -> np.ndarray:
+        row = super().as_row()
+        row[EN] = 1.5 * self.k
+        return row
+
+
+def _spring_pack(compiled: bool):
+    """Spheres and exact ellipsoids dropped into a box under the registered spring law (a
+    scene on one rank), with the compiled deck steps or the Python driver; returns the
+    solver after 0.06 s."""
+    from nurbsdem import Simulation, shapes
+    sim = Simulation(gravity=(0.0, 0.0, -9.81))
+    sim._solver_options["compiled_steps"] = compiled
+    sim.add_material(1, 2500.0)
+    sim.add_interface(model="StiffLinearisation", stiffness=2e3)
+    sim.add_box((0.0, 0.0, 0.0), (0.03, 0.03, 0.06))
+    rng = np.random.default_rng(4)
+    for k in range(8):
+        shape = shapes.sphere(0.004) if k % 2 else shapes.ellipsoid(0.005, 0.004, 0.0035)
+        sim.add_particle(shape, 1, (0.0075 + 0.015 * (k % 2), 0.0075 + 0.015 * (k // 2 % 2),
+                                    0.006 + 0.011 * (k // 4)),
+                         rotation=rng.normal(size=3), velocity=rng.normal(scale=0.05, size=3))
+    sim.run_dynamic(0.06, 1e-3)
+    return sim.solver
+
+
+@pytest.fixture
+def stiff_law():
+    code = laws.register(StiffLinearisation, spring_normal, spring_scale)
+    yield code
+    laws.unregister(StiffLinearisation.name)
+
+
+def test_registered_law_runs_in_the_compiled_deck_steps(stiff_law, monkeypatch):
+    """A scene under a registered law runs in the compiled deck steps (through the contact
+    part's copy that dispatches to it, ``contact_part_kernel.redirect``) and ends in the
+    state of the Python driver's run bit for bit; the cached kernel is put back for the
+    built-in laws."""
+    from nurbsdem.dynamics.deck_steps import DeckSteps
+    from nurbsdem.dynamics.step import contact_part, contact_part_kernel
+    loops = []
+    run = DeckSteps.run
+
+    def counted(self, *args, **kwargs):
+        loops.append(self.system._kernels.contact_part)
+        return run(self, *args, **kwargs)
+    monkeypatch.setattr(DeckSteps, "run", counted)
+    fast = _spring_pack(True)
+    assert loops and loops[0] is not contact_part           # the copy, in the compiled loop
+    assert contact_part_kernel.target is loops[0]
+    slow = _spring_pack(False)
+    assert fast.summary.active_total > 0 and fast.summary.steps == slow.summary.steps == 60
+    for name in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(getattr(fast.bodies, name), getattr(slow.bodies, name),
+                                      err_msg=name)
+    laws.unregister(StiffLinearisation.name)
+    try:
+        builtin = _pack_with_builtin_law()
+    finally:
+        laws.register(StiffLinearisation, spring_normal, spring_scale)   # for the teardown
+    assert contact_part_kernel.target is contact_part and builtin.summary.active_total > 0
+
+
+def _pack_with_builtin_law():
+    from nurbsdem import Simulation, shapes
+    sim = Simulation(gravity=(0.0, 0.0, -9.81))
+    sim.add_material(1, 2500.0)
+    sim.add_interface(normal_penalty=2e3)
+    sim.add_box((0.0, 0.0, 0.0), (0.03, 0.03, 0.06))
+    sim.add_particle(shapes.sphere(0.004), 1, (0.015, 0.015, 0.00399))
+    sim.run_dynamic(0.01, 1e-3)
+    return sim.solver

@@ -65,7 +65,6 @@ from ..geometry.curvature import scene_contact_radii
 from ..geometry.rotation import quats_to_matrices
 from ..jit import PointerKernel, cycles, fill_lazy_kernels, internal, seconds_per_cycle
 from .curved_turns import table_turns, turn_walls
-from .laws import builtin_only
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .energy import balance_terms
 from .loop_state import (ACC_CALM, ACC_REFINE, ACC_REPEATS, ACTIVE_MAX, ACTIVE_SUM, BUILDS, CALM,
@@ -79,8 +78,8 @@ from .monitor import record_row, row_width
 from .periodic_steps import (apply_wrap, has_images, image_contact_part, image_kick_part,
                              image_step_start, network_images, pair_images, periodic_const,
                              periodic_list, shift_rows, solve_images, stored_images, wrapped)
-from .step import (all_kinematics, interfaces_defined, kick_part_ptr, spun_contacts,
-                   step_start_ptr)
+from .step import (all_kinematics, contact_part_kernel, interfaces_defined, kick_part_ptr,
+                   spun_contacts, step_start_ptr)
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
@@ -564,8 +563,8 @@ class DeckSteps:
         """The compiled stepper when the provider is a scene on one rank, in a periodic cell
         or not (:mod:`.periodic_steps`), that has been called once (any contact law: the Hertz
         radii of NURBS contacts come from the curvature kernel the Python path calls,
-        :func:`_hertz_radii`) whose laws are all built in
-        (:func:`~nurbsdem.dynamics.laws.builtin_only`), or such a scene without a periodic
+        :func:`_hertz_radii`; a law registered at run time through the contact part's copy
+        whose dispatch includes it, :meth:`_loop`), or such a scene without a periodic
         cell with mesh and surface walls (met by exact spheres and NURBS particles), at rest,
         turning at constant rates or turned by tables (:func:`_curved_provider`); else
         None."""
@@ -576,8 +575,7 @@ class DeckSteps:
         if (not isinstance(scene, SceneContacts) or scene.n == 0 or scene.domain is not None
                 or (scene.cell is not None      # the image bodies' kicks: walls at rest
                     and (curved is not None or system.wall_spin is not None))
-                or scene.prev_pose is None or scene.built_pose is None
-                or not builtin_only(system._table)):    # a law registered at run time
+                or scene.prev_pose is None or scene.built_pose is None):
             return None
         return DeckSteps(system, scene, curved)
 
@@ -657,8 +655,11 @@ class DeckSteps:
     def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, ledger, counters, peak,
               acc_growth, estimate, sample_at, rows, state_at, times):
         """:func:`run_deck_steps` on the system's state (the one call of the loop, so that
-        :meth:`load` and :meth:`run` pass the same argument types)."""
+        :meth:`load` and :meth:`run` pass the same argument types), with the contact part of
+        the system's laws (the cached kernel, or the copy that dispatches to laws registered
+        at run time as well: :func:`~nurbsdem.dynamics.laws.engine.engine_kernels`)."""
         s, b = self.system, self.system.bodies
+        contact_part_kernel.redirect(s._kernels.contact_part)
         return run_deck_steps(
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,

@@ -5,8 +5,7 @@ The compiled deck steps (:mod:`nurbsdem.dynamics.deck_steps`) drive the same par
 on one rank; this driver runs the rest: several MPI ranks (the ghosts' loads exchanged after
 the contact part, the kicks' work logged for the deck end's replay, the guards reduced over
 the ranks), walls that turn (each contact with a turning wall kicks against that wall's point
-velocity), contact providers other than a scene, contact laws registered at run time, and
-each deck step the compiled loop hands back.  Units: SI; global body indices particles
+velocity), contact providers other than a scene, and each deck step the compiled loop hands back.  Units: SI; global body indices particles
 0..N-1, walls N..N+W-1.
 """
 from __future__ import annotations
@@ -80,7 +79,7 @@ def _unpack(cs: Any, n_bodies: int):
 class InternalSteps:
     """The internal steps of one deck step driven from Python, one provider call each (a base
     class of :class:`~nurbsdem.dynamics.system.DemSystem`): what runs on several MPI ranks,
-    with curved or turning walls, contact laws registered at run time and the deck steps the
+    with the curved or turning walls the compiled loop does not take, and the deck steps the
     compiled loop hands back (:mod:`nurbsdem.dynamics.deck_steps`): the step's start (half
     kick with its exact work, the period-2 watch, drift), the provider's contacts, the contact
     part (paper Eq. 16–17) and the second half kick, the compiled loop's parts in its order."""

@@ -222,4 +222,7 @@ def contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys, h
 #: (:class:`~nurbsdem.jit.PointerKernel`): the loop does not compile them again
 step_start_ptr = PointerKernel(step_start, "step_start").call
 kick_part_ptr = PointerKernel(kick_part, "kick_part").call
-contact_part_ptr = PointerKernel(contact_part, "contact_part").call
+#: the contact part's pointer kernel, which :meth:`~nurbsdem.jit.PointerKernel.redirect`
+#: points at the copy whose dispatch includes laws registered at run time
+contact_part_kernel = PointerKernel(contact_part, "contact_part")
+contact_part_ptr = contact_part_kernel.call
