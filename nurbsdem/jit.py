@@ -217,11 +217,21 @@ class PointerKernel:
         target = self.dispatcher if target is None else target
         if target is self.target:
             return
+        filled = {argtypes: self._compiled(target, argtypes, restype)
+                  for argtypes, (slot, restype) in self._slots.items() if slot.value}
         self.target = target
-        for argtypes, (slot, _) in list(self._slots.items()):
-            if slot.value:
-                slot.value = 0
-                self.fill(argtypes)
+        for argtypes, address in filled.items():
+            self._slots[argtypes][0].value = address
+
+    def _compiled(self, target, argtypes: tuple, restype):
+        """The address of ``target`` compiled (or loaded) for ``argtypes``; a slot typed
+        already (``restype`` not none) takes only a kernel of the same result type."""
+        target.compile(argtypes)
+        cres = target.overloads[argtypes]
+        if restype != types.none and cres.signature.return_type != restype:
+            raise TypeError(f"{target} returns {cres.signature.return_type}, not the "
+                            f"{restype} of the pointer kernel {self.name}")
+        return cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
 
     def symbol(self, argtypes: tuple) -> str:
         """The name of the slot of the kernel compiled for ``argtypes``."""
@@ -243,15 +253,11 @@ class PointerKernel:
             self._slots[argtypes] = (slot, types.none)
         slot, restype = self._slots[argtypes]
         if not slot.value and (self.lazy is None or self.lazy in _LAZY_WANTED):
-            self.target.compile(argtypes)
-            cres = self.target.overloads[argtypes]
-            if restype != types.none and cres.signature.return_type != restype:
-                raise TypeError(f"{self.target} returns {cres.signature.return_type}, not "
-                                f"the {restype} of the pointer kernel {self.name}")
-            restype = cres.signature.return_type
+            address = self._compiled(self.target, argtypes, restype)
+            restype = self.target.overloads[argtypes].signature.return_type
             if self.lazy is not None and restype != types.none:
                 raise TypeError(f"the lazy pointer kernel {self.name} returns {restype}")
-            slot.value = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+            slot.value = address
             self._slots[argtypes] = (slot, restype)
         return restype
 

@@ -63,3 +63,33 @@ def test_an_empty_lazy_slot_raises_until_filled(lazy_kernel):
     jit.fill_lazy_kernels()
     caller(2.0, x, y)
     assert np.array_equal(y, 2.0 * x)
+
+
+@njit
+def _axmy(a, x, y):
+    for i in range(x.shape[0]):
+        y[i] -= a * x[i]
+    return y.sum()
+
+
+@njit
+def _nothing(a, x, y):
+    pass
+
+
+def test_a_redirected_pointer_calls_the_other_kernel_from_compiled_callers():
+    """``redirect`` puts another kernel of the same signature in the slots a caller already
+    compiled holds; ``redirect()`` puts the kernel's own back; a kernel of another result
+    type is refused."""
+    x = np.arange(4.0)
+    _twice(1.0, x, np.zeros(4))                      # the caller compiled, the slot filled
+    try:
+        AXPY.redirect(_axmy)
+        y = np.zeros(4)
+        assert _twice(1.0, x, y) == -(6.0 + 12.0) and np.array_equal(y, -2.0 * x)
+        with pytest.raises(TypeError, match="returns none, not the float64"):
+            AXPY.redirect(_nothing)
+    finally:
+        AXPY.redirect()
+    y = np.zeros(4)
+    assert _twice(1.0, x, y) == 6.0 + 12.0 and np.array_equal(y, 2.0 * x)

@@ -133,14 +133,37 @@ def test_the_list_goes_stale_on_displacement_not_on_path():
     assert list_is_stale(*built, x, R, wall, radius, 0.0)  # no skin: built at every call
 
 
+class _RankOwning:
+    """What a scene asks of its MPI domain (:class:`~nurbsdem.parallel.Domain`), for a rank
+    that owns the particles ``owned`` (N,) bool and is the only rank."""
+
+    def __init__(self, owned: np.ndarray) -> None:
+        self.owned = owned
+        self.lcps = self.failed = 0
+
+    def any(self, flag: bool) -> bool:
+        return bool(flag)
+
+    def sync_for_build(self, kin):
+        return kin
+
+    def after_build(self, a, b) -> None:
+        pass
+
+    def counted(self, a) -> np.ndarray:
+        return self.owned[np.asarray(a, np.int64)]
+
+
 @pytest.mark.parametrize("side", [3, 6])
-def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
+@pytest.mark.parametrize("rank", [False, True], ids=["serial", "rank"])
+def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side, rank):
     """Each body keeps its own built pose: a rebuild renews the poses of the bodies (and
     walls) that moved more than REPOSE_FRACTION of half the skin and tests only their pairs'
     patch boxes (and, past ALL_PAIRS_MAX bodies, searches only their bounding spheres); the
     list equals a full build at the bodies' built poses, to the bit, and still holds every
     pair whose bounding spheres and patch boxes overlap at the present poses (with at least
-    those candidate patches)."""
+    those candidate patches).  The same on an MPI rank that owns half of the particles: its
+    list holds the pairs with an owned particle, as its full build would."""
     from scipy.spatial.transform import Rotation
 
     from nurbsdem.contact.boxes import candidate_patch_masks_batch_jit
@@ -161,6 +184,10 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
     W = len(walls)
     skin = 2e-3
     scene = SceneContacts(shapes, body_shape, walls, skin=skin)
+    owned = np.ones(n, np.bool_)
+    if rank:
+        owned = x[:, 0] < np.median(x[:, 0])
+        scene.domain = _RankOwning(owned)
     kin = kinematics(x, R, shapes, body_shape, W)
     scene(kin)
     assert scene.builds == 1
@@ -185,7 +212,7 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
         np.testing.assert_array_equal(bx[~renewed], old[0][~renewed])
         np.testing.assert_array_equal(bx[renewed], x[renewed])
         assert np.all(np.linalg.norm(x - bx, axis=1) <= REPOSE_FRACTION * skin / 2 + 0.03 * skin)
-        full = scene_list(scene.tables(), bx, bp, bR, bw, np.ones(n, np.bool_), m,
+        full = scene_list(scene.tables(), bx, bp, bR, bw, owned, m,
                           np.zeros(0, np.int64), np.zeros((0, scene.P), np.bool_),
                           np.zeros((0, scene.P), np.bool_), np.ones(n + W, np.bool_))
         ps = scene.pairs
@@ -197,6 +224,7 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
         r = scene.radius
         nurbs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
                           if (body_shape[i] == 0 or body_shape[j] == 0)
+                          and (owned[i] or owned[j])
                           and np.linalg.norm(x[i] - x[j]) < r[i] + r[j]])
         t = scene.tables()
         keep, ma, mb = candidate_patch_masks_batch_jit(t.boxes, t.box_offsets, t.body_shape,
@@ -206,6 +234,17 @@ def test_a_rebuild_renews_only_the_moved_bodies_and_equals_a_full_build(side):
         for (i, j), a_, b_ in zip(nurbs[keep], ma[keep], mb[keep]):
             r = listed[int(i * scene.nb + j)]
             assert np.all(ps.mask_a[r] >= a_) and np.all(ps.mask_b[r] >= b_)
+    if rank:        # a re-cut: the rank's next build lists the newly owned particles' pairs
+        owned = ~owned
+        scene.domain = _RankOwning(owned)
+        x = x + [[0.0, 0.0, skin]] * (np.arange(n)[:, None] == 0)
+        scene(kinematics(x, R, shapes, body_shape, W))
+        bx, bR, bw, bp = scene.built_pose
+        full = scene_list(scene.tables(), bx, bp, bR, bw, owned, m, np.zeros(0, np.int64),
+                          np.zeros((0, scene.P), np.bool_), np.zeros((0, scene.P), np.bool_),
+                          np.ones(n + W, np.bool_))
+        for got, want in zip((scene.pairs.a, scene.pairs.b, scene.pairs.keys), full):
+            np.testing.assert_array_equal(got, want)
 
 
 def test_every_contact_is_among_the_rows_just_solved(tmp_path, monkeypatch):
