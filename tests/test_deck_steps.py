@@ -97,13 +97,16 @@ def test_compiled_nurbs_steps_equal_the_python_path(tmp_path, monkeypatch, name,
 
 def test_a_guard_return_hands_the_deck_steps_to_the_python_path(tmp_path, monkeypatch):
     """What the loop's caller does when an LCP fails in the compiled loop (it returns GUARD at
-    deck step ``done``): the system and the scene are rolled back to the call's start and the
-    Python path runs those deck steps, answering the failure.  A failure cannot be injected
-    into compiled code, so here two calls of the loop in three claim one at their last deck
-    step: paper particles, the same bits and counts as the Python path alone."""
+    deck step ``done``): the system and the scene are rolled back to the call's start, the
+    deck steps before the failed one run in the loop again, and the Python path runs the
+    failed one alone, answering the failure.  A failure cannot be injected into compiled
+    code, so here two calls of the loop in three claim one at their last deck step (and, run
+    again, at the one before): paper particles, the same bits and counts as the Python path
+    alone, the Python path running only the claimed deck steps."""
     from nurbsdem.dynamics import deck_steps
     original = deck_steps.run_deck_steps
     claimed = []
+    python_steps = []
 
     def failing(*args):
         status, done, *rest = original(*args)
@@ -111,11 +114,23 @@ def test_a_guard_return_hands_the_deck_steps_to_the_python_path(tmp_path, monkey
         claimed.append(claim)
         return (deck_steps.GUARD, done - 1, *rest) if claim else (status, done, *rest)
     monkeypatch.setattr(deck_steps, "run_deck_steps", failing)
-    (py, s_py), (cc, s_cc) = _both_paths(tmp_path, "paper.inp", PAPER)
+    deck = tmp_path / "paper.inp"
+    deck.write_text(PAPER)
+    py, cc = tmp_path / "python", tmp_path / "compiled"
+    s_py = Solver(parse_deck(deck), output=py, quiet=True, compiled_steps=False).run()
+    step = system_module.DemSystem.step
+
+    def counted(self):
+        python_steps.append(self.time)
+        return step(self)
+    monkeypatch.setattr(system_module.DemSystem, "step", counted)
+    s_cc = Solver(parse_deck(deck), output=cc, quiet=True).run()
     _same_results(py, cc)
     for key in ("steps", "substeps", "lcps", "active_total", "active_max", "degenerated"):
         assert getattr(s_py, key) == getattr(s_cc, key), key
     assert sum(claimed) >= 3
+    # a deck step claimed at the start of a call (done 0) is the one the Python path repeats
+    assert 1 <= len(python_steps) < s_cc.steps // 2
 
 
 def _hertz(text: str) -> str:

@@ -41,9 +41,10 @@ The loop returns to Python
   factor fell (the walls' kinematics are tabulated per internal step for one count),
 * with :data:`GUARD` when a guard fires, a contact between materials without an interface
   occurs or an LCP fails (even after its cold retry) in deck step ``done + 1``: the caller
-  restores the state of the loop's start and runs those deck steps in Python, which repeats
-  the failed one with more sub-steps, answers the failed LCP once with its moved solution
-  (:mod:`nurbsdem.contact.scene`), or raises.
+  restores the state of the loop's start and runs the ``done`` deck steps before it in the
+  loop again; the failed one, first in the next call, fails there at once and is repeated
+  in Python alone, which repeats it with more sub-steps, answers the failed LCP once with
+  its moved solution (:mod:`nurbsdem.contact.scene`), or raises.
 
 Units: SI (m, s, kg); global body indices particles 0..N-1, walls N..N+W-1.
 """

@@ -507,10 +507,11 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         A scene provider on one rank (:class:`~nurbsdem.dynamics.deck_steps.DeckSteps`; not
         Hertz–Mindlin with NURBS particles) runs them in compiled code, with the same results
         as :meth:`step`; it returns early when the time-step control changes the sub-step
-        count (it takes the exact estimate itself where the count stands), and a deck step on
-        which a guard fires or an LCP fails is repeated by :meth:`step`
-        (which refines it, answers the failed LCP, or raises).  Other scenes: one
-        :meth:`step`."""
+        count (it takes the exact estimate itself where the count stands).  When a guard fires
+        or an LCP fails in a deck step, the call is rolled back and the deck steps before that
+        one are run again in the loop (the same bits), so that the failed one comes first in
+        the next call: there it is repeated by :meth:`step` alone (which refines it, answers
+        the failed LCP, or raises).  Other scenes: one :meth:`step`."""
         self.initialize()
         fast = self._compiled_stepper() if n_max >= 1 else None
         sample_at = (np.zeros(max(int(n_max), 1), bool) if sample_at is None
@@ -530,9 +531,11 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
             if status == GUARD:
                 self._put_back(good)
                 self.provider.restore(snap)
-                for j in range(done + 1):
-                    self._tallied_step(bool(sample_at[j]), bool(state_at[j]) and j < done)
-                return done + 1
+                if done == 0:       # the Python path repeats it: refined, answered or raised
+                    self._tallied_step(bool(sample_at[0]))
+                    return 1
+                n_max = done        # the deck steps before it again (the same bits); the
+                continue            # failed one is the next call's first
             if status != REFINE or done:
                 break       # REFINE on the first deck step: again with the new count
         W = self.walls.n
