@@ -25,8 +25,9 @@ failed rows that remain are left to the scene (moved solution or left out, once)
 
 The kernels and their inputs are those of the per-pair functions (``detect_batch``,
 ``detect_wall_batch``, ``sphere_nurbs_rows``): the rows are the same to the bit; only the
-Python around them, per pair kind and evaluation, is gone.  Units: metres; rows in the column layout of :mod:`nurbsdem.contact.lcp`; global body
-indices (particles 0..N-1, walls N..N+W-1).
+Python around them, per pair kind and evaluation, is gone.  Units: metres; rows in the
+column layout of :mod:`nurbsdem.contact.lcp`; global body indices (particles 0..N-1, walls
+N..N+W-1).
 """
 from __future__ import annotations
 

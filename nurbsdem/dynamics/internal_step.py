@@ -5,8 +5,8 @@ The compiled deck steps (:mod:`nurbsdem.dynamics.deck_steps`) drive the same par
 on one rank; this driver runs the rest: several MPI ranks (the ghosts' loads exchanged after
 the contact part, the kicks' work logged for the deck end's replay, the guards reduced over
 the ranks), walls that turn (each contact with a turning wall kicks against that wall's point
-velocity), contact providers other than a scene, and each deck step the compiled loop hands back.  Units: SI; global body indices particles
-0..N-1, walls N..N+W-1.
+velocity), contact providers other than a scene, and each deck step the compiled loop
+hands back.  Units: SI; global body indices particles 0..N-1, walls N..N+W-1.
 """
 from __future__ import annotations
 

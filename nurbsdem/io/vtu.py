@@ -6,9 +6,10 @@ Why not meshio's writer
 A sample of the paper example's particles holds 67 200 points; meshio compresses every array
 of every sample and base64-encodes it, and three quarters of those bytes never change while the
 bodies stay the same (the connectivity, cell offsets and types, particle and shape ids, patch
-ids), on the one worker thread that competes with the LCP threads for the cores.  :class:`Reuse` keeps each such array's encoded bytes for as long as
-its owner's key (the bodies' ids and shapes) stays the same, so only the points and velocities
-are compressed again.  The arrays are stored in the file's ``AppendedData`` section as raw
+ids), on the one worker thread that competes with the LCP threads for the cores.
+:class:`Reuse` keeps each such array's encoded bytes for as long as its owner's key (the
+bodies' ids and shapes) stays the same, so only the points and velocities are compressed
+again.  The arrays are stored in the file's ``AppendedData`` section as raw
 bytes (``encoding="raw"``), each a UInt32 header of block count, block size, last block size
 and compressed sizes followed by its zlib blocks of 32768 bytes: the layout of VTK's own
 writer (``vtkXMLUnstructuredGridWriter`` in its default appended mode), read by ParaView and
