@@ -154,8 +154,9 @@ def test_contact_arrays_on_threads_have_the_bits_of_one_thread(threads):
     rows_f, rows_i = rng.normal(size=(M, NF)), rng.integers(0, 9, (M, NI))
     a, b, keys = rng.integers(0, 99, M), rng.integers(0, 99, M), np.arange(M) * 7
     sel = np.sort(rng.choice(M, THREADED_ROWS + 5, replace=False))
-    whole = active_arrays(rows_f, rows_i, a, b, keys, sel)
-    parts = [active_arrays(rows_f, rows_i, a, b, keys, sel[sl]) for sl in _slices(sel.size)]
+    whole = active_arrays(rows_f, rows_i, a, b, keys, sel, np.int64(0))
+    parts = [active_arrays(rows_f, rows_i, a, b, keys, sel[sl], np.int64(0))
+             for sl in _slices(sel.size)]
     for k, arr in enumerate(whole):
         assert _same(arr, np.concatenate([p[k] for p in parts]))
 

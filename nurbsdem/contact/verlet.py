@@ -379,15 +379,18 @@ def _active_threads(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, p
 
 @njit(cache=True)
 def active_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.ndarray,
-                  keys: np.ndarray, sel: np.ndarray):
+                  keys: np.ndarray, sel: np.ndarray, room: int):
     """Per active contact (the list positions ``sel``): body_a, body_b, point_a, point_b (m),
     normal, depth (m), key, degeneration level, params (uA, vA, uB, vB), patch_a, patch_b
-    (gathered on threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts)."""
+    (gathered on threads from :data:`~nurbsdem.jit.THREADED_ROWS` contacts), each array with
+    ``room`` rows more at its end, not written (where the compiled loop puts the contacts with
+    mesh and surface walls: no second copy of the arrays)."""
     K = sel.shape[0]
-    ca, cb, key = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
-    pa, pb, nrm, params = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 4))
-    depth = np.empty(K)
-    deg, patch_a, patch_b = np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64)
+    T = K + room
+    ca, cb, key = np.empty(T, np.int64), np.empty(T, np.int64), np.empty(T, np.int64)
+    pa, pb, nrm, params = np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 4))
+    depth = np.empty(T)
+    deg, patch_a, patch_b = np.empty(T, np.int64), np.empty(T, np.int64), np.empty(T, np.int64)
     if K >= THREADED_ROWS:
         _active_threads(rows_f, rows_i, a, b, keys, sel, ca, cb, key, pa, pb, nrm, params,
                         depth, deg, patch_a, patch_b)
@@ -421,5 +424,5 @@ def contact_arrays(rows_f: np.ndarray, rows_i: np.ndarray, a: np.ndarray, b: np.
     patch_b (:func:`active_arrays`); per separated pair near_a, near_b, near_point (midpoint
     of the closest points, m), near_normal, near_gap (m) (:func:`near_arrays`)."""
     sel, near, gap = active_and_near(rows_f, rows_i, budget, reach)
-    return (active_arrays(rows_f, rows_i, a, b, keys, sel)
+    return (active_arrays(rows_f, rows_i, a, b, keys, sel, np.int64(0))
             + near_arrays(rows_f, a, b, near, gap))

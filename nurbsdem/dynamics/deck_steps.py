@@ -166,22 +166,21 @@ def _hertz_radii(sc, a, b, patch_a, patch_b, params, nrm, deg, R):
 
 
 @internal
-def _with_curved(curved, cwork, time, x, R, pos, wall_d, a, b, pa, pb, nrm, dep, key, deg,
-                 params, patch_a, patch_b):
-    """The scene's active contact arrays followed by those of the particles with the mesh and
-    surface walls (:func:`~nurbsdem.contact.curved_compiled.curved_contacts`, particles' pose
-    rotations R and origins pos; no surface parameters: patch −1), as the Python driver's
-    provider merges them (none where a contact was refused: ``cwork.count[0]`` −1)."""
-    curved_contacts_ptr((curved, cwork, time, x, R, pos, wall_d))
-    k = max(cwork.count[0], 0)
-    w = cwork
-    return (np.concatenate((a, w.out_a[:k])), np.concatenate((b, w.out_b[:k])),
-            np.concatenate((pa, w.out_pa[:k])), np.concatenate((pb, w.out_pb[:k])),
-            np.concatenate((nrm, w.out_normal[:k])), np.concatenate((dep, w.out_depth[:k])),
-            np.concatenate((key, w.out_key[:k])), np.concatenate((deg, np.zeros(k, deg.dtype))),
-            np.concatenate((params, np.zeros((k, 4)))),
-            np.concatenate((patch_a, np.full(k, -1, patch_a.dtype))),
-            np.concatenate((patch_b, np.full(k, -1, patch_b.dtype))))
+def _put_curved(cwork, K0, a, b, pa, pb, nrm, dep, key, deg, params, patch_a, patch_b):
+    """The contacts of the particles with the mesh and surface walls (``cwork``'s, of
+    :func:`~nurbsdem.contact.curved_compiled.curved_contacts`: no surface parameters, patch
+    −1) into the rows K0 .. of the active contact arrays, after the scene's, as the Python
+    driver's provider merges them."""
+    for r in range(cwork.count[0]):
+        c = K0 + r
+        a[c], b[c], key[c] = cwork.out_a[r], cwork.out_b[r], cwork.out_key[r]
+        for k in range(3):
+            pa[c, k] = cwork.out_pa[r, k]
+            pb[c, k] = cwork.out_pb[r, k]
+            nrm[c, k] = cwork.out_normal[r, k]
+        for k in range(4):
+            params[c, k] = 0.0
+        dep[c], deg[c], patch_a[c], patch_b[c] = cwork.out_depth[r], 0, -1, -1
 
 
 @internal
@@ -196,22 +195,23 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     positions: :func:`~nurbsdem.contact.verlet.active_rows`); the separated pairs, which only
     the time-step control at the end of a deck step takes, with ``full`` only (else none).
     The contacts of the particles with mesh and surface walls ``curved`` at ``time`` (s) follow
-    the scene's (:func:`_with_curved`; ``cwork``: their workspaces; ``spin`` (W,6): each
+    the scene's (:func:`_put_curved`; ``cwork``: their workspaces; ``spin`` (W,6): each
     wall's angular velocity, rad/s, and centre, m).  Returns (True, the new
     Evaluation), or (False, ev) when a contact has no interface (the Python path raises the
     error)."""
     act = active_rows(pl.rows_i, due)
-    (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
-     patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys, act)
-    monitored = due.shape[0]
-    if curved.n_walls:             # the provider counts the curved walls' contacts monitored
-        K0 = a.shape[0]
-        (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
-         patch_b) = _with_curved(curved, cwork, time, x, R, pos, wall_d, a, b, pa, pb, nrm,
-                                 dep, key, deg, params, patch_a, patch_b)
+    k = 0
+    if curved.n_walls:             # the particles' contacts with the mesh and surface walls
+        curved_contacts_ptr((curved, cwork, time, x, R, pos, wall_d))
         if cwork.count[0] < 0:     # a refused surface contact: the Python driver raises it
             return False, ev
-        monitored += a.shape[0] - K0
+        k = cwork.count[0]
+    (a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
+     patch_b) = active_arrays(pl.rows_f, pl.rows_i, pl.a, pl.b, pl.keys, act, np.int64(k))
+    if k:                          # after the scene's, as the Python driver's provider
+        _put_curved(cwork, act.shape[0], a, b, pa, pb, nrm, dep, key, deg, params, patch_a,
+                    patch_b)
+    monitored = due.shape[0] + k   # the provider counts the curved walls' contacts monitored
     if full:
         near, gap = near_pairs(pl.rows_f, pl.rows_i, pl.budget, reach)
     else:
