@@ -302,11 +302,11 @@ def test_lcp_sweep_near_convex_all_seeds(sweep_table, regime):
     """The full hard-case sweep (4 800 solves per regime, and 2 400 of the
     perturbed poses that give the warm starts): no failure, cold, warm or perturbed, and the
     signed distance within the non-convexity height of the reference (the probe touching the
-    feature point); the contact points agree with the depth. Seed 110 used to fail in the
-    normal and deep regimes (a stalled search on a lower maximum of the support problem at
-    a saddle, lcp.solve_pair "saddle stall"); 116 perturbed poses failed while the measured
-    height was the sampled one (1.103e-7 m for 1.217e-7 m) and one more (seed 108, grazing)
-    while phi's convergence was judged over a fixed 10–20 iteration window.
+    feature point); the contact points agree with the depth. The hard seeds: 110 (normal and
+    deep: a search that stalls on a lower maximum of the support problem at a saddle,
+    lcp.solve_pair "saddle stall"), the perturbed poses where a sampled height would be below
+    the measured one (1.103e-7 m for 1.217e-7 m), and 108 (grazing: phi's convergence judged
+    over a fixed 10–20 iteration window would stop early).
 
     Perturbed poses: the probe centre moves by dc relative to A. The distance to A's convex
     hull is convex in the centre, with gradient n (the unperturbed normal) and Hessian at

@@ -102,7 +102,8 @@ def test_a_guard_return_hands_the_deck_steps_to_the_python_path(tmp_path, monkey
     failed one alone, answering the failure.  A failure cannot be injected into compiled
     code, so here two calls of the loop in three claim one at their last deck step (and, run
     again, at the one before): paper particles, the same bits and counts as the Python path
-    alone, the Python path running only the claimed deck steps."""
+    alone, with the Python path repeating only deck steps claimed at a call's start (fewer
+    than half of all the deck steps)."""
     from nurbsdem.dynamics import deck_steps
     original = deck_steps.run_deck_steps
     claimed = []

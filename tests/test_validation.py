@@ -400,7 +400,8 @@ def test_replicating_through_the_lid_is_refused_at_run_time(tmp_path):
 
 
 def test_random_group_beyond_jamming_is_refused_at_once(tmp_path):
-    """A million spheres in a small region used to try for hours before failing."""
+    """100 000 spheres in a region far too small for them are refused at once (placing them
+    would try for hours before failing)."""
     text = DECK.replace(P2, P2 + "\n  Random 3 Shapes 1 Counts 100000 Material 1 Region "
                         "0 0 0 0.25 0.25 0.25")
     with pytest.raises(InputError) as info:
