@@ -601,8 +601,15 @@ def _tell_first_compilation() -> None:
     """One log line when numba's cache lacks the compiled loop (a fresh install, an upgrade
     or an edited source): the run starts only after minutes of compiling."""
     import logging
+
+    from numba.core import config
+
     from .cachecheck import compiles_first
-    if compiles_first():
+    if config.DISABLE_JIT:
+        logging.getLogger("nurbsdem").info(
+            "NUMBA_DISABLE_JIT is set: the kernels run as plain Python (for debugging; "
+            "hundreds of times slower, the same results)")
+    elif compiles_first():
         logging.getLogger("nurbsdem").info(
             "compiling the kernels for this machine first (once after an install, an upgrade "
             "or an edit of their sources; `nurbsdem warmup` compiles them ahead; later runs "

@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 from llvmlite import ir
 from numba import njit, types
-from numba.core import cgutils
+from numba.core import cgutils, config
 from numba.extending import intrinsic
 
 
@@ -122,6 +122,19 @@ def fetch_add(typingctx, counter, amount):
         value = context.cast(builder, args[1], signature.args[1], types.int64)
         return builder.atomic_rmw("add", ptr, value, "monotonic")
     return types.int64(counter, amount), codegen
+
+
+if config.DISABLE_JIT:
+    # plain Python (NUMBA_DISABLE_JIT=1, for debugging): intrinsics have no Python form
+    def cycles() -> int:  # noqa: F811
+        """:func:`cycles` in plain Python: the ``time.perf_counter_ns`` clock."""
+        return time.perf_counter_ns()
+
+    def fetch_add(counter: np.ndarray, amount: int) -> int:  # noqa: F811
+        """:func:`fetch_add` in plain Python (one thread: no atomics needed)."""
+        before = int(counter[0])
+        counter[0] += amount
+        return before
 
 
 @njit(cache=True)

@@ -124,7 +124,7 @@ def _run_tokens(out: np.ndarray, state: np.ndarray, row: np.ndarray, phase: int,
     rec = row.shape[0]
     lit = min(rec, n)
     for t in range(lit):
-        _put_symbol(out, state, row[(phase + t) % rec])
+        _put_symbol(out, state, np.int64(row[(phase + t) % rec]))
     left = n - lit
     while left >= 3:
         length = min(MAX_MATCH, left)
@@ -133,7 +133,7 @@ def _run_tokens(out: np.ndarray, state: np.ndarray, row: np.ndarray, phase: int,
         _put_copy(out, state, length, rec)
         left -= length
     for t in range(left):                  # 1 or 2 bytes: literals
-        _put_symbol(out, state, row[(phase + n - left + t) % rec])
+        _put_symbol(out, state, np.int64(row[(phase + n - left + t) % rec]))
 
 
 @njit(cache=True)
