@@ -146,9 +146,10 @@ def test_two_ranks_give_the_serial_run_bit_for_bit(serial, tmp_path):
 
 @needs_mpi
 @pytest.mark.slow      # the suite's time: two_ranks_give_the_serial_run covers 2 ranks by default
-def test_hertz_mindlin_on_two_ranks(tmp_path):
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_hertz_mindlin_on_several_ranks(tmp_path, ranks):
     """Hertz–Mindlin laws (the exact curvature per contact, its fallback count in
-    monitors/hertz.csv) on 2 ranks: the serial results."""
+    monitors/hertz.csv) on 2 and 3 ranks: the serial results."""
     text = DECK.read_text().replace("../../../inputs", str(HERE.parent / "inputs"))
     text = text.replace("Material 1 Density 2700",
                         "Material 1 Density 2700 YoungModulus 7e7 PoissonRatio 0.3")
@@ -160,7 +161,7 @@ def test_hertz_mindlin_on_two_ranks(tmp_path):
     deck = tmp_path / "hertz.inp"
     deck.write_text(text)
     _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "ref"])
-    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "out"], 2)
+    _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "out"], ranks)
     assert_same_run(tmp_path / "out", tmp_path / "ref")
 
 
