@@ -91,50 +91,48 @@ def internal(func: Callable | None = None, *, inline: str = "never"):
 HAS_CYCLE_COUNTER = platform.machine().lower() in ("x86_64", "amd64")
 
 
-@intrinsic
-def cycles(typingctx):
-    """The CPU's cycle counter (int64; ``llvm.readcyclecounter``: the time-stamp counter on
-    x86-64; 0 elsewhere), for timing parts of a compiled loop; :func:`seconds_per_cycle`
-    converts."""
-    def codegen(context, builder, signature, args):
-        if not HAS_CYCLE_COUNTER:
-            return ir.Constant(ir.IntType(64), 0)
-        fn = cgutils.get_or_insert_function(builder.module,
-                                            ir.FunctionType(ir.IntType(64), []),
-                                            "llvm.readcyclecounter")
-        return builder.call(fn, [])
-    return types.int64(), codegen
-
-
-@intrinsic
-def fetch_add(typingctx, counter, amount):
-    """Atomically add ``amount`` to ``counter[0]`` (a 1-d int64 array) and return its value
-    before (``atomicrmw add``, monotonic): threads of a parallel loop taking chunks of work
-    from a shared counter (:func:`nurbsdem.contact.detect.next_chunk`)."""
-    if not (isinstance(counter, types.Array) and counter.dtype == types.int64
-            and counter.ndim == 1 and isinstance(amount, types.Integer)):
-        return None
-
-    def codegen(context, builder, signature, args):
-        ary = context.make_array(signature.args[0])(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, signature.args[0], ary,
-                                       [context.get_constant(types.intp, 0)])
-        value = context.cast(builder, args[1], signature.args[1], types.int64)
-        return builder.atomic_rmw("add", ptr, value, "monotonic")
-    return types.int64(counter, amount), codegen
-
-
 if config.DISABLE_JIT:
-    # plain Python (NUMBA_DISABLE_JIT=1, for debugging): intrinsics have no Python form
-    def cycles() -> int:  # noqa: F811
+    # plain Python (NUMBA_DISABLE_JIT=1, for debugging): an intrinsic has no Python form
+    def cycles() -> int:
         """:func:`cycles` in plain Python: the ``time.perf_counter_ns`` clock."""
         return time.perf_counter_ns()
 
-    def fetch_add(counter: np.ndarray, amount: int) -> int:  # noqa: F811
+    def fetch_add(counter: np.ndarray, amount: int) -> int:
         """:func:`fetch_add` in plain Python (one thread: no atomics needed)."""
         before = int(counter[0])
         counter[0] += amount
         return before
+else:
+    @intrinsic
+    def cycles(typingctx):
+        """The CPU's cycle counter (int64; ``llvm.readcyclecounter``: the time-stamp counter on
+        x86-64; 0 elsewhere), for timing parts of a compiled loop; :func:`seconds_per_cycle`
+        converts."""
+        def codegen(context, builder, signature, args):
+            if not HAS_CYCLE_COUNTER:
+                return ir.Constant(ir.IntType(64), 0)
+            fn = cgutils.get_or_insert_function(builder.module,
+                                                ir.FunctionType(ir.IntType(64), []),
+                                                "llvm.readcyclecounter")
+            return builder.call(fn, [])
+        return types.int64(), codegen
+
+    @intrinsic
+    def fetch_add(typingctx, counter, amount):
+        """Atomically add ``amount`` to ``counter[0]`` (a 1-d int64 array) and return its value
+        before (``atomicrmw add``, monotonic): threads of a parallel loop taking chunks of work
+        from a shared counter (:func:`nurbsdem.contact.detect.next_chunk`)."""
+        if not (isinstance(counter, types.Array) and counter.dtype == types.int64
+                and counter.ndim == 1 and isinstance(amount, types.Integer)):
+            return None
+
+        def codegen(context, builder, signature, args):
+            ary = context.make_array(signature.args[0])(context, builder, args[0])
+            ptr = cgutils.get_item_pointer(context, builder, signature.args[0], ary,
+                                           [context.get_constant(types.intp, 0)])
+            value = context.cast(builder, args[1], signature.args[1], types.int64)
+            return builder.atomic_rmw("add", ptr, value, "monotonic")
+        return types.int64(counter, amount), codegen
 
 
 @njit(cache=True)

@@ -224,26 +224,6 @@ def _as_given(points, cells, point_data, cell_data) -> tuple:
     return points, cells, point_data, cell_data
 
 
-class _BodyState:
-    """A copy of what :meth:`ParaViewWriter.particle_mesh` reads of the bodies."""
-
-    def __init__(self, id, shape_id, position, R, velocity, angular_velocity) -> None:
-        self.id, self.shape_id, self.position = id, shape_id, position
-        self.velocity, self.angular_velocity, self._R = velocity, angular_velocity, R
-
-    @classmethod
-    def of(cls, bodies: "Bodies") -> "_BodyState":
-        return cls(np.array(bodies.id, np.int64), np.array(bodies.shape_id, np.int64),
-                   np.array(bodies.position, float), np.array(bodies.rotation_matrices(), float),
-                   np.array(bodies.velocity, float), np.array(bodies.angular_velocity, float))
-
-    def __len__(self) -> int:
-        return len(self.id)
-
-    def rotation_matrices(self) -> np.ndarray:
-        return self._R
-
-
 class ParaViewWriter:
     """The three ParaView series: particles, walls, contacts.
 
@@ -351,7 +331,7 @@ class ParaViewWriter:
     def write_particles(self, time: float, bodies: "Bodies") -> Path:
         """One sample of ``particles.pvd`` (time in s); its grid is built by the worker (in
         the background) from a copy of the bodies' state."""
-        state = _BodyState.of(bodies)
+        state = bodies.copy()
         key = (state.id.tobytes(), state.shape_id.tobytes())     # fixes the REUSED arrays
         return self.series["particles"].write_built(time, self._particle_grid, (state,), key)
 
