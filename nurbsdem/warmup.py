@@ -36,6 +36,14 @@ ENTRY_KERNELS = {
     "deck_steps.run_deck_steps": "the compiled time loop (forces, time-step control)",
     "deflate._blocks": "compressed ParaView output",
 }
+#: each entry kernel's share of a first solve's compile time (the quick paper deck from an
+#: empty cache, the kernels it calls included: ``benchmarks/bench_compile.py --compiles``;
+#: the step's start compiles inside the time loop there), for the time left that
+#: :class:`CompileReport` tells
+ENTRY_SHARES = {"listed.scene_list": 0.15, "listed.solve_due": 0.30,
+                "verlet.contact_arrays": 0.01, "step.step_start": 0.0,
+                "step.contact_part": 0.08, "deck_steps.run_deck_steps": 0.38,
+                "deflate._blocks": 0.02}
 
 
 def _deck(folder: Path, output: bool) -> Path:
@@ -288,8 +296,10 @@ def _usable_cores() -> int:
 
 class CompileReport:
     """While installed (a context manager): one line to ``stream`` when a kernel starts
-    compiling at the top of the call stack, naming it and counting the entry kernels
-    (:data:`ENTRY_KERNELS`) done so far; nothing when everything loads from the cache."""
+    compiling at the top of the call stack, naming it, counting the entry kernels
+    (:data:`ENTRY_KERNELS`) done so far and, once a tenth of the work is done, the time left
+    at the pace so far (:data:`ENTRY_SHARES`); nothing when everything loads from the
+    cache."""
 
     def __init__(self, stream: TextIO | None = None) -> None:
         self.stream = stream if stream is not None else sys.stderr
@@ -305,14 +315,26 @@ class CompileReport:
                 if not self.started:
                     self.started = time.perf_counter()
                 left = len(ENTRY_KERNELS) - len(self.seen)
+                elapsed = time.perf_counter() - self.started
                 self.stream.write(f"nurbsdem: compiling {ENTRY_KERNELS[name]} ({name}; "
                                   f"{left} of {len(ENTRY_KERNELS)} parts left after it, "
-                                  f"{time.perf_counter() - self.started:.0f} s so far)\n")
+                                  f"{elapsed:.0f} s so far{self._time_left(name, elapsed)})\n")
                 self.stream.flush()
         self.depth += 1
 
     def on_end(self, event) -> None:
         self.depth -= 1
+
+    def _time_left(self, name: str, elapsed: float) -> str:
+        """", about N s left" when entry ``name`` starts after ``elapsed`` s: the shares of the
+        entries not compiled yet (``name``'s included) at the pace of those done, once they
+        hold a tenth of the work; "" before."""
+        done = sum(ENTRY_SHARES.get(n, 0.0) for n in self.seen if n != name)
+        left = sum(share for n, share in ENTRY_SHARES.items()
+                   if n in ENTRY_KERNELS and (n == name or n not in self.seen))
+        if done < 0.1 or elapsed <= 0.0:
+            return ""
+        return f", about {elapsed * left / done:.0f} s left"
 
     def __enter__(self) -> "CompileReport":
         from numba.core import event

@@ -118,6 +118,25 @@ def test_a_solve_names_the_kernels_it_compiles(monkeypatch):
     assert stream.getvalue() == ""
 
 
+def test_the_time_left_follows_the_pace_so_far(monkeypatch):
+    """The time left when an entry kernel starts: the shares of the entries not compiled yet
+    (its own included) at the pace of those done; nothing before a tenth of the work."""
+    monkeypatch.setattr(warmup, "ENTRY_KERNELS", {"m.a": "a", "m.b": "b", "m.c": "c"})
+    monkeypatch.setattr(warmup, "ENTRY_SHARES", {"m.a": 0.2, "m.b": 0.3, "m.c": 0.5})
+    report = warmup.CompileReport(io.StringIO())
+    report.seen = {"m.a"}
+    assert report._time_left("m.a", 5.0) == ""
+    report.seen = {"m.a", "m.b"}
+    assert report._time_left("m.b", 10.0) == ", about 40 s left"     # 0.2 in 10 s, 0.8 left
+    report.seen = {"m.a", "m.b", "m.c"}
+    assert report._time_left("m.c", 25.0) == ", about 25 s left"     # 0.5 in 25 s, 0.5 left
+
+
+def test_the_shares_name_entry_kernels_and_sum_to_most_of_the_work():
+    assert set(warmup.ENTRY_SHARES) == set(warmup.ENTRY_KERNELS)
+    assert 0.8 < sum(warmup.ENTRY_SHARES.values()) <= 1.0
+
+
 @pytest.mark.slow
 def test_warmup_fills_an_empty_cache(tmp_path):
     """``nurbsdem warmup`` with an empty cache: afterwards the compiled loop is cached and
