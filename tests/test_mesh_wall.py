@@ -125,6 +125,31 @@ def test_grid_finds_every_triangle_within_reach():
         assert near <= found
 
 
+def test_grid_lists_each_triangle_in_every_cell_its_box_touches():
+    """The grid's CSR arrays against binning triangle by triangle: each cell lists the
+    triangles whose bounding box touches it, in ascending order; each triangle's cell range."""
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    verts = sphere.vertices * np.array([1.0, 0.6, 0.3])      # cells spanned differ per axis
+    mesh = build_mesh_wall(verts, sphere.faces)
+    lo, hi = mesh.tri_cells[:, :3], mesh.tri_cells[:, 3:]
+    corners = verts[sphere.faces]
+    assert np.array_equal(lo, np.floor((corners.min(axis=1) - mesh.grid_origin)
+                                       / mesh.grid_cell).astype(np.int64))
+    assert np.array_equal(hi, np.floor((corners.max(axis=1) - mesh.grid_origin)
+                                       / mesh.grid_cell).astype(np.int64))
+    dims = mesh.grid_dims
+    expected = [[] for _ in range(int(np.prod(dims)))]
+    for t in range(len(sphere.faces)):
+        for ix in range(lo[t, 0], hi[t, 0] + 1):
+            for iy in range(lo[t, 1], hi[t, 1] + 1):
+                for iz in range(lo[t, 2], hi[t, 2] + 1):
+                    expected[ix + dims[0] * (iy + dims[1] * iz)].append(t)
+    assert (hi - lo).max() >= 1                               # triangles spanning cells
+    for cell, tris in enumerate(expected):
+        got = mesh.cell_tris[mesh.cell_start[cell]:mesh.cell_start[cell + 1]]
+        assert got.tolist() == tris, cell
+
+
 def test_contacts_of_a_rotated_moved_mesh_equal_those_of_the_moved_sphere():
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
     mesh = build_mesh_wall(sphere.vertices, sphere.faces)

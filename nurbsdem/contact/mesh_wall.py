@@ -124,19 +124,20 @@ def _bin_triangles(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, 
     hi = np.floor((vertices[faces].max(axis=1) - origin) / cell).astype(np.int64)
     lo = np.clip(lo, 0, dims - 1)
     hi = np.clip(hi, 0, dims - 1)
-    cells, tris = [], []
-    for t in range(len(faces)):
-        ix, iy, iz = (np.arange(lo[t, k], hi[t, k] + 1) for k in range(3))
-        gx, gy, gz = np.meshgrid(ix, iy, iz, indexing="ij")
-        ids = (gx + dims[0] * (gy + dims[1] * gz)).ravel()
-        cells.append(ids)
-        tris.append(np.full(ids.shape, t, np.int64))
-    cells_a = np.concatenate(cells)
-    tris_a = np.concatenate(tris)
+    span = hi - lo + 1                               # cells per axis of each triangle's box
+    count = span.prod(axis=1)
+    tris_a = np.repeat(np.arange(len(faces), dtype=np.int64), count)
+    # the j-th cell of a triangle's box, z fastest, then y, then x
+    j = np.arange(tris_a.shape[0], dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    nz, ny = span[tris_a, 2], span[tris_a, 1]
+    ix = lo[tris_a, 0] + j // (nz * ny)
+    iy = lo[tris_a, 1] + (j // nz) % ny
+    iz = lo[tris_a, 2] + j % nz
+    cells_a = ix + dims[0] * (iy + dims[1] * iz)
     order = np.argsort(cells_a, kind="stable")
     n_cells = int(np.prod(dims))
     start = np.zeros(n_cells + 1, np.int64)
-    np.add.at(start, cells_a + 1, 1)
+    start[1:] = np.bincount(cells_a, minlength=n_cells)
     return np.cumsum(start), tris_a[order], np.ascontiguousarray(np.hstack([lo, hi]))
 
 
