@@ -1,5 +1,7 @@
-"""Mesh files of equipment (nurbsdem.io.meshfile): the three formats, placement, and one clear
-line for each bad file."""
+"""Mesh files of equipment (nurbsdem.io.meshfile): the three formats, placement, one clear
+line for each bad file, and a file read once while it is unchanged."""
+import os
+
 import numpy as np
 import pytest
 import trimesh
@@ -100,3 +102,26 @@ def test_size_mismatch_flags_millimetres():
     assert "millimetres" in size_mismatch(500.0, 0.01, "drum.stl")
     assert "smaller than one particle" in size_mismatch(0.005, 0.01, "drum.stl")
     assert size_mismatch(0.5, 0.01, "drum.stl") is None
+
+
+def test_an_unchanged_file_is_read_once_and_a_changed_one_again(tmp_path, monkeypatch):
+    """The deck's parse, the solver and the writers read a mesh file in turn: the file is read
+    once while it stays the same, each caller gets its own arrays, placed its own way."""
+    from nurbsdem.io import meshfile
+    reads, read = [], meshfile._read
+
+    def counted(path, where):
+        reads.append(path)
+        return read(path, where)
+    monkeypatch.setattr(meshfile, "_read", counted)
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(2.0, 4.0, 6.0)).export(path)
+    first = read_wall_mesh(path)
+    first.vertices[:] = 0.0                               # a caller's own copy
+    moved = read_wall_mesh(path, scale=0.5, position=(1, 2, 3))
+    assert len(reads) == 1
+    assert np.allclose(moved.vertices.max(axis=0), [1.5, 3.0, 4.5], atol=1e-12)
+    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(path)     # as long a file
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10**9))
+    assert np.allclose(read_wall_mesh(path).vertices.max(axis=0), 0.5, atol=1e-12)
+    assert len(reads) == 2

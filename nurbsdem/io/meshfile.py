@@ -52,9 +52,31 @@ def _rotation_matrix(rotvec) -> np.ndarray:
     return Rotation.from_rotvec(np.asarray(rotvec, float)).as_matrix()
 
 
-def _load(path: Path, where: str):
-    """The file's mesh, read once: its raw vertices checked finite (trimesh's processing
-    drops a NaN vertex of a PLY silently), then processed (duplicate vertices merged)."""
+#: the meshes :func:`_load` read last: (resolved path, modification time ns, size) ->
+#: (vertices, faces); a deck's mesh is read when the deck is parsed, when the solver builds
+#: the wall and when the writers draw it, the same file each time
+_LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+#: how many meshes :data:`_LOADED` keeps
+LOADED_KEPT = 8
+
+
+def _load(path: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V,3), faces (T,3) int64) of the file's mesh (copies of those kept from an
+    earlier read of the unchanged file, :data:`_LOADED`)."""
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key not in _LOADED:
+        mesh = _read(path, where)
+        if len(_LOADED) >= LOADED_KEPT:
+            _LOADED.pop(next(iter(_LOADED)))
+        _LOADED[key] = (np.array(mesh.vertices, float), np.array(mesh.faces, np.int64))
+    vertices, faces = _LOADED[key]
+    return vertices.copy(), faces.copy()
+
+
+def _read(path: Path, where: str):
+    """The file's mesh, read: its raw vertices checked finite (trimesh's processing drops a
+    NaN vertex of a PLY silently), then processed (duplicate vertices merged)."""
     import trimesh
 
     try:
@@ -127,9 +149,8 @@ def read_wall_mesh(path: str | Path, scale: float = 1.0, position=(0.0, 0.0, 0.0
         raise InputError(f"{where}: no such mesh file: {path}")
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"{where}: Scale must be positive, got {scale!r}")
-    mesh = _load(path, where)
-    vertices = np.asarray(mesh.vertices, float) * float(scale)
-    faces = np.asarray(mesh.faces, np.int64)
+    vertices, faces = _load(path, where)
+    vertices = vertices * float(scale)
     vertices = vertices @ _rotation_matrix(rotation).T + np.asarray(position, float)
     size = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     twice_area = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
