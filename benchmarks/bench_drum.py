@@ -15,7 +15,9 @@ mean and spread over samples 0.1 s apart) and the drive torque about the axis (t
 the torque the drive applies, minus the particles' load on the drum about x: nurbsdem
 ``monitors/wall_drum.csv``; Yade: the facets' forces' moments about the axis).  Printed
 with the wall time of each time loop on one thread (nurbsdem ``NUMBA_NUM_THREADS=1``, the
-run less its set-up and output; Yade ``-j1``) and their ratio.  When Yade is not installed (``apt-get install yade``) the benchmark says so
+solver's timers of its time loop: search, LCPs, forces and integration, the compiled
+kernels' loading from numba's cache included, about a second; Yade ``-j1``, its ``O.run``)
+and their ratio.  When Yade is not installed (``apt-get install yade``) the benchmark says so
 and measures nurbsdem alone.
 
 Usage: .venv/bin/python benchmarks/bench_drum.py [--quick] [--count N]

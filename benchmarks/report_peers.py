@@ -26,8 +26,9 @@ def section_spheres(rep: Report) -> None:
         rows.append(["Yade " + "(`-j1`)", fmt(yd["wall"], ".2f"), "", fmt(yd["height"], ".4f")])
     rep.add(f"`benchmarks/bench_yade.py`: the paper's box and contact law with 112 exact spheres "
             f"(volume-equivalent radii of A, B, C), released at rest, {r['T']} s at dt 1e-4 s, "
-            "one thread each, the same positions; time of the time loop (compiled kernels "
-            f"cached: a warm-up run first); the faster of {bench_yade.ROUNDS} runs of each, "
+            "one thread each, the same positions; time of the time loop (nurbsdem: its "
+            "solver's timers, after a short deck in the same process loaded the compiled "
+            f"kernels; Yade: its `O.run`); the faster of {bench_yade.ROUNDS} runs of each, "
             "alternated (nurbsdem: " + ", ".join(f"{t:.2f}" for t in nd["loops"]) + " s"
             + ("; Yade: " + ", ".join(f"{t:.2f}" for t in yd["walls"]) + " s"
                if isinstance(yd, dict) else "") + ").\n\n" +
