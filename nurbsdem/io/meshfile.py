@@ -56,8 +56,9 @@ def _rotation_matrix(rotvec) -> np.ndarray:
 #: (vertices, faces); a deck's mesh is read when the deck is parsed, when the solver builds
 #: the wall and when the writers draw it, the same file each time
 _LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
-#: how many meshes :data:`_LOADED` keeps
-LOADED_KEPT = 8
+#: how many meshes :data:`_LOADED` keeps (a deck reads each of its meshes at three places in
+#: turn; a mesh of 10^6 triangles keeps about 36 MB)
+LOADED_KEPT = 4
 
 
 def _load(path: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
