@@ -44,9 +44,9 @@ LOOP = ("global search", "LCP", "forces + integration")
 s = Solver(parse_deck(sys.argv[1]), output=sys.argv[2], quiet=True)
 s.start()
 s.run_step(s.model.steps[0])              # the warm-up step: loads the compiled kernels
-before, substeps = sum(s.timers[k] for k in LOOP), s.summary.substeps
+loop0, substeps0 = sum(s.timers[k] for k in LOOP), s.summary.substeps
 s.run_step(s.model.steps[1])
-loop, substeps = sum(s.timers[k] for k in LOOP) - before, s.summary.substeps - substeps
+loop, substeps = sum(s.timers[k] for k in LOOP) - loop0, s.summary.substeps - substeps0
 s.finish()
 import numpy as np
 mon = np.genfromtxt(sys.argv[2] + "/monitors/wall_floor.csv", delimiter=",", names=True)
@@ -148,7 +148,7 @@ def main(argv: list[str]) -> dict:
         print(f"  {label:<26} time loop {r['loop']:.2f} s, {r['substeps']} internal steps, "
               f"{1e3 * per:.2f} ms per step, {1e6 * per / n:.2f} µs per particle-step")
     ratio = float(np.median(ratios))
-    print(f"mesh / flat cost per internal step: {ratio:.3f} (+{100 * (ratio - 1):.1f} %; pairs "
+    print(f"mesh / flat cost per internal step: {ratio:.3f} ({100 * (ratio - 1):+.1f} %; pairs "
           f"{min(ratios):.3f} to {max(ratios):.3f}); "
           f"floor reactions at the end differ by {err:.2e} of the weight "
           f"({out['flat']['reaction'] / weight:.4f} x the weight on the flat floor)")
