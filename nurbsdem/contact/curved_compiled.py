@@ -64,8 +64,8 @@ CurvedConst = namedtuple(
     "sphere nurbs body_shape n_nurbs ptab pinfo pcen prad pseeds")
 #: what the search changes: the mesh kernels' workspaces over all meshes' triangles (stamp,
 #: tris, cand_q, cand_d, cand_f, keys) and the query mark (1,); the spheres' kept lists of
-#: nearby triangles per mesh wall (M meshes: near_p (M,N,5), near_n (M,N), near_t
-#: (M,N,LIST_ROOM), :func:`~nurbsdem.contact.mesh_wall.make_lists`); the surfaces'
+#: nearby triangles per mesh wall (M meshes: near_p (M,N,5), near_n (M,N), near_t and
+#: near_d (M,N,LIST_ROOM), :func:`~nurbsdem.contact.mesh_wall.make_lists`); the surfaces'
 #: certificates per wall: gap (W,N) m, x0 (W,N,3), odo0 (W,N), the odometer (W,) m and the
 #: pose it was last advanced at (prev_R (W,3,3), prev_t (W,3), posed (W,)), the surfaces'
 #: extents (W,) m and centres (W,3) m (wall frame); the last call's contacts (count (1,) of
@@ -74,7 +74,7 @@ CurvedConst = namedtuple(
 #: workspace against the meshes, particle_work
 #: (:data:`~nurbsdem.contact.mesh_particle_compiled.MeshParticleWork`, for the largest mesh)
 CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f keys mark near_p near_n "
-                        "near_t gap x0 odo0 odo prev_R prev_t posed extent centre out_a out_b "
+                        "near_t near_d gap x0 odo0 odo prev_R prev_t posed extent centre out_a out_b "
                         "out_pa out_pb out_normal out_depth out_key count particle_work")
 
 
@@ -165,6 +165,7 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
                       np.empty(T), np.empty(T, np.int64), np.zeros(T, np.int64),
                       np.zeros(1, np.int64), np.zeros((M, n, 5)),
                       np.full((M, n), NO_LIST, np.int64), np.zeros((M, n, LIST_ROOM), np.int64),
+                      np.zeros((M, n, LIST_ROOM)),
                       np.full((W, n), -1.0), np.zeros((W, n, 3)), np.zeros((W, n)),
                       np.zeros(W), np.zeros((W, 3, 3)), np.zeros((W, 3)),
                       np.zeros(W, np.bool_), extent, centre, np.zeros(room, np.int64),
@@ -256,20 +257,19 @@ def _mesh_contacts(cc, wk, w, mesh, idx, x, R, t, c):
     cell_tris = cc.cell_tris[cc.to[w]:cc.to[w + 1]]
     stamp, tris, keys = wk.stamp[f0:f1], wk.tris[f0:f1], wk.keys[f0:f1]
     cand_q, cand_d, cand_f = wk.cand_q[f0:f1], wk.cand_d[f0:f1], wk.cand_f[f0:f1]
-    near_p, near_n, near_t = wk.near_p[mesh], wk.near_n[mesh], wk.near_t[mesh]
-    room = idx.shape[0] + MAX_PER_WALL              # touching rows: mostly one a sphere
-    while True:
-        rows_f, rows_i = np.empty((room, NF)), np.empty((room, NI), np.int64)
-        owner, rank = np.empty(room, np.int64), np.empty(room, np.int64)
-        n = mesh_rows_listed(idx, x, cc.radius, R, t, vertices, faces, normals,
-                             cc.two_sided[w], cc.msize[w], cc.grid_origin[w], cc.grid_cell[w],
-                             cc.grid_dims[w], cell_start, cell_tris, tri_cells, stamp,
-                             wk.mark[0] + 1, tris, cand_q, cand_d, cand_f, near_p, near_n,
-                             near_t, keys, MAX_PER_WALL, rows_f, rows_i, owner, rank)
-        wk.mark[0] += idx.shape[0]
-        if n <= room:
-            break
-        room = n
+    near_p, near_n = wk.near_p[mesh], wk.near_n[mesh]
+    near_t, near_d = wk.near_t[mesh], wk.near_d[mesh]
+    # room for every row a sphere can have: one call, no retry loop (docs/design-notes.md);
+    # only the rows written are touched, mostly one a sphere
+    room = idx.shape[0] * MAX_PER_WALL
+    rows_f, rows_i = np.empty((room, NF)), np.empty((room, NI), np.int64)
+    owner, rank = np.empty(room, np.int64), np.empty(room, np.int64)
+    n = mesh_rows_listed(idx, x, cc.radius, R, t, vertices, faces, normals, cc.two_sided[w],
+                         cc.msize[w], cc.grid_origin[w], cc.grid_cell[w], cc.grid_dims[w],
+                         cell_start, cell_tris, tri_cells, stamp, wk.mark[0] + 1, tris, cand_q,
+                         cand_d, cand_f, near_p, near_n, near_t, near_d, keys, MAX_PER_WALL,
+                         rows_f, rows_i, owner, rank)
+    wk.mark[0] += idx.shape[0]
     return _put(cc, wk, w, x.shape[0] + cc.first + w, c, n, rows_f, owner, rank)
 
 

@@ -34,7 +34,8 @@ points to) the centre is behind.
 r + skin of its centre (mesh frame) between evaluations, like a Verlet list, and asks the grid
 again only once it has moved (the wall's motion included) more than skin/2; the candidates
 taken from the list are put back in the grid's order, so the rows are those of the grid bit
-for bit, whatever the lists hold.  A triangle whose bounding box lies beyond reach is skipped
+for bit, whatever the lists hold.  A triangle whose distance from the list's centre exceeds r
+by more than the centre's move since, or whose bounding box lies beyond reach, is skipped
 without its closest point.
 
 Lengths in metres; triangles are indices into the vertex array (T,3).
@@ -531,7 +532,7 @@ def _contact_row(x0, x1, x2, r, R, t, qa, qb, qc, d, normals, tri, c0, c1, c2, r
 @njit(cache=True)
 def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size, grid_origin,
                      grid_cell, grid_dims, cell_start, cell_tris, tri_cells, stamp, mark0, tris,
-                     cand_q, cand_d, cand_f, near_p, near_n, near_t, keys, most, rows_f,
+                     cand_q, cand_d, cand_f, near_p, near_n, near_t, near_d, keys, most, rows_f,
                      rows_i, owner, rank):
     """The touching rows (signed distance < 0) of spheres ``idx`` (centres x (N,3), radii r
     (N,), m) with a mesh wall at pose (R, t): of each sphere, those of its first ``most``
@@ -541,8 +542,11 @@ def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size,
     written: call again with that room).  Sphere m's grid query takes the mark mark0 + m.
 
     From each sphere's list of nearby triangles kept between calls (:func:`make_lists`:
-    near_p, near_n, near_t; keys a workspace; tri_cells the mesh's): the triangles within
-    r + skin (skin = ``LIST_SKIN`` r) of the centre (mesh frame) where the list was made.
+    near_p, near_n, near_t, near_d; keys a workspace; tri_cells the mesh's): the triangles
+    within r + skin (skin = ``LIST_SKIN`` r) of the centre (mesh frame) where the list was
+    made, with their distances from there.  A triangle farther than r + the centre's move
+    since then (and a round-off guard) is beyond r now: it is skipped without its closest
+    point.  Over a resting floor that leaves the one or two triangles under the sphere.
     It is made again when the centre (mesh frame: the wall's motion counts) has moved more
     than skin/2 from there or the radius differs, so that it holds every triangle within r;
     those of them in the cells of the box x ± r are the grid's candidates, put in the grid's
@@ -568,12 +572,14 @@ def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size,
         e0, e1, e2 = x0 - near_p[i, 0], x1 - near_p[i, 1], x2 - near_p[i, 2]
         half = 0.5 * near_p[i, 4]
         src, row, n_src, grid = near_t, i, near_n[i], near_n[i] < 0
+        kept = True                                   # the list was made at an earlier call
         if (n_src == NO_LIST or near_p[i, 3] != ri
                 or e0 * e0 + e1 * e1 + e2 * e2 > half * half):
             n_src = _make_list(i, x0, x1, x2, ri, vertices, faces, normals, grid_origin,
                                grid_cell, grid_dims, cell_start, cell_tris, stamp, mark0 + m,
-                               tris, cand_q, cand_d, cand_f, near_p, near_n, near_t)
-            src, row, grid = made, 0, False
+                               tris, cand_q, cand_d, cand_f, near_p, near_n, near_t,
+                               near_d)
+            src, row, grid, kept = made, 0, False, False
         if grid:                                      # too many near: the grid
             n = _near(x0, x1, x2, ri, grid_origin, grid_cell, grid_dims, cell_start,
                       cell_tris, stamp, mark0 + m, tris)
@@ -586,7 +592,11 @@ def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size,
             if lx > hx or ly > hy or lz > hz:
                 n_src = 0
             n = 0
+            clear = (ri + BEYOND * (ri + abs(x0) + abs(x1) + abs(x2))
+                     + math.sqrt(e0 * e0 + e1 * e1 + e2 * e2))
             for k in range(n_src):
+                if kept and near_d[i, k] > clear:     # beyond r: the distance drops by the move
+                    continue
                 tri = src[row, k]
                 a, b, c = faces[tri, 0], faces[tri, 1], faces[tri, 2]
                 q0, q1, q2, d, feat = _near_point(x0, x1, x2, ri, vertices[a, 0],
@@ -637,9 +647,9 @@ def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size,
 @njit(cache=True)
 def _make_list(i, x0, x1, x2, r, vertices, faces, normals, grid_origin, grid_cell, grid_dims,
                cell_start, cell_tris, stamp, mark, tris, cand_q, cand_d, cand_f, near_p,
-               near_n, near_t):
-    """Sphere i's list made at (x0, x1, x2): the triangles within r + skin, also left in
-    ``tris``; returns their count.  The skin has a round-off guard of ``BEYOND`` of the
+               near_n, near_t, near_d):
+    """Sphere i's list made at (x0, x1, x2): the triangles within r + skin and their
+    distances (m), also left in ``tris`` and ``cand_d``; returns their count.  The skin has a round-off guard of ``BEYOND`` of the
     coordinates' size on top of ``LIST_SKIN`` r."""
     skin = LIST_SKIN * r + BEYOND * (r + abs(x0) + abs(x1) + abs(x2))
     reach = r + skin
@@ -654,6 +664,7 @@ def _make_list(i, x0, x1, x2, r, vertices, faces, normals, grid_origin, grid_cel
         return n
     for m in range(n):
         near_t[i, m] = tris[m]
+        near_d[i, m] = cand_d[m]
     near_n[i] = n
     return n
 
@@ -662,9 +673,10 @@ def make_lists(mesh: MeshWall, n: int, room: int = LIST_ROOM) -> tuple[np.ndarra
     """The kept lists of :func:`mesh_rows_listed` for n spheres against ``mesh``: near_p
     (n,5) (the centre (mesh frame, m), radius and skin (m) of each list), near_n (n,) int64
     (its length; ``NO_LIST``: none yet, −1: more than ``room``), near_t (n, room) int64 (its
-    triangles) and keys (T,) int64 (a workspace)."""
+    triangles), near_d (n, room) (their distances from the list's centre, m) and keys (T,)
+    int64 (a workspace)."""
     return (np.zeros((n, 5)), np.full(n, NO_LIST, np.int64), np.zeros((n, room), np.int64),
-            np.zeros(len(mesh.faces), np.int64))
+            np.zeros((n, room)), np.zeros(len(mesh.faces), np.int64))
 
 
 def make_workspace(mesh: MeshWall) -> tuple[np.ndarray, ...]:
