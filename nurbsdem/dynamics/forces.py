@@ -210,10 +210,9 @@ def _tangential_result(c, mu, fn, fdn, eel_n, et, ct, n0, n1, n2, s0, s1, s2, wt
     ft0, ft1, ft2 = fe0 + fd0, fe1 + fd1, fe2 + fd2
     ftm = math.sqrt(ft0 * ft0 + ft1 * ft1 + ft2 * ft2)
     flim = mu * fn
-    stick[c] = 1
     slip = 0.0
-    if ftm > flim:
-        stick[c] = 0
+    sliding = ftm > flim
+    if sliding:
         alpha = flim / ftm if ftm > 0.0 else 0.0
         smag2 = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         slip = et * alpha * smag2 * (1.0 - alpha) * smag2
@@ -230,6 +229,7 @@ def _tangential_result(c, mu, fn, fdn, eel_n, et, ct, n0, n1, n2, s0, s1, s2, wt
     e_el[c, 0] = eel_n
     e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
     slip_out[c] = slip
+    stick[c] = 0 if sliding else 1     # one store: a conditional one keeps the loop scalar
 
 
 @njit(cache=True, inline="always")
