@@ -229,7 +229,8 @@ def _tangential_result(c, mu, fn, fdn, eel_n, et, ct, n0, n1, n2, s0, s1, s2, wt
     e_el[c, 0] = eel_n
     e_el[c, 1] = 0.5 * et * (s0 * s0 + s1 * s1 + s2 * s2)
     slip_out[c] = slip
-    stick[c] = 0 if sliding else 1     # one store: a conditional one keeps the loop scalar
+    # one store, after the branch: a store inside it made the compiled loop several times slower
+    stick[c] = 0 if sliding else 1
 
 
 @njit(cache=True, inline="always")
