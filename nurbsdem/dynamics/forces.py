@@ -253,6 +253,19 @@ def _add_rolling_torque(c, a, b, f_el_t, torque) -> None:
 
 
 @njit(cache=True)
+def _any_rolling_torque(f_el_t: np.ndarray) -> bool:
+    """Whether a contact has a rolling torque that is not zero (f_el_t's columns 3–5, where
+    the array has them)."""
+    if f_el_t.shape[1] < NSPRING:
+        return False
+    for c in range(f_el_t.shape[0]):
+        for k in range(ROLL, NSPRING):
+            if f_el_t[c, k] != 0.0:
+                return True
+    return False
+
+
+@njit(cache=True)
 def _add_contact_loads(body_a: np.ndarray, body_b: np.ndarray, pos: np.ndarray,
                        point: np.ndarray, f_total: np.ndarray, f_el_t: np.ndarray,
                        force: np.ndarray, torque: np.ndarray) -> None:
@@ -260,7 +273,10 @@ def _add_contact_loads(body_a: np.ndarray, body_b: np.ndarray, pos: np.ndarray,
     torque (f_el_t's columns 3–5, :mod:`nurbsdem.dynamics.rolling`), to the loads (B,3) of its
     bodies, in contact order: the accumulation of :func:`contact_forces`.  (On one
     thread: split into ranges of bodies, each adding from the contacts that touch it, it was
-    1.7 x slower on 2.4e5 contacts of 1e5 bodies, the contacts' rows read out of order.)"""
+    1.7 x slower on 2.4e5 contacts of 1e5 bodies, the contacts' rows read out of order.)
+    The rolling torques are added only where one is not zero: the loop without their test
+    runs several times faster, with the same sums."""
+    rolling = _any_rolling_torque(f_el_t)
     for c in range(body_a.shape[0]):
         a = body_a[c]
         b = body_b[c]
@@ -282,7 +298,8 @@ def _add_contact_loads(body_a: np.ndarray, body_b: np.ndarray, pos: np.ndarray,
         torque[a, 0] -= ta0
         torque[a, 1] -= ta1
         torque[a, 2] -= ta2
-        _add_rolling_torque(c, a, b, f_el_t, torque)
+        if rolling:
+            _add_rolling_torque(c, a, b, f_el_t, torque)
 
 
 @njit(cache=True, parallel=True)
