@@ -34,8 +34,8 @@ from .curved_walls import (MAX_PER_WALL, _surface_rows_of, wall_contact_key, wal
                            world_box)
 from .kinds import MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_particle_compiled import (make_mesh_particle_work, pack_topology,
-                                     particle_mesh_rows_ptr)
+from .mesh_particle_compiled import make_mesh_particle_work, particle_mesh_rows_ptr
+from .mesh_topology import pack_topology
 from .mesh_wall import LIST_ROOM, NO_LIST, MeshWall, mesh_rows_listed
 from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
                                         particle_surface_rows_ptr)
@@ -49,7 +49,7 @@ from .wall_skin import due_spheres, pose_travel, wall_reach
 #: two_sided, size, grid origin, cell and dims, and offsets (W+1,) mfo, mlo, mto into the
 #: features (edges and vertices that are not flat) of the meshes met by NURBS particles,
 #: their triangles and the triangles' features: feat, feat_tris, tri_feat_range (per face)
-#: and tri_feat (:func:`~nurbsdem.contact.mesh_particle_compiled.pack_topology`; empty
+#: and tri_feat (:func:`~nurbsdem.contact.mesh_topology.pack_topology`; empty
 #: without NURBS particles); surfaces: offsets (W+1,) into patches and samples, the joint pool and samples, and
 #: per-wall spacing and size; the particles: reach (N,) m (bounding radius about the
 #: centroid), which are exact spheres and which NURBS particles (N,) bool, their shapes
@@ -180,7 +180,7 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
 def _topologies(geo: list, nurbs: bool) -> tuple:
     """(mfo, mlo, mto (W+1,) offsets per wall, feat, feat_tris, tri_feat_range, tri_feat) of
     the mesh walls' features among the walls' geometries ``geo``
-    (:func:`~nurbsdem.contact.mesh_particle_compiled.pack_topology`) when NURBS particles
+    (:func:`~nurbsdem.contact.mesh_topology.pack_topology`) when NURBS particles
     meet them (``nurbs``), else none (every triangle without features); a surface wall has
     none."""
     def one(g):

@@ -59,13 +59,13 @@ of the feature; ``I_PA``: −1).
 from __future__ import annotations
 
 import math
-import weakref
 
 import numpy as np
 
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_IT, I_PA, I_PB, I_VALID, NF, NI
 from .mesh_wall import (EDGE_AB, FACE, TIE, VERTEX_A, MeshWall, _triangle_candidates,
                         triangles_near)
+from .mesh_topology import inward, topology
 from .support_oracle import SupportOracle
 
 #: Newton iterations of an edge or vertex contact before it counts as not converged
@@ -168,11 +168,11 @@ def _face(oracle: SupportOracle, mesh: MeshWall, tri: int):
 def _crosses_beyond_border(mesh: MeshWall, tri: int, c: np.ndarray, p: np.ndarray) -> bool:
     """Whether the segment from the particle's centroid c to its deepest point p below the
     plane of triangle ``tri`` crosses that plane beyond a border edge of the triangle (an
-    edge of the mesh's boundary, :func:`_topology`): then the particle passes the plane
-    outside the mesh (a tilted particle whose end reaches under the rim of an orifice), the
-    segment between c and p lies in it, and the part of it under the triangle came round the
-    rim, not through the triangle: the face holds no contact (the rim's edge does, where the
-    particle reaches it)."""
+    edge of the mesh's boundary, :func:`~nurbsdem.contact.mesh_topology.topology`): then the
+    particle passes the plane outside the mesh (a tilted particle whose end reaches under the
+    rim of an orifice), the segment between c and p lies in it, and the part of it under the
+    triangle came round the rim, not through the triangle: the face holds no contact (the
+    rim's edge does, where the particle reaches it)."""
     f = mesh.faces[tri].tolist()
     n = mesh.normals[tri]
     a = mesh.vertices[f[0]]
@@ -180,7 +180,7 @@ def _crosses_beyond_border(mesh: MeshWall, tri: int, c: np.ndarray, p: np.ndarra
     if not sc * sp < 0.0:
         return False
     r = c + (sc / (sc - sp)) * (p - c)
-    border = _topology(mesh)[0]
+    border = topology(mesh)[0]
     for k in range(3):
         i, j = f[k], f[(k + 1) % 3]
         if len(border.get((min(i, j), max(i, j)), ())) != 1:
@@ -322,63 +322,13 @@ def _vertex(oracle: SupportOracle, V: np.ndarray, d0: np.ndarray):
 # ---------------------------------------------------------------------------- the mesh
 
 
-#: per mesh (by id, with a weak reference to it; dropped with the mesh): its edges and
-#: vertices that are not flat
-_TOPOLOGY: dict = {}
-
-
-def _topology(mesh: MeshWall) -> tuple[dict, dict, list, list]:
-    """(edges {(i, j) i < j: [triangles]}, vertices {i: [triangles]}, per triangle its keys
-    of both) of the mesh's edges and vertices that are not flat: an edge whose two triangles
-    lie in one plane on either side of it, and a vertex all of whose edges are such, have the
-    plane's normal only as their normal cone, where the faces hold every contact (computed
-    once per mesh)."""
-    hit = _TOPOLOGY.get(id(mesh))
-    if hit is not None and hit[0]() is mesh:
-        return hit[1]
-    edges: dict = {}
-    verts: dict = {}
-    for tri, f in enumerate(mesh.faces.tolist()):
-        for k in range(3):
-            i, j = f[k], f[(k + 1) % 3]
-            edges.setdefault((min(i, j), max(i, j)), []).append(tri)
-            verts.setdefault(f[k], []).append(tri)
-    sharp = {e: tris for e, tris in edges.items()
-             if not (len(tris) == 2 and float(_inward(mesh, tris[0], *e)
-                                              @ _inward(mesh, tris[1], *e)) <= -1.0 + 1e-12)}
-    bent = {i for e in sharp for i in e}
-    corners = {v: tris for v, tris in verts.items() if v in bent}
-    tri_edges: list = [[] for _ in range(len(mesh.faces))]
-    tri_verts: list = [[] for _ in range(len(mesh.faces))]
-    for e, tris in sharp.items():
-        for tri in tris:
-            tri_edges[tri].append(e)
-    for v, tris in corners.items():
-        for tri in tris:
-            tri_verts[tri].append(v)
-    data = (sharp, corners, tri_edges, tri_verts)
-    _TOPOLOGY[id(mesh)] = (weakref.ref(mesh), data)
-    weakref.finalize(mesh, _TOPOLOGY.pop, id(mesh), None)
-    return data
-
-
 def _features(mesh: MeshWall, near: np.ndarray) -> tuple[dict, dict]:
     """The edges {(i, j): [triangles]} and vertices {i: [triangles]} of the triangles
-    ``near`` that are not flat (:func:`_topology`)."""
-    sharp, corners, tri_edges, tri_verts = _topology(mesh)
+    ``near`` that are not flat (:func:`~nurbsdem.contact.mesh_topology.topology`)."""
+    sharp, corners, tri_edges, tri_verts = topology(mesh)
     edges = {e: sharp[e] for tri in near.tolist() for e in tri_edges[tri]}
     verts = {v: corners[v] for tri in near.tolist() for v in tri_verts[tri]}
     return edges, verts
-
-
-def _inward(mesh: MeshWall, tri: int, i: int, j: int) -> np.ndarray:
-    """The unit in-plane normal of edge (i, j) of triangle ``tri`` pointing into it."""
-    f = mesh.faces[tri]
-    x = mesh.vertices[[k for k in f.tolist() if k != i and k != j][0]]
-    p0, p1 = mesh.vertices[i], mesh.vertices[j]
-    t = (p1 - p0) / np.linalg.norm(p1 - p0)
-    w = (x - p0) - ((x - p0) @ t) * t
-    return w / np.linalg.norm(w)
 
 
 def _facing(oracle: SupportOracle, mesh: MeshWall, tri: int) -> np.ndarray:
@@ -441,8 +391,8 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
         p0, p1 = mesh.vertices[i], mesh.vertices[j]
         if _segment_distance(c, p0, p1) > reach:
             continue
-        inward = [_inward(mesh, tri, i, j) for tri in tris]
-        e = _edge(oracle, p0, p1, inward, active_only)
+        normals_in = [inward(mesh, tri, i, j) for tri in tris]
+        e = _edge(oracle, p0, p1, normals_in, active_only)
         if e is not None and (len(tris) == 1 or _on_particle_side(oracle, mesh, tris, e[3])):
             out.append(e[:4] + (EDGE_AB, tris[0], e[4]))
     for v, tris in verts.items():

@@ -12,10 +12,11 @@ reference's order (the distinct face normals in sorted order, the faces, the edg
 vertices), so the rows agree with the Python solve to round-off.
 
 The mesh's edges and vertices that are not flat (those whose normal cone has an interior)
-are packed once per mesh by :func:`pack_topology` as *features*: ``feat`` (F, 4) int64 rows
-(v0, v1, start, end), an edge (v0 < v1) or a vertex (v1 = −1) and the range of its
-triangles in ``feat_tris``; ``tri_feat_range`` (T, 2) the range in ``tri_feat`` of each
-triangle's features (its edges, then its vertices).
+are packed once per mesh as *features*
+(:func:`~nurbsdem.contact.mesh_topology.pack_topology`): ``feat`` (F, 4) int64 rows (v0,
+v1, start, end), an edge (v0 < v1) or a vertex (v1 = −1) and the range of its triangles in
+``feat_tris``; ``tri_feat_range`` (T, 2) the range in ``tri_feat`` of each triangle's
+features (its edges, then its vertices).
 
 :func:`particle_mesh_into` solves one particle against one mesh in three parts: the start
 (the pose in the mesh frame, :func:`_near`: the triangles within reach, :func:`_may_hold`:
@@ -28,7 +29,6 @@ in one call (the Python provider and the compiled deck steps).  Lengths in metre
 from __future__ import annotations
 
 import math
-import weakref
 from collections import namedtuple
 
 import numpy as np
@@ -37,7 +37,8 @@ from numba import njit
 from ..jit import PointerKernel, kernel
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_FAIL, I_IT, I_PA, I_PB, I_VALID, NF, NI
 from .mesh_particle import (ARC_SAMPLES, DEEPER, ITERATED_TIE, MAX_IT, MAX_TURN, MIN_ARC,
-                            TOL, _topology)
+                            TOL)
+from .mesh_topology import pack_topology
 from .mesh_wall import EDGE_AB, FACE, TIE, VERTEX_A, MeshWall, _triangle_candidates, triangles_near
 from .surface_particle_compiled import (_C, _D, _M, _P, _POS, _start as _pose_start, _support,
                                         make_surface_work)
@@ -55,38 +56,6 @@ _FEAT, _TRI, _IT = 0, 1, 2
 #: facing normals
 _O, _EA, _EB, _E1, _E2, _T, _DD, _U1, _U2, _S = range(10)
 MV_ROWS = 10
-
-
-# --------------------------------------------------------------------------- topology
-#: per mesh (by id, with a weak reference; dropped with the mesh): its packed features
-_PACKED: dict = {}
-
-
-def pack_topology(mesh: MeshWall) -> tuple:
-    """(feat (F,4), feat_tris (L,), tri_feat_range (T,2), tri_feat (L2,)) int64 arrays of the
-    mesh's edges and vertices that are not flat (module docstring;
-    :func:`~nurbsdem.contact.mesh_particle._topology`), in the reference's orders; computed
-    once per mesh."""
-    hit = _PACKED.get(id(mesh))
-    if hit is not None and hit[0]() is mesh:
-        return hit[1]
-    sharp, corners, tri_edges, tri_verts = _topology(mesh)
-    feat, feat_tris, index = [], [], {}
-    for key, tris in list(sharp.items()) + list(corners.items()):
-        index[key] = len(feat)
-        v0, v1 = key if isinstance(key, tuple) else (key, -1)
-        feat.append((v0, v1, len(feat_tris), len(feat_tris) + len(tris)))
-        feat_tris.extend(tris)
-    tri_range, tri_feat = [], []
-    for tri in range(len(mesh.faces)):
-        ids = [index[e] for e in tri_edges[tri]] + [index[v] for v in tri_verts[tri]]
-        tri_range.append((len(tri_feat), len(tri_feat) + len(ids)))
-        tri_feat.extend(ids)
-    data = (np.array(feat, np.int64).reshape(-1, 4), np.array(feat_tris, np.int64),
-            np.array(tri_range, np.int64).reshape(-1, 2), np.array(tri_feat, np.int64))
-    _PACKED[id(mesh)] = (weakref.ref(mesh), data)
-    weakref.finalize(mesh, _PACKED.pop, id(mesh), None)
-    return data
 
 
 #: the workspaces of :func:`particle_mesh_into` (T triangles, F features, C = T + F): the
@@ -723,10 +692,10 @@ def particle_mesh_into(tab, info, cen, rad, seeds, pos, Rb, R, t, vertices, face
     ``cen`` (3,) m and bounding radius ``rad`` m, at the pose (pos (3,) m, Rb (3,3); world),
     against the mesh of the arrays ``vertices`` … ``cell_tris``
     (:class:`~nurbsdem.contact.mesh_wall.MeshWall`) and ``feat`` … ``tri_feat``
-    (:func:`pack_topology`) at (R, t) (``x_world = R x_mesh + t``): the rows of
-    :func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts`, in its order (only those
-    with sd < 0 with ``active_only``).  ``work``: :func:`make_mesh_particle_work`.  Returns
-    the count of rows (written or not)."""
+    (:func:`~nurbsdem.contact.mesh_topology.pack_topology`) at (R, t) (``x_world = R x_mesh
+    + t``): the rows of :func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts`, in its
+    order (only those with sd < 0 with ``active_only``).  ``work``:
+    :func:`make_mesh_particle_work`.  Returns the count of rows (written or not)."""
     sv, cf, ci, keep = work.sv, work.cf, work.ci, work.keep
     _pose_start(pos, Rb, R, t, cen, sv[5], sv[6], sv[10], sv[11], sv[12])
     n = _near(rad, vertices, faces, normals, two_sided, grid_origin, grid_cell, grid_dims,
