@@ -74,8 +74,9 @@ CurvedConst = namedtuple(
 #: workspace against the meshes, particle_work
 #: (:data:`~nurbsdem.contact.mesh_particle_compiled.MeshParticleWork`, for the largest mesh)
 CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f keys mark near_p near_n "
-                        "near_t near_d gap x0 odo0 odo prev_R prev_t posed extent centre out_a out_b "
-                        "out_pa out_pb out_normal out_depth out_key count particle_work")
+                        "near_t near_d gap x0 odo0 odo prev_R prev_t posed extent centre "
+                        "out_a out_b out_pa out_pb out_normal out_depth out_key count "
+                        "particle_work")
 
 
 def _offsets(sizes) -> np.ndarray:

@@ -649,8 +649,8 @@ def _make_list(i, x0, x1, x2, r, vertices, faces, normals, grid_origin, grid_cel
                cell_start, cell_tris, stamp, mark, tris, cand_q, cand_d, cand_f, near_p,
                near_n, near_t, near_d):
     """Sphere i's list made at (x0, x1, x2): the triangles within r + skin and their
-    distances (m), also left in ``tris`` and ``cand_d``; returns their count.  The skin has a round-off guard of ``BEYOND`` of the
-    coordinates' size on top of ``LIST_SKIN`` r."""
+    distances (m), also left in ``tris`` and ``cand_d``; returns their count.  The skin has a
+    round-off guard of ``BEYOND`` of the coordinates' size on top of ``LIST_SKIN`` r."""
     skin = LIST_SKIN * r + BEYOND * (r + abs(x0) + abs(x1) + abs(x2))
     reach = r + skin
     n = _near(x0, x1, x2, reach, grid_origin, grid_cell, grid_dims, cell_start, cell_tris,
