@@ -532,6 +532,7 @@ def wall_loads(body_b: np.ndarray, point: np.ndarray, f_total: np.ndarray, f_el_
     displacements m), in contact order: the walls' part of the
     accumulation of :func:`contact_forces`, same bits (a domain decomposition assembles the
     walls' loads from the contacts of all ranks with it)."""
+    rolling = _any_rolling_torque(f_el_t)      # as in :func:`_add_contact_loads`
     for c in range(body_b.shape[0]):
         b = body_b[c]
         if b < n_particles:
@@ -547,4 +548,5 @@ def wall_loads(body_b: np.ndarray, point: np.ndarray, f_total: np.ndarray, f_el_
         torque[b, 0] += tb0
         torque[b, 1] += tb1
         torque[b, 2] += tb2
-        _add_rolling_torque(c, np.int64(-1), b, f_el_t, torque)
+        if rolling:
+            _add_rolling_torque(c, np.int64(-1), b, f_el_t, torque)
