@@ -81,7 +81,7 @@ from .stage1 import (MAX_IT as S1_MAX_IT, DELTA0 as S1_DELTA0, O_GL,
 from .stage2 import (SADDLE_PHI_IT, SADDLE_PHI_TOL, SADDLE_STALL_ANGLE, WORK_ROWS, _D, _DT, _EA,
                      _EB, _GA, _GB, _H, _JUMP, _MA, _MB, _PA, _PB, _T1, _T2, _TMP,
                      _rot_t, _tangent_basis, _to_world, direction_search)
-from .support import CREASE, norm3, seed_start
+from .support import CREASE, norm3, rt_times, seed_start
 
 # float result columns
 F_SD = 0          # signed distance (m): < 0 penetration depth, > 0 separation
@@ -235,12 +235,8 @@ def _model_point(prevF, body, e, out):
 def _model_quad(prevF, body, R, x, y):
     """(Rᵀx)ᵀ S (Rᵀy): the stored symmetric dp/de S of body 0/1 as a form on world vectors."""
     fs = F_SA if body == 0 else F_SB
-    x0 = R[0, 0] * x[0] + R[1, 0] * x[1] + R[2, 0] * x[2]
-    x1 = R[0, 1] * x[0] + R[1, 1] * x[1] + R[2, 1] * x[2]
-    x2 = R[0, 2] * x[0] + R[1, 2] * x[1] + R[2, 2] * x[2]
-    y0 = R[0, 0] * y[0] + R[1, 0] * y[1] + R[2, 0] * y[2]
-    y1 = R[0, 1] * y[0] + R[1, 1] * y[1] + R[2, 1] * y[2]
-    y2 = R[0, 2] * y[0] + R[1, 2] * y[1] + R[2, 2] * y[2]
+    x0, x1, x2 = rt_times(R, x[0], x[1], x[2])
+    y0, y1, y2 = rt_times(R, y[0], y[1], y[2])
     return (x0 * (prevF[fs] * y0 + prevF[fs + 1] * y1 + prevF[fs + 2] * y2)
             + x1 * (prevF[fs + 1] * y0 + prevF[fs + 3] * y1 + prevF[fs + 4] * y2)
             + x2 * (prevF[fs + 2] * y0 + prevF[fs + 4] * y1 + prevF[fs + 5] * y2))

@@ -65,7 +65,7 @@ import math
 import numpy as np
 
 from ..jit import kernel
-from .support import (CREASE, FREE, OPEN_FIX, POLE_FIX, dot3, evaluate, pole_escape,
+from .support import (CREASE, FREE, OPEN_FIX, POLE_FIX, dot3, evaluate, pole_escape, rt_times,
                       try_migrate)
 from .trust_region import jacobi_eig, tr_step_eig
 
@@ -333,12 +333,8 @@ def _reduced_hessian(domA, domB, ist, RA, RB, g, C, evA, evB, gr, wd, Hs, gs, id
         for j in range(i, 4):
             Hs[i, j] = dot3(C[i], C[j])
     # curvature terms: g · Γ'' (file frame: Rᵀ g)
-    gA0 = RA[0, 0] * g[0] + RA[1, 0] * g[1] + RA[2, 0] * g[2]
-    gA1 = RA[0, 1] * g[0] + RA[1, 1] * g[1] + RA[2, 1] * g[2]
-    gA2 = RA[0, 2] * g[0] + RA[1, 2] * g[1] + RA[2, 2] * g[2]
-    gB0 = RB[0, 0] * g[0] + RB[1, 0] * g[1] + RB[2, 0] * g[2]
-    gB1 = RB[0, 1] * g[0] + RB[1, 1] * g[1] + RB[2, 1] * g[2]
-    gB2 = RB[0, 2] * g[0] + RB[1, 2] * g[1] + RB[2, 2] * g[2]
+    gA0, gA1, gA2 = rt_times(RA, g[0], g[1], g[2])
+    gB0, gB1, gB2 = rt_times(RB, g[0], g[1], g[2])
     Hs[0, 0] += gA0 * evA[3, 0] + gA1 * evA[3, 1] + gA2 * evA[3, 2]
     Hs[0, 1] += gA0 * evA[4, 0] + gA1 * evA[4, 1] + gA2 * evA[4, 2]
     Hs[1, 1] += gA0 * evA[5, 0] + gA1 * evA[5, 1] + gA2 * evA[5, 2]
@@ -610,9 +606,7 @@ def nearest_seed(seed_x, seed_p, s0, ns, mask, p0, pos, R, q):
     q0 = q[0] - pos[0]
     q1 = q[1] - pos[1]
     q2 = q[2] - pos[2]
-    f0 = R[0, 0] * q0 + R[1, 0] * q1 + R[2, 0] * q2
-    f1 = R[0, 1] * q0 + R[1, 1] * q1 + R[2, 1] * q2
-    f2 = R[0, 2] * q0 + R[1, 2] * q1 + R[2, 2] * q2
+    f0, f1, f2 = rt_times(R, q0, q1, q2)
     best = 1e300
     ib = s0
     use_mask = mask.shape[0] > 0

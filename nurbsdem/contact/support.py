@@ -87,6 +87,15 @@ def dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
+@kernel(inline="always")
+def rt_times(R, x0, x1, x2):
+    """Rᵀ x for the rotation R (body to world) and the world vector (x0, x1, x2): its file
+    (body) frame components."""
+    return (R[0, 0] * x0 + R[1, 0] * x1 + R[2, 0] * x2,
+            R[0, 1] * x0 + R[1, 1] * x1 + R[2, 1] * x2,
+            R[0, 2] * x0 + R[1, 2] * x1 + R[2, 2] * x2)
+
+
 @kernel
 def norm3(a):
     """|a| for a 3-vector."""
@@ -280,6 +289,18 @@ def _start_point(tab, ip, fst, ws, ev):
 
 
 @kernel(inline="always")
+def _escape(tab, ip, pu, pv, edge, e, u, v, ws, ev2, tmp):
+    """A pole escape (:func:`pole_escape`) from (pu, pv) on the collapsed edge ``edge`` of
+    patch ip.  Returns (moved, u, v, evaluations): the meridian's point, or (u, v) as given
+    when the pole is the support point."""
+    ok, uu, vv = pole_escape(tab, ip, pu, pv, edge, e, ws, ev2, tmp)
+    if ok:
+        u = uu
+        v = vv
+    return ok, u, v, POLE_SAMPLES + 2
+
+
+@kernel(inline="always")
 def _boundary(tab, ip, u, v, e, out_u, out_v, fixu, fixv, nmig, npole, ws, ev2, tmp):
     """At a rectangle's edge with the gradient pointing out (``out_u``, ``out_v``): the u
     (zeta) neighbour first, then v (theta): migrate to the neighbour patch, escape a pole, or
@@ -309,12 +330,9 @@ def _boundary(tab, ip, u, v, e, out_u, out_v, fixu, fixv, nmig, npole, ws, ev2, 
         if code == 2:
             if npole < 3:
                 npole += 1
-                ok, uu, vv = pole_escape(tab, ip, u, v, edge, e, ws, ev2, tmp)
-                nev += POLE_SAMPLES + 2
-                if ok:
-                    u = uu
-                    v = vv
-                    moved = True
+                moved, u, v, n = _escape(tab, ip, u, v, edge, e, u, v, ws, ev2, tmp)
+                nev += n
+                if moved:
                     break
             fx = POLE_FIX
         elif code == 3:
@@ -347,16 +365,9 @@ def _pole_restart(tab, ip, u, v, e, npole, ws, ev2, tmp):
             pv = v
         if abs(pv - lo) < 0.02 * w:
             npole += 1
-            if edge < 2:
-                uu, vv = lo, v
-            else:
-                uu, vv = u, lo
-            ok, uu, vv = pole_escape(tab, ip, uu, vv, edge, e, ws, ev2, tmp)
-            nev += POLE_SAMPLES + 2
-            if ok:
-                u = uu
-                v = vv
-                moved = True
+            pu, pv = (lo, v) if edge < 2 else (u, lo)
+            moved, u, v, n = _escape(tab, ip, pu, pv, edge, e, u, v, ws, ev2, tmp)
+            nev += n
             break
     return moved, u, v, npole, nev
 
