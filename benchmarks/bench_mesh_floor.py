@@ -4,28 +4,29 @@ The scene: N exact spheres (radius 5 mm, glass-like) in a simple cubic block of 
 resting on a floor, gravity on, linear contacts (εn 1e4 N/m, cn 0.5 N·s/m, εt 1e4 N/m,
 μ 0.5); the floor is either a flat `Wall` or a `Mesh` of the same square tessellated into
 2 × k × k triangles (k = 224: 100 352 triangles), a file the benchmark writes.  Both decks
-run the same deck steps (TimeStep 1e-3 s, sub-stepped by the solver) in the compiled deck
-steps, each ``--repeats`` times, the two decks alternated (one run of 280 internal steps
-varies by tens of per cent on a shared machine); printed for each: the median time loop (the
-solver's own timers of the time loop: search, LCPs, forces and integration) of the measured
-step, which follows a warm-up step of ``WARM_STEPS`` deck steps (it loads the compiled
-kernels: not a cost of the step), its cost per internal step and per particle-step, and the
-median of the paired ratios mesh / flat with their range.  The set-up (the mesh read and
-binned), the output and the writers' opening (the mesh drawn for ``walls.pvd``) are not in
-the time loop.  The error: the floor's
-vertical reaction at the end against the flat floor's, relative to the pack's weight (the
-mesh's face contacts are the flat wall's closed form; the positions themselves drift apart
-by round-off amplified in the stacked block, whose contacts are summed in another order).
+run in the compiled deck steps, in **one process**: each is set up and runs a warm-up step of
+``WARM_STEPS`` deck steps (it loads the compiled kernels: not a cost of the step), then the
+two run ``--repeats`` measured steps of ``--steps`` deck steps (TimeStep 1e-3 s, sub-stepped
+by the solver) each, alternated, flat then mesh.  One process because the same run's speed
+differs by tens of per cent from one process to the next (its memory layout), more than the
+difference measured; alternated so that a slower minute of a shared machine hits both.
+Printed for each deck: the median time loop of its measured steps (the solver's own timers
+of the time loop: search, LCPs, forces and integration), its cost per internal step and per
+particle-step, and the median of the paired ratios mesh / flat per internal step with their
+range.  The set-up (the mesh read and binned), the output and the writers' opening (the mesh
+drawn for ``walls.pvd``) are not in the time loop.  The error: the floor's vertical
+reaction at the end against the flat floor's, relative to the pack's weight (the mesh's
+face contacts are the flat wall's closed form; the positions themselves drift apart by
+round-off amplified in the stacked block, whose contacts are summed in another order).
 
 Usage: .venv/bin/python benchmarks/bench_mesh_floor.py [--n 10000] [--k 224] [--steps 20]
-       [--repeats 5] [--quick]   (quick: 1 000 spheres, k = 64, 5 deck steps)
+       [--repeats 8] [--quick]   (quick: 1 000 spheres, k = 64, 5 deck steps, 2 repeats)
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
-import os
 import subprocess
 import sys
 import tempfile
@@ -34,23 +35,33 @@ from pathlib import Path
 import numpy as np
 
 R = 0.005
-#: deck steps of the warm-up step before the measured one
+#: deck steps of the warm-up step before the measured ones
 WARM_STEPS = 2
+#: both decks in one process (argv: the two decks, their output folders, the repeats): per
+#: deck the measured steps' time loops (s) and internal steps, and the floor's reaction (N)
 RUN = """
 import json, sys
+import numpy as np
 from nurbsdem.io.deck import parse_deck
 from nurbsdem.solver import Solver
 LOOP = ("global search", "LCP", "forces + integration")
-s = Solver(parse_deck(sys.argv[1]), output=sys.argv[2], quiet=True)
-s.start()
-s.run_step(s.model.steps[0])              # the warm-up step: loads the compiled kernels
-loop0, substeps0 = sum(s.timers[k] for k in LOOP), s.summary.substeps
-s.run_step(s.model.steps[1])
-loop, substeps = sum(s.timers[k] for k in LOOP) - loop0, s.summary.substeps - substeps0
-s.finish()
-import numpy as np
-mon = np.genfromtxt(sys.argv[2] + "/monitors/wall_floor.csv", delimiter=",", names=True)
-print(json.dumps(dict(loop=loop, substeps=substeps, reaction=float(mon["reaction_z"][-1]))))
+decks, outs, repeats = sys.argv[1:3], sys.argv[3:5], int(sys.argv[5])
+solvers = [Solver(parse_deck(d), output=o, quiet=True) for d, o in zip(decks, outs)]
+for s in solvers:
+    s.start()
+    s.run_step(s.model.steps[0])          # the warm-up step: loads the compiled kernels
+runs = [dict(loop=[], substeps=[]) for _ in solvers]
+for k in range(1, repeats + 1):
+    for s, run in zip(solvers, runs):
+        loop0, substeps0 = sum(s.timers[x] for x in LOOP), s.summary.substeps
+        s.run_step(s.model.steps[k])
+        run["loop"].append(sum(s.timers[x] for x in LOOP) - loop0)
+        run["substeps"].append(s.summary.substeps - substeps0)
+for s, run, o in zip(solvers, runs, outs):
+    s.finish()
+    mon = np.genfromtxt(o + "/monitors/wall_floor.csv", delimiter=",", names=True)
+    run["reaction"] = float(mon["reaction_z"][-1])
+print(json.dumps(runs))
 """
 
 
@@ -76,7 +87,10 @@ def write_floor(path: Path, side: float, k: int) -> int:
     return len(faces)
 
 
-def deck(pos: np.ndarray, side: float, floor: str, steps: int) -> str:
+def deck(pos: np.ndarray, side: float, floor: str, steps: int, repeats: int) -> str:
+    """The deck: the warm-up step, then ``repeats`` measured steps of ``steps`` deck steps."""
+    measured = "".join(f"  Step {k} Dynamic Duration {steps * 1e-3:.6g} TimeStep 1e-3\n"
+                       for k in range(2, repeats + 2))
     lines = "\n".join(f"  Particle {i + 1} Shape 1 Material 1 Position {p[0]:.17g} {p[1]:.17g} "
                       f"{p[2]:.17g}" for i, p in enumerate(pos))
     return f"""Environment
@@ -93,17 +107,10 @@ Contact
   Interface 1 NormalPenalty 1e4 NormalDamping 0.5 TangentialPenalty 1e4 Friction 0.5
 Steps
   Step 1 Dynamic Duration {WARM_STEPS * 1e-3:.6g} TimeStep 1e-3
-  Step 2 Dynamic Duration {steps * 1e-3:.6g} TimeStep 1e-3
-Output
+{measured}Output
   Directory out
   Monitors Every 1e-3
 """
-
-
-def run(deck_path: Path, out: Path) -> dict:
-    r = subprocess.run([sys.executable, "-c", RUN, str(deck_path), str(out)], env=dict(os.environ),
-                       capture_output=True, text=True, check=True)
-    return json.loads(r.stdout.strip().splitlines()[-1])
 
 
 def main(argv: list[str]) -> dict:
@@ -111,42 +118,46 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--n", type=int, default=10000)
     ap.add_argument("--k", type=int, default=224)
     ap.add_argument("--steps", type=int, default=20)
-    ap.add_argument("--repeats", type=int, default=5,
-                    help="runs of each deck, alternated; the medians are reported")
+    ap.add_argument("--repeats", type=int, default=8,
+                    help="measured steps of each deck, alternated; the medians are reported")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args(argv)
     if a.quick:
-        a.n, a.k, a.steps = 1000, 64, 5
+        a.n, a.k, a.steps, a.repeats = 1000, 64, 5, 2
+    repeats = max(1, a.repeats)
     pos, side = block(a.n)
-    out = {}
+    names = ("flat", "mesh")
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         triangles = write_floor(work / "floor.stl", side, a.k)
         floors = {"flat": f"Wall 1 Name floor Point 0 0 0 Normal 0 0 1 Size {side} {side}",
                   "mesh": "Mesh 1 Name floor File floor.stl"}
-        for name, line in floors.items():
-            (work / f"{name}.inp").write_text(deck(pos, side, line, a.steps))
-            run(work / f"{name}.inp", work / f"warm_{name}")      # compiled kernels cached
-        runs = {name: [] for name in floors}
-        for k in range(max(1, a.repeats)):       # alternated: a slower minute hits both
-            for name in floors:
-                runs[name].append(run(work / f"{name}.inp", work / f"out_{name}_{k}"))
-        ratios = [(m["loop"] / m["substeps"]) / (f["loop"] / f["substeps"])
-                  for f, m in zip(runs["flat"], runs["mesh"])]
-        for name in floors:                      # the run of the median time loop
-            by_loop = sorted(runs[name], key=lambda r: r["loop"])
-            out[name] = by_loop[len(by_loop) // 2]
+        for name in names:
+            (work / f"{name}.inp").write_text(deck(pos, side, floors[name], a.steps, repeats))
+        r = subprocess.run([sys.executable, "-c", RUN]
+                           + [str(work / f"{name}.inp") for name in names]
+                           + [str(work / f"out_{name}") for name in names] + [str(repeats)],
+                           capture_output=True, text=True, check=True)
+        runs = dict(zip(names, json.loads(r.stdout.strip().splitlines()[-1])))
+    per = {name: np.array(runs[name]["loop"]) / np.array(runs[name]["substeps"])
+           for name in names}
+    ratios = per["mesh"] / per["flat"]
+    out = {}
+    for name in names:                           # the measured step of the median time loop
+        k = int(np.argsort(runs[name]["loop"])[len(runs[name]["loop"]) // 2])
+        out[name] = dict(loop=runs[name]["loop"][k], substeps=runs[name]["substeps"][k],
+                         reaction=runs[name]["reaction"])
     n = len(pos)
     weight = len(pos) * 2500.0 * 4.0 / 3.0 * math.pi * R ** 3 * 9.81
     err = abs(out["mesh"]["reaction"] - out["flat"]["reaction"]) / weight
-    print(f"{n} spheres in 3 layers on a floor of side {side:.3f} m, {a.steps} deck steps; "
-          f"each deck run {len(ratios)} times, alternated (medians)")
+    print(f"{n} spheres in 3 layers on a floor of side {side:.3f} m, {a.steps} deck steps "
+          f"measured {len(ratios)} times per deck in one process, alternated (medians)")
     for name in ("flat", "mesh"):
         r = out[name]
-        per = r["loop"] / r["substeps"]
+        cost = r["loop"] / r["substeps"]
         label = "flat wall" if name == "flat" else f"mesh, {triangles} triangles"
         print(f"  {label:<26} time loop {r['loop']:.2f} s, {r['substeps']} internal steps, "
-              f"{1e3 * per:.2f} ms per step, {1e6 * per / n:.2f} µs per particle-step")
+              f"{1e3 * cost:.2f} ms per step, {1e6 * cost / n:.2f} µs per particle-step")
     ratio = float(np.median(ratios))
     print(f"mesh / flat cost per internal step: {ratio:.3f} ({100 * (ratio - 1):+.1f} %; pairs "
           f"{min(ratios):.3f} to {max(ratios):.3f}); "
