@@ -460,7 +460,8 @@ def test_a_tilted_particle_over_the_rim_of_an_orifice_touches_from_its_first_ove
     rim exactly when its section in the floor's plane reaches past it, each of the rim's
     edges it reaches with the depth of the analytic support function against that edge (the
     least over the edge's normal arc, on either side of the floor: a lower end that dipped
-    through the orifice touches the rim with its upper surface), the deepest growing
+    through the orifice touches the rim with its upper surface), or against the edge's end
+    where that is the edge's deepest point, the deepest growing
     steadily with the overlap; the compiled kernel gives the reference's rows."""
     mesh = _orifice()
     axes = (0.004, 0.0016, 0.0016)
@@ -483,8 +484,13 @@ def test_a_tilted_particle_over_the_rim_of_an_orifice_touches_from_its_first_ove
             if reach < 1e-5:
                 continue
             assert len(rf) >= 1
-            for row in rf:                       # each on a rim edge (several: a polygon)
+            for row in rf:      # each on a rim edge or at its deepest end (several: a polygon)
                 q = row[F_PB:F_PB + 3]
+                corner = np.linalg.norm(mesh.vertices - q, axis=1).min() < 1e-12
+                if corner:
+                    assert row[F_SD] == pytest.approx(_vertex_reference(c, M, q),
+                                                      abs=1e-11 * axes[0])
+                    continue
                 k = math.floor(math.atan2(q[1], q[0]) / (2.0 * math.pi / 64))
                 p0, p1 = (mesh.vertices[np.argmin(np.linalg.norm(
                     mesh.vertices - 0.012 * np.array([math.cos(a), math.sin(a), 0.0]), axis=1))]
@@ -519,3 +525,40 @@ def test_a_long_particle_through_an_orifice_has_no_contact_under_the_rim():
         poses.append((pos, R))
         assert len(particle_mesh_contacts(table, 0, pos, R, mesh)[0]) == 0
     _compiled_equals_reference(table, mesh, poses)
+
+
+def test_a_particle_at_a_corner_of_an_orifice_touches_wherever_the_corner_is_inside_it():
+    """An elongated ellipsoid in random orientations beside a polygon vertex V of the
+    orifice's rim (the floor turns by more than half a turn there: the vertex's normal cone
+    is the plane's normal alone), its centre in the hole or over the rim, below or above the
+    floor: wherever V lies inside the particle there is a contact, and every contact at V
+    has the depth of the analytic support function at V (1e-11 of the particle's size);
+    the compiled kernel gives the reference's rows.  Without the boundary edges' corners
+    (or with the vertex Newton stopping where h_A(d) − d · V is not convex) 55 (16) of the
+    978 poses with V inside had no contact."""
+    mesh = _orifice()
+    V = mesh.vertices[np.argmin(np.linalg.norm(mesh.vertices - [0.012, 0.0, 0.0], axis=1))]
+    assert np.allclose(V, [0.012, 0.0, 0.0])
+    axes = (0.004, 0.0016, 0.0016)
+    table = table_of(shapes.ellipsoid(*axes))
+    rng = np.random.default_rng(1)
+    inside = at_v = 0
+    poses = []
+    for _ in range(400):
+        R = _rotation(rng.normal(size=3))
+        M = R @ np.diag(np.square(axes)) @ R.T
+        ang, rad = rng.uniform(-0.15, 0.15), rng.uniform(0.008, 0.0125)
+        c = np.array([rad * math.cos(ang), rad * math.sin(ang), rng.uniform(-0.002, 0.002)])
+        pos = c - R @ table.centroid[0]
+        rf, _ = particle_mesh_contacts(table, 0, pos, R, mesh)
+        if (V - c) @ np.linalg.solve(M, V - c) < 0.98:
+            inside += 1
+            assert len(rf) >= 1
+            poses.append((pos, R))
+        for row in rf:
+            if np.linalg.norm(row[F_PB:F_PB + 3] - V) < 1e-12:
+                at_v += 1
+                assert row[F_SD] == pytest.approx(_vertex_reference(c, M, V),
+                                                  abs=1e-11 * axes[0])
+    assert inside > 100 and at_v > 50
+    _compiled_equals_reference(table, mesh, poses[:60])

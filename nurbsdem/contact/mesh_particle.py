@@ -32,8 +32,12 @@ own region of normals, in which the minimum is a contact of that feature:
 * **vertex** V: h_X(−d) = −d · V, stationary where p_A(d) − V ∥ d, a Newton on the tangent
   components with the Jacobian (dp/dd)_t − λ I (λ = d · (p_A − V)): the point-to-surface
   problem of :mod:`nurbsdem.contact.point_surface` in the support-function form (it holds
-  with V inside A); a contact when d lies in the vertex's normal cone (d · (x − V) ≥ 0 for
-  every vertex x of the triangles around V).
+  with V inside A; where h_A(d) − d · V is not convex, steepest-descent turns of d lead
+  Newton in); a contact when d lies in the vertex's normal cone (d · (x − V) ≥ 0 for every
+  vertex x of the triangles around V), or when V is the deepest point of a boundary edge at
+  V (d · (X − V) ≥ 0 along the edge (V, X), with d in that edge's arc): at a reflex corner
+  of the boundary (a vertex of an orifice's polygon) the cone is the plane's normal alone,
+  and the rim's corner holds the contact of the edge whose own root lies beyond it.
 
 **One contact per flat or convex region** (the rule of :mod:`nurbsdem.contact.mesh_wall`): a
 face contact always counts; an edge or vertex contact counts only with its normal in the
@@ -293,7 +297,8 @@ def _tangent_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _vertex(oracle: SupportOracle, V: np.ndarray, d0: np.ndarray):
     """(sd, p, q, d, iterations) of the point V against the particle (module docstring),
-    Newton from the normal d0; None when it does not converge to a minimum."""
+    Newton from the normal d0 (steepest-descent turns where the Jacobian is not positive
+    definite); None when it does not converge to a minimum."""
     d = d0 / np.linalg.norm(d0)
     tol = TOL * oracle.radius
     for it in range(MAX_IT):
@@ -306,11 +311,15 @@ def _vertex(oracle: SupportOracle, V: np.ndarray, d0: np.ndarray):
         F = np.array([u1 @ r, u2 @ r])
         J = np.array([[u1 @ M @ u1, u1 @ M @ u2], [u2 @ M @ u1, u2 @ M @ u2]]) - lam * np.eye(2)
         J = 0.5 * (J + J.T)
-        if np.linalg.eigvalsh(J)[0] <= 0.0:
-            return None                          # not a minimum of h_A(d) − d · V
+        convex = np.linalg.eigvalsh(J)[0] > 0.0
         if abs(F[0]) <= tol and abs(F[1]) <= tol:
+            if not convex:
+                return None                      # not a minimum of h_A(d) − d · V
             return -lam, p, V.copy(), d, it
-        step = -np.linalg.solve(J, F)
+        # where h_A(d) − d · V is not convex (V deep in the particle, d far from the
+        # minimum), a steepest-descent turn of the normal (its gradient F over the support
+        # distance λ) until Newton can take over
+        step = -np.linalg.solve(J, F) if convex else -F / max(abs(lam), tol)
         size = float(np.linalg.norm(step))
         if size > MAX_TURN:
             step *= MAX_TURN / size
@@ -347,6 +356,26 @@ def _in_vertex_cone(mesh: MeshWall, V_id: int, tris: list, d: np.ndarray) -> boo
             if k != V_id and float(d @ (mesh.vertices[k] - V)) < -tol:
                 return False
     return True
+
+
+def _deepest_of_a_border_edge(mesh: MeshWall, V_id: int, tris: list, d: np.ndarray) -> bool:
+    """Whether the vertex V with the contact normal d is the deepest point of an edge of the
+    mesh's boundary at V: d · (X − V) ≥ 0 along the edge (V, X), so that the edge's line is
+    deepest beyond V and its own contact is off the segment, with d in that edge's normal arc
+    (d · w ≥ 0, w its triangle's in-plane normal from the edge inwards: the particle beside
+    the rim, not over the face).  At a reflex corner of a boundary (a vertex of an orifice's
+    polygon, where the mesh turns by more than half a turn) the vertex's normal cone is the
+    plane's normal alone, and this is the contact of the rim's corner."""
+    border = topology(mesh)[0]
+    V = mesh.vertices[V_id]
+    for tri in tris:
+        for k in mesh.faces[tri].tolist():
+            if k == V_id or len(border.get((min(k, V_id), max(k, V_id)), ())) != 1:
+                continue
+            if (float(d @ (mesh.vertices[k] - V)) >= 0.0
+                    and float(d @ inward(mesh, tri, V_id, k)) >= 0.0):
+                return True
+    return False
 
 
 def _segment_distance(c: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> float:
@@ -406,8 +435,9 @@ def _candidates(oracle: SupportOracle, mesh: MeshWall, near: np.ndarray,
         if active_only and _separated(oracle, d0, [V]):
             continue
         hit = _vertex(oracle, V, d0)
-        if (hit is not None and _in_vertex_cone(mesh, v, tris, hit[3])
-                and _on_particle_side(oracle, mesh, tris, hit[3])):
+        if hit is not None and ((_in_vertex_cone(mesh, v, tris, hit[3])
+                                 and _on_particle_side(oracle, mesh, tris, hit[3]))
+                                or _deepest_of_a_border_edge(mesh, v, tris, hit[3])):
             out.append(hit[:4] + (VERTEX_A, tris[0], hit[4]))
     return out
 

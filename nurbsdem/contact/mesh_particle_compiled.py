@@ -38,7 +38,7 @@ from ..jit import PointerKernel, kernel
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_FAIL, I_IT, I_PA, I_PB, I_VALID, NF, NI
 from .mesh_particle import (ARC_SAMPLES, DEEPER, ITERATED_TIE, MAX_IT, MAX_TURN, MIN_ARC,
                             TOL)
-from .mesh_topology import pack_topology
+from .mesh_topology import crosses_beyond_border, deepest_of_a_border_edge, pack_topology
 from .mesh_wall import EDGE_AB, FACE, TIE, VERTEX_A, MeshWall, _triangle_candidates, triangles_near
 from .surface_particle_compiled import (_C, _D, _M, _P, _POS, _start as _pose_start, _support,
                                         make_surface_work)
@@ -259,43 +259,6 @@ def _may_hold(tab, info, cen, rad, seeds, vertices, faces, normals, size, n, wor
 
 
 # --------------------------------------------------------------------------- iterations
-@kernel(inline="always")
-def _is_border(feat, tri_feat_range, tri_feat, tri, i, j):
-    """Whether the edge (i, j) of triangle ``tri`` is an edge of the mesh's boundary (a
-    feature with one triangle)."""
-    lo, hi = min(i, j), max(i, j)
-    for r in range(tri_feat_range[tri, 0], tri_feat_range[tri, 1]):
-        f = tri_feat[r]
-        if feat[f, 0] == lo and feat[f, 1] == hi:
-            return feat[f, 3] - feat[f, 2] == 1
-    return False
-
-
-@kernel(inline="always")
-def _crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri, c, p):
-    """The reference's ``_crosses_beyond_border``: whether the segment from the centroid c
-    to the deepest point p crosses the plane of triangle ``tri`` beyond a border edge."""
-    n = normals[tri]
-    a = vertices[faces[tri, 0]]
-    sc, sp = _dot_diff(n, c, a), _dot_diff(n, p, a)
-    if not sc * sp < 0.0:
-        return False
-    s = sc / (sc - sp)
-    r0, r1, r2 = c[0] + s * (p[0] - c[0]), c[1] + s * (p[1] - c[1]), c[2] + s * (p[2] - c[2])
-    for k in range(3):
-        i, j = faces[tri, k], faces[tri, (k + 1) % 3]
-        if not _is_border(feat, tri_feat_range, tri_feat, tri, i, j):
-            continue
-        x, y, z = vertices[i], vertices[j], vertices[faces[tri, (k + 2) % 3]]
-        e0, e1, e2 = y[0] - x[0], y[1] - x[1], y[2] - x[2]
-        w0, w1, w2 = n[1] * e2 - n[2] * e1, n[2] * e0 - n[0] * e2, n[0] * e1 - n[1] * e0
-        if w0 * (z[0] - x[0]) + w1 * (z[1] - x[1]) + w2 * (z[2] - x[2]) < 0.0:
-            w0, w1, w2 = -w0, -w1, -w2
-        if w0 * (r0 - x[0]) + w1 * (r1 - x[1]) + w2 * (r2 - x[2]) < 0.0:
-            return True
-    return False
-
-
 @kernel
 def _face(tab, info, cen, rad, seeds, vertices, faces, normals, feat, tri_feat_range,
           tri_feat, tri, work, nc):
@@ -320,7 +283,7 @@ def _face(tab, info, cen, rad, seeds, vertices, faces, normals, feat, tri_feat_r
     al, be = qf[F_PAR + 2], qf[F_PAR + 3]
     if not (qi[I_VALID] == 1 and al >= 0.0 and be >= 0.0 and al + be <= 1.0):
         return nc
-    if _crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri,
+    if crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri,
                               sw[_C], qf[F_PA:F_PA + 3]):
         return nc
     _put(cf, ci, nc, qf[F_SD], qf[F_PA:F_PA + 3], qf[F_PB:F_PB + 3], qf[F_N], qf[F_N + 1],
@@ -513,7 +476,8 @@ def _tangent_basis(d0, d1, d2, u1, u2):
 def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
     """(found, λ, iterations) of the point V against the particle (the reference's
     ``_vertex``): a Newton on the tangent components of p_A(d) − V from the unit d, with the
-    Jacobian (dp/dd)_t − λ I; found: converged to a minimum, with p in sw[_P], d in sw[_D]."""
+    Jacobian (dp/dd)_t − λ I, steepest-descent turns where that is not positive definite;
+    found: converged to a minimum, with p in sw[_P], d in sw[_D]."""
     sv, mv = work.sv, work.mv
     sw = sv[5]
     u1, u2 = mv[_U1], mv[_U2]
@@ -530,13 +494,16 @@ def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
         a = _quad(M, u1) - lam
         c = _quad(M, u2) - lam
         b = 0.5 * (_bilinear(M, u1, u2) + _bilinear(M, u2, u1))
-        if 0.5 * (a + c) - math.sqrt(0.25 * (a - c) ** 2 + b * b) <= 0.0:
-            return False, 0.0, it                 # not a minimum of h_A(d) − d · V
+        convex = 0.5 * (a + c) - math.sqrt(0.25 * (a - c) ** 2 + b * b) > 0.0
         if abs(f0) <= tol and abs(f1) <= tol:
-            return True, lam, it
-        det = a * c - b * b
-        s0 = -(c * f0 - b * f1) / det
-        s1 = -(a * f1 - b * f0) / det
+            return convex, lam, it                # not convex: not a minimum of h_A − d · V
+        if convex:
+            det = a * c - b * b
+            s0 = -(c * f0 - b * f1) / det
+            s1 = -(a * f1 - b * f0) / det
+        else:                                     # the reference's steepest-descent turn
+            g = max(abs(lam), tol)
+            s0, s1 = -f0 / g, -f1 / g
         size = math.sqrt(s0 * s0 + s1 * s1)
         if size > MAX_TURN:
             s0, s1 = s0 * MAX_TURN / size, s1 * MAX_TURN / size
@@ -547,12 +514,29 @@ def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
     return False, 0.0, MAX_IT
 
 
+@kernel(inline="always")
+def _in_cone_on_side(vertices, faces, normals, size, feat_tris, t0, t1, v, d, c, s):
+    """Whether the contact normal d of vertex v lies in its normal cone over the triangles
+    feat_tris[t0:t1] on the side of the particle's centroid c (the reference's
+    ``_in_vertex_cone`` and ``_on_particle_side``; s: a 3-vector workspace)."""
+    V = vertices[v]
+    tol = 1e-12 * size
+    for m in range(t0, t1):
+        for k in range(3):
+            x = faces[feat_tris[m], k]
+            if x != v and _dot_diff(d, vertices[x], V) < -tol:
+                return False
+    _facing_sum(c, vertices, faces, normals, feat_tris, t0, t1, s)
+    return _dot(d, s) < 0.0
+
+
 @kernel
-def _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat_tris, t0, t1, v,
-            active_only, work, nc):
+def _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat, feat_tris,
+            tri_feat_range, tri_feat, t0, t1, v, active_only, work, nc):
     """The contact of vertex v with triangles feat_tris[t0:t1] (the reference's vertex
     branch: Newton from minus the sum of their facing normals, kept in the vertex's normal
-    cone on the particle's side) as candidate nc; returns the new count."""
+    cone on the particle's side, or where v is the deepest point of a boundary edge) as
+    candidate nc; returns the new count."""
     sv, mv, cf, ci = work.sv, work.mv, work.cf, work.ci
     sw = sv[5]
     V = vertices[v]
@@ -570,15 +554,10 @@ def _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat_tri
     if not found:
         return nc
     d = sw[_D]
-    tol = 1e-12 * size
-    for m in range(t0, t1):                      # in the vertex's normal cone
-        for k in range(3):
-            x = faces[feat_tris[m], k]
-            if x != v and _dot_diff(d, vertices[x], V) < -tol:
-                return nc
-    _facing_sum(sw[_C], vertices, faces, normals, feat_tris, t0, t1, s)
-    if not _dot(d, s) < 0.0:
-        return nc
+    if not _in_cone_on_side(vertices, faces, normals, size, feat_tris, t0, t1, v, d, sw[_C], s):
+        if not deepest_of_a_border_edge(vertices, faces, feat, tri_feat_range, tri_feat,
+                                         feat_tris, t0, t1, v, d):
+            return nc
     _put(cf, ci, nc, -lam, sw[_P], V, d[0], d[1], d[2], VERTEX_A, feat_tris[t0], it)
     return nc + 1
 
@@ -619,8 +598,8 @@ def _features(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat, 
             g0, g1, g2 = V[0] - c[0], V[1] - c[1], V[2] - c[2]
             if math.sqrt(g0 * g0 + g1 * g1 + g2 * g2) > rad:
                 continue
-            nc = _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat_tris,
-                         t0, t1, i, active_only, work, nc)
+            nc = _vertex(tab, info, cen, rad, seeds, vertices, faces, normals, size, feat,
+                         feat_tris, tri_feat_range, tri_feat, t0, t1, i, active_only, work, nc)
     return nc
 
 

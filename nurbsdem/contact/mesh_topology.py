@@ -7,15 +7,19 @@ hold every contact; every other edge (a fold, or the mesh's boundary) and every 
 one is a feature.  :func:`topology` lists them as the reference solver
 (:mod:`nurbsdem.contact.mesh_particle`) walks them; :func:`pack_topology` packs them into
 arrays for the compiled one (:mod:`nurbsdem.contact.mesh_particle_compiled`).  Both are
-computed once per mesh and dropped with it.
+computed once per mesh and dropped with it.  The compiled solver's predicates over the packed
+features (a boundary edge; a particle passing the plane beyond one; a vertex that is the
+deepest point of one) are here too.
 """
 from __future__ import annotations
 
+import math
 import weakref
 from typing import Callable
 
 import numpy as np
 
+from ..jit import kernel
 from .mesh_wall import MeshWall
 
 #: per mesh (by id, with a weak reference to it; dropped with the mesh): its topology, and
@@ -99,3 +103,73 @@ def _packed(mesh: MeshWall) -> tuple:
         tri_feat.extend(ids)
     return (np.array(feat, np.int64).reshape(-1, 4), np.array(feat_tris, np.int64),
             np.array(tri_range, np.int64).reshape(-1, 2), np.array(tri_feat, np.int64))
+
+
+# ------------------------------------------------- predicates over the packed features
+@kernel(inline="always")
+def is_border(feat, tri_feat_range, tri_feat, tri, i, j):
+    """Whether the edge (i, j) of triangle ``tri`` is an edge of the mesh's boundary (a
+    feature with one triangle)."""
+    lo, hi = min(i, j), max(i, j)
+    for r in range(tri_feat_range[tri, 0], tri_feat_range[tri, 1]):
+        f = tri_feat[r]
+        if feat[f, 0] == lo and feat[f, 1] == hi:
+            return feat[f, 3] - feat[f, 2] == 1
+    return False
+
+
+@kernel(inline="always")
+def crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri, c, p):
+    """The reference's ``_crosses_beyond_border`` (:mod:`nurbsdem.contact.mesh_particle`):
+    whether the segment from the centroid c to the deepest point p crosses the plane of
+    triangle ``tri`` beyond a border edge."""
+    n = normals[tri]
+    a = vertices[faces[tri, 0]]
+    sc = n[0] * (c[0] - a[0]) + n[1] * (c[1] - a[1]) + n[2] * (c[2] - a[2])
+    sp = n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2])
+    if not sc * sp < 0.0:
+        return False
+    s = sc / (sc - sp)
+    r0, r1, r2 = c[0] + s * (p[0] - c[0]), c[1] + s * (p[1] - c[1]), c[2] + s * (p[2] - c[2])
+    for k in range(3):
+        i, j = faces[tri, k], faces[tri, (k + 1) % 3]
+        if not is_border(feat, tri_feat_range, tri_feat, tri, i, j):
+            continue
+        x, y, z = vertices[i], vertices[j], vertices[faces[tri, (k + 2) % 3]]
+        e0, e1, e2 = y[0] - x[0], y[1] - x[1], y[2] - x[2]
+        w0, w1, w2 = n[1] * e2 - n[2] * e1, n[2] * e0 - n[0] * e2, n[0] * e1 - n[1] * e0
+        if w0 * (z[0] - x[0]) + w1 * (z[1] - x[1]) + w2 * (z[2] - x[2]) < 0.0:
+            w0, w1, w2 = -w0, -w1, -w2
+        if w0 * (r0 - x[0]) + w1 * (r1 - x[1]) + w2 * (r2 - x[2]) < 0.0:
+            return True
+    return False
+
+
+@kernel(inline="always")
+def deepest_of_a_border_edge(vertices, faces, feat, tri_feat_range, tri_feat, feat_tris, t0,
+                              t1, v, d):
+    """The reference's ``_deepest_of_a_border_edge`` (:mod:`nurbsdem.contact.mesh_particle`):
+    whether vertex v with the contact normal d is the deepest point of a boundary edge
+    (v, x) of a triangle of feat_tris[t0:t1] (d · (x − V) ≥ 0) with d in that edge's normal
+    arc (d · w ≥ 0, w the unit in-plane normal from the edge into its triangle)."""
+    V = vertices[v]
+    for m in range(t0, t1):
+        tri = feat_tris[m]
+        for k in range(3):
+            x = faces[tri, k]
+            if x == v or not is_border(feat, tri_feat_range, tri_feat, tri, v, x):
+                continue
+            X = vertices[x]
+            e0, e1, e2 = X[0] - V[0], X[1] - V[1], X[2] - V[2]
+            if d[0] * e0 + d[1] * e1 + d[2] * e2 < 0.0:
+                continue
+            Z = vertices[faces[tri, 0] + faces[tri, 1] + faces[tri, 2] - v - x]
+            ne = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            t0_, t1_, t2_ = e0 / ne, e1 / ne, e2 / ne
+            z0, z1, z2 = Z[0] - V[0], Z[1] - V[1], Z[2] - V[2]
+            a = z0 * t0_ + z1 * t1_ + z2 * t2_
+            w0, w1, w2 = z0 - a * t0_, z1 - a * t1_, z2 - a * t2_
+            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            if d[0] * (w0 / nw) + d[1] * (w1 / nw) + d[2] * (w2 / nw) >= 0.0:
+                return True
+    return False
