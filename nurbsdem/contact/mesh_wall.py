@@ -539,7 +539,8 @@ def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size,
     rows of :func:`sphere_mesh_rows` that touch, the same bit for bit, in the same order,
     into rows_f / rows_i from row 0, with the sphere in ``owner`` and the row's rank among
     its rows in ``rank``; returns their count (rows beyond the arrays' length are not
-    written: call again with that room).  Sphere m's grid query takes the mark mark0 + m.
+    written: call again with that room; those after the count are scratch).  Sphere m's
+    grid query takes the mark mark0 + m.
 
     From each sphere's list of nearby triangles kept between calls (:func:`make_lists`:
     near_p, near_n, near_t, near_d; keys a workspace; tri_cells the mesh's): the triangles
@@ -630,13 +631,15 @@ def mesh_rows_listed(idx, x, r, R, t, vertices, faces, normals, two_sided, size,
                 continue
             tri = tris[k]
             v = faces[tri, 0]
+            # written in place (the next row overwrites one that does not touch); past the
+            # arrays' room, into a spare row, to count it
+            room = out < rows_f.shape[0]
+            dst_f, dst_i, row = (rows_f, rows_i, out) if room else (one_f, one_i, 0)
             _contact_row(x0, x1, x2, ri, R, t, cand_q[k, 0], cand_q[k, 1], cand_q[k, 2],
                          cand_d[k], normals, tri, vertices[v, 0], vertices[v, 1],
-                         vertices[v, 2], one_f, one_i, 0)
-            if one_f[0, F_SD] < 0.0:
-                if out < rows_f.shape[0]:
-                    rows_f[out, :] = one_f[0, :]
-                    rows_i[out, :] = one_i[0, :]
+                         vertices[v, 2], dst_f, dst_i, row)
+            if dst_f[row, F_SD] < 0.0:
+                if room:
                     owner[out] = i
                     rank[out] = j
                 out += 1
