@@ -284,7 +284,7 @@ def _face(tab, info, cen, rad, seeds, vertices, faces, normals, feat, tri_feat_r
     if not (qi[I_VALID] == 1 and al >= 0.0 and be >= 0.0 and al + be <= 1.0):
         return nc
     if crosses_beyond_border(vertices, faces, normals, feat, tri_feat_range, tri_feat, tri,
-                              sw[_C], qf[F_PA:F_PA + 3]):
+                             sw[_C], qf[F_PA:F_PA + 3]):
         return nc
     _put(cf, ci, nc, qf[F_SD], qf[F_PA:F_PA + 3], qf[F_PB:F_PB + 3], qf[F_N], qf[F_N + 1],
          qf[F_N + 2], FACE, tri, 1)
@@ -496,7 +496,7 @@ def _vertex_newton(tab, info, cen, rad, seeds, V, d0, d1, d2, work):
         b = 0.5 * (_bilinear(M, u1, u2) + _bilinear(M, u2, u1))
         convex = 0.5 * (a + c) - math.sqrt(0.25 * (a - c) ** 2 + b * b) > 0.0
         if abs(f0) <= tol and abs(f1) <= tol:
-            return convex, lam, it                # not convex: not a minimum of h_A − d · V
+            return convex, lam, it                # not convex: a saddle of h_A(d) − d · V
         if convex:
             det = a * c - b * b
             s0 = -(c * f0 - b * f1) / det
