@@ -17,13 +17,14 @@ stability limit.
 
 1. **Fill** (once, for all orifices): the silo with a closed floor (a flat ``Wall``: the
    orifice shut by its gate) is filled to 24 d (full run) by an ``Inlet`` pouring the
-   spheres at 1.5 m/s down from a slab 11 d thick above the bed over ``POUR`` seconds; they
+   spheres at 1.5 m/s down from a slab 11 d thick above the bed over ``POUR`` seconds (for
+   every ``POUR_HEIGHT`` of bed); they
    settle for ``SETTLE`` seconds after the last has landed (their speeds at the end are
    printed).  The bulk density ρ_b is the mass of the spheres whose centres lie in the core
    of the settled bed (2 d from the side walls, the floor and the free surface) over the
    core's volume.
 2. **Discharge** (per orifice): the settled bed (positions and velocities) in the silo whose
-   floor is the mesh with the orifice: the gate is gone at t = 0; 0.45 s of discharge (full
+   floor is the mesh with the orifice: the gate is gone at t = 0; 0.4 s of discharge (full
    run) at orifices of 6, 8, 11 and 15 d (over 0.28 s from an 18 d fill, the rates through
    8 to 15 d still rose by 3–7 % between the window's halves; the bed ends above 1.2 D).
    The spheres falling out pass an ``Outlet`` plane 4 d below the floor; the steady mass
@@ -105,10 +106,13 @@ EVERY = 0.01                              # inlet and outlet segments (s)
 SEGMENTS = 64                             # the orifice's polygon
 FRACTIONS = "Fractions 0.3333333333333333 0.3333333333333334 0.3333333333333333"
 POUR, SETTLE = 0.15, 0.15                 # the fill's pour and settling times (s)
+#: the most bed height (in d) the inlet pours in ``POUR`` seconds: a deeper fill pours longer
+#: (faster, a segment's particles do not fit in the room the last ones left: they wait)
+POUR_HEIGHT = 18.0
 LEAD, TAIL = 0.35, 0.1                    # fractions of a discharge left out of the fit
 #: the published ranges for spheres: exponent, k, C
 RANGES = {"n": (2.2, 2.8), "k": (1.0, 2.0), "C": (0.5, 0.7)}
-FULL = dict(orifices=(6.0, 8.0, 11.0, 15.0), fill=24.0, discharge=0.45)
+FULL = dict(orifices=(6.0, 8.0, 11.0, 15.0), fill=24.0, discharge=0.4)
 QUICK = dict(orifices=(6.0,), fill=9.0, discharge=0.15)
 #: the runs of the other grains (``--shape ellipsoid | paper``): three orifices, a shallower
 #: fill and shorter discharges (a NURBS particle's contacts cost LCPs)
@@ -216,16 +220,18 @@ def fill_count(side: float, height: float) -> int:
 def fill_deck(side: float, height: float, count: int, shape: str = "sphere"
               ) -> tuple[str, float]:
     """The fill: an inlet pours ``count`` spheres into the closed silo at 1.5 m/s down over
-    ``POUR`` seconds from a slab 11 d thick above the bed's expected top ``height`` (m);
+    ``POUR`` seconds (longer for a bed above ``POUR_HEIGHT``) from a slab 11 d thick above
+    the bed's expected top ``height`` (m);
     the run lasts until the last of them has fallen to the floor and ``SETTLE`` seconds more.
     The deck and its duration (s)."""
     h = 0.5 * side - 1.2 * RADII[-1]
     top = height + 12.0 * D_GRAIN
     v0 = 1.5
     fall = (math.sqrt(v0 * v0 + 2.0 * G * top) - v0) / G
-    T = round((POUR + fall + SETTLE) / EVERY) * EVERY
+    pour = POUR * max(1.0, height / (POUR_HEIGHT * D_GRAIN))
+    T = round((pour + fall + SETTLE) / EVERY) * EVERY
     box = f"Box {-h} {-h} {height + D_GRAIN} {h} {h} {top}"
-    flow = f"Rate {count / POUR:.6g} Count {count} Velocity 0 0 {-v0} Seed 3 Every {EVERY}"
+    flow = f"Rate {count / pour:.6g} Count {count} Velocity 0 0 {-v0} Seed 3 Every {EVERY}"
     deck = _header(shape) + textwrap.dedent(f"""\
         Walls
           Wall 1 Name floor Point 0 0 0 Normal 0 0 1 Size {side + 0.02} {side + 0.02}
