@@ -533,9 +533,9 @@ def test_a_particle_at_a_corner_of_an_orifice_touches_wherever_the_corner_is_ins
     is the plane's normal alone), its centre in the hole or over the rim, below or above the
     floor: wherever V lies inside the particle there is a contact, and every contact at V
     has the depth of the analytic support function at V (1e-11 of the particle's size);
-    the compiled kernel gives the reference's rows.  Without the boundary edges' corners
-    (or with the vertex Newton stopping where h_A(d) − d · V is not convex) 55 (16) of the
-    978 poses with V inside had no contact."""
+    the compiled kernel gives the reference's rows.  Without the rule of the boundary edges'
+    corners, or with the vertex Newton stopping where h_A(d) − d · V is not convex, some of
+    the poses with V inside have no contact."""
     mesh = _orifice()
     V = mesh.vertices[np.argmin(np.linalg.norm(mesh.vertices - [0.012, 0.0, 0.0], axis=1))]
     assert np.allclose(V, [0.012, 0.0, 0.0])
