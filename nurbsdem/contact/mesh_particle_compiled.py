@@ -38,7 +38,8 @@ from ..jit import PointerKernel, kernel
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_FAIL, I_IT, I_PA, I_PB, I_VALID, NF, NI
 from .mesh_particle import (ARC_SAMPLES, DEEPER, ITERATED_TIE, MAX_IT, MAX_TURN, MIN_ARC,
                             TOL)
-from .mesh_topology import crosses_beyond_border, deepest_of_a_border_edge, pack_topology
+from .mesh_topology import (crosses_beyond_border, deepest_of_a_border_edge, inward_normal,
+                            pack_topology)
 from .mesh_wall import EDGE_AB, FACE, TIE, VERTEX_A, MeshWall, _triangle_candidates, triangles_near
 from .surface_particle_compiled import (_C, _D, _M, _P, _POS, _start as _pose_start, _support,
                                         make_surface_work)
@@ -382,13 +383,8 @@ def _edge_arc(vertices, faces, feat_tris, t0, t1, i, j, work):
         for k in range(3):                   # the vertex that is neither end
             if faces[tri, k] != i and faces[tri, k] != j:
                 o = faces[tri, k]
-        x, w = vertices[o], inward[m - t0]
-        s = _dot_diff(t, x, p0)
-        for k in range(3):
-            w[k] = (x[k] - p0[k]) - s * t[k]
-        nw = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        for k in range(3):
-            w[k] /= nw
+        w = inward[m - t0]
+        w[0], w[1], w[2] = inward_normal(p0, t[0], t[1], t[2], vertices[o])
     e1, e2 = mv[_E1], mv[_E2]
     for k in range(3):
         e1[k] = inward[0, k]

@@ -163,13 +163,20 @@ def deepest_of_a_border_edge(vertices, faces, feat, tri_feat_range, tri_feat, fe
             e0, e1, e2 = X[0] - V[0], X[1] - V[1], X[2] - V[2]
             if d[0] * e0 + d[1] * e1 + d[2] * e2 < 0.0:
                 continue
-            Z = vertices[faces[tri, 0] + faces[tri, 1] + faces[tri, 2] - v - x]
             ne = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            t0_, t1_, t2_ = e0 / ne, e1 / ne, e2 / ne
-            z0, z1, z2 = Z[0] - V[0], Z[1] - V[1], Z[2] - V[2]
-            a = z0 * t0_ + z1 * t1_ + z2 * t2_
-            w0, w1, w2 = z0 - a * t0_, z1 - a * t1_, z2 - a * t2_
-            nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            if d[0] * (w0 / nw) + d[1] * (w1 / nw) + d[2] * (w2 / nw) >= 0.0:
+            w0, w1, w2 = inward_normal(V, e0 / ne, e1 / ne, e2 / ne,
+                                       vertices[faces[tri, 0] + faces[tri, 1] + faces[tri, 2]
+                                                - v - x])
+            if d[0] * w0 + d[1] * w1 + d[2] * w2 >= 0.0:
                 return True
     return False
+
+
+@kernel(inline="always")
+def inward_normal(p0, t0, t1, t2, x):
+    """The unit in-plane normal of the edge through p0 along the unit (t0, t1, t2) that
+    points to x, the triangle's third vertex (the compiled :func:`inward`)."""
+    s = t0 * (x[0] - p0[0]) + t1 * (x[1] - p0[1]) + t2 * (x[2] - p0[2])
+    w0, w1, w2 = (x[0] - p0[0]) - s * t0, (x[1] - p0[1]) - s * t1, (x[2] - p0[2]) - s * t2
+    nw = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    return w0 / nw, w1 / nw, w2 / nw
