@@ -20,6 +20,14 @@ kernels' loading from numba's cache included, about a second; Yade ``-j1``, its 
 and their ratio.  When Yade is not installed (``apt-get install yade``) the benchmark says so
 and measures nurbsdem alone.
 
+Then **the paper's particles**, which only nurbsdem runs: each sphere becomes a paper particle
+of its volume (A, B and C scaled to the spheres of 4.5, 4 and 3.5 mm: :func:`paper_shapes`),
+placed at random (their bounding spheres clear of each other) and turned at random, in the
+exact NURBS drum, with the same law, settling and turn; their angle and torque against the
+spheres'.  The drum's concave radius (0.1 m) is far above the particles' largest radius of
+curvature (A's, 13 mm at this scale), so every contact with the mantle is unique (the
+``Surface`` wall's condition).
+
 Usage: .venv/bin/python benchmarks/bench_drum.py [--quick] [--count N]
 (quick: 150 spheres, a 0.3 s turn: a smoke test of the pipeline, not a measurement).
 """
@@ -35,6 +43,7 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "postproc"))
@@ -53,24 +62,44 @@ SEGMENTS = 72                     # the mesh and Yade's facets: chord error R (1
 WINDOW = 1.0
 
 
-def place(count: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def place(count: int, seed: int = 1,
+          clear: dict[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Centres (n,3) and radii (n,) at random without overlap in the drum, 1 mm clear of
-    each other and of the mantle and end plates (largest first)."""
+    each other and of the mantle and end plates (largest first).  ``clear`` maps a radius of
+    :data:`RADII` to the radius kept clear about the centre (a particle's bounding radius;
+    default the radius itself)."""
     rng = np.random.default_rng(seed)
     rad = np.sort(rng.choice(RADII, count))[::-1]
+    cl = np.array([(clear or {}).get(float(r), float(r)) for r in rad])
     pos = np.zeros((count, 3))
-    for i, ri in enumerate(rad):
+    for i, ri in enumerate(cl):
         for _ in range(200000):
             p = np.array([rng.uniform(-LENGTH / 2 + ri + 1e-3, LENGTH / 2 - ri - 1e-3),
                           *rng.uniform(-R_DRUM, R_DRUM, 2)])
             if math.hypot(p[1], p[2]) > R_DRUM - ri - 1e-3:
                 continue
-            if i == 0 or np.all(np.linalg.norm(pos[:i] - p, axis=1) > rad[:i] + ri + 1e-3):
+            if i == 0 or np.all(np.linalg.norm(pos[:i] - p, axis=1) > cl[:i] + ri + 1e-3):
                 pos[i] = p
                 break
         else:  # pragma: no cover - the drum holds them at this fill
-            raise RuntimeError("could not place the spheres")
+            raise RuntimeError("could not place the particles")
     return pos, rad
+
+
+def paper_shapes(folder: Path) -> dict[float, tuple[str, float]]:
+    """The paper's particles A, B and C scaled to the volumes of the spheres of radius 4.5,
+    4 and 3.5 mm (each sphere of the drum becomes a paper particle of its volume), written
+    to ``folder`` as shape files: radius → (file name, bounding radius m)."""
+    from nurbsdem.io.shapefile import save_shape
+    from nurbsdem.shapes import paper_particle_shape
+    out = {}
+    for kind, r in zip("ABC", sorted(RADII, reverse=True)):
+        shape = paper_particle_shape(kind)
+        s = (4.0 / 3.0 * math.pi * r ** 3 / shape.volume) ** (1.0 / 3.0)
+        scaled = shape.scaled(s, name=f"paper_{kind}")
+        save_shape(folder / f"paper_{kind}.yaml", scaled)
+        out[r] = (f"paper_{kind}.yaml", scaled.bounding_radius)
+    return out
 
 
 def write_mesh(path: Path) -> None:
@@ -88,11 +117,22 @@ def write_mesh(path: Path) -> None:
     trimesh.Trimesh(v, np.array(f), process=False).export(path)
 
 
-def nurbsdem_deck(pos, rad, T: float, wall_line: str) -> str:
+def nurbsdem_deck(pos, rad, T: float, wall_line: str,
+                  files: dict[float, tuple[str, float]] | None = None, seed: int = 2) -> str:
+    """The drum's deck: spheres of :data:`RADII`, or with ``files`` (:func:`paper_shapes`)
+    the shape files of those radii, each particle turned by a random rotation (seeded)."""
     shape = {r: k + 1 for k, r in enumerate(RADII)}
-    lines = [f"  Particle {i + 1} Shape {shape[float(ri)]} Material 1 Position "
-             f"{p[0]:.17g} {p[1]:.17g} {p[2]:.17g}" for i, (p, ri) in enumerate(zip(pos, rad))]
-    shapes = "\n".join(f"  Shape {k + 1} Sphere Radius {r}" for k, r in enumerate(RADII))
+    rng = np.random.default_rng(seed)
+    lines = []
+    for i, (p, ri) in enumerate(zip(pos, rad)):
+        line = (f"  Particle {i + 1} Shape {shape[float(ri)]} Material 1 Position "
+                f"{p[0]:.17g} {p[1]:.17g} {p[2]:.17g}")
+        if files:
+            rv = Rotation.random(random_state=rng).as_rotvec()
+            line += f" Rotation {rv[0]:.17g} {rv[1]:.17g} {rv[2]:.17g}"
+        lines.append(line)
+    shapes = "\n".join(f"  Shape {k + 1} File {files[r][0]}" if files else
+                       f"  Shape {k + 1} Sphere Radius {r}" for k, r in enumerate(RADII))
     return textwrap.dedent("""\
         Environment
           Gravity 0 0 -9.81
@@ -223,6 +263,11 @@ def main(argv: list[str]) -> dict:
             out[kind] = run_nurbsdem(deck, work / f"out_{kind}")
         dt = (SETTLE + T) / out["nurbs"]["substeps"]
         out["yade"] = run_yade(pos, rad, T, dt, work)
+        files = paper_shapes(work)
+        ppos, prad = place(count, clear={r: v[1] for r, v in files.items()})
+        deck = work / "drum_paper.inp"
+        deck.write_text(nurbsdem_deck(ppos, prad, T, walls["nurbs"], files=files))
+        out["paper"] = run_nurbsdem(deck, work / "out_paper")
     print(f"rotating drum: {count} spheres, R {R_DRUM} m, L {LENGTH} m, Froude {FROUDE} "
           f"(Ω {OMEGA:.3f} rad/s), {SETTLE} s settling + {T} s turning; angle and torque over "
           f"the last {WINDOW} s; one thread each")
@@ -230,6 +275,7 @@ def main(argv: list[str]) -> dict:
     rows = [("nurbsdem, NURBS drum", out["nurbs"]), ("nurbsdem, mesh drum", out["mesh"])]
     if isinstance(out["yade"], dict):
         rows.append((f"Yade, {SEGMENTS} facets", out["yade"]))
+    rows.append(("paper particles, NURBS", out["paper"]))
     for name, r in rows:
         print(f"{name:<22}{r.get('loop', r.get('wall')):>10.2f}"
               f"{r['angle']:>10.2f} ± {r['angle_spread']:<4.2f}{r['torque']:>15.5f}")
@@ -240,6 +286,10 @@ def main(argv: list[str]) -> dict:
         print(f"ratio nurbsdem (NURBS drum) / Yade time: {n['loop'] / y['wall']:.2f}; angles "
               f"differ by {n['angle'] - y['angle']:+.2f} deg; torques by "
               f"{100 * (n['torque'] / y['torque'] - 1):+.1f} % (Yade at dt {dt:.3g} s)")
+    p, n = out["paper"], out["nurbs"]
+    print(f"the paper's particles of the spheres' volumes (only nurbsdem runs them): angle "
+          f"{p['angle'] - n['angle']:+.2f} deg and torque {100 * (p['torque'] / n['torque'] - 1):+.1f} % "
+          f"against the spheres; time loop {p['loop'] / n['loop']:.1f} x theirs")
     out.update(count=count, window=WINDOW, T=T)
     return out
 

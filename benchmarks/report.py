@@ -99,6 +99,17 @@ def _headline_md(rep: Report) -> str:
         out.append(f"* Rotating drum of spheres against Yade (one thread each): {dr['ratio']:.2f} "
                    f"x Yade's time, angles of repose {dr['angle']:+.2f} degrees apart, "
                    "section 5.")
+    dp = h.get("drum_paper")
+    if dp:
+        out.append(f"* The same drum with the paper's particles of the spheres' volumes: angle "
+                   f"of repose {dp['angle']:.1f} degrees against the spheres' "
+                   f"{dp['spheres']:.1f}, section 5.")
+    bv = h.get("beverloo_fills") or h.get("beverloo")
+    if bv:
+        fills = f" over {bv['fills']} fills" if "fills" in bv else ""
+        out.append(f"* Silo discharge of spheres{fills}: Beverloo's exponent {bv['n']:.2f}, "
+                   f"k {bv['k']:.2f}, C {bv['C']:.3f} (spheres' published range: n 2.5 ± 0.3, "
+                   "k 1–2, C 0.5–0.7), section 5.")
     st = h.get("settled")
     if st:
         lo, hi = st["rows"][0], st["rows"][-1]

@@ -53,14 +53,17 @@ def section_drum(rep: Report) -> None:
              f"{res['angle']:.2f} ± {res['angle_spread']:.2f}", fmt(res["torque"], ".4f")]
             for name, res in (("nurbsdem, exact NURBS drum", r["nurbs"]),
                               ("nurbsdem, mesh drum", r["mesh"]),
-                              (f"Yade, {bench_drum.SEGMENTS} facets", r["yade"]))
+                              (f"Yade, {bench_drum.SEGMENTS} facets", r["yade"]),
+                              ("nurbsdem, paper particles, exact NURBS drum", r["paper"]))
             if isinstance(res, dict)]
     rep.add(f"`benchmarks/bench_drum.py`: {r['count']} spheres (radii "
             f"{', '.join(str(x) for x in bench_drum.RADII)} m) in a drum of radius "
             f"{bench_drum.R_DRUM} m and length {bench_drum.LENGTH} m turning at Froude number "
             f"{bench_drum.FROUDE} after settling; the same positions, linear law and time step "
             "for both codes, one thread each; the dynamic angle of repose (the bed's tilt) and "
-            f"the drive torque over the last {r['window']} s.\n\n"
+            f"the drive torque over the last {r['window']} s. Last row: the same drum with "
+            "each sphere replaced by the paper's particle of its volume (A, B, C for the "
+            "three radii, turned at random), which only nurbsdem runs.\n\n"
             + md_table(["code", "time loop s", "angle of repose (deg)", "drive torque N m"],
                        rows) + "\n")
     y = r["yade"]
@@ -73,6 +76,12 @@ def section_drum(rep: Report) -> None:
         rep.headline["drum"] = dict(ratio=ratio, angle=n["angle"] - y["angle"])
     else:
         rep.add(f"{y}.\n")
+    p, n = r["paper"], r["nurbs"]
+    rep.add(f"The paper's particles against the spheres of their volumes: angle of repose "
+            f"{p['angle'] - n['angle']:+.2f} degrees, drive torque "
+            f"{100 * (p['torque'] / n['torque'] - 1):+.1f} %, time loop "
+            f"{p['loop'] / n['loop']:.1f} × the spheres'.\n")
+    rep.headline["drum_paper"] = dict(angle=p["angle"], spheres=n["angle"])
 
 
 def section_beverloo(rep: Report) -> None:
@@ -108,11 +117,12 @@ def section_beverloo(rep: Report) -> None:
                       "bed left (d)", "time loop s", "outlet % of loop", "mean step s"], rows)
             + "\n\n")
     fit, fixed = r.get("fit"), r.get("fit_n25")
+
+    def par(f, k, spec):
+        mark = "inside" if f["inside"][k] else "**outside**"
+        lo, hi = bb.RANGES[k]
+        return f"{f[k]:{spec}} ± {f.get('sd_' + k, float('nan')):.2g} ({mark} {lo}–{hi})"
     if fit:
-        def par(f, k, spec):
-            mark = "inside" if f["inside"][k] else "**outside**"
-            lo, hi = bb.RANGES[k]
-            return f"{f[k]:{spec}} ± {f.get('sd_' + k, float('nan')):.2g} ({mark} {lo}–{hi})"
         rep.add(f"Beverloo fit (`postproc/beverloo.py`, ± its standard errors): exponent "
                 f"{par(fit, 'n', '.2f')}, k {par(fit, 'k', '.2f')}, C {par(fit, 'C', '.3f')}; "
                 f"RMS of W {100 * fit['rms']:.2f} %.")
@@ -123,6 +133,8 @@ def section_beverloo(rep: Report) -> None:
         rep.headline["beverloo"] = dict(n=fit["n"], k=fit["k"], C=fit["C"])
     else:
         rep.add("No Beverloo fit: it needs three orifices.\n")
+    if not r["quick"]:
+        _beverloo_fills(rep, cache, par)
     rep.add(f"Inlet and outlet exchanges: **{100 * r['flow_share']:.1f} %** of the time loop "
             f"(target at most 5 %; the fill's inlet {100 * fill['flow'] / fill['loop']:.1f} %).\n")
     y = r["yade"]
@@ -139,6 +151,33 @@ def section_beverloo(rep: Report) -> None:
     else:
         rep.add(f"{y}.\n")
     _beverloo_shapes(rep, cache)
+
+
+def _beverloo_fills(rep: Report, cache: Path, par) -> None:
+    """The rates of several fills of the same silo (``bench_beverloo.py --seed S``, then
+    ``--combine``), averaged per orifice, and the fits on them, when their JSON is there."""
+    path = cache / "beverloo_fills.json"
+    if not path.exists():
+        rep.add("One fill only: the rates' spread from fill to fill is not measured (run "
+                "`bench_beverloo.py --seed S` for other seeds, then `--combine`).\n")
+        return
+    f = json.loads(path.read_text())
+    rows = [[f"{o['ratio']:g}", f"{o['W']:.4f} ± {o['sem']:.4f}",
+             ", ".join(f"{w:.4f}" for w in o["W_fills"])] for o in f["orifices"]]
+    rep.add(f"\nOver {len(f['seeds'])} fills of the same silo (inlet seeds "
+            f"{', '.join(str(x) for x in f['seeds'])}; bulk densities "
+            f"{', '.join(f'{x:.0f}' for x in f['rho_b_fills'])} kg/m³), the mean rate of each "
+            "orifice ± its standard error:\n\n"
+            + md_table(["D / d", "mean W kg/s", "W of each fill"], rows) + "\n\n")
+    fit, fixed = f.get("fit"), f.get("fit_n25")
+    if fit:
+        rep.add(f"Beverloo fit on the mean rates: exponent {par(fit, 'n', '.2f')}, "
+                f"k {par(fit, 'k', '.2f')}, C {par(fit, 'C', '.3f')}; RMS of W "
+                f"{100 * fit['rms']:.2f} %; at n = 2.5: k {par(fixed, 'k', '.2f')}, "
+                f"C {par(fixed, 'C', '.3f')}. Each fill's own free exponent: "
+                + ", ".join("-" if n is None else f"{n:.2f}" for n in f["n_fills"]) + ".\n")
+        rep.headline["beverloo_fills"] = dict(n=fit["n"], k=fit["k"], C=fit["C"],
+                                              fills=len(f["seeds"]))
 
 
 def _beverloo_shapes(rep: Report, cache: Path) -> None:
