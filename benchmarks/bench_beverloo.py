@@ -67,7 +67,7 @@ B and C scaled (shape files the run writes), through orifices of 6, 7 and 8 d in
 exact ellipsoids or NURBS particles).
 
 Usage: python benchmarks/bench_beverloo.py [--quick] [--shape S] [--seed S] [--json PATH]
-| --refit PATH | --combine PATH...
+| --refit PATH | --combine PATH... [--json PATH]
 (quick: one orifice of 6 d in a silo 2.5 × 6 d wide, short runs: a smoke test of the
 pipeline, not a measurement; no Beverloo fit, which needs three orifices).  Writes the JSON
 ``benchmarks/.cache/beverloo.json`` (``--quick``: ``beverloo_quick.json``; other grains:
@@ -94,6 +94,7 @@ sys.path.insert(0, str(ROOT / "postproc"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from beverloo import fit_beverloo  # noqa: E402
 from bench_yade import run_yade_script  # noqa: E402
+import common  # noqa: E402
 
 G = 9.81
 RADII = (0.0018, 0.0020, 0.0022)          # m, equal numbers
@@ -188,22 +189,9 @@ def _shape_lines(shape: str) -> str:
 
 
 def write_paper_shapes(folder: Path) -> None:
-    """The paper's particles A, B and C (:func:`nurbsdem.shapes.paper_particle`) scaled to
-    the volumes of the spheres of radii RADII, as shape files ``paper_1.yaml`` … in
-    ``folder`` (their control points scaled about the origin of the file's frame)."""
-    import yaml
-    from nurbsdem.io.shapefile import load_yaml
-    from nurbsdem.shapes import paper_particle_shape
-    for k, (kind, r) in enumerate(zip("ABC", RADII)):
-        entry = paper_particle_shape(kind)
-        volume = float(entry.volume)
-        scale = (4.0 / 3.0 * math.pi * r ** 3 / volume) ** (1.0 / 3.0)
-        data = load_yaml(ROOT / "inputs" / "shapes" / f"{kind}.yaml")
-        for patch in data["patches"]:
-            patch["control_points"] = (np.asarray(patch["control_points"], float)
-                                       * scale).tolist()
-        data["name"] = f"{kind} scaled to d {2 * r * 1e3:.1f} mm"
-        (folder / f"paper_{k + 1}.yaml").write_text(yaml.safe_dump(data))
+    """The paper's particles A, B and C scaled to the volumes of the spheres of radii RADII,
+    as shape files ``paper_1.yaml`` … in ``folder`` (:func:`common.write_paper_shapes`)."""
+    common.write_paper_shapes(folder, RADII)
 
 
 def _header(shape: str = "sphere") -> str:
@@ -595,13 +583,13 @@ def refit(path: Path) -> dict:
     return out
 
 
-def combine(paths: list[Path]) -> dict:
+def combine(paths: list[Path], json_path: Path | None = None) -> dict:
     """Beverloo's fits on the rates of several fills (runs with ``--seed``; their JSONs at
     ``paths``): per orifice the mean rate over the fills and its standard error; the fits of
     :func:`_fit` on the mean rates with the fills' mean bulk density; and each fill's own free
-    exponent (their spread is the fill-to-fill scatter of the fit).  Written to
-    ``benchmarks/.cache/beverloo_fills.json`` (which ``benchmarks/report.py`` reads) and
-    returned."""
+    exponent (their spread is the fill-to-fill scatter of the fit).  Written to ``json_path``
+    (default ``benchmarks/.cache/beverloo_fills.json``, which ``benchmarks/report.py`` reads)
+    and returned."""
     runs = [json.loads(p.read_text()) for p in paths]
     ratios = [o["ratio"] for o in runs[0]["orifices"]]
     for p, r in zip(paths, runs):
@@ -623,7 +611,7 @@ def combine(paths: list[Path]) -> dict:
     _fit(out)
     print("each fill's free exponent: " + ", ".join(
         "-" if n is None else f"{n:.2f}" for n in out["n_fills"]))
-    path = ROOT / "benchmarks" / ".cache" / "beverloo_fills.json"
+    path = json_path or ROOT / "benchmarks" / ".cache" / "beverloo_fills.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out, indent=1, default=float))
     return out
@@ -633,7 +621,10 @@ def main(argv: list[str]) -> dict:
     if "--refit" in argv:
         return refit(Path(argv[argv.index("--refit") + 1]))
     if "--combine" in argv:
-        return combine([Path(a) for a in argv[argv.index("--combine") + 1:]])
+        rest = argv[argv.index("--combine") + 1:]
+        json_path = Path(rest[rest.index("--json") + 1]) if "--json" in rest else None
+        return combine([Path(a) for a in rest if a != "--json" and Path(a) != json_path],
+                       json_path)
     quick = "--quick" in argv
     shape = argv[argv.index("--shape") + 1] if "--shape" in argv else "sphere"
     _shape_lines(shape)                         # an unknown shape: refused before any run

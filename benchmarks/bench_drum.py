@@ -21,11 +21,11 @@ and their ratio.  When Yade is not installed (``apt-get install yade``) the benc
 and measures nurbsdem alone.
 
 Then **the paper's particles**, which only nurbsdem runs: each sphere becomes a paper particle
-of its volume (A, B and C scaled to the spheres of 4.5, 4 and 3.5 mm: :func:`paper_shapes`),
+of its volume (A, B and C scaled to the spheres of 3.5, 4 and 4.5 mm: :func:`paper_shapes`),
 placed at random (their bounding spheres clear of each other) and turned at random, in the
 exact NURBS drum, with the same law, settling and turn; their angle and torque against the
 spheres'.  The drum's concave radius (0.1 m) is far above the particles' largest radius of
-curvature (A's, 13 mm at this scale), so every contact with the mantle is unique (the
+curvature (A's, 10 mm at this scale), so every contact with the mantle is unique (the
 ``Surface`` wall's condition).
 
 Usage: .venv/bin/python benchmarks/bench_drum.py [--quick] [--count N]
@@ -50,6 +50,7 @@ sys.path.insert(0, str(ROOT / "postproc"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from repose import bed_angle  # noqa: E402
 from bench_yade import NURBSDEM_RUN, run_yade_script  # noqa: E402
+from common import write_paper_shapes  # noqa: E402
 
 R_DRUM, LENGTH, G = 0.1, 0.04, 9.81
 RADII = (0.0035, 0.004, 0.0045)
@@ -87,19 +88,10 @@ def place(count: int, seed: int = 1,
 
 
 def paper_shapes(folder: Path) -> dict[float, tuple[str, float]]:
-    """The paper's particles A, B and C scaled to the volumes of the spheres of radius 4.5,
-    4 and 3.5 mm (each sphere of the drum becomes a paper particle of its volume), written
+    """The paper's particles A, B and C scaled to the volumes of the spheres of radius 3.5,
+    4 and 4.5 mm (each sphere of the drum becomes a paper particle of its volume), written
     to ``folder`` as shape files: radius → (file name, bounding radius m)."""
-    from nurbsdem.io.shapefile import save_shape
-    from nurbsdem.shapes import paper_particle_shape
-    out = {}
-    for kind, r in zip("ABC", sorted(RADII, reverse=True)):
-        shape = paper_particle_shape(kind)
-        s = (4.0 / 3.0 * math.pi * r ** 3 / shape.volume) ** (1.0 / 3.0)
-        scaled = shape.scaled(s, name=f"paper_{kind}")
-        save_shape(folder / f"paper_{kind}.yaml", scaled)
-        out[r] = (f"paper_{kind}.yaml", scaled.bounding_radius)
-    return out
+    return dict(zip(RADII, write_paper_shapes(folder, RADII)))
 
 
 def write_mesh(path: Path) -> None:

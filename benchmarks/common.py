@@ -234,3 +234,26 @@ def best_per_item(fn, items, repeat: int = 3) -> tuple[float, list]:
         res = [fn(*it) for it in items]
         best = min(best, (time.perf_counter() - t) / len(items))
     return best, res
+
+
+def write_paper_shapes(folder: Path, radii) -> list[tuple[str, float]]:
+    """The paper's particles A, B and C (:func:`nurbsdem.shapes.paper_particle`) scaled to
+    the volumes of the spheres of ``radii`` (m, one each), as shape files ``paper_1.yaml`` …
+    in ``folder`` (their control points scaled about the origin of the file's frame): each
+    file's name and the scaled particle's bounding radius (m)."""
+    import math
+    import yaml
+    from nurbsdem.io.shapefile import load_yaml
+    from nurbsdem.shapes import paper_particle_shape
+    out = []
+    for k, (kind, r) in enumerate(zip("ABC", radii)):
+        entry = paper_particle_shape(kind)
+        scale = (4.0 / 3.0 * math.pi * r ** 3 / float(entry.volume)) ** (1.0 / 3.0)
+        data = load_yaml(REPO / "inputs" / "shapes" / f"{kind}.yaml")
+        for patch in data["patches"]:
+            patch["control_points"] = (np.asarray(patch["control_points"], float)
+                                       * scale).tolist()
+        data["name"] = f"{kind} scaled to d {2 * r * 1e3:.1f} mm"
+        (folder / f"paper_{k + 1}.yaml").write_text(yaml.safe_dump(data))
+        out.append((f"paper_{k + 1}.yaml", float(entry.bounding_radius) * scale))
+    return out

@@ -56,3 +56,34 @@ def test_the_grains_of_each_shape_have_the_spheres_volumes(tmp_path, shape):
         volumes = [model.shapes[k].volume for k in sorted(model.shapes)]
         np.testing.assert_allclose(volumes, [4 / 3 * math.pi * r ** 3
                                              for r in bench_beverloo.RADII], rtol=1e-9)
+
+
+def test_the_fills_combined_give_beverloo_back_from_rates_that_scatter_about_it(tmp_path):
+    """``combine``: two fills whose rates lie 3 % above and below Beverloo's law (n 2.5, k 1.5,
+    C 0.6) and whose bulk densities differ give the mean rates, their standard errors and the
+    law's n, k and C back; runs with other orifices are refused."""
+    import json
+    d, rho, g = bench_beverloo.D_GRAIN, 1570.0, bench_beverloo.G
+    ratios = (6.0, 8.0, 11.0, 15.0)
+    law = [0.6 * rho * math.sqrt(g) * ((x - 1.5) * d) ** 2.5 for x in ratios]
+    paths = []
+    for seed, sign in ((3, 1.0), (4, -1.0)):
+        run = dict(seed=seed, d=d, T=0.4, fill=dict(rho_b=rho * (1 + 0.01 * sign), top=0.096),
+                   orifices=[dict(ratio=x, D=x * d, W=w * (1 + 0.03 * sign))
+                             for x, w in zip(ratios, law)])
+        paths.append(tmp_path / f"seed{seed}.json")
+        paths[-1].write_text(json.dumps(run))
+    out = bench_beverloo.combine(paths, tmp_path / "fills.json")
+    assert json.loads((tmp_path / "fills.json").read_text())["seeds"] == [3, 4]
+    for row, w in zip(out["orifices"], law):
+        assert row["W"] == pytest.approx(w, rel=1e-12)
+        assert row["sem"] == pytest.approx(0.03 * w, rel=1e-9)
+    assert out["fit"]["n"] == pytest.approx(2.5, abs=1e-5)
+    assert out["fit"]["k"] == pytest.approx(1.5, abs=1e-4)
+    assert out["fit"]["C"] == pytest.approx(0.6, rel=1e-4)
+    assert out["fit_n25"]["C"] == pytest.approx(0.6, rel=1e-9)
+    other = json.loads(paths[1].read_text())
+    other["orifices"] = other["orifices"][:3]
+    paths[1].write_text(json.dumps(other))
+    with pytest.raises(SystemExit, match="other orifices"):
+        bench_beverloo.combine(paths, tmp_path / "fills.json")
