@@ -20,7 +20,9 @@
   particles'); their ``MoveWall`` strokes (in :func:`check_model`).
 * **inlets**: a region partly behind a flat wall, or too small for the particles of one
   segment, is a warning (:func:`nurbsdem.flow_checks.warn_flow`; the errors of inlets and
-  outlets are the deck's and the API's own, :mod:`nurbsdem.io.deck_flow`).
+  outlets are the deck's and the API's own, :mod:`nurbsdem.io.deck_flow`);
+* **output**: ParaView samples larger than the free space of their disk are a warning
+  (:func:`nurbsdem.output_checks.warn_output_size`).
 
 Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
 bodies are tested against each other; every body is tested against every wall.
@@ -580,16 +582,19 @@ def check_model(model: "Model") -> None:
 
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     """Check the placed scene (default ``model.bodies``): walls, bodies in the periodic cell,
-    bodies against walls (mesh and surface walls too), explicit bodies against each other; warn of inlets that reach
-    behind a wall or cannot hold a segment's particles. Raises :class:`InputError` (deck file
+    bodies against walls (mesh and surface walls too), explicit bodies against each other; warn
+    of inlets that reach behind a wall or cannot hold a segment's particles, and of ParaView
+    samples that would not fit their disk (:mod:`nurbsdem.output_checks`). Raises :class:`InputError` (deck file
     and line)."""
     from .flow_checks import warn_flow
+    from .output_checks import warn_output_size
     from .periodic_checks import check_periodic_bodies
     from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
     check_walls(model)
     check_periodic_bodies(model, bodies, plane_support_distance)
     warn_flow(model)
+    warn_output_size(model)
     if bodies is not None and len(bodies):
         explicit = {p.id for p in model.particles}
         index = [i for i in range(len(bodies)) if int(bodies.id[i]) in explicit]
