@@ -23,10 +23,29 @@ if TYPE_CHECKING:  # pragma: no cover
 DISK_BYTES_PER_VERTEX = 22
 
 
+def max_particle_count(model: "Model") -> tuple[int, int | None]:
+    """(largest number of particles any step has, line of the step that makes it)."""
+    from .model import ReplicateStep
+    n, worst, line = model.particle_count, model.particle_count, None
+    for s in model.steps:
+        if isinstance(s, ReplicateStep):
+            n *= int(s.layers)
+            if n > worst:
+                worst, line = n, s.line
+    return worst, line
+
+
+def output_line(model: "Model") -> int | None:
+    """The line of the deck's ``VTK`` entry, or ``None``."""
+    for k, line in enumerate(model.text.splitlines(), start=1):
+        if line.split("#")[0].strip().lower().startswith("vtk"):
+            return k
+    return None
+
+
 def most_particles(model: "Model") -> int:
     """The most particles the run can hold: the deck's (after its ``Replicate`` steps) and
     every inlet's ``Count``."""
-    from .validation import max_particle_count
     return max_particle_count(model)[0] + sum(int(i.count) for i in model.inlets)
 
 
@@ -85,8 +104,7 @@ def warn_output_size(model: "Model") -> None:
     problem = output_size_problem(model)
     if problem is None:
         return
-    from .validation import _output_line
-    line = _output_line(model) if getattr(model, "text", None) else None
+    line = output_line(model) if getattr(model, "text", None) else None
     loc = (f"{model.path}:{line}: " if model.path and line else
            f"{model.path}: " if model.path else "")
     logging.getLogger("nurbsdem").warning(f"{loc}{problem}")

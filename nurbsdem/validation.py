@@ -40,6 +40,7 @@ from .check_rules import (MAX_RESTING_FRACTION, OVERLAP_TOLERANCE, RESTING_LOADS
                           static_overlap, wall_plane)
 from .dynamics.stepcontrol import critical_step
 from .errors import InputError, vector_text as _vec
+from .output_checks import max_particle_count, output_line as _output_line, warn_output_size
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.shape import Shape
@@ -257,18 +258,6 @@ def _gib(nbytes: float) -> str:
     return f"{nbytes / 1024 ** 3:.3g} GiB"
 
 
-def max_particle_count(model: "Model") -> tuple[int, int | None]:
-    """(largest number of particles any step has, line of the step that makes it)."""
-    from .model import ReplicateStep
-    n, worst, line = model.particle_count, model.particle_count, None
-    for s in model.steps:
-        if isinstance(s, ReplicateStep):
-            n *= int(s.layers)
-            if n > worst:
-                worst, line = n, s.line
-    return worst, line
-
-
 def check_nothing_to_solve(model: "Model") -> None:
     """A deck must define particles (or an inlet that creates them) and at least one step."""
     if not model.steps:
@@ -323,13 +312,6 @@ def check_memory(model: "Model") -> None:
 def _first_particle_line(model: "Model") -> int | None:
     lines = [g.line for g in model.random_groups] + [p.line for p in model.particles]
     return min(lines) if lines else None
-
-
-def _output_line(model: "Model") -> int | None:
-    for k, line in enumerate(model.text.splitlines(), start=1):
-        if line.split("#")[0].strip().lower().startswith("vtk"):
-            return k
-    return None
 
 
 def _particle_masses(model: "Model") -> dict[int, float]:
@@ -587,7 +569,6 @@ def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     samples that would not fit their disk (:mod:`nurbsdem.output_checks`). Raises :class:`InputError` (deck file
     and line)."""
     from .flow_checks import warn_flow
-    from .output_checks import warn_output_size
     from .periodic_checks import check_periodic_bodies
     from .wall_checks import check_curved_walls_scene
     bodies = model.bodies if bodies is None else bodies
