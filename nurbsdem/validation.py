@@ -22,7 +22,10 @@
   segment, is a warning (:func:`nurbsdem.flow_checks.warn_flow`; the errors of inlets and
   outlets are the deck's and the API's own, :mod:`nurbsdem.io.deck_flow`);
 * **output**: ParaView samples larger than the free space of their disk are a warning
-  (:func:`nurbsdem.output_checks.warn_output_size`).
+  (:func:`nurbsdem.output_checks.warn_output_size`);
+* **surface walls tighter than the particles**: a wall that curves toward the particles more
+  tightly than a NURBS particle's flattest part is a warning
+  (:func:`nurbsdem.curvature_checks.warn_tight_surfaces`).
 
 Random groups are placed with disjoint bounding spheres, so only explicit ``Particle``
 bodies are tested against each other; every body is tested against every wall.
@@ -565,9 +568,11 @@ def check_model(model: "Model") -> None:
 def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     """Check the placed scene (default ``model.bodies``): walls, bodies in the periodic cell,
     bodies against walls (mesh and surface walls too), explicit bodies against each other; warn
-    of inlets that reach behind a wall or cannot hold a segment's particles, and of ParaView
-    samples that would not fit their disk (:mod:`nurbsdem.output_checks`). Raises :class:`InputError` (deck file
+    of inlets that reach behind a wall or cannot hold a segment's particles, of ParaView
+    samples that would not fit their disk (:mod:`nurbsdem.output_checks`) and of surface
+    walls that curve more tightly than a particle (:mod:`nurbsdem.curvature_checks`). Raises :class:`InputError` (deck file
     and line)."""
+    from .curvature_checks import warn_tight_surfaces
     from .flow_checks import warn_flow
     from .periodic_checks import check_periodic_bodies
     from .wall_checks import check_curved_walls_scene
@@ -576,6 +581,7 @@ def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     check_periodic_bodies(model, bodies, plane_support_distance)
     warn_flow(model)
     warn_output_size(model)
+    warn_tight_surfaces(model)
     if bodies is not None and len(bodies):
         explicit = {p.id for p in model.particles}
         index = [i for i in range(len(bodies)) if int(bodies.id[i]) in explicit]
