@@ -77,7 +77,7 @@ def output_size_problem(model: "Model") -> str | None:
     """The warning's text when the particle samples would not fit the free space of the
     output's disk, else ``None``."""
     out = model.output
-    if out is None or not model.shapes or model.total_time <= 0:
+    if out is None or out.vtk_every <= 0 or not model.shapes or model.total_time <= 0:
         return None
     need, samples, n = vtk_output_bytes(model)
     have = free_bytes(out.directory)
@@ -100,11 +100,11 @@ def output_size_problem(model: "Model") -> str | None:
 def warn_output_size(model: "Model") -> None:
     """:func:`output_size_problem` on the ``nurbsdem`` logger, ``deck:line: message`` (the
     ``VTK`` line, the deck alone without one; the message alone for a scene built in
-    Python)."""
+    Python).  No ParaView output (``vtk_every`` 0 in Python): no warning."""
     problem = output_size_problem(model)
     if problem is None:
         return
-    line = output_line(model) if getattr(model, "text", None) else None
-    loc = (f"{model.path}:{line}: " if model.path and line else
-           f"{model.path}: " if model.path else "")
+    deck = bool(getattr(model, "text", None)) and bool(model.path)
+    line = output_line(model) if deck else None
+    loc = f"{model.path}:{line}: " if line else f"{model.path}: " if deck else ""
     logging.getLogger("nurbsdem").warning(f"{loc}{problem}")
