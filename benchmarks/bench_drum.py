@@ -22,7 +22,8 @@ and measures nurbsdem alone.
 
 Then **the paper's particles**, which only nurbsdem runs: each sphere becomes a paper particle
 of its volume (A, B and C scaled to the spheres of 3.5, 4 and 4.5 mm: :func:`paper_shapes`),
-placed at random (their bounding spheres clear of each other) and turned at random, in the
+placed on sites drawn at random from a lattice (:func:`place_lattice`: their bounding spheres
+clear of each other) and turned at random, in the
 exact NURBS drum, with the same law, settling and turn; their angle and torque against the
 spheres'.  The drum's concave radius (0.1 m) is far above the particles' largest radius of
 curvature (A's, 10 mm at this scale), so every contact with the mantle is unique (the
@@ -85,6 +86,36 @@ def place(count: int, seed: int = 1,
         else:  # pragma: no cover - the drum holds them at this fill
             raise RuntimeError("could not place the particles")
     return pos, rad
+
+
+def place_lattice(count: int, clear: dict[float, float], seed: int = 1, gap: float = 2e-4
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (n,3) and radii (n,) of :data:`RADII` (drawn at random, seeded) on ``count``
+    sites drawn at random from a hexagonal close-packed lattice in the drum whose spacing is
+    the largest of ``clear`` (a radius of :data:`RADII` → the bounding radius of the particle
+    that stands for it) doubled plus ``gap`` (m), the sites ``gap`` clear of the mantle and
+    the end plates.  Elongated particles' bounding spheres fill the drum too densely for
+    :func:`place`'s random sequential placement."""
+    rng = np.random.default_rng(seed)
+    rb = max(clear.values())
+    s = 2.0 * rb + gap
+    x0, x1 = -LENGTH / 2 + rb + gap, LENGTH / 2 - rb - gap
+    layers = int(math.floor((x1 - x0) / (s * math.sqrt(2.0 / 3.0)) + 1e-9)) + 1
+    room = R_DRUM - rb - gap
+    m = int(math.ceil(room / s)) + 2
+    sites = []
+    for k in range(layers):
+        shift = (0.5 * s, 0.5 * s / math.sqrt(3.0)) if k % 2 else (0.0, 0.0)
+        for i in range(-m, m + 1):
+            for j in range(-2 * m, 2 * m + 1):
+                y = (i + 0.5 * (j % 2)) * s + shift[0]
+                z = j * s * math.sqrt(3.0) / 2.0 + shift[1]
+                if math.hypot(y, z) <= room:
+                    sites.append((x0 + k * s * math.sqrt(2.0 / 3.0), y, z))
+    if len(sites) < count:
+        raise RuntimeError(f"the drum's lattice holds {len(sites)} particles, not {count}")
+    pick = rng.choice(len(sites), count, replace=False)
+    return np.array(sites)[pick], rng.choice(RADII, count)
 
 
 def paper_shapes(folder: Path) -> dict[float, tuple[str, float]]:
@@ -256,7 +287,7 @@ def main(argv: list[str]) -> dict:
         dt = (SETTLE + T) / out["nurbs"]["substeps"]
         out["yade"] = run_yade(pos, rad, T, dt, work)
         files = paper_shapes(work)
-        ppos, prad = place(count, clear={r: v[1] for r, v in files.items()})
+        ppos, prad = place_lattice(count, {r: v[1] for r, v in files.items()})
         deck = work / "drum_paper.inp"
         deck.write_text(nurbsdem_deck(ppos, prad, T, walls["nurbs"], files=files))
         out["paper"] = run_nurbsdem(deck, work / "out_paper")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -200,12 +201,19 @@ def section_cost(rep: Report, workdir: Path) -> None:
     if not quick:
         _section_large(rep, workdir)
         _section_settled(rep)
-    section_spheres(rep)
-    section_drum(rep)
-    section_beverloo(rep)
-    section_pour(rep)
-    section_point_surface(rep)
-    _section_paper(rep, workdir, quick)
+    for part in (section_spheres, section_drum, section_beverloo, section_pour,
+                 section_point_surface, lambda r: _section_paper(r, workdir, quick)):
+        _guarded(rep, part)
+
+
+def _guarded(rep: Report, part) -> None:
+    """One part of section 5; a failure is said where its text would be, and the next part
+    runs."""
+    try:
+        part(rep)
+    except Exception as exc:
+        rep.add(f"**Not measured**: this part failed ({type(exc).__name__}: {exc}).\n")
+        traceback.print_exc()
 
 
 def _section_paper(rep: Report, workdir: Path, quick: bool) -> None:

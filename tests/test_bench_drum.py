@@ -19,11 +19,16 @@ def test_the_paper_drum_deck_holds_particles_of_the_spheres_volumes_apart(tmp_pa
     save_shape(tmp_path / "drum.yaml", [cylinder_patch(bench_drum.R_DRUM, bench_drum.LENGTH,
                                                        axis=(0, 0, 1))])
     files = bench_drum.paper_shapes(tmp_path)
-    pos, rad = bench_drum.place(24, clear={r: v[1] for r, v in files.items()})
-    clear = np.array([files[float(r)][1] for r in rad])
-    gap = np.linalg.norm(pos[:, None] - pos[None], axis=2) - clear[:, None] - clear[None]
-    assert gap[~np.eye(len(pos), dtype=bool)].min() > 1e-3 - 1e-12
-    assert np.all(np.hypot(pos[:, 1], pos[:, 2]) + clear <= bench_drum.R_DRUM - 1e-3 + 1e-12)
+    clear = {r: v[1] for r, v in files.items()}
+    full, kinds = bench_drum.place_lattice(800, clear)          # the benchmark's count fits
+    assert len(full) == 800 and set(kinds.tolist()) == set(bench_drum.RADII)
+    pos, rad = bench_drum.place_lattice(24, clear)
+    rb = np.array([clear[float(r)] for r in rad])
+    for x, r in ((full, np.full(800, max(clear.values()))), (pos, rb)):
+        gap = np.linalg.norm(x[:, None] - x[None], axis=2) - r[:, None] - r[None]
+        assert gap[~np.eye(len(x), dtype=bool)].min() > 0.0
+        assert np.all(np.hypot(x[:, 1], x[:, 2]) + r <= bench_drum.R_DRUM)
+        assert np.all(np.abs(x[:, 0]) + r <= bench_drum.LENGTH / 2)
     line = ("Surface 1 Name drum File drum.yaml Rotation 0 1.5707963267948966 0 Position "
             f"{-bench_drum.LENGTH / 2} 0 0")
     (tmp_path / "drum.inp").write_text(bench_drum.nurbsdem_deck(pos, rad, 0.1, line,
