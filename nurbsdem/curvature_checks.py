@@ -9,9 +9,9 @@ points, or a ring), a particle that crosses it there stops the run with a one-li
 :func:`warn_tight_surfaces` compares, before the run, each surface wall's tightest radius of
 curvature toward the particles with the flattest radius of curvature of the NURBS particles
 that can reach it, both sampled on every patch at :data:`SAMPLES` × :data:`SAMPLES`
-parameter points (:func:`curvatures`: exact principal curvatures there), and warns when the wall is the
-tighter: the particles may never reach that place (a warning, not an error), but if they
-do, the run stops.  Exact spheres meet surface walls in closed form, which is unique
+parameter points (:func:`curvatures`: exact principal curvatures there), and warns when the
+wall is the tighter: the particles may never reach that place (a warning, not an error),
+but if they do, the run stops.  Exact spheres meet surface walls in closed form, which is unique
 wherever the sphere's centre has one nearest wall point: they are not compared.
 """
 from __future__ import annotations

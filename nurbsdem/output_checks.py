@@ -2,8 +2,8 @@
 
 A sample of ``particles.pvd`` tessellates every particle: ``(Resolution + 1)²`` vertices per
 patch, written as compressed XML (about :data:`DISK_BYTES_PER_VERTEX` bytes per vertex).
-A pour of a few 10⁴ particles sampled every 0.01 s (the ``VTK Every`` default) writes
-hundreds of GiB, and a run that fills its disk stops at the sample that did not fit.
+40 000 spheres sampled every 0.01 s (the ``VTK Every`` default) write about 40 GiB per
+second simulated, and a run that fills its disk stops at the sample that did not fit.
 :func:`warn_output_size` says so before the run, on the ``nurbsdem`` logger, with the
 numbers to change; the run still starts (the estimate is coarse, and the user may make room).
 """
