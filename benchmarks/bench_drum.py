@@ -64,27 +64,23 @@ SEGMENTS = 72                     # the mesh and Yade's facets: chord error R (1
 WINDOW = 1.0
 
 
-def place(count: int, seed: int = 1,
-          clear: dict[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def place(count: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Centres (n,3) and radii (n,) at random without overlap in the drum, 1 mm clear of
-    each other and of the mantle and end plates (largest first).  ``clear`` maps a radius of
-    :data:`RADII` to the radius kept clear about the centre (a particle's bounding radius;
-    default the radius itself)."""
+    each other and of the mantle and end plates (largest first)."""
     rng = np.random.default_rng(seed)
     rad = np.sort(rng.choice(RADII, count))[::-1]
-    cl = np.array([(clear or {}).get(float(r), float(r)) for r in rad])
     pos = np.zeros((count, 3))
-    for i, ri in enumerate(cl):
+    for i, ri in enumerate(rad):
         for _ in range(200000):
             p = np.array([rng.uniform(-LENGTH / 2 + ri + 1e-3, LENGTH / 2 - ri - 1e-3),
                           *rng.uniform(-R_DRUM, R_DRUM, 2)])
             if math.hypot(p[1], p[2]) > R_DRUM - ri - 1e-3:
                 continue
-            if i == 0 or np.all(np.linalg.norm(pos[:i] - p, axis=1) > cl[:i] + ri + 1e-3):
+            if i == 0 or np.all(np.linalg.norm(pos[:i] - p, axis=1) > rad[:i] + ri + 1e-3):
                 pos[i] = p
                 break
         else:  # pragma: no cover - the drum holds them at this fill
-            raise RuntimeError("could not place the particles")
+            raise RuntimeError("could not place the spheres")
     return pos, rad
 
 
