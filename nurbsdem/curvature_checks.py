@@ -84,18 +84,11 @@ def flattest_radius(patches: Sequence["Patch"]) -> float:
     return best
 
 
-def _nurbs_shapes(model: "Model") -> list[int]:
-    """The ids of the non-sphere shapes the particles, groups and inlets use."""
-    used = {p.shape_id for p in model.particles}
-    used |= {s for g in model.random_groups for s in g.shape_ids}
-    used |= {s for i in model.inlets for s in getattr(i, "shapes", ())}
-    return sorted(s for s in used if s in model.shapes and model.shapes[s].kind != "sphere")
-
-
 def tight_surface_problems(model: "Model") -> list[tuple[int, str]]:
     """(deck line, text) of each surface wall that curves more tightly toward the particles
     than the flattest NURBS particle the run holds."""
-    shapes = _nurbs_shapes(model)
+    from .wall_checks import used_shapes
+    shapes = sorted(s for s in used_shapes(model) if model.shapes[s].kind != "sphere")
     walls = [w for w in model.curved_walls if w.kind == "surface"]
     if not shapes or not walls:
         return []

@@ -69,7 +69,8 @@ def free_bytes(directory: Path) -> int:
     return int(shutil.disk_usage(path).free)
 
 
-def _gib(nbytes: float) -> str:
+def gib(nbytes: float) -> str:
+    """Bytes as GiB, three digits."""
     return f"{nbytes / 1024 ** 3:.3g} GiB"
 
 
@@ -91,9 +92,9 @@ def output_size_problem(model: "Model") -> str | None:
         fix = f"raise VTK Every to {every:.3g} s or more, or lower Resolution"
     else:
         fix = "not even two samples fit: lower Resolution"
-    return (f"VTK Every {out.vtk_every:g} s writes about {_gib(need)} of ParaView samples "
+    return (f"VTK Every {out.vtk_every:g} s writes about {gib(need)} of ParaView samples "
             f"({samples} samples of up to {n} particles at Resolution {out.vtk_resolution}); "
-            f"the disk of {out.directory} has {_gib(have)} free: the run stops when it is full "
+            f"the disk of {out.directory} has {gib(have)} free: the run stops when it is full "
             f"({fix})")
 
 

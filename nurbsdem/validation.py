@@ -43,7 +43,8 @@ from .check_rules import (MAX_RESTING_FRACTION, OVERLAP_TOLERANCE, RESTING_LOADS
                           static_overlap, wall_plane)
 from .dynamics.stepcontrol import critical_step
 from .errors import InputError, vector_text as _vec
-from .output_checks import max_particle_count, output_line as _output_line, warn_output_size
+from .output_checks import (gib, max_particle_count, output_line as _output_line,
+                            warn_output_size)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .geometry.shape import Shape
@@ -257,10 +258,6 @@ def available_memory() -> int:
         return 16 * 1024 ** 3
 
 
-def _gib(nbytes: float) -> str:
-    return f"{nbytes / 1024 ** 3:.3g} GiB"
-
-
 def check_nothing_to_solve(model: "Model") -> None:
     """A deck must define particles (or an inlet that creates them) and at least one step."""
     if not model.steps:
@@ -298,8 +295,8 @@ def check_memory(model: "Model") -> None:
     need = n * BYTES_PER_BODY
     if need > have:
         where = line if line is not None else _first_particle_line(model)
-        raise model.error(f"{n:.4g} particles would need about {_gib(need)} of memory; this "
-                          f"machine has {_gib(have)}", where)
+        raise model.error(f"{n:.4g} particles would need about {gib(need)} of memory; this "
+                          f"machine has {gib(have)}", where)
     out = model.output
     if out is None or not model.shapes:
         return
@@ -307,9 +304,9 @@ def check_memory(model: "Model") -> None:
     verts = n * patches * (int(out.vtk_resolution) + 1) ** 2
     need = verts * BYTES_PER_VERTEX
     if need > have / 2:
-        raise model.error(f"VTK Resolution {out.vtk_resolution} would need about {_gib(need)} "
+        raise model.error(f"VTK Resolution {out.vtk_resolution} would need about {gib(need)} "
                           f"for one frame of {n:.4g} particles ({verts:.3g} vertices); this "
-                          f"machine has {_gib(have)}: lower Resolution", _output_line(model))
+                          f"machine has {gib(have)}: lower Resolution", _output_line(model))
 
 
 def _first_particle_line(model: "Model") -> int | None:
@@ -570,8 +567,8 @@ def validate_scene(model: "Model", bodies: "Bodies | None" = None) -> None:
     bodies against walls (mesh and surface walls too), explicit bodies against each other; warn
     of inlets that reach behind a wall or cannot hold a segment's particles, of ParaView
     samples that would not fit their disk (:mod:`nurbsdem.output_checks`) and of surface
-    walls that curve more tightly than a particle (:mod:`nurbsdem.curvature_checks`). Raises :class:`InputError` (deck file
-    and line)."""
+    walls that curve more tightly than a particle (:mod:`nurbsdem.curvature_checks`).
+    Raises :class:`InputError` (deck file and line)."""
     from .curvature_checks import warn_tight_surfaces
     from .flow_checks import warn_flow
     from .periodic_checks import check_periodic_bodies

@@ -433,12 +433,17 @@ def rest_points(model: "Model", spec: "CurvedWallSpec") -> np.ndarray:
     return build_surface_wall(surface_patches(spec, _where(model, spec))).seed_x
 
 
-def _particle_sizes(model: "Model") -> list[float]:
-    """Bounding diameters (m) of the shapes the particles, groups and inlets use."""
+def used_shapes(model: "Model") -> set[int]:
+    """The ids of the defined shapes that the particles, groups and inlets use."""
     used = {p.shape_id for p in model.particles}
     used |= {s for g in model.random_groups for s in g.shape_ids}
     used |= {s for i in model.inlets for s in getattr(i, "shapes", ())}
-    return [2.0 * float(model.shapes[s].bounding_radius) for s in used if s in model.shapes]
+    return {s for s in used if s in model.shapes}
+
+
+def _particle_sizes(model: "Model") -> list[float]:
+    """Bounding diameters (m) of the shapes the particles, groups and inlets use."""
+    return [2.0 * float(model.shapes[s].bounding_radius) for s in used_shapes(model)]
 
 
 def warn_mesh_size(model: "Model", spec: "CurvedWallSpec", size: float,
