@@ -66,14 +66,17 @@ B and C scaled (shape files the run writes), through orifices of 6, 7 and 8 d in
 2.5 × 8 d wide filled to 9 d (a NURBS particle's contacts cost LCPs); no Yade run (it has no
 exact ellipsoids or NURBS particles).
 
-Usage: python benchmarks/bench_beverloo.py [--quick] [--shape S] [--seed S] [--json PATH]
-| --refit PATH | --combine PATH... [--json PATH]
+Usage: python benchmarks/bench_beverloo.py [--quick] [--shape S] [--seed S]
+[--orifices R... [--yade-at R]] [--json PATH] | --refit PATH | --combine PATH... [--json PATH]
 (quick: one orifice of 6 d in a silo 2.5 × 6 d wide, short runs: a smoke test of the
-pipeline, not a measurement; no Beverloo fit, which needs three orifices).  Writes the JSON
-``benchmarks/.cache/beverloo.json`` (``--quick``: ``beverloo_quick.json``; other grains:
-``beverloo_<shape>[_quick].json``; another seed: ``beverloo_seed<S>.json``) that
+pipeline, not a measurement; no Beverloo fit, which needs three orifices; ``--orifices``: the
+same silo and fill of the seed discharged through these orifices instead, and Yade through
+the one of ``--yade-at``).  Writes the JSON ``benchmarks/.cache/beverloo.json``
+(``--quick``: ``beverloo_quick.json``; other grains: ``beverloo_<shape>[_quick].json``;
+another seed: ``beverloo_seed<S>.json``; other orifices: ``…_D<R>-<R>.json``) that
 ``benchmarks/report.py`` reads; ``--refit`` fits its rates again; ``--combine`` fits the
-rates of several fills' JSONs averaged (:func:`combine`: ``beverloo_fills.json``).
+rates of several fills' JSONs averaged, a seed's runs of other orifices joined to its run
+(:func:`combine`: ``beverloo_fills.json``).
 """
 from __future__ import annotations
 
@@ -124,6 +127,10 @@ SHAPED = dict(orifices=(6.0, 7.0, 8.0), fill=9.0, discharge=0.15)
 #: the sphere's volume); the paper's particles A, B and C scaled to the spheres' volumes
 SHAPES = ("sphere", "ellipsoid", "paper")
 ELLIPSOID = (1.25, 1.0, 0.8)
+#: the smallest orifice (in d) of the combined fills' second fit: at 6 d the flow runs in
+#: bursts between short arches and its rate falls below the law (the small-orifice
+#: deficit of Mankoc et al., Granular Matter 9, 2007), which steepens the free exponent
+FIT_FROM = 8.0
 #: the inlet's seed of the fill (``--seed``): another seed pours another bed of the same
 #: grains, whose discharges give the rates' spread from fill to fill
 SEED = 3
@@ -560,7 +567,7 @@ def _costs(out: dict, dt_yade: float) -> None:
     if isinstance(y, str):
         print(y)
         return
-    n0 = rows[0]
+    n0 = next(r for r in rows if r["ratio"] == out.get("yade_at", rows[0]["ratio"]))
     out["ratio"] = n0["loop"] / y["wall"]
     y["per_particle_step"] = y["wall"] / (out["fill"]["count"] * out["T"] / dt_yade)
     print(f"Yade, D = {n0['ratio']:g} d at dt {dt_yade:.3g} s: time loop {y['wall']:.1f} s "
@@ -583,18 +590,58 @@ def refit(path: Path) -> dict:
     return out
 
 
+def _merge_seed(runs: list[tuple[Path, dict]]) -> dict:
+    """One fill's run (the JSON of the default orifices) with the rates of its other runs
+    (``--orifices``, the same seed) joined in, sorted by orifice; refused unless every run
+    poured the same bed (count and bulk density equal) and discharged as long."""
+    (p0, base), rest = runs[0], runs[1:]
+    merged = dict(base, orifices=list(base["orifices"]))
+    for p, r in rest:
+        if (r["fill"]["count"] != base["fill"]["count"] or r["T"] != base["T"]
+                or abs(r["fill"]["rho_b"] - base["fill"]["rho_b"]) > 1e-9 * base["fill"]["rho_b"]):
+            raise SystemExit(f"--combine: {p} has seed {r.get('seed', 3)} as {p0} has, but "
+                             "not the same fill or discharge time")
+        have = {o["ratio"] for o in merged["orifices"]}
+        merged["orifices"] += [o for o in r["orifices"] if o["ratio"] not in have]
+    merged["orifices"].sort(key=lambda o: o["ratio"])
+    if rest:
+        _fit(merged)
+    return merged
+
+
+def _fits_from(out: dict, smallest: float) -> None:
+    """The fits of :func:`_fit` over the orifices of ``out`` of at least ``smallest`` d,
+    into ``out["fit_from"]`` and ``out["fit_n25_from"]`` (with ``out["from"]``); none with
+    fewer than four such orifices (three parameters need a spare one)."""
+    keep = [o for o in out["orifices"] if o["ratio"] >= smallest - 1e-9]
+    out["from"], out["fit_from"], out["fit_n25_from"] = smallest, None, None
+    if len(keep) < 4 or len(keep) == len(out["orifices"]):
+        return
+    part = dict(out, orifices=keep)
+    _fit(part)
+    out["fit_from"], out["fit_n25_from"] = part["fit"], part["fit_n25"]
+
+
 def combine(paths: list[Path], json_path: Path | None = None) -> dict:
-    """Beverloo's fits on the rates of several fills (runs with ``--seed``; their JSONs at
-    ``paths``): per orifice the mean rate over the fills and its standard error; the fits of
-    :func:`_fit` on the mean rates with the fills' mean bulk density; and each fill's own free
-    exponent (their spread is the fill-to-fill scatter of the fit).  Written to ``json_path``
-    (default ``benchmarks/.cache/beverloo_fills.json``, which ``benchmarks/report.py`` reads)
-    and returned."""
-    runs = [json.loads(p.read_text()) for p in paths]
+    """Beverloo's fits on the rates of several fills (runs with ``--seed``, and runs of the
+    same seeds with ``--orifices``; their JSONs at ``paths``): per orifice the mean rate over
+    the fills and its standard error; the fits of :func:`_fit` on the mean rates with the
+    fills' mean bulk density, over all orifices and over those of at least :data:`FIT_FROM`
+    d (:func:`_fits_from`); and each fill's own free exponent (their spread is the
+    fill-to-fill scatter of the fit).  Written to ``json_path`` (default
+    ``benchmarks/.cache/beverloo_fills.json``, which ``benchmarks/report.py`` reads) and
+    returned."""
+    by_seed: dict[int, list] = {}
+    for p in paths:
+        r = json.loads(p.read_text())
+        by_seed.setdefault(r.get("seed", 3), []).append((p, r))
+    runs = [_merge_seed(sorted(v, key=lambda pr: -len(pr[1]["orifices"])))
+            for _, v in sorted(by_seed.items())]
     ratios = [o["ratio"] for o in runs[0]["orifices"]]
-    for p, r in zip(paths, runs):
+    for r in runs:
         if [o["ratio"] for o in r["orifices"]] != ratios or r["T"] != runs[0]["T"]:
-            raise SystemExit(f"--combine: {p} has other orifices or another discharge time")
+            raise SystemExit(f"--combine: the fill of seed {r.get('seed', 3)} has other "
+                             "orifices or another discharge time than the first")
     rows = []
     for i, ratio in enumerate(ratios):
         W = np.array([r["orifices"][i]["W"] for r in runs])
@@ -611,10 +658,49 @@ def combine(paths: list[Path], json_path: Path | None = None) -> dict:
     _fit(out)
     print("each fill's free exponent: " + ", ".join(
         "-" if n is None else f"{n:.2f}" for n in out["n_fills"]))
+    _fits_from(out, FIT_FROM)
+    if out["fit_from"]:
+        print(f"(the fits over the orifices of at least {FIT_FROM:g} d)")
     path = json_path or ROOT / "benchmarks" / ".cache" / "beverloo_fills.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out, indent=1, default=float))
     return out
+
+
+def _orifices_option(argv: list[str], side: float) -> list[float]:
+    """The orifices (in d) of ``--orifices R...`` (the numbers after it), each at most the
+    default silo's 2.5 D wide; [] without the option.  A run of other orifices pours the same
+    fill of its seed (the inlet and the solver are deterministic), so that ``--combine``
+    joins its rates to those of the default run of that seed."""
+    if "--orifices" not in argv:
+        return []
+    ratios = []
+    for a in argv[argv.index("--orifices") + 1:]:
+        try:
+            ratios.append(float(a))
+        except ValueError:
+            break
+    if not ratios:
+        raise SystemExit("--orifices: give the orifice diameters in grain diameters d")
+    wide = side / (2.5 * D_GRAIN)
+    for r in ratios:
+        if not 6.0 <= r <= wide:
+            raise SystemExit(f"--orifices: {r:g} d is outside 6 to {wide:g} d (the silo is "
+                             f"{side * 1e3:.0f} mm wide, at least 2.5 D)")
+    return ratios
+
+
+def _yade_option(argv: list[str], ratios: list[float], shape: str, extra: bool
+                 ) -> float | None:
+    """The orifice (in d) of the run's Yade comparison: ``--yade-at R`` (one of the run's
+    orifices), else the smallest orifice of the default spheres' run of seed 3; None for no
+    Yade run."""
+    if "--yade-at" in argv:
+        at = float(argv[argv.index("--yade-at") + 1])
+        if at not in ratios or shape != "sphere":
+            raise SystemExit(f"--yade-at: {at:g} d is not an orifice of this run of spheres")
+        return at
+    return ratios[0] if shape == "sphere" and SEED == 3 and not extra else None
 
 
 def main(argv: list[str]) -> dict:
@@ -630,19 +716,24 @@ def main(argv: list[str]) -> dict:
     _shape_lines(shape)                         # an unknown shape: refused before any run
     global SEED
     SEED = int(argv[argv.index("--seed") + 1]) if "--seed" in argv else SEED
-    cfg = QUICK if quick else FULL if shape == "sphere" else SHAPED
+    cfg = dict(QUICK if quick else FULL if shape == "sphere" else SHAPED)
+    d = D_GRAIN
+    side = 2.5 * max(cfg["orifices"]) * d      # the silo of the default orifices
+    extra = _orifices_option(argv, side)
+    if extra:
+        cfg["orifices"] = extra
     name = ("beverloo" + ("" if shape == "sphere" else f"_{shape}") + ("_quick" if quick else "")
-            + ("" if SEED == 3 else f"_seed{SEED}"))
+            + ("" if SEED == 3 else f"_seed{SEED}")
+            + ("" if not extra else "_D" + "-".join(f"{r:g}" for r in extra)))
     json_path = Path(argv[argv.index("--json") + 1]) if "--json" in argv else (
         ROOT / "benchmarks" / ".cache" / f"{name}.json")
-    d = D_GRAIN
-    side = 2.5 * max(cfg["orifices"]) * d
     count = fill_count(side, cfg["fill"] * d)
     T = cfg["discharge"]
     out: dict = dict(quick=quick, shape=shape, seed=SEED, d=d, side=side, count=count,
                      radii=RADII, kn=KN,
                      cn=damping(), mu=MU, safety=SAFETY, T=T, lead=LEAD, tail=TAIL,
                      orifices=[])
+    at = _yade_option(argv, cfg["orifices"], shape, bool(extra))
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -651,12 +742,15 @@ def main(argv: list[str]) -> dict:
         out["fill"] = _fill(work, side, cfg["fill"] * d, count, shape)
         for ratio in cfg["orifices"]:
             out["orifices"].append(_discharge(work, side, ratio, T, out["fill"], shape))
-        dt_yade = out["orifices"][0]["dt"]
-        if shape == "sphere" and SEED == 3:
+        out["yade_at"] = at if at is not None else cfg["orifices"][0]
+        dt_yade = next(o["dt"] for o in out["orifices"] if o["ratio"] == out["yade_at"])
+        if at is not None:
             bed = np.load(work / "bed.npz")
-            write_floor(work / "floor.stl", side, cfg["orifices"][0] * d)
+            write_floor(work / "floor.stl", side, at * d)
             out["yade"] = run_yade(bed["position"], bed["shape"], bed["velocity"], side,
-                                   cfg["orifices"][0] * d, T, dt_yade, work)
+                                   at * d, T, dt_yade, work)
+        elif extra:
+            out["yade"] = "Yade is compared on the default orifices only (or --yade-at R)"
         elif shape == "sphere":
             out["yade"] = f"Yade is compared on the fill of seed 3 only (this is seed {SEED})"
         else:

@@ -150,7 +150,27 @@ def section_beverloo(rep: Report) -> None:
         rep.headline["beverloo_yade"] = r["ratio"]
     else:
         rep.add(f"{y}.\n")
+    _beverloo_yade_at(rep, cache)
     _beverloo_shapes(rep, cache)
+
+
+def _beverloo_yade_at(rep: Report, cache: Path) -> None:
+    """Yade through the other orifices of the same bed (``bench_beverloo.py --orifices R
+    --yade-at R``: ``beverloo_D<R>.json``), when their JSONs are there: the rates of both
+    codes, which check nurbsdem's rates over the range the exponent is fitted on."""
+    rows = []
+    for path in sorted(cache.glob("beverloo_D*.json")):
+        r = json.loads(path.read_text())
+        y = r.get("yade")
+        if not isinstance(y, dict):
+            continue
+        o = next(o for o in r["orifices"] if o["ratio"] == r["yade_at"])
+        rows.append([f"{o['ratio']:g}", f"{o['W']:.4f}", f"{y['W']:.4f}",
+                     f"{100 * (o['W'] / y['W'] - 1):+.1f}", f"{r['ratio']:.2f}"])
+    if rows:
+        rep.add("\nYade through other orifices of the same bed (`--orifices R --yade-at R`):\n\n"
+                + md_table(["D / d", "nurbsdem W kg/s", "Yade W kg/s", "difference %",
+                            "time nurbsdem / Yade"], rows) + "\n\n")
 
 
 def _beverloo_fills(rep: Report, cache: Path, par) -> None:
@@ -178,6 +198,17 @@ def _beverloo_fills(rep: Report, cache: Path, par) -> None:
                 + ", ".join("-" if n is None else f"{n:.2f}" for n in f["n_fills"]) + ".\n")
         rep.headline["beverloo_fills"] = dict(n=fit["n"], k=fit["k"], C=fit["C"],
                                               fills=len(f["seeds"]))
+    part, part25 = f.get("fit_from"), f.get("fit_n25_from")
+    if part:
+        keep = [o for o in f["orifices"] if o["ratio"] >= f["from"] - 1e-9]
+        rep.add(f"Over the {len(keep)} orifices of at least {f['from']:g} d "
+                f"({', '.join(format(o['ratio'], 'g') for o in keep)} d): exponent "
+                f"{par(part, 'n', '.2f')}, k {par(part, 'k', '.2f')}, C "
+                f"{par(part, 'C', '.3f')}; RMS of W {100 * part['rms']:.2f} %; at n = 2.5: "
+                f"k {par(part25, 'k', '.2f')}, C {par(part25, 'C', '.3f')}. The free fit's C "
+                "is in m^(2.5 − n): it compares with the published 0.5–0.7 at n = 2.5 only.\n")
+        rep.headline["beverloo_fills"].update(
+            n_from=part["n"], k_from=part25["k"], C_from=part25["C"], start=f["from"])
 
 
 def _beverloo_shapes(rep: Report, cache: Path) -> None:

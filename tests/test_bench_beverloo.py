@@ -87,3 +87,39 @@ def test_the_fills_combined_give_beverloo_back_from_rates_that_scatter_about_it(
     paths[1].write_text(json.dumps(other))
     with pytest.raises(SystemExit, match="other orifices"):
         bench_beverloo.combine(paths, tmp_path / "fills.json")
+
+
+def test_runs_of_other_orifices_join_their_fill_and_the_fit_from_8_d(tmp_path):
+    """``combine`` joins a seed's run of other orifices (``--orifices``) to that seed's
+    default run: two fills of six orifices on Beverloo's law (n 2.5, k 1.5, C 0.6) 2 % above
+    and below it, each fill split over two runs, give the mean rates of all six orifices in
+    order, and the fit over the five of at least 8 d gives the law back; a run of the same
+    seed whose fill differs is refused, and ``--orifices`` outside the silo's range too."""
+    import json
+    d, rho, g = bench_beverloo.D_GRAIN, 1570.0, bench_beverloo.G
+    ratios = (6.0, 8.0, 9.5, 11.0, 13.0, 15.0)
+    law = {x: 0.6 * rho * math.sqrt(g) * ((x - 1.5) * d) ** 2.5 for x in ratios}
+    paths = []
+    for seed, sign in ((3, 1.0), (4, -1.0)):
+        fill = dict(rho_b=rho * (1 + 0.01 * sign), top=0.096, count=37917)
+        for part in ((6.0, 8.0, 11.0, 15.0), (9.5, 13.0)):
+            run = dict(seed=seed, d=d, T=0.4, fill=fill,
+                       orifices=[dict(ratio=x, D=x * d, W=law[x] * (1 + 0.02 * sign))
+                                 for x in part])
+            paths.append(tmp_path / f"seed{seed}_{len(part)}.json")
+            paths[-1].write_text(json.dumps(run))
+    out = bench_beverloo.combine(paths[::-1], tmp_path / "fills.json")
+    assert [o["ratio"] for o in out["orifices"]] == list(ratios)
+    for row in out["orifices"]:
+        assert row["W"] == pytest.approx(law[row["ratio"]], rel=1e-12)
+    assert out["from"] == 8.0
+    assert out["fit_from"]["n"] == pytest.approx(2.5, abs=1e-5)
+    assert out["fit_from"]["k"] == pytest.approx(1.5, abs=1e-4)
+    assert out["fit_n25_from"]["C"] == pytest.approx(0.6, rel=1e-9)
+    other = json.loads(paths[1].read_text())
+    other["fill"]["rho_b"] *= 1.001
+    paths[1].write_text(json.dumps(other))
+    with pytest.raises(SystemExit, match="not the same fill"):
+        bench_beverloo.combine(paths, tmp_path / "fills.json")
+    with pytest.raises(SystemExit, match="outside 6 to 15 d"):
+        bench_beverloo.main(["--orifices", "16"])
