@@ -65,3 +65,22 @@ def test_a_cone_tighter_than_the_paper_particles_is_a_warning_at_its_line(tmp_pa
                     f"wall or smaller particles avoid it)"]
     said, _, _ = check(tmp_path, None)
     assert said == []
+
+
+def test_check_reads_a_surface_file_once_and_again_after_it_changes(tmp_path, monkeypatch):
+    """The parse, the curvature warning and the wall's geometry share one read of a
+    ``Surface`` file; an edit of the file (its time and size) is read anew."""
+    import os
+
+    from nurbsdem.io import deck_curved, shapefile
+    read, calls = shapefile.read_patches, []
+    monkeypatch.setattr(shapefile, "read_patches",
+                        lambda p: (Path(p).name == "narrow.yaml" and calls.append(p)) or read(p))
+    deck_curved._file_patches.cache_clear()
+    save_shape(tmp_path / "narrow.yaml", [cone_patch(0.04, 0.14, 0.16)])
+    said, _, _ = check(tmp_path, "narrow.yaml")
+    assert len(said) == 1 and calls == [tmp_path / "narrow.yaml"]
+    save_shape(tmp_path / "narrow.yaml", [cone_patch(0.2, 0.3, 0.16)])
+    os.utime(tmp_path / "narrow.yaml", ns=(1, 1))
+    said, _, _ = check(tmp_path, "narrow.yaml")
+    assert said == [] and len(calls) == 2

@@ -4,8 +4,8 @@ their geometry for the solver.
 ``Mesh ID Name n File f.stl [Scale s] [Position x y z] [Rotation rx ry rz] [Material m]
 [OneSided yes|no]`` and ``Surface ID Name n File f.yaml [Position x y z] [Rotation rx ry rz]
 [Material m]`` make a :class:`~nurbsdem.model.CurvedWallSpec`; the file is read at parse time
-(so that a missing or broken file is reported at its deck line) and again by the solver
-(:func:`curved_wall_geometry`).  Placement: ``x_world = R(rotation) (scale x_file) +
+(so that a missing or broken file is reported at its deck line); a surface file's patches are
+kept for the solver (:func:`curved_wall_geometry`) and the checks until the file changes.  Placement: ``x_world = R(rotation) (scale x_file) +
 position``, rotation a rotation vector (rad).  ``MoveWall NAME Displacement`` steps translate
 them as they do flat walls, ``MoveWall NAME Rotate`` steps (:func:`rotate_step`) turn them
 (and translate them too with a ``Displacement``); :func:`curved_tessellation` draws them in
@@ -13,6 +13,7 @@ them as they do flat walls, ``MoveWall NAME Rotate`` steps (:func:`rotate_step`)
 """
 from __future__ import annotations
 
+import functools
 import logging
 import weakref
 from pathlib import Path
@@ -27,15 +28,23 @@ def _resolve(base: Path, source: str) -> Path:
     return Path(source) if Path(source).is_absolute() else base / source
 
 
+@functools.lru_cache(maxsize=16)
+def _file_patches(path: str, mtime_ns: int, size: int) -> tuple:
+    """The patches of a shape file as read (the file's time and size in the key: the parse,
+    the checks and the solver read a file once between its edits)."""
+    from .shapefile import read_patches
+    return tuple(read_patches(Path(path))[0])
+
+
 def surface_patches(spec: CurvedWallSpec, where: str) -> list:
     """The placed patches of a ``Surface`` wall's shape file (InputError naming ``where``)."""
     from .meshfile import _rotation_matrix
-    from .shapefile import read_patches
     path = spec.path
     if path is None or not path.is_file():
         raise InputError(f"{where}: no such surface file: {path}")
     try:
-        patches, _ = read_patches(path)
+        st = path.stat()
+        patches = _file_patches(str(path), st.st_mtime_ns, st.st_size)
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
     if not patches:
