@@ -107,9 +107,9 @@ def _headline_md(rep: Report) -> str:
     bv = h.get("beverloo_fills") or h.get("beverloo")
     if bv:
         fills = f" over {bv['fills']} fills" if "fills" in bv else ""
-        out.append(f"* Silo discharge of spheres{fills}: Beverloo's exponent {bv['n']:.2f}, "
-                   f"k {bv['k']:.2f}, C {bv['C']:.3f} (spheres' published range: n 2.5 ± 0.3, "
-                   "k 1–2, C 0.5–0.7), section 5.")
+        out.append(f"* Silo discharge of spheres{fills}: Beverloo's exponent {bv['n']:.2f}; "
+                   f"at n = 2.5, k {bv['k']:.2f} and C {bv['C']:.3f} (spheres' published "
+                   "range: n 2.5 ± 0.3, k 1–2, C 0.5–0.7), section 5.")
         if "n_from" in bv:
             out.append(f"* The same fills through the orifices of at least {bv['start']:g} d: "
                        f"Beverloo's exponent {bv['n_from']:.2f}; at n = 2.5, k "

@@ -130,7 +130,8 @@ def section_beverloo(rep: Report) -> None:
             rep.add(f" At n = 2.5: k {par(fixed, 'k', '.2f')}, C {par(fixed, 'C', '.3f')}; "
                     f"RMS of W {100 * fixed['rms']:.2f} %.")
         rep.add("\n")
-        rep.headline["beverloo"] = dict(n=fit["n"], k=fit["k"], C=fit["C"])
+        rep.headline["beverloo"] = dict(n=fit["n"], k=(fixed or fit)["k"],
+                                        C=(fixed or fit)["C"])
     else:
         rep.add("No Beverloo fit: it needs three orifices.\n")
     if not r["quick"]:
@@ -196,7 +197,7 @@ def _beverloo_fills(rep: Report, cache: Path, par) -> None:
                 f"{100 * fit['rms']:.2f} %; at n = 2.5: k {par(fixed, 'k', '.2f')}, "
                 f"C {par(fixed, 'C', '.3f')}. Each fill's own free exponent: "
                 + ", ".join("-" if n is None else f"{n:.2f}" for n in f["n_fills"]) + ".\n")
-        rep.headline["beverloo_fills"] = dict(n=fit["n"], k=fit["k"], C=fit["C"],
+        rep.headline["beverloo_fills"] = dict(n=fit["n"], k=fixed["k"], C=fixed["C"],
                                               fills=len(f["seeds"]))
     part, part25 = f.get("fit_from"), f.get("fit_n25_from")
     if part:

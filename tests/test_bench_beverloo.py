@@ -123,3 +123,56 @@ def test_runs_of_other_orifices_join_their_fill_and_the_fit_from_8_d(tmp_path):
         bench_beverloo.combine(paths, tmp_path / "fills.json")
     with pytest.raises(SystemExit, match="outside 6 to 15 d"):
         bench_beverloo.main(["--orifices", "16"])
+
+
+def _synthetic_run(seed: int, ratios, sign: float, yade_at=None) -> dict:
+    """A run's JSON as bench_beverloo writes it, its rates on Beverloo's law (n 2.5, k 1.5,
+    C 0.6) times 1 + 0.02 sign, Yade's rate at ``yade_at`` 1 % below nurbsdem's."""
+    d, rho, g = bench_beverloo.D_GRAIN, 1570.0, bench_beverloo.G
+    rows = [dict(ratio=x, D=x * d, W=0.6 * rho * math.sqrt(g) * ((x - 1.5) * d) ** 2.5
+                 * (1 + 0.02 * sign), halves=[1.0, 1.0], C_mid=0.6, top_end=0.08, loop=700.0,
+                 flow=30.0, dt=6.5e-5, cpu=700.0) for x in ratios]
+    fill = dict(rho_b=rho, top=0.096, count=37917, flow=15.0, loop=400.0)
+    run = dict(quick=False, seed=seed, d=d, T=0.4, side=0.15, count=37917,
+               radii=list(bench_beverloo.RADII), fill=fill, orifices=rows, flow_share=0.045,
+               yade="Yade is compared on the default orifices only")
+    if yade_at is not None:
+        o = next(o for o in rows if o["ratio"] == yade_at)
+        run.update(yade_at=yade_at, ratio=1.5, cpu_ratio=1.4,
+                   yade=dict(wall=o["loop"] / 1.5, cpu=500.0, W=o["W"] / 1.01,
+                             halves=[1.0, 1.0]))
+    bench_beverloo._fit(run)
+    return run
+
+
+def test_the_report_gives_the_fit_from_8_d_and_yade_through_other_orifices(tmp_path,
+                                                                          monkeypatch):
+    """The report's silo section (``report_peers.section_beverloo``) on the JSONs of two
+    fills, each with a run of other orifices, and a Yade run through 15 d: the mean rates'
+    fits over all orifices and over those of at least 8 d, and Yade's row at 15 d; the
+    headline has both exponents and k, C at n 2.5."""
+    import json
+
+    import report_peers
+    from report_base import Report
+    cache = tmp_path / "benchmarks" / ".cache"
+    cache.mkdir(parents=True)
+    default, extra = (6.0, 8.0, 11.0, 15.0), (9.5, 13.0)
+    (cache / "beverloo.json").write_text(json.dumps(_synthetic_run(3, default, 1.0, 6.0)))
+    (cache / "beverloo_D15.json").write_text(json.dumps(_synthetic_run(3, (15.0,), 1.0, 15.0)))
+    paths = []
+    for seed, sign in ((3, 1.0), (4, -1.0)):
+        for part in (default, extra):
+            paths.append(tmp_path / f"s{seed}_{len(part)}.json")
+            paths[-1].write_text(json.dumps(_synthetic_run(seed, part, sign)))
+    bench_beverloo.combine(paths, cache / "beverloo_fills.json")
+    monkeypatch.setattr(report_peers, "REPO", tmp_path)
+    rep = Report(tmp_path / "out", {}, quick=False)
+    report_peers.section_beverloo(rep)
+    text = "".join(rep.parts)
+    assert "Over the 5 orifices of at least 8 d (8, 9.5, 11, 13, 15 d): exponent 2.50" in text
+    assert "| 15 | " in text and "| +1.0 | 1.50 |" in text
+    head = rep.headline["beverloo_fills"]
+    assert head["n"] == pytest.approx(2.5, abs=1e-4)
+    assert head["n_from"] == pytest.approx(2.5, abs=1e-4)
+    assert head["C"] == pytest.approx(0.6, rel=1e-9) and head["start"] == 8.0
