@@ -151,27 +151,61 @@ def section_beverloo(rep: Report) -> None:
         rep.headline["beverloo_yade"] = r["ratio"]
     else:
         rep.add(f"{y}.\n")
-    _beverloo_yade_at(rep, cache)
+    _beverloo_yade_at(rep, cache, r)
     _beverloo_shapes(rep, cache)
 
 
-def _beverloo_yade_at(rep: Report, cache: Path) -> None:
-    """Yade through the other orifices of the same bed (``bench_beverloo.py --orifices R
-    --yade-at R``: ``beverloo_D<R>.json``), when their JSONs are there: the rates of both
-    codes, which check nurbsdem's rates over the range the exponent is fitted on."""
-    rows = []
+def _beverloo_yade_at(rep: Report, cache: Path, base: dict) -> None:
+    """Yade through the other orifices of the default run's bed (``bench_beverloo.py
+    --orifices R --yade-at R``: ``beverloo_D<R>.json``), when their JSONs are there: the rates
+    of both codes, and with four orifices or more (the default run's own Yade orifice among
+    them) Beverloo's fits of each code's rates on that bed, which check the exponent
+    nurbsdem's rates give against an independent code's."""
+    import bench_beverloo as bb
+    pairs, rows = {}, []
+    if isinstance(base.get("yade"), dict):
+        at = base.get("yade_at", base["orifices"][0]["ratio"])
+        o = next(o for o in base["orifices"] if o["ratio"] == at)
+        pairs[at] = (o["D"], o["W"], base["yade"]["W"])
     for path in sorted(cache.glob("beverloo_D*.json")):
         r = json.loads(path.read_text())
         y = r.get("yade")
-        if not isinstance(y, dict):
+        if not isinstance(y, dict) or r.get("seed", 3) != base.get("seed", 3):
             continue
         o = next(o for o in r["orifices"] if o["ratio"] == r["yade_at"])
-        rows.append([f"{o['ratio']:g}", f"{o['W']:.4f}", f"{y['W']:.4f}",
-                     f"{100 * (o['W'] / y['W'] - 1):+.1f}", f"{r['ratio']:.2f}"])
-    if rows:
-        rep.add("\nYade through other orifices of the same bed (`--orifices R --yade-at R`):\n\n"
-                + md_table(["D / d", "nurbsdem W kg/s", "Yade W kg/s", "difference %",
-                            "time nurbsdem / Yade"], rows) + "\n\n")
+        pairs[o["ratio"]] = (o["D"], o["W"], y["W"])
+        rows.append([o["ratio"], f"{o['W']:.4f}", f"{y['W']:.4f}",
+                     f"{100 * (o['W'] / y['W'] - 1):+.1f}", fmt(r.get("ratio"), ".2f")])
+    if not rows:
+        return
+    rows = [[f"{row[0]:g}"] + row[1:] for row in sorted(rows)]
+    rep.add("\nYade through other orifices of the same bed (`--orifices R --yade-at R`; the "
+            "time ratio where both ran side by side on an otherwise idle machine):\n\n"
+            + md_table(["D / d", "nurbsdem W kg/s", "Yade W kg/s", "difference %",
+                        "time nurbsdem / Yade"], rows) + "\n\n")
+    if len(pairs) < 4:
+        return
+    keys = sorted(pairs)
+    D = [pairs[k][0] for k in keys]
+    fits = []
+    for col in (1, 2):
+        W = [pairs[k][col] for k in keys]
+        free = fit_beverloo_or_none(D, W, base["d"], base["fill"]["rho_b"], bb.G)
+        fixed = fit_beverloo_or_none(D, W, base["d"], base["fill"]["rho_b"], bb.G, n=2.5)
+        fits.append("–" if free is None or fixed is None else
+                    f"exponent {free.n:.2f} ± {free.sd_n:.2g}; at n = 2.5, k {fixed.k:.2f}, "
+                    f"C {fixed.C:.3f}")
+    rep.add(f"Beverloo's fits on this bed through {', '.join(f'{k:g}' for k in keys)} d: "
+            f"nurbsdem's rates {fits[0]}; Yade's rates {fits[1]}.\n")
+
+
+def fit_beverloo_or_none(D, W, d, rho_b, g, n=None):
+    """:func:`beverloo.fit_beverloo` (postproc), or None where it fails."""
+    import bench_beverloo as bb
+    try:
+        return bb.fit_beverloo(D, W, d, rho_b, g, n=n)
+    except (ValueError, RuntimeError):
+        return None
 
 
 def _beverloo_fills(rep: Report, cache: Path, par) -> None:

@@ -148,9 +148,10 @@ def _synthetic_run(seed: int, ratios, sign: float, yade_at=None) -> dict:
 def test_the_report_gives_the_fit_from_8_d_and_yade_through_other_orifices(tmp_path,
                                                                           monkeypatch):
     """The report's silo section (``report_peers.section_beverloo``) on the JSONs of two
-    fills, each with a run of other orifices, and a Yade run through 15 d: the mean rates'
-    fits over all orifices and over those of at least 8 d, and Yade's row at 15 d; the
-    headline has both exponents and k, C at n 2.5."""
+    fills, each with a run of other orifices, and Yade runs through 8, 11 and 15 d: the mean
+    rates' fits over all orifices and over those of at least 8 d, Yade's rows, and both
+    codes' fits on the bed of Yade's four orifices (Yade's rates 1 % lower: the same n and k,
+    C 1 % lower; the rates 2 % above the law); the headline has both exponents and k, C at n 2.5."""
     import json
 
     import report_peers
@@ -159,7 +160,8 @@ def test_the_report_gives_the_fit_from_8_d_and_yade_through_other_orifices(tmp_p
     cache.mkdir(parents=True)
     default, extra = (6.0, 8.0, 11.0, 15.0), (9.5, 13.0)
     (cache / "beverloo.json").write_text(json.dumps(_synthetic_run(3, default, 1.0, 6.0)))
-    (cache / "beverloo_D15.json").write_text(json.dumps(_synthetic_run(3, (15.0,), 1.0, 15.0)))
+    for x in (8.0, 11.0, 15.0):
+        (cache / f"beverloo_D{x:g}.json").write_text(json.dumps(_synthetic_run(3, (x,), 1.0, x)))
     paths = []
     for seed, sign in ((3, 1.0), (4, -1.0)):
         for part in (default, extra):
@@ -172,6 +174,10 @@ def test_the_report_gives_the_fit_from_8_d_and_yade_through_other_orifices(tmp_p
     text = "".join(rep.parts)
     assert "Over the 5 orifices of at least 8 d (8, 9.5, 11, 13, 15 d): exponent 2.50" in text
     assert "| 15 | " in text and "| +1.0 | 1.50 |" in text
+    assert text.index("| 8 | ") < text.index("| 11 | ") < text.index("| 15 | ")
+    fits = text[text.index("Beverloo's fits on this bed through 6, 8, 11, 15 d"):].split("\n")[0]
+    assert "nurbsdem's rates exponent 2.50 ±" in fits and "k 1.50, C 0.612;" in fits
+    assert "Yade's rates exponent 2.50 ±" in fits and f"C {0.612 / 1.01:.3f}" in fits
     head = rep.headline["beverloo_fills"]
     assert head["n"] == pytest.approx(2.5, abs=1e-4)
     assert head["n_from"] == pytest.approx(2.5, abs=1e-4)
