@@ -127,9 +127,9 @@ SHAPED = dict(orifices=(6.0, 7.0, 8.0), fill=9.0, discharge=0.15)
 #: the sphere's volume); the paper's particles A, B and C scaled to the spheres' volumes
 SHAPES = ("sphere", "ellipsoid", "paper")
 ELLIPSOID = (1.25, 1.0, 0.8)
-#: the smallest orifice (in d) of the combined fills' second fit: at 6 d the flow runs in
-#: bursts between short arches and its rate falls below the law (the small-orifice
-#: deficit of Mankoc et al., Granular Matter 9, 2007), which steepens the free exponent
+#: the smallest orifice (in d) of the combined fills' second fit, which shows how much the
+#: free exponent rests on the smallest orifice, the one nearest to clogging (where the law
+#: is least sure: Mankoc et al., Granular Matter 9, 2007); the first fit takes them all
 FIT_FROM = 8.0
 #: the inlet's seed of the fill (``--seed``): another seed pours another bed of the same
 #: grains, whose discharges give the rates' spread from fill to fill
