@@ -60,7 +60,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "Shape": (".geometry.shape", "Shape"),
     "load_shape": (".io.shapefile", "load_shape"),
     "save_shape": (".io.shapefile", "save_shape"),
-    "Simulation": (".simulation", "Simulation"),      # the scripting API (issue #14)
+    "Simulation": (".simulation", "Simulation"),      # the scripting API
 }
 
 __all__ = ["__version__", "shapes", "Simulation", "Patch", "Shape", "load_shape", "save_shape",
