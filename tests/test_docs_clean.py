@@ -1,6 +1,6 @@
 """The documentation, comments and docstrings state what is true, not a diary: no numbered
 milestones of the work, no labels of run orders, no remarks on the machine's slower or faster
-moods, and no references to the retired developer notes, in the README, docs/ (the changelog
+moods, no issue numbers, and no references to the retired developer notes, in the README, docs/ (the changelog
 aside), the package, the tests and the benchmarks (whose text goes into the generated
 reports)."""
 from __future__ import annotations
@@ -18,6 +18,7 @@ PATTERNS = {
         r"\b(?:slow|slower|fast|faster|quiet|busy|short|long|good|bad)\s+sp" + r"ells?\b"
         r"|\bsp" + r"ells? of (?:the|this|a) ", re.I),
     "the retired developer notes": re.compile(r"DEV" + r"NOTES"),
+    "an issue's number": re.compile(r"\biss" + r"ues? *#?\d", re.I),
 }
 
 
@@ -41,9 +42,11 @@ def hits(files: list[Path]) -> list[tuple[Path, int, str, str]]:
 
 def test_the_patterns_catch_diary_and_spare_ordinary_words(tmp_path):
     diary = ["as before st" + "op 31", "Report (a slow sp" + "ell of the VM)",
-             "alternated AB" + "BA", "see DEV" + "NOTES", "in a faster sp" + "ell"]
+             "alternated AB" + "BA", "see DEV" + "NOTES", "in a faster sp" + "ell",
+             "the scripting API (iss" + "ue #14)", "as iss" + "ue 42 asks"]
     plain = ["the deck's spelling", "the spelled-out array", "Step 3 of the deck",
-             "the LCP stops at 1e-11", "the copy that spells the rows out", "a stop at 3 m"]
+             "the LCP stops at 1e-11", "the copy that spells the rows out", "a stop at 3 m",
+             "a known issue of numba", "issues a warning"]
     f = tmp_path / "x.md"
     f.write_text("\n".join(diary + plain), encoding="utf-8")
     assert sorted({n for _, n, _, _ in hits([f])}) == list(range(1, len(diary) + 1))
