@@ -1,8 +1,8 @@
 """The documentation, comments and docstrings state what is true, not a diary: no numbered
 milestones of the work, no labels of run orders, no remarks on the machine's slower or faster
-moods, no issue numbers, and no references to the retired developer notes, in the README, docs/ (the changelog
-aside), the package, the tests and the benchmarks (whose text goes into the generated
-reports)."""
+moods, no issue numbers, and no references to the retired developer notes, in the README,
+docs/ (the changelog aside), the package, the tests and the benchmarks (whose text goes into
+the generated reports)."""
 from __future__ import annotations
 
 import re
