@@ -180,7 +180,7 @@ def _beverloo_yade_at(rep: Report, cache: Path, base: dict) -> None:
         return
     rows = [[f"{row[0]:g}"] + row[1:] for row in sorted(rows)]
     rep.add("\nYade through other orifices of the same bed (`--orifices R --yade-at R`; the "
-            "time ratio where both ran side by side on an otherwise idle machine):\n\n"
+            "time ratio where both ran in one benchmark run):\n\n"
             + md_table(["D / d", "nurbsdem W kg/s", "Yade W kg/s", "difference %",
                         "time nurbsdem / Yade"], rows) + "\n\n")
     if len(pairs) < 4:
@@ -190,8 +190,8 @@ def _beverloo_yade_at(rep: Report, cache: Path, base: dict) -> None:
     fits = []
     for col in (1, 2):
         W = [pairs[k][col] for k in keys]
-        free = fit_beverloo_or_none(D, W, base["d"], base["fill"]["rho_b"], bb.G)
-        fixed = fit_beverloo_or_none(D, W, base["d"], base["fill"]["rho_b"], bb.G, n=2.5)
+        free = _fit_or_none(D, W, base["d"], base["fill"]["rho_b"], bb.G)
+        fixed = _fit_or_none(D, W, base["d"], base["fill"]["rho_b"], bb.G, n=2.5)
         fits.append("–" if free is None or fixed is None else
                     f"exponent {free.n:.2f} ± {free.sd_n:.2g}; at n = 2.5, k {fixed.k:.2f}, "
                     f"C {fixed.C:.3f}")
@@ -199,7 +199,7 @@ def _beverloo_yade_at(rep: Report, cache: Path, base: dict) -> None:
             f"nurbsdem's rates {fits[0]}; Yade's rates {fits[1]}.\n")
 
 
-def fit_beverloo_or_none(D, W, d, rho_b, g, n=None):
+def _fit_or_none(D, W, d, rho_b, g, n=None):
     """:func:`beverloo.fit_beverloo` (postproc), or None where it fails."""
     import bench_beverloo as bb
     try:

@@ -5,11 +5,11 @@ their geometry for the solver.
 [OneSided yes|no]`` and ``Surface ID Name n File f.yaml [Position x y z] [Rotation rx ry rz]
 [Material m]`` make a :class:`~nurbsdem.model.CurvedWallSpec`; the file is read at parse time
 (so that a missing or broken file is reported at its deck line); a surface file's patches are
-kept for the solver (:func:`curved_wall_geometry`) and the checks until the file changes.  Placement: ``x_world = R(rotation) (scale x_file) +
-position``, rotation a rotation vector (rad).  ``MoveWall NAME Displacement`` steps translate
-them as they do flat walls, ``MoveWall NAME Rotate`` steps (:func:`rotate_step`) turn them
-(and translate them too with a ``Displacement``); :func:`curved_tessellation` draws them in
-``walls.pvd``.
+kept for the solver (:func:`curved_wall_geometry`) and the checks until the file changes.
+Placement: ``x_world = R(rotation) (scale x_file) + position``, rotation a rotation vector
+(rad).  ``MoveWall NAME Displacement`` steps translate them as they do flat walls, ``MoveWall
+NAME Rotate`` steps (:func:`rotate_step`) turn them (and translate them too with a
+``Displacement``); :func:`curved_tessellation` draws them in ``walls.pvd``.
 """
 from __future__ import annotations
 
