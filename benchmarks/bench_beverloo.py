@@ -555,7 +555,12 @@ def _fit(out: dict) -> None:
               + f", RMS of W {f.rms:.2%}")
 
 
-def _costs(out: dict, dt_yade: float) -> None:
+def _yade_row(out: dict) -> dict:
+    """The orifice row of the run's Yade comparison (``out["yade_at"]``)."""
+    return next(r for r in out["orifices"] if r["ratio"] == out["yade_at"])
+
+
+def _costs(out: dict) -> None:
     """The inlet and outlet share and the ratio to Yade, into ``out``, printed."""
     rows = out["orifices"]
     flow = sum(r["flow"] for r in rows) + out["fill"]["flow"]
@@ -567,7 +572,8 @@ def _costs(out: dict, dt_yade: float) -> None:
     if isinstance(y, str):
         print(y)
         return
-    n0 = next(r for r in rows if r["ratio"] == out.get("yade_at", rows[0]["ratio"]))
+    n0 = _yade_row(out)
+    dt_yade = n0["dt"]
     out["ratio"] = n0["loop"] / y["wall"]
     y["per_particle_step"] = y["wall"] / (out["fill"]["count"] * out["T"] / dt_yade)
     print(f"Yade, D = {n0['ratio']:g} d at dt {dt_yade:.3g} s: time loop {y['wall']:.1f} s "
@@ -742,13 +748,12 @@ def main(argv: list[str]) -> dict:
         out["fill"] = _fill(work, side, cfg["fill"] * d, count, shape)
         for ratio in cfg["orifices"]:
             out["orifices"].append(_discharge(work, side, ratio, T, out["fill"], shape))
-        out["yade_at"] = at if at is not None else cfg["orifices"][0]
-        dt_yade = next(o["dt"] for o in out["orifices"] if o["ratio"] == out["yade_at"])
-        if at is not None:
+        if at is not None:                     # Yade's step: nurbsdem's mean step there
+            out["yade_at"] = at
             bed = np.load(work / "bed.npz")
             write_floor(work / "floor.stl", side, at * d)
             out["yade"] = run_yade(bed["position"], bed["shape"], bed["velocity"], side,
-                                   at * d, T, dt_yade, work)
+                                   at * d, T, _yade_row(out)["dt"], work)
         elif extra:
             out["yade"] = "Yade is compared on the default orifices only (or --yade-at R)"
         elif shape == "sphere":
@@ -758,7 +763,7 @@ def main(argv: list[str]) -> dict:
                            f"ellipsoids or NURBS particles")
     out["wall"] = time.perf_counter() - t0
     _fit(out)
-    _costs(out, dt_yade)
+    _costs(out)
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps(out, indent=1, default=float))
     return out
