@@ -67,13 +67,16 @@ B and C scaled (shape files the run writes), through orifices of 6, 7 and 8 d in
 exact ellipsoids or NURBS particles).
 
 Usage: python benchmarks/bench_beverloo.py [--quick] [--shape S] [--seed S]
-[--orifices R... [--yade-at R]] [--json PATH] | --refit PATH | --combine PATH... [--json PATH]
+[--orifices R... [--yade-at R]] [--discharge S] [--json PATH] | --refit PATH |
+--combine PATH... [--json PATH]
 (quick: one orifice of 6 d in a silo 2.5 × 6 d wide, short runs: a smoke test of the
 pipeline, not a measurement; no Beverloo fit, which needs three orifices; ``--orifices``: the
 same silo and fill of the seed discharged through these orifices instead, and Yade through
-the one of ``--yade-at``).  Writes the JSON ``benchmarks/.cache/beverloo.json``
+the one of ``--yade-at``; ``--discharge``: S seconds of discharge instead of 0.4, at most
+:data:`MAX_DISCHARGE`).  Writes the JSON ``benchmarks/.cache/beverloo.json``
 (``--quick``: ``beverloo_quick.json``; other grains: ``beverloo_<shape>[_quick].json``;
-another seed: ``beverloo_seed<S>.json``; other orifices: ``…_D<R>-<R>.json``) that
+another seed: ``beverloo_seed<S>.json``; other orifices: ``…_D<R>-<R>.json``; another
+discharge time: ``…_T<S>.json``) that
 ``benchmarks/report.py`` reads; ``--refit`` fits its rates again; ``--combine`` fits the
 rates of several fills' JSONs averaged, a seed's runs of other orifices joined to its run
 (:func:`combine`: ``beverloo_fills.json``).
@@ -119,6 +122,8 @@ LEAD, TAIL = 0.35, 0.1                    # fractions of a discharge left out of
 #: the published ranges for spheres: exponent, k, C
 RANGES = {"n": (2.2, 2.8), "k": (1.0, 2.0), "C": (0.5, 0.7)}
 FULL = dict(orifices=(6.0, 8.0, 11.0, 15.0), fill=24.0, discharge=0.4)
+#: the longest ``--discharge`` (s): through 15 d the 24 d fill then ends about 16 d high
+MAX_DISCHARGE = 0.8
 QUICK = dict(orifices=(6.0,), fill=9.0, discharge=0.15)
 #: the runs of the other grains (``--shape ellipsoid | paper``): three orifices, a shallower
 #: fill and shorter discharges (a NURBS particle's contacts cost LCPs)
@@ -598,17 +603,24 @@ def refit(path: Path) -> dict:
 
 def _merge_seed(runs: list[tuple[Path, dict]]) -> dict:
     """One fill's run (the JSON of the default orifices) with the rates of its other runs
-    (``--orifices``, the same seed) joined in, sorted by orifice; refused unless every run
-    poured the same bed (count and bulk density equal) and discharged as long."""
+    (``--orifices``, ``--discharge``: the same seed) joined in, sorted by orifice, each
+    orifice's rate from its longest discharge (the widest fit window; its time in the
+    orifice's ``T``); refused unless every run poured the same bed (count and bulk density
+    equal)."""
     (p0, base), rest = runs[0], runs[1:]
-    merged = dict(base, orifices=list(base["orifices"]))
+    merged = dict(base, orifices=[dict(o, T=base["T"]) for o in base["orifices"]])
     for p, r in rest:
-        if (r["fill"]["count"] != base["fill"]["count"] or r["T"] != base["T"]
+        if (r["fill"]["count"] != base["fill"]["count"]
                 or abs(r["fill"]["rho_b"] - base["fill"]["rho_b"]) > 1e-9 * base["fill"]["rho_b"]):
             raise SystemExit(f"--combine: {p} has seed {r.get('seed', 3)} as {p0} has, but "
-                             "not the same fill or discharge time")
-        have = {o["ratio"] for o in merged["orifices"]}
-        merged["orifices"] += [o for o in r["orifices"] if o["ratio"] not in have]
+                             "not the same fill")
+        have = {o["ratio"]: i for i, o in enumerate(merged["orifices"])}
+        for o in r["orifices"]:
+            i = have.get(o["ratio"])
+            if i is None:
+                merged["orifices"].append(dict(o, T=r["T"]))
+            elif r["T"] > merged["orifices"][i]["T"]:
+                merged["orifices"][i] = dict(o, T=r["T"])
     merged["orifices"].sort(key=lambda o: o["ratio"])
     if rest:
         _fit(merged)
@@ -645,15 +657,16 @@ def combine(paths: list[Path], json_path: Path | None = None) -> dict:
             for _, v in sorted(by_seed.items())]
     ratios = [o["ratio"] for o in runs[0]["orifices"]]
     for r in runs:
-        if [o["ratio"] for o in r["orifices"]] != ratios or r["T"] != runs[0]["T"]:
+        if [o["ratio"] for o in r["orifices"]] != ratios:
             raise SystemExit(f"--combine: the fill of seed {r.get('seed', 3)} has other "
-                             "orifices or another discharge time than the first")
+                             "orifices than the first")
     rows = []
     for i, ratio in enumerate(ratios):
         W = np.array([r["orifices"][i]["W"] for r in runs])
         sem = float(W.std(ddof=1) / math.sqrt(len(W))) if len(W) > 1 else float("nan")
         rows.append(dict(ratio=ratio, D=runs[0]["orifices"][i]["D"], W=float(W.mean()),
-                         W_fills=W.tolist(), sem=sem))
+                         W_fills=W.tolist(), sem=sem,
+                         T_fills=[r["orifices"][i]["T"] for r in runs]))
         print(f"D = {ratio:g} d: W = {W.mean():.4f} ± {sem:.4f} kg/s over {len(W)} fills "
               f"({', '.join(f'{w:.4f}' for w in W)})")
     rho = [r["fill"]["rho_b"] for r in runs]
@@ -696,6 +709,23 @@ def _orifices_option(argv: list[str], side: float) -> list[float]:
     return ratios
 
 
+def _discharge_option(argv: list[str], T: float) -> float:
+    """The discharge time (s) of ``--discharge S`` (else ``T``, the configuration's): a longer
+    discharge of the same fill widens the fit window (the same fractions of the run left out)
+    and so narrows the rate of an intermittent small orifice; refused below 0.2 s (the window
+    would hold the start-up) or where the bed would fall below the largest orifice."""
+    if "--discharge" not in argv:
+        return T
+    try:
+        S = float(argv[argv.index("--discharge") + 1])
+    except (IndexError, ValueError):
+        raise SystemExit("--discharge: give the discharge time in seconds") from None
+    if not 0.2 <= S <= MAX_DISCHARGE:
+        raise SystemExit(f"--discharge: {S:g} s is outside 0.2 to {MAX_DISCHARGE:g} s (the bed "
+                         "of the 24 d fill stays above 1 D through 15 d up to then)")
+    return S
+
+
 def _yade_option(argv: list[str], ratios: list[float], shape: str, extra: bool
                  ) -> float | None:
     """The orifice (in d) of the run's Yade comparison: ``--yade-at R`` (one of the run's
@@ -728,9 +758,13 @@ def main(argv: list[str]) -> dict:
     extra = _orifices_option(argv, side)
     if extra:
         cfg["orifices"] = extra
+    cfg["discharge"] = _discharge_option(argv, cfg["discharge"])
+    longer = cfg["discharge"] != (QUICK if quick else FULL if shape == "sphere" else SHAPED)[
+        "discharge"]
     name = ("beverloo" + ("" if shape == "sphere" else f"_{shape}") + ("_quick" if quick else "")
             + ("" if SEED == 3 else f"_seed{SEED}")
-            + ("" if not extra else "_D" + "-".join(f"{r:g}" for r in extra)))
+            + ("" if not extra else "_D" + "-".join(f"{r:g}" for r in extra))
+            + (f"_T{cfg['discharge']:g}" if longer else ""))
     json_path = Path(argv[argv.index("--json") + 1]) if "--json" in argv else (
         ROOT / "benchmarks" / ".cache" / f"{name}.json")
     count = fill_count(side, cfg["fill"] * d)

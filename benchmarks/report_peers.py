@@ -219,11 +219,21 @@ def _beverloo_fills(rep: Report, cache: Path, par) -> None:
     f = json.loads(path.read_text())
     rows = [[f"{o['ratio']:g}", f"{o['W']:.4f} ± {o['sem']:.4f}",
              ", ".join(f"{w:.4f}" for w in o["W_fills"])] for o in f["orifices"]]
+    header = ["D / d", "mean W kg/s", "W of each fill"]
+    times = [o.get("T_fills", [f["T"]] * len(o["W_fills"])) for o in f["orifices"]]
+    longer = any(t != f["T"] for ts in times for t in ts)
+    if longer:                       # some rates from longer discharges (``--discharge``)
+        header.append("discharge of each fill s")
+        for row, ts in zip(rows, times):
+            row.append(", ".join(f"{t:g}" for t in ts))
     rep.add(f"\nOver {len(f['seeds'])} fills of the same silo (inlet seeds "
             f"{', '.join(str(x) for x in f['seeds'])}; bulk densities "
             f"{', '.join(f'{x:.0f}' for x in f['rho_b_fills'])} kg/m³), the mean rate of each "
-            "orifice ± its standard error:\n\n"
-            + md_table(["D / d", "mean W kg/s", "W of each fill"], rows) + "\n\n")
+            "orifice ± its standard error"
+            + (" (each fill's rate from its longest discharge through that orifice, "
+               "`--discharge`: the same fractions of the run left out, a wider window)"
+               if longer else "") + ":\n\n"
+            + md_table(header, rows) + "\n\n")
     fit, fixed = f.get("fit"), f.get("fit_n25")
     if fit:
         rep.add(f"Beverloo fit on the mean rates: exponent {par(fit, 'n', '.2f')}, "

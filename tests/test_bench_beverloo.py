@@ -182,3 +182,41 @@ def test_the_report_gives_the_fit_from_8_d_and_yade_through_other_orifices(tmp_p
     assert head["n"] == pytest.approx(2.5, abs=1e-4)
     assert head["n_from"] == pytest.approx(2.5, abs=1e-4)
     assert head["C"] == pytest.approx(0.6, rel=1e-9) and head["start"] == 8.0
+
+
+def test_a_longer_discharge_of_a_fill_gives_that_orifices_rate(tmp_path, monkeypatch):
+    """``combine`` takes each orifice's rate of a fill from its longest discharge
+    (``--discharge``): the default runs' 6 and 8 d rates lie 10 % off Beverloo's law, the
+    0.8 s runs' on it (2 % above and below), so the mean rates and the fit give the law back,
+    and the report's fills table gives each fill's discharge time; ``--discharge`` beyond
+    the bed's reach is refused."""
+    import json
+
+    import report_peers
+    from report_base import Report
+    cache = tmp_path / "benchmarks" / ".cache"
+    cache.mkdir(parents=True)
+    paths = []
+    for seed, sign in ((3, 1.0), (4, -1.0)):
+        short = _synthetic_run(seed, (6.0, 8.0, 11.0, 15.0), sign)
+        for o in short["orifices"][:2]:
+            o["W"] *= 1.1
+        long = _synthetic_run(seed, (6.0, 8.0), sign)
+        long["T"] = 0.8
+        for name, run in (("short", short), ("long", long)):
+            paths.append(tmp_path / f"s{seed}_{name}.json")
+            paths[-1].write_text(json.dumps(run))
+    out = bench_beverloo.combine(paths[::-1], cache / "beverloo_fills.json")
+    assert [o["T_fills"] for o in out["orifices"]] == [[0.8, 0.8]] * 2 + [[0.4, 0.4]] * 2
+    assert out["fit"]["n"] == pytest.approx(2.5, abs=1e-5)
+    assert out["fit_n25"]["C"] == pytest.approx(0.6, rel=1e-9)
+    (cache / "beverloo.json").write_text(json.dumps(_synthetic_run(3, (6.0, 8.0, 11.0, 15.0),
+                                                                   1.0)))
+    monkeypatch.setattr(report_peers, "REPO", tmp_path)
+    rep = Report(tmp_path / "out", {}, quick=False)
+    report_peers.section_beverloo(rep)
+    text = "".join(rep.parts)
+    assert "discharge of each fill s |" in text and "| 0.8, 0.8 |" in text
+    assert "| 0.4, 0.4 |" in text
+    with pytest.raises(SystemExit, match="outside 0.2 to 0.8 s"):
+        bench_beverloo.main(["--discharge", "1.2"])
