@@ -37,7 +37,7 @@ def drop(substeps: int, T: float = 0.1):
     for _ in range(n):
         s.step()
         vz = s.bodies.v[0, 2]
-        if not s.c_a.size:
+        if not s.contacts.a.size:
             if vz < vmin and vmax == 0.0:
                 vmin = vz
             vmax = max(vmax, vz) if s.time > 0.05 else vmax

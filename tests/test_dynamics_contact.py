@@ -111,7 +111,7 @@ def test_frictionless_undamped_spheres_in_a_box_conserve_energy():
     drift = 0.0
     for _ in range(50):
         s.advance(200)
-        ncontacts += len(s.c_a)
+        ncontacts += len(s.contacts.a)
         drift = max(drift, abs(s.energy().mechanical - e0) / e0)
     assert s.energy().dissipated == 0.0
     assert ncontacts > 0                             # collisions did happen
@@ -139,7 +139,7 @@ def test_sphere_on_incline_rolls_without_slip_below_threshold():
     assert math.tan(a) < 3.5 * mu
     assert acc == pytest.approx(5 / 7 * g * math.sin(a), rel=0.01)
     assert wr == pytest.approx(v, rel=0.01)          # rolling: omega_y r = v_x
-    assert s.c_stick.all()
+    assert s.contacts.stick.all()
 
 
 def test_sphere_on_incline_slides_above_threshold():
@@ -148,7 +148,7 @@ def test_sphere_on_incline_slides_above_threshold():
     assert math.tan(a) > 3.5 * mu
     assert acc == pytest.approx(g * (math.sin(a) - mu * math.cos(a)), rel=0.01)
     assert wr < 0.9 * v                              # slipping
-    assert not s.c_stick.any()
+    assert not s.contacts.stick.any()
     assert s.energy().dissipated_friction > 0
 
 
@@ -161,7 +161,7 @@ def test_resting_sphere_comes_to_rest_with_contact_force_equal_to_weight():
     assert e.kinetic_translational < 1e-9 * m * g * r
     assert s.wall_contact_force[0] == pytest.approx([0, 0, -m * g], abs=1e-6 * m * g)
     assert s.wall_reaction[0, 2] == pytest.approx(m * g, rel=1e-6)
-    assert s.c_fn[0] == pytest.approx(m * g, rel=1e-6)
+    assert s.contacts.fn[0] == pytest.approx(m * g, rel=1e-6)
     assert abs(e.balance_error) < 1e-2 * e.dissipated
 
 

@@ -92,9 +92,9 @@ def _run_impact(s, max_steps):
     t_in = t_out = None
     for _ in range(max_steps):
         s.step()
-        if s.c_a.shape[0]:
+        if s.contacts.a.shape[0]:
             dmax = max(dmax, float(s.last_contacts.depth[0]))
-            fmax = max(fmax, float(s.c_fn[0]))
+            fmax = max(fmax, float(s.contacts.fn[0]))
             t_in = s.time if t_in is None else t_in
             t_out = s.time
         elif t_in is not None:
@@ -225,7 +225,7 @@ def test_ellipsoid_resting_on_each_axis(axis):
                                          walls=[flat_wall([0, 0, 0], [0, 0, 1], [1, 1])]))
     s.advance(300)
     assert float(s.last_contacts.depth[0]) == pytest.approx(dth, rel=2e-2)
-    assert s.c_radius[0] == pytest.approx(Rth, rel=1e-6)
+    assert s.contacts.radius[0] == pytest.approx(Rth, rel=1e-6)
     # the network sees the tangent stiffness 2E*√(Rδ) of the contact, not the table's
     net = s._network()
     d = float(s.last_contacts.depth[0])
@@ -275,7 +275,7 @@ def test_patch_indices_of_a_second_shape():
                                          walls=[flat_wall([0, 0, 0], [0, 0, 1], [1, 1])]))
     s.advance(20)
     Rth = elliptic_hertz_radius(ax[2] / (2 * ax[0] ** 2), ax[2] / (2 * ax[1] ** 2))
-    assert s.c_radius[0] == pytest.approx(Rth, rel=1e-9)
+    assert s.contacts.radius[0] == pytest.approx(Rth, rel=1e-9)
     assert s.hertz_fallback == 0
 
 

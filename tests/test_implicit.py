@@ -111,7 +111,7 @@ def test_dashpots_follow_the_clipped_law_at_the_end_velocity():
     checked = clipped = 0
     for _ in range(400):
         s.step()
-        K = s.c_a.shape[0]
+        K = s.contacts.a.shape[0]
         if not K:
             continue
         b = s.bodies
@@ -119,11 +119,11 @@ def test_dashpots_follow_the_clipped_law_at_the_end_velocity():
         v = b.v + hk * s.force[:b.n] / b.mass[:, None]
         L = b.L + hk * s.torque[:b.n]
         w = np.empty((K, 3))
-        _relative_point_velocities(s.c_a, s.c_b, s.c_point, b.x, s.wall_d,
+        _relative_point_velocities(s.contacts.a, s.contacts.b, s.contacts.point, b.x, s.wall_d,
                                    v, omega_world(b.q, L, 1 / b.I), s.wall_u, w)
-        wn = np.einsum("ij,ij->i", w, s.c_normal)
-        f = np.einsum("ij,ij->i", s.c_fdn, s.c_normal)
-        f_el = s.c_fn - f
+        wn = np.einsum("ij,ij->i", w, s.contacts.normal)
+        f = np.einsum("ij,ij->i", s.contacts.fdn, s.contacts.normal)
+        f_el = s.contacts.fn - f
         law = np.maximum(-f_el, -1e2 * wn)
         scale = 1e2 * np.abs(wn).max() + f_el.max()
         assert f == pytest.approx(law, abs=1e-9 * scale)
@@ -210,7 +210,7 @@ def test_step_control_leaves_the_implicit_dashpots_out():
     assert im.substeps < ex.substeps
     ex.advance(300)
     im.advance(300)
-    assert im.c_a.shape[0] > 0 and im.substeps < ex.substeps
+    assert im.contacts.a.shape[0] > 0 and im.substeps < ex.substeps
 
 
 def test_energy_balance_and_restart_with_implicit_dashpots(tmp_path):

@@ -29,7 +29,7 @@ def collide(x1, x2, cell, shape):
     touching = 0
     for _ in range(300):
         s.step()
-        touching += s.c_a.shape[0] > 0
+        touching += s.contacts.a.shape[0] > 0
     return s, touching
 
 
@@ -130,7 +130,7 @@ def test_the_energy_balance_stays_closed_when_particles_wrap_along_gravity():
     touching, z, error = [], [], []
     for _ in range(250):
         s.step()
-        touching.append(s.c_a.shape[0] > 0)
+        touching.append(s.contacts.a.shape[0] > 0)
         z.append(s.bodies.x[:, 2].copy())
         error.append(s.energy().balance_error)
     after = int(np.flatnonzero(touching)[-1]) + 1

@@ -185,7 +185,7 @@ def test_a_dense_fcc_block_settles_without_period_two_motion(dt, safety, implici
     assert s.dt_network < s.dt_apriori / (1.5 if implicit else 2.5)
     for _ in range(int(round(0.03 / dt))):
         s.step()
-    assert s.c_a.shape[0] > 300                        # still packed: 12 contacts inside
+    assert s.contacts.a.shape[0] > 300                        # still packed: 12 contacts inside
     assert s.dt_internal <= safety * s.dt_network * (1 + 1e-9)
     # and the sub-step count that this fraction of the limit needs, no more
     assert s.substeps == needed_substeps(dt, safety * min(s.dt_network, s.dt_apriori))
@@ -230,8 +230,7 @@ def test_substeps_rise_with_the_network_and_fall_when_it_loosens():
     s, _ = fcc_block(1e-3)
     s.initialize()
     dense = s.substeps
-    s.c_a, s.c_b = s.c_a[:0], s.c_b[:0]          # the pack loosens: no contacts left
-    s.c_point, s.c_normal = s.c_point[:0], s.c_normal[:0]
+    s.contacts = s.contacts._replace(**{f: v[:0] for f, v in s.contacts._asdict().items()})
     s.last_contacts = None
     s._control_step()
     assert s.substeps < dense and s.substeps == math.ceil(1e-3 / (0.5 * s.dt_apriori))

@@ -67,6 +67,7 @@ from ..geometry.rotation import quats_to_matrices
 from ..jit import PointerKernel, cycles, fill_lazy_kernels, internal, seconds_per_cycle
 from .curved_turns import table_turns, turn_walls
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
+from .contact_state import contacts_of
 from .energy import balance_terms
 from .loop_state import (ACC_CALM, ACC_REFINE, ACC_REPEATS, ACTIVE_MAX, ACTIVE_SUM, BUILDS, CALM,
                         CONTROL, CONTROL_CYCLES, Control, DASHPOT_CYCLES, DASHPOT_SOLVES,
@@ -604,12 +605,12 @@ class DeckSteps:
         s, cs = self.system, self.scene.last
         pl = self.scene.pairs
         reach = self.scene.odo[pl.a] + self.scene.odo[pl.b]
-        K = s.c_a.shape[0]
-        coeffs = s.c_coeffs if (s.c_coeffs.ndim == 2 and s.c_coeffs.shape[0] == K) \
-            else np.ascontiguousarray(s._table[s._mat_all[s.c_a], s._mat_all[s.c_b]][:, :4])
-        return Evaluation(s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot, s.c_fdn, s.c_fdt,
-                          s.c_fet, s.c_fn, s.c_eel, s.c_stick, s.c_key, coeffs,
-                          np.ascontiguousarray(s.c_radius, float),
+        c = s.contacts
+        K = c.a.shape[0]
+        coeffs = c.coeffs if (c.coeffs.ndim == 2 and c.coeffs.shape[0] == K) \
+            else np.ascontiguousarray(s._table[s._mat_all[c.a], s._mat_all[c.b]][:, :4])
+        return Evaluation(c.a, c.b, c.point, c.normal, c.ftot, c.fdn, c.fdt, c.fet, c.fn, c.eel,
+                          c.stick, c.key, coeffs, np.ascontiguousarray(c.radius, float),
                           int(getattr(s, "hertz_fallback", 0)), s.hist_keys,
                           s.hist_springs, s.force, s.torque, float(s.last_slip_work),
                           np.asarray(cs.near_a, np.int64), np.asarray(cs.near_b, np.int64),
@@ -724,11 +725,7 @@ class DeckSteps:
         curved = int(self.cwork.count[0]) if self.curved.n_walls else 0
         sc.last = sc.contact_set(ev.reach, monitored=int(ev.monitored) - curved)
         s.last_contacts = with_curved_contacts(sc.last, self.cwork) if curved else sc.last
-        s.c_a, s.c_b, s.c_point, s.c_normal, s.c_ftot = ev.a, ev.b, ev.point, ev.normal, ev.ftot
-        s.c_fdn, s.c_fdt, s.c_fet, s.c_fn, s.c_eel = ev.fdn, ev.fdt, ev.fet, ev.fn, ev.eel
-        s.c_stick, s.c_key, s.c_coeffs = ev.stick, ev.key, ev.coeffs
-        s.c_radius = ev.radius
-        s.c_image = ev.image if ev.image.shape[0] == ev.a.shape[0] else np.zeros((ev.a.shape[0], 3))
+        s.contacts = contacts_of(ev)
         if self.sc.hertz:
             s.hertz_fallback = int(ev.fallback)
         s.hist_keys, s.hist_springs = ev.hist_keys, ev.hist_springs

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..jit import seconds_per_cycle
+from .contact_state import ContactState
 from .energy import EnergyLedger, EnergySample
 from .images import ImageBodies
 from .integrator import state_is_finite
@@ -108,7 +109,8 @@ class InternalSteps:
         contact with a turning wall gets a wall of its own (index W + j) that moves at that
         wall's point velocity and turns at its angular velocity
         (:func:`~nurbsdem.dynamics.step.spun_contacts`)."""
-        return spun_contacts(self.c_a, self.c_b, np.ascontiguousarray(self.c_point, float),
+        c = self.contacts
+        return spun_contacts(c.a, c.b, np.ascontiguousarray(c.point, float),
                              self.bodies.n, np.ascontiguousarray(self.wall_spin, float),
                              np.ascontiguousarray(self.wall_d, float), wall_u)
 
@@ -133,26 +135,26 @@ class InternalSteps:
         pos, vel, omg = self._all_kinematics()
         if self.needs_radius:   # the contacts' exact curvature radii (Hertz, rolling)
             from ..geometry.curvature import contact_radii_for
-            self.c_radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
+            radius, self.hertz_fallback = contact_radii_for(self.provider, cs, b, K)
         else:
-            self.c_radius = np.zeros(K)
+            radius = np.zeros(K)
         solves = np.zeros(4, np.int64)
         dashpot = np.zeros(0)
         image = getattr(cs, "image", None)
-        self.c_image = (np.ascontiguousarray(image, float) if image is not None
-                        and len(image) == K else np.zeros((K, 3)))
+        image = (np.ascontiguousarray(image, float) if image is not None and len(image) == K
+                 else np.zeros((K, 3)))
         if self.implicit_damping and h > 0.0 and self.domain is not None:
             dashpot = self.domain.implicit_dashpots(
-                a, bb, pa, pb, nrm, dep, key, self.c_radius, h, solves,
-                self.c_image if self.domain.periodic else None)
-        im = ImageBodies.of(b.n, bb, self.c_image)
+                a, bb, pa, pb, nrm, dep, key, radius, h, solves,
+                image if self.domain.periodic else None)
+        im = ImageBodies.of(b.n, bb, image)
         bc, b_part, q, L = self._bc, bb, b.q, b.L
         if im is not None:                   # contacts with periodic images (.images)
             bc, b_part, q, L = im.const(bc), im.b, im.particles(q), im.particles(L)
             pos, vel, omg = im.bodies(pos, True), im.bodies(vel), im.bodies(omg)
-        (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, self.c_coeffs,
+        (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs,
          self.last_slip_work, keys, springs, repeated) = self._kernels.contact_part(
-             bc, self.implicit_damping, a, b_part, pa, pb, nrm, dep, key, self.c_radius,
+             bc, self.implicit_damping, a, b_part, pa, pb, nrm, dep, key, radius,
              self.hist_keys, self.hist_springs, pos, vel, omg, q, L, h, solves, dashpot,
              np.zeros(0, np.int64) if im is None else im.own)
         if im is not None:
@@ -166,9 +168,8 @@ class InternalSteps:
         if self.domain is not None:          # the owners' loads of this rank's ghosts
             self.domain.exchange_loads(force, torque)
         self.force, self.torque = force, torque
-        self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_normal = a, bb, point, ftot, nrm
-        self.c_fet = fet
-        self.c_fdn, self.c_fdt, self.c_fn, self.c_eel, self.c_stick, self.c_key = fdn, fdt, fn, eel, stick, key
+        self.contacts = ContactState(a, bb, key, point, nrm, ftot, fdn, fdt, fet, fn, eel, stick,
+                                     coeffs, radius, image)
         self.split["contact forces"] += (t1 - t0) + (time.perf_counter() - t2) - dashpots
 
     def _apply_wrap(self, cs: Any) -> None:
@@ -197,19 +198,20 @@ class InternalSteps:
 
     def _images(self) -> "ImageBodies | None":
         """The image bodies of the stored contacts (:mod:`nurbsdem.dynamics.images`)."""
-        return ImageBodies.of(self.bodies.n, self.c_b, getattr(self, "c_image", np.zeros((0, 3))))
+        return ImageBodies.of(self.bodies.n, self.contacts.b, self.contacts.image)
 
     def _book_dropped(self, cs: Any) -> None:
         """A pair the provider left out after a failed contact problem takes its normal elastic
         energy with it: book it as dissipated (normal), so the energy balance stays closed."""
         dropped = getattr(cs, "dropped_keys", None)
-        gone = (np.isin(self.c_key, dropped) if dropped is not None and len(dropped)
-                else np.zeros(self.c_key.shape[0], bool))
+        c = self.contacts
+        gone = (np.isin(c.key, dropped) if dropped is not None and len(dropped)
+                else np.zeros(c.key.shape[0], bool))
         if self.domain is not None:          # booked at the deck end, in the serial order
-            self.domain.log_dropped(self.c_a[gone], self.c_key[gone], self.c_eel[gone, 0])
+            self.domain.log_dropped(c.a[gone], c.key[gone], c.eel[gone, 0])
             return
         if gone.any():
-            self.ledger.dissipated_normal += float(self.c_eel[gone, 0].sum())
+            self.ledger.dissipated_normal += float(c.eel[gone, 0].sum())
 
     def _kick_walls(self, u_mean: np.ndarray) -> tuple:
         """(body_b, wall_d, wall_u, wall_w) of the stored contacts for a half kick's work
@@ -218,24 +220,24 @@ class InternalSteps:
         (trapezoidal in the force, no error at kinks of a piecewise-linear motion), and their
         angular velocities (zero); a turning wall's contacts at its point velocities and
         spin (:meth:`_spun_contacts`)."""
-        if self.wall_spin is not None and self.c_a.shape[0]:
+        if self.wall_spin is not None and self.contacts.a.shape[0]:
             return self._spun_contacts(np.ascontiguousarray(u_mean))
-        return self.c_b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3))
+        return self.contacts.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3))
 
     def _kick_arguments(self, im: "ImageBodies | None" = None) -> tuple:
         """The stored contacts' arrays and loads as the step's parts take them (with image
         bodies ``im``: theirs too, each image loaded as its owner)."""
+        c = self.contacts
         if im is not None:
-            return (im.const(self._bc), self.c_a, im.b, self.c_point, self.c_ftot, self.c_fdn,
-                    self.c_fdt, self.c_fet, im.bodies(self.force), im.bodies(self.torque))
-        return (self._bc, self.c_a, self.c_b, self.c_point, self.c_ftot, self.c_fdn, self.c_fdt,
-                self.c_fet, self.force, self.torque)
+            return (im.const(self._bc), c.a, im.b, c.point, c.ftot, c.fdn, c.fdt, c.fet,
+                    im.bodies(self.force), im.bodies(self.torque))
+        return self._bc, c.a, c.b, c.point, c.ftot, c.fdn, c.fdt, c.fet, self.force, self.torque
 
     def _booked(self, ledger: np.ndarray, terms: np.ndarray) -> None:
         """After a half kick: the ledger array back into :attr:`ledger` (one rank), or the
         terms logged for the deck end's replay in the serial order (several ranks)."""
         if self.domain is not None:
-            self.domain.log_kick(self.c_a, self.c_b, self.c_key, terms)
+            self.domain.log_kick(self.contacts.a, self.contacts.b, self.contacts.key, terms)
         else:
             self.ledger = EnergyLedger.from_array(ledger)
 

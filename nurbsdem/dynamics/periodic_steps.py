@@ -56,7 +56,7 @@ def stored_images(system, cell, K: int, cs) -> tuple[np.ndarray, np.ndarray]:
     without a periodic cell)."""
     if cell is None:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    image = getattr(system, "c_image", np.zeros((0, 3)))
+    image = system.contacts.image
     near = np.asarray(getattr(cs, "near_image", np.zeros((0, 3))), float).reshape(-1, 3)
     return (np.ascontiguousarray(image, float) if len(image) == K else np.zeros((K, 3)),
             np.ascontiguousarray(near))

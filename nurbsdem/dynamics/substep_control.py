@@ -133,9 +133,10 @@ class SubstepControl:
         one deck step (:func:`~nurbsdem.dynamics.stepcontrol.contact_network`): (a, b, point,
         normal, coeffs (K,4)), or None when there is none.  The contacts keep their own
         (tangent) coefficients from the force evaluation (Hertz: they grow with the overlap)."""
-        a, bb = self.c_a, self.c_b
+        c = self.contacts
+        a, bb = c.a, c.b
         k = a.shape[0]
-        coeffs = self.c_coeffs
+        coeffs = c.coeffs
         if coeffs.ndim != 2 or coeffs.shape[0] != k:
             coeffs = np.ascontiguousarray(self._table[self._mat_all[a], self._mat_all[bb]][:, :4])
         cs = self.last_contacts
@@ -148,7 +149,7 @@ class SubstepControl:
                     np.zeros((0, 3)), np.zeros(0))
         b = self.bodies
         speed = body_speeds(b.v, omega_world(b.q, b.L, self._inv_I), self._ell, self.wall_u)
-        net = contact_network(a, bb, self.c_point, self.c_normal, coeffs, *near, speed, self.dt,
+        net = contact_network(a, bb, c.point, c.normal, coeffs, *near, speed, self.dt,
                               self._g_norm, self._table, self._mat_all)
         self._net_image = self._network_images(net, cs)
         if self.implicit_damping:
@@ -161,12 +162,12 @@ class SubstepControl:
         extra argument only where a pair touches an image: the other calls keep their
         compiled types)."""
         near_image = getattr(cs, "near_image", None)
-        image = getattr(self, "c_image", None)
-        if image is None or near_image is None or not (np.any(image != 0.0)
-                                                       or np.any(near_image != 0.0)):
+        c = self.contacts
+        image = c.image
+        if near_image is None or not (np.any(image != 0.0) or np.any(near_image != 0.0)):
             return ()
         nb = self.n_bodies
-        keys = np.concatenate([self.c_a * nb + self.c_b,
+        keys = np.concatenate([c.a * nb + c.b,
                                np.asarray(cs.near_a, np.int64) * nb + np.asarray(cs.near_b)])
         table = np.concatenate([image, near_image])
         order = np.argsort(keys)
@@ -213,7 +214,7 @@ class SubstepControl:
         dt = critical_step_from_rates(omega2, gamma)
         self._network_zeta = gamma / (2.0 * math.sqrt(omega2)) if omega2 > 0 else 0.0
         n_contacts = int(np.count_nonzero(a == body) + np.count_nonzero(bb == body))
-        why = (f"contact network of {a.shape[0]} pairs ({self.c_a.shape[0]} in contact): highest "
+        why = (f"contact network of {a.shape[0]} pairs ({self.contacts.a.shape[0]} in contact): highest "
                f"frequency {math.sqrt(omega2):.4g} rad/s, damping rate {gamma:.4g} 1/s, "
                f"centred on particle {body} with {n_contacts} contacts")
         return dt, why

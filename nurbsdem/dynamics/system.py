@@ -75,6 +75,7 @@ import numpy as np
 from ..errors import InputError, NurbsdemError
 from ..jit import launch_threads
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
+from .contact_state import no_contacts
 from .energy import EnergyLedger, EnergySample, balance_terms
 from .forces import InterfaceTable
 from .laws.engine import engine_kernels
@@ -364,9 +365,8 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
             self.hist_springs = widened(self.initial_history[1])
         self.wall_work = np.zeros(self.walls.n)
         self.ledger = EnergyLedger()
-        self.c_a = self.c_key = np.zeros(0, np.int64)     # no previous evaluation
-        self.c_eel = np.zeros((0, 2))
-        self.c_image = np.zeros((0, 3))       # periodic images of the contacts' B (.images)
+        #: the last evaluation's contacts (:mod:`.contact_state`); none before the first
+        self.contacts = no_contacts()
         #: the potential energy (J) a wrap into the periodic cell changed at the first
         #: evaluation (:meth:`_apply_wrap`)
         self.initial_wrap_work = 0.0
@@ -378,7 +378,8 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         self._first_control_step()
         if self.initial_history is not None:
             # carried-over springs bring their stored energy with them: none of it is dissipated
-            self.ledger.tangential_spring_work = float(self.c_eel[:, 1].sum()) if self.c_eel.shape[0] else 0.0
+            eel = self.contacts.eel
+            self.ledger.tangential_spring_work = float(eel[:, 1].sum()) if eel.shape[0] else 0.0
         e = self.energy()
         self.ledger.initial_mechanical = e.mechanical
         self._peak = e.kinetic + e.elastic
@@ -451,7 +452,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         (:func:`~nurbsdem.dynamics.energy.balance_terms`, as the compiled deck steps take it)."""
         b = self.bodies
         return float(balance_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
-                                   np.ascontiguousarray(self.c_eel, float).reshape(-1, 2),
+                                   np.ascontiguousarray(self.contacts.eel, float).reshape(-1, 2),
                                    self.ledger.to_array())[1])
 
     def _repeat_for_accuracy(self, balance0: float, n_sub: int, acc: int) -> float | None:

@@ -11,16 +11,17 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.rotation import matrix_to_quat
+from .contact_state import checkpoint_arrays, from_checkpoint
 from .energy import EnergyLedger, EnergySample, energy_terms
 from .laws import needs_contact_radius, rolls
 from .monitor import MonitorSample, StateSample, contact_output_of, energy_sample
 from .rigid import body_poses, omega_world
 from .rolling import widened
 
-_STATE_KEYS = ("x", "q", "v", "L", "force", "torque", "hist_keys", "hist_springs",
-               "c_a", "c_b", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet", "c_fn",
-               "c_eel", "c_stick", "c_key", "wall_d", "wall_u", "wall_work", "ledger",
-               "alt_count", "alt_prev_v", "alt_prev_L", "c_coeffs", "c_radius", "c_image")
+#: the system's arrays a checkpoint holds besides the body state, the contacts
+#: (:func:`~nurbsdem.dynamics.contact_state.checkpoint_arrays`) and the ledger
+_STATE_KEYS = ("force", "torque", "hist_keys", "hist_springs", "wall_d", "wall_u", "wall_work",
+               "alt_count", "alt_prev_v", "alt_prev_L")
 
 
 class SystemState:
@@ -34,8 +35,9 @@ class SystemState:
         cs = self.last_contacts
         hertz = None
         if self.uses_hertz:
-            hertz = (int(self.c_a.shape[0]), int(getattr(self, "hertz_fallback", 0)),
-                     np.asarray(self.c_radius, float), np.asarray(self.c_coeffs[:, 0], float))
+            c = self.contacts
+            hertz = (int(c.a.shape[0]), int(getattr(self, "hertz_fallback", 0)),
+                     np.asarray(c.radius, float), np.asarray(c.coeffs[:, 0], float))
         return MonitorSample(self.time, self.energy(), int(getattr(cs, "monitored", 0) or 0),
                              int(getattr(cs, "active", 0) or 0),
                              int(getattr(cs, "degenerated_count", 0) or 0),
@@ -63,11 +65,12 @@ class SystemState:
         (:func:`~nurbsdem.dynamics.monitor.contact_output_of`; None without any)."""
         cs = self.last_contacts
         active = int(getattr(cs, "active", 0) or 0)
-        if active == 0 or self.c_a.shape[0] != active:
+        c = self.contacts
+        if active == 0 or c.a.shape[0] != active:
             return None
-        return self._contacts_for_output(cs.body_a, cs.body_b, self.c_point, self.c_ftot,
-                                         self.c_fn, cs.normal, cs.depth, cs.degenerated,
-                                         self.c_coeffs, self.c_radius)
+        return self._contacts_for_output(cs.body_a, cs.body_b, c.point, c.ftot, c.fn,
+                                         cs.normal, cs.depth, cs.degenerated, c.coeffs,
+                                         c.radius)
 
     def _contacts_for_output(self, a, b, point, ftot, fn, normal, depth, deg, coeffs,
                              radius) -> dict | None:
@@ -99,7 +102,7 @@ class SystemState:
         :func:`~nurbsdem.dynamics.deck_steps._kept`, 8 bytes a number), with ``contacts``
         contacts (default: the last evaluation's): what the solver budgets the states kept in
         one call by (tested against the arrays' nbytes)."""
-        k = int(self.c_a.shape[0]) if contacts is None else int(contacts)
+        k = int(self.contacts.a.shape[0]) if contacts is None else int(contacts)
         return 8 * (16 * self.n_particles + 24 * k + 3 * self.walls.n)
 
     @property
@@ -130,8 +133,8 @@ class SystemState:
         state, last loads, tangential histories, last contact data, energy ledger, counters.
         Restoring it into a system built the same way continues bit-for-bit."""
         self.initialize()
-        st = {k: np.array(getattr(self, k), copy=True) for k in _STATE_KEYS
-              if k not in ("x", "q", "v", "L", "ledger")}
+        st = {k: np.array(getattr(self, k), copy=True) for k in _STATE_KEYS}
+        st.update(checkpoint_arrays(self.contacts))
         b = self.bodies
         st.update(x=b.x.copy(), q=b.q.copy(), v=b.v.copy(), L=b.L.copy(),
                   ledger=self.ledger.to_array(),
@@ -150,9 +153,9 @@ class SystemState:
             raise InputError("checkpoint does not match the system's bodies and walls")
         b.x, b.q, b.v, b.L = (np.array(st[k], dtype=float, copy=True) for k in ("x", "q", "v", "L"))
         for k in _STATE_KEYS:
-            if k in ("x", "q", "v", "L", "ledger") or k not in st:
-                continue
-            setattr(self, k, np.array(st[k], copy=True))
+            if k in st:
+                setattr(self, k, np.array(st[k], copy=True))
+        self.contacts = from_checkpoint(st, self.contacts)
         self.hist_springs = widened(self.hist_springs)   # a checkpoint without rolling springs
         self.ledger = EnergyLedger.from_array(st["ledger"])
         self.step_count = int(st["counters"][0])
@@ -175,7 +178,7 @@ class SystemState:
         """Energies at the current state (J); see :mod:`nurbsdem.dynamics.energy`."""
         b = self.bodies
         terms = energy_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
-                             np.ascontiguousarray(self.c_eel, float).reshape(-1, 2))
+                             np.ascontiguousarray(self.contacts.eel, float).reshape(-1, 2))
         return energy_sample(self.time, *terms, self.ledger)
 
     @property

@@ -70,6 +70,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..contact.contactset import ContactSet
+from ..dynamics.contact_state import ContactState
 from ..dynamics.energy import EnergyLedger
 from ..dynamics.forces import N_TERMS, match_history, wall_loads
 from ..dynamics.images import ImageBodies
@@ -83,9 +84,9 @@ from ..geometry.rotation import quats_to_matrices
 REBALANCE_EVERY = 200
 GHOST_GROWTH = 1.5
 
-#: per-contact arrays of a DemSystem's last evaluation, merged by pair key at each deck end
-ROW_FIELDS = ("c_a", "c_b", "c_key", "c_point", "c_normal", "c_ftot", "c_fdn", "c_fdt", "c_fet",
-              "c_fn", "c_eel", "c_stick", "c_coeffs", "c_radius")
+#: the fields of a DemSystem's last contacts (:class:`~nurbsdem.dynamics.contact_state.
+#: ContactState`) merged by pair key at each deck end (the images: in a periodic cell only)
+ROW_FIELDS = tuple(f for f in ContactState._fields if f != "image")
 #: per-particle arrays of a DemSystem that a rank receives from the owners
 BODY_FIELDS = ("x", "q", "v", "L")
 SYSTEM_BODY_FIELDS = ("alt_count", "alt_prev_v", "alt_prev_L")
@@ -101,7 +102,7 @@ PAIR_FIELDS = ("list_a", "list_b", "keys", "mask_a", "mask_b", "rows_f", "rows_i
 
 #: the same in a periodic cell: each contact's (and separated pair's) image translation of
 #: body B (m), and each listed pair's image (int)
-PERIODIC_ROW_FIELDS = ("c_image",)
+PERIODIC_ROW_FIELDS = ("image",)
 PERIODIC_CS_ACTIVE = ("image",)
 PERIODIC_CS_NEAR = ("near_image",)
 PERIODIC_PAIR_FIELDS = ("pair_shift",)
@@ -482,22 +483,24 @@ class Domain:
         self._from_owners([getattr(s.bodies, f) for f in BODY_FIELDS]
                           + [getattr(s, f) for f in SYSTEM_BODY_FIELDS]
                           + [s.force[:N], s.torque[:N]])
-        sel = self.counted(s.c_a)
-        rows = {f: getattr(s, f)[sel] for f in self.row_fields}
+        sel = self.counted(s.contacts.a)
+        rows = {f: getattr(s.contacts, f)[sel] for f in self.row_fields}
         hsel = self.counted(self.particles_of(s.hist_keys))
         hist = dict(key=s.hist_keys[hsel], spring=s.hist_springs[hsel])
         cs = s.last_contacts
         mine = (rows, hist, self._counted_contacts(cs), self.events, (self.lcps, self.failed))
         self.sent["gathers"] += _nbytes(mine)
         gathered = self.comm.allgather(mine)
-        rows = merge_by_key([g[0] for g in gathered], "c_key", self.order)
-        for f in self.row_fields:
-            setattr(s, f, rows[f])
+        rows = merge_by_key([g[0] for g in gathered], "key", self.order)
+        if "image" not in rows:
+            rows["image"] = np.zeros((rows["a"].shape[0], 3))
+        s.contacts = s.contacts._replace(**rows)
         hist = merge_by_key([g[1] for g in gathered], "key")
         s.hist_keys, s.hist_springs = hist["key"], hist["spring"].reshape(-1, NSPRING)
         s.force[N:] = 0.0
         s.torque[N:] = 0.0
-        wall_loads(s.c_b, s.c_point, s.c_ftot, s.c_fet, s.wall_d, N, s.force, s.torque)
+        c = s.contacts
+        wall_loads(c.b, c.point, c.ftot, c.fet, s.wall_d, N, s.force, s.torque)
         merged = self._merged_contacts([g[2] for g in gathered])
         s.last_contacts = merged
         sc.last = merged
@@ -505,8 +508,8 @@ class Domain:
             # the serial count of contacts whose curvature fell back (the radii are the
             # merged rows' again: per contact, the same bits)
             from ..geometry.curvature import contact_radii_for
-            s.c_radius, s.hertz_fallback = contact_radii_for(sc, merged, s.bodies,
-                                                             s.c_a.shape[0])
+            radius, s.hertz_fallback = contact_radii_for(sc, merged, s.bodies, c.a.shape[0])
+            s.contacts = c._replace(radius=radius)
         self._replay([g[3] for g in gathered])
         self.events = []
         counts = np.sum([g[4] for g in gathered], axis=0)
