@@ -136,6 +136,8 @@ ELLIPSOID = (1.25, 1.0, 0.8)
 #: free exponent rests on the smallest orifice, the one nearest to clogging (where the law
 #: is least sure: Mankoc et al., Granular Matter 9, 2007); the first fit takes them all
 FIT_FROM = 8.0
+#: the resamples of the fills for the free exponent's spread (:func:`bootstrap_exponent`)
+BOOT_DRAWS = 2000
 #: the inlet's seed of the fill (``--seed``): another seed pours another bed of the same
 #: grains, whose discharges give the rates' spread from fill to fill
 SEED = 3
@@ -640,6 +642,32 @@ def _fits_from(out: dict, smallest: float) -> None:
     out["fit_from"], out["fit_n25_from"] = part["fit"], part["fit_n25"]
 
 
+def bootstrap_exponent(W_fills: np.ndarray, D: list[float], d: float, rho_b: float,
+                       draws: int = BOOT_DRAWS, seed: int = 1) -> dict | None:
+    """The free Beverloo exponent's spread from fill to fill: ``draws`` resamples of the
+    fills (rows of ``W_fills`` (F, orifices) kg/s, drawn with replacement), each fitted on
+    its mean rates; the 16th, 50th and 84th percentiles of the exponent and the share of the
+    draws inside the published range (fits that fail are left out).  None with fewer than
+    three fills."""
+    W_fills = np.asarray(W_fills, float)
+    F = W_fills.shape[0]
+    if F < 3:
+        return None
+    rng = np.random.default_rng(seed)
+    ns = []
+    for _ in range(draws):
+        W = W_fills[rng.integers(0, F, F)].mean(axis=0)
+        try:
+            ns.append(fit_beverloo(D, W, d, rho_b, G).n)
+        except (ValueError, RuntimeError):
+            continue
+    ns = np.array(ns)
+    lo, hi = RANGES["n"]
+    p16, p50, p84 = (float(np.percentile(ns, q)) for q in (16, 50, 84))
+    return dict(draws=int(ns.size), p16=p16, p50=p50, p84=p84,
+                inside=float(np.mean((ns >= lo) & (ns <= hi))))
+
+
 def combine(paths: list[Path], json_path: Path | None = None) -> dict:
     """Beverloo's fits on the rates of several fills (runs with ``--seed``, and runs of the
     same seeds with ``--orifices``; their JSONs at ``paths``): per orifice the mean rate over
@@ -677,6 +705,14 @@ def combine(paths: list[Path], json_path: Path | None = None) -> dict:
     _fit(out)
     print("each fill's free exponent: " + ", ".join(
         "-" if n is None else f"{n:.2f}" for n in out["n_fills"]))
+    out["bootstrap"] = bootstrap_exponent(np.array([o["W_fills"] for o in rows]).T,
+                                          [o["D"] for o in rows], out["d"],
+                                          out["fill"]["rho_b"])
+    if out["bootstrap"]:
+        b = out["bootstrap"]
+        print(f"the free exponent over {b['draws']} resamples of the fills: {b['p16']:.2f} to "
+              f"{b['p84']:.2f} (16th to 84th percentile), {100 * b['inside']:.0f} % of them "
+              f"inside {RANGES['n'][0]}-{RANGES['n'][1]}")
     _fits_from(out, FIT_FROM)
     if out["fit_from"]:
         print(f"(the fits over the orifices of at least {FIT_FROM:g} d)")

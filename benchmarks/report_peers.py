@@ -211,6 +211,7 @@ def _fit_or_none(D, W, d, rho_b, g, n=None):
 def _beverloo_fills(rep: Report, cache: Path, par) -> None:
     """The rates of several fills of the same silo (``bench_beverloo.py --seed S``, then
     ``--combine``), averaged per orifice, and the fits on them, when their JSON is there."""
+    import bench_beverloo as bb
     path = cache / "beverloo_fills.json"
     if not path.exists():
         rep.add("One fill only: the rates' spread from fill to fill is not measured (run "
@@ -243,6 +244,13 @@ def _beverloo_fills(rep: Report, cache: Path, par) -> None:
                 + ", ".join("-" if n is None else f"{n:.2f}" for n in f["n_fills"]) + ".\n")
         rep.headline["beverloo_fills"] = dict(n=fit["n"], k=fixed["k"], C=fixed["C"],
                                               fills=len(f["seeds"]))
+        boot = f.get("bootstrap")
+        if boot:
+            lo, hi = bb.RANGES["n"]
+            rep.add(f"Resampling the fills ({boot['draws']} draws with replacement, each fitted "
+                    f"on its mean rates): free exponent {boot['p16']:.2f} to {boot['p84']:.2f} "
+                    f"(16th to 84th percentile, median {boot['p50']:.2f}); "
+                    f"{100 * boot['inside']:.0f} % of the draws inside {lo}–{hi}.\n")
     part, part25 = f.get("fit_from"), f.get("fit_n25_from")
     if part:
         keep = [o for o in f["orifices"] if o["ratio"] >= f["from"] - 1e-9]

@@ -220,3 +220,24 @@ def test_a_longer_discharge_of_a_fill_gives_that_orifices_rate(tmp_path, monkeyp
     assert "| 0.4, 0.4 |" in text
     with pytest.raises(SystemExit, match="outside 0.2 to 0.8 s"):
         bench_beverloo.main(["--discharge", "1.2"])
+
+
+def test_resampling_the_fills_gives_the_exponents_spread():
+    """``bootstrap_exponent``: four fills whose rates lie on Beverloo's law (n 2.5) times
+    independent factors 1 ± 2 % give a spread of the free exponent about 2.5 that narrows
+    with 1 % factors; fewer than three fills give none."""
+    rng = np.random.default_rng(7)
+    d, rho = bench_beverloo.D_GRAIN, 1570.0
+    ratios = np.array([6.0, 8.0, 9.5, 11.0, 13.0, 15.0])
+    law = 0.6 * rho * math.sqrt(bench_beverloo.G) * ((ratios - 1.5) * d) ** 2.5
+    noise = rng.normal(size=(4, ratios.size))
+    spreads = []
+    for scale in (0.02, 0.01):
+        b = bench_beverloo.bootstrap_exponent(law * (1 + scale * noise), ratios * d, d, rho,
+                                              draws=400)
+        assert b["draws"] == 400 and b["p16"] < b["p50"] < b["p84"]
+        assert abs(b["p50"] - 2.5) < 0.5 and 0.0 <= b["inside"] <= 1.0
+        spreads.append(b["p84"] - b["p16"])
+    assert spreads[1] < spreads[0]
+    assert bench_beverloo.bootstrap_exponent(law[None, :].repeat(2, 0), ratios * d, d,
+                                             rho) is None
