@@ -372,7 +372,7 @@ def section_robustness(rep: Report) -> None:
     from nurbsdem.contact import ContactTable, detect_batch
     from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_DEG, I_FAIL, I_PA, I_PB
     from nurbsdem.contact.reference import SampledBody, ellipsoid_pair
-    from nurbsdem.contact.wall import detect_wall_batch
+    from nurbsdem.contact.flat_wall import detect_wall_batch
     from nurbsdem.geometry.generators import sphere
     rep.add("## 3. Robustness: randomised hard cases\n")
     rep.add(rep.stamp_line() + "\n")

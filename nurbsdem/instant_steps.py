@@ -57,7 +57,7 @@ def to_contact(model: Model, bodies: Bodies, wall_offset: np.ndarray,
 def distance_to_plane(model: Model, b: Bodies, origin: np.ndarray, n: np.ndarray) -> float:
     """Smallest signed distance (m) from the particles to the plane (origin, n), measured
     along n, exactly: the support point of each particle along −n (paper Eq. 8)."""
-    from .contact.wall import detect_wall
+    from .contact.flat_wall import detect_wall
     if len(b) == 0:
         raise InputError("MoveWall ToContact needs particles")
     t1 = np.cross(n, [1.0, 0, 0])

@@ -158,7 +158,7 @@ def plane_support_distance(shape: "Shape", centroid: np.ndarray, R: np.ndarray,
                            point: np.ndarray, n: np.ndarray) -> float:
     """Signed distance (m) along the unit normal n from the plane through ``point`` to the
     body's deepest point (its support point along -n, paper Eq. 8): < 0 penetration."""
-    from .contact.wall import detect_wall
+    from .contact.flat_wall import detect_wall
 
     t1 = np.cross(n, [1.0, 0.0, 0.0])
     if np.linalg.norm(t1) < 0.5:

@@ -138,11 +138,11 @@ def _lcp_batches() -> None:
 
 def _wall_batches() -> None:
     """The parallel body-against-flat-wall kernel and the kernels it calls, with arguments of
-    the types the scene's dispatch passes (:func:`nurbsdem.contact.wall.solve_wall_rows`)."""
+    the types the scene's dispatch passes (:func:`nurbsdem.contact.flat_wall.solve_wall_rows`)."""
     import numba
     import numpy as np
     from .contact.lcp import NF, NI
-    from .contact.wall import _wall_batch_kernel
+    from .contact.flat_wall import _wall_batch_kernel
     t, pos, rot = _pairs()
     k = np.arange(N_PAIRS, dtype=np.int64)
     rows = lambda *row: np.tile(np.array(row, float), (N_PAIRS, 1))   # noqa: E731

@@ -10,7 +10,7 @@ from nurbsdem.contact.boxes import (MASK_CHUNK, candidate_patch_masks_batch_jit,
                                     candidate_patch_pairs, candidate_patch_pairs_batch,
                                     candidate_patches_wall, candidate_patches_wall_batch,
                                     obb_overlap, pack_boxes)
-from nurbsdem.contact.broadphase import wall_geometry
+from nurbsdem.contact.flat_wall import wall_geometry
 from nurbsdem.shapes import ellipsoid, flat_wall, sphere
 
 

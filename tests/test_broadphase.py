@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nurbsdem.contact.broadphase import (sphere_pairs, sphere_pairs_brute, sphere_wall_pairs,
-                                         wall_geometry)
+from nurbsdem.contact.broadphase import sphere_pairs, sphere_pairs_brute
+from nurbsdem.contact.flat_wall import sphere_wall_pairs, wall_geometry
 
 
 def _check(c, r, margin=0.0):

@@ -92,7 +92,7 @@ def test_batch_results_do_not_depend_on_how_the_threads_share_it(threads):
     bit on one thread, on two, and solved alone (a batch of one pair); flat walls too."""
     import numba
 
-    from nurbsdem.contact.wall import detect_wall_batch
+    from nurbsdem.contact.flat_wall import detect_wall_batch
     rng = np.random.default_rng(21)
     K = 300
     table = ContactTable([EA, EB])

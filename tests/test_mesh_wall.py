@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from nurbsdem.contact.analytic import _sphere_wall_row
+from nurbsdem.contact.flat_wall import sphere_wall_row
 from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_PB, NF, NI
 from nurbsdem.contact.mesh_wall import (FACE, build_mesh_wall, closest_on_triangle,
                                         make_workspace, sphere_contacts, triangles_near)
@@ -47,8 +47,8 @@ def test_two_triangle_floor_equals_the_flat_wall():
         rf, ri = sphere_contacts(mesh, x, 0.01)
         assert len(rf) == 1
         ref_f, ref_i = np.zeros((1, NF)), np.zeros((1, NI), np.int64)
-        _sphere_wall_row(x[0], x[1], x[2], 0.01, 0, np.zeros((1, 3)), wall_origin, wall_a,
-                         wall_b, np.array([[0, 1.0, 0, 1.0]]), ref_f, ref_i, 0)
+        sphere_wall_row(x[0], x[1], x[2], 0.01, 0, np.zeros((1, 3)), wall_origin, wall_a,
+                        wall_b, np.array([[0, 1.0, 0, 1.0]]), ref_f, ref_i, 0)
         for col in (F_SD, F_N, F_N + 1, F_N + 2, *range(F_PA, F_PA + 3), *range(F_PB, F_PB + 3)):
             assert rf[0, col] == pytest.approx(ref_f[0, col], abs=1e-17)
         assert ri[0, I_ACTIVE] == ref_i[0, I_ACTIVE] == 1

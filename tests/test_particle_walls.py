@@ -25,7 +25,7 @@ from nurbsdem.contact.mesh_wall import build_mesh_wall
 from nurbsdem.contact.surface_particle import (ContactNotUnique, particle_surface_row,
                                                particle_surface_row_reference)
 from nurbsdem.contact.surface_wall import build_surface_wall
-from nurbsdem.contact.wall import detect_wall
+from nurbsdem.contact.flat_wall import detect_wall
 from nurbsdem.geometry.rotation import quat_from_rotvec, quat_to_matrix
 from nurbsdem.geometry.surfaces import cylinder_patch
 from nurbsdem.io.shapefile import read_patches

@@ -6,7 +6,7 @@
   flat wall patch).
 """
 from .detect import ContactResult, ContactTable, detect, detect_batch, table_of
-from .wall import detect_wall, detect_wall_batch, wall_frame
+from .flat_wall import detect_wall, detect_wall_batch, wall_frame
 
 __all__ = ["ContactResult", "ContactTable", "detect", "detect_batch", "table_of",
            "detect_wall", "detect_wall_batch", "wall_frame"]

@@ -1,4 +1,6 @@
-"""Closed-form contacts for exact spheres: sphere–sphere and sphere–flat wall.
+"""Closed-form contacts for exact spheres: sphere–sphere here, sphere–flat wall in the flat
+wall's module (:func:`~nurbsdem.contact.flat_wall.sphere_wall_row`), dispatched together
+(:func:`closed_form_into`).
 
 The local contact problem of two exact spheres (centres x_A, x_B, radii r_A, r_B) has the
 closed-form solution that the LCP of paper Section 3 converges to:
@@ -7,10 +9,7 @@ closed-form solution that the LCP of paper Section 3 converges to:
     signed distance = (p_B − p_A)·n = |x_B − x_A| − r_A − r_B
 
 (the closest points when apart, the support points of the deepest penetration — Eq. 6–9 —
-when they intersect).  Against a flat wall with unit normal m towards the particles, corner o
-and edges a, b (the fast path of :mod:`nurbsdem.contact.wall`): p_A = x − r m, p_B its
-projection on the plane, signed distance m·(p_A − o), normal −m, active only where p_B falls
-inside the wall's parallelogram.
+when they intersect).
 
 Rows use the column layout of :mod:`nurbsdem.contact.lcp` (``I_PA`` = −1: no patch is
 involved; ``I_IT`` = 0 iterations) so that everything after the contact search is unchanged.
@@ -23,17 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_PA, I_PB, I_VALID
-
-
-@njit(cache=True)
-def _clear_row(rows_f: np.ndarray, rows_i: np.ndarray, j: int) -> None:
-    """Zero row j of rows_f (P,NF), rows_i (P,NI), in place (a view of the row in a loop over
-    pairs would cost numba's atomic reference counts: more than the closed form)."""
-    for k in range(rows_f.shape[1]):
-        rows_f[j, k] = 0.0
-    for k in range(rows_i.shape[1]):
-        rows_i[j, k] = 0
+from .flat_wall import sphere_wall_row
+from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_PA, I_PB, I_VALID, clear_row
 
 
 @njit(cache=True)
@@ -42,7 +32,7 @@ def _sphere_sphere_row(xa0: float, xa1: float, xa2: float, ra: float, xb0: float
                        j: int) -> None:
     """One sphere pair (centres xa, xb m, radii ra, rb m) into row j of rows_f (P,NF), rows_i
     (P,NI) (zeroed first).  Coincident centres take the normal +x."""
-    _clear_row(rows_f, rows_i, j)
+    clear_row(rows_f, rows_i, j)
     d0, d1, d2 = xb0 - xa0, xb1 - xa1, xb2 - xa2
     dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     if dist > 0.0:
@@ -60,67 +50,6 @@ def _sphere_sphere_row(xa0: float, xa1: float, xa2: float, ra: float, xb0: float
     rows_i[j, I_PB] = -1
     rows_i[j, I_VALID] = 1
     rows_i[j, I_ACTIVE] = 1 if sd < 0.0 else 0
-
-
-@njit(cache=True)
-def _parallelogram(r0: float, r1: float, r2: float, a0: float, a1: float, a2: float, b0: float,
-                   b1: float, b2: float) -> tuple[float, float]:
-    """:func:`parallelogram_coordinates` of edge vectors given by their components."""
-    aa = a0 * a0 + a1 * a1 + a2 * a2
-    ab = a0 * b0 + a1 * b1 + a2 * b2
-    bb = b0 * b0 + b1 * b1 + b2 * b2
-    ar = a0 * r0 + a1 * r1 + a2 * r2
-    br = b0 * r0 + b1 * r1 + b2 * r2
-    det = aa * bb - ab * ab
-    return (bb * ar - ab * br) / det, (aa * br - ab * ar) / det
-
-
-@njit(cache=True)
-def parallelogram_coordinates(r0: float, r1: float, r2: float, a: np.ndarray,
-                              b: np.ndarray) -> tuple[float, float]:
-    """Coordinates (α, β) of the in-plane offset r (m) from a wall's corner on its edge
-    vectors a, b (3,): r = α a + β b (the 2×2 normal equations); inside when both are in
-    [0, 1]."""
-    return _parallelogram(r0, r1, r2, a[0], a[1], a[2], b[0], b[1], b[2])
-
-
-@njit(cache=True)
-def _sphere_wall_row(x0: float, x1: float, x2: float, r: float, w: int, wall_d: np.ndarray,
-                     wall_origin: np.ndarray, wall_a: np.ndarray, wall_b: np.ndarray,
-                     wall_dom: np.ndarray, rows_f: np.ndarray, rows_i: np.ndarray,
-                     j: int) -> None:
-    """One sphere (centre x m, radius r m) against flat wall w (corner wall_origin[w] +
-    wall_d[w], edge vectors wall_a[w], wall_b[w], parameter rectangle wall_dom[w]) into row j
-    of rows_f, rows_i (zeroed first), in the convention of
-    :func:`nurbsdem.contact.wall.solve_wall`."""
-    _clear_row(rows_f, rows_i, j)
-    a0, a1, a2 = wall_a[w, 0], wall_a[w, 1], wall_a[w, 2]
-    b0, b1, b2 = wall_b[w, 0], wall_b[w, 1], wall_b[w, 2]
-    o0 = wall_origin[w, 0] + wall_d[w, 0]
-    o1 = wall_origin[w, 1] + wall_d[w, 1]
-    o2 = wall_origin[w, 2] + wall_d[w, 2]
-    m0 = a1 * b2 - a2 * b1
-    m1 = a2 * b0 - a0 * b2
-    m2 = a0 * b1 - a1 * b0
-    mm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-    m0, m1, m2 = m0 / mm, m1 / mm, m2 / mm
-    rows_f[j, F_N], rows_f[j, F_N + 1], rows_f[j, F_N + 2] = -m0, -m1, -m2
-    p0, p1, p2 = x0 - r * m0, x1 - r * m1, x2 - r * m2
-    rows_f[j, F_PA], rows_f[j, F_PA + 1], rows_f[j, F_PA + 2] = p0, p1, p2
-    sd = m0 * (p0 - o0) + m1 * (p1 - o1) + m2 * (p2 - o2)
-    rows_f[j, F_SD] = sd
-    q0, q1, q2 = p0 - sd * m0, p1 - sd * m1, p2 - sd * m2
-    rows_f[j, F_PB], rows_f[j, F_PB + 1], rows_f[j, F_PB + 2] = q0, q1, q2
-    al, be = _parallelogram(q0 - o0, q1 - o1, q2 - o2, a0, a1, a2, b0, b1, b2)
-    rows_f[j, F_PAR + 2] = wall_dom[w, 0] + al * (wall_dom[w, 1] - wall_dom[w, 0])
-    rows_f[j, F_PAR + 3] = wall_dom[w, 2] + be * (wall_dom[w, 3] - wall_dom[w, 2])
-    rows_i[j, I_PA] = -1
-    rows_i[j, I_PB] = 0
-    rows_i[j, I_VALID] = 1
-    inside = al >= 0.0 and al <= 1.0 and be >= 0.0 and be <= 1.0
-    if not inside:
-        rows_i[j, I_BROAD] = 2
-    rows_i[j, I_ACTIVE] = 1 if (inside and sd < 0.0) else 0
 
 
 @njit(cache=True)
@@ -167,5 +96,5 @@ def closed_form_into(rows_f: np.ndarray, rows_i: np.ndarray, idx: np.ndarray, a:
             _sphere_sphere_row(xa0, xa1, xa2, ra, xb0, xb1, xb2,
                                sphere_radius[body_shape[ib]], rows_f, rows_i, j)
         else:
-            _sphere_wall_row(xa0, xa1, xa2, ra, ib - n_particles, wall_d, wall_origin, wall_a,
-                             wall_b, wall_dom, rows_f, rows_i, j)
+            sphere_wall_row(xa0, xa1, xa2, ra, ib - n_particles, wall_d, wall_origin, wall_a,
+                            wall_b, wall_dom, rows_f, rows_i, j)

@@ -413,7 +413,7 @@ def candidate_patches_wall(shape, pose, wall_center: np.ndarray, wall_axes: np.n
                            depth: float = 0.0) -> np.ndarray:
     """Patches of a body whose oriented boxes reach a flat rectangular wall.
 
-    The wall (see :func:`nurbsdem.contact.broadphase.wall_geometry`) is a thin oriented box:
+    The wall (see :func:`nurbsdem.contact.flat_wall.wall_geometry`) is a thin oriented box:
     the rectangle ``wall_center + s t1 + r t2``, ``|s| <= half[0]``, ``|r| <= half[1]``,
     extended ``depth`` (m, default 0: just the rectangle) behind its active side (along -n),
     so that patches of a body that has sunk deeper than a patch box into the wall stay
@@ -452,7 +452,7 @@ def candidate_patches_wall_batch(boxes: np.ndarray, box_offsets: np.ndarray,
     Parameters as in :func:`candidate_patch_pairs_batch` and :func:`candidate_patches_wall`;
     ``wall_centers`` (W, 3), ``wall_axes`` (W, 3, 3), ``wall_half`` (W, 2), ``pairs`` int64
     (K, 2) of (body, wall index 0..W-1), e.g. from
-    :func:`~nurbsdem.contact.broadphase.sphere_wall_pairs`.
+    :func:`~nurbsdem.contact.flat_wall.sphere_wall_pairs`.
 
     Returns int64 (M, 2) rows (pair index k, patch of the body), sorted.
     """

@@ -22,8 +22,8 @@ found once, from its smaller member). The cost is ~linear in N. A rebuild that r
 bodies asks :func:`sphere_pairs_of` for their pairs only: the same grid, queried from those
 bodies (each pair by the same comparison, so the same verdicts).
 
-Flat walls: :func:`sphere_wall_pairs` tests each bounding sphere against each wall
-rectangle (exact sphere-vs-rectangle distance).
+Flat walls: :func:`~nurbsdem.contact.flat_wall.sphere_wall_pairs` (the flat wall's module)
+tests each bounding sphere against each wall rectangle.
 
 Units: metres. Arrays are float64 / int64. Hot kernels are numba ``@njit(cache=True)``
 functions (``*_jit``) that can be called from other compiled code; the public wrappers
@@ -486,87 +486,3 @@ def sphere_pairs_brute(centers: np.ndarray, radii: np.ndarray, margin: float = 0
     s = r[i] + r[j] + margin
     keep = (s > 0) & (np.einsum("ij,ij->i", d, d) < s * s)
     return np.stack([i[keep], j[keep]], axis=1).astype(np.int64)
-
-
-# --------------------------------------------------------------------------- walls
-def wall_geometry(patch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centre, frame and half sizes of a flat rectangular wall patch (degree 1, 2x2 points,
-    as made by :func:`nurbsdem.shapes.flat_wall`).
-
-    Returns
-    -------
-    center: (3,) m.  axes: (3, 3) with columns (t1, t2, n): t1 along u, t2 in plane with
-    t1 x t2 = n, n the unit normal ``S_u x S_v`` (the wall's active side).
-    half: (2,) half lengths along t1 and t2 (m).
-    """
-    P = np.asarray(patch.control_points, dtype=float)
-    if P.shape[:2] != (2, 2):
-        raise ValueError("a flat wall must have 2 x 2 control points")
-    center = P.reshape(-1, 3).mean(0)
-    eu = 0.5 * ((P[1, 0] - P[0, 0]) + (P[1, 1] - P[0, 1]))
-    ev = 0.5 * ((P[0, 1] - P[0, 0]) + (P[1, 1] - P[1, 0]))
-    n = np.cross(eu, ev)
-    n /= np.linalg.norm(n)
-    t1 = eu / np.linalg.norm(eu)
-    t2 = np.cross(n, t1)
-    half = np.array([0.5 * np.linalg.norm(eu), 0.5 * abs(ev @ t2)])
-    return center, np.stack([t1, t2, n], axis=1), half
-
-
-@njit(cache=True)
-def sphere_wall_pairs_jit(centers, radii, wall_centers, wall_axes, wall_half, margin):
-    """Compiled core of :func:`sphere_wall_pairs` (no input checks). Returns int64 (K, 2)."""
-    n = centers.shape[0]
-    nw = wall_centers.shape[0]
-    buf = np.empty((max(16, 2 * n), 2), dtype=np.int64)
-    npair = np.int64(0)         # not a literal: one specialisation of _push
-    for i in range(n):
-        for k in range(nw):
-            du = 0.0
-            dv = 0.0
-            dn = 0.0
-            for d in range(3):
-                x = centers[i, d] - wall_centers[k, d]
-                du += x * wall_axes[k, d, 0]
-                dv += x * wall_axes[k, d, 1]
-                dn += x * wall_axes[k, d, 2]
-            eu = max(abs(du) - wall_half[k, 0], 0.0)
-            ev = max(abs(dv) - wall_half[k, 1], 0.0)
-            s = radii[i] + margin
-            if s > 0.0 and dn * dn + eu * eu + ev * ev < s * s:
-                buf = _push(buf, npair, i, k)
-                npair += 1
-    return buf[:npair].copy()
-
-
-def sphere_wall_pairs(centers: np.ndarray, radii: np.ndarray, wall_centers: np.ndarray,
-                      wall_axes: np.ndarray, wall_half: np.ndarray,
-                      margin: float = 0.0) -> np.ndarray:
-    """Body-vs-flat-wall candidates of the first global level (paper Eq. 3 with a wall).
-
-    Body i is near wall k when its bounding sphere reaches the wall rectangle (inflated by
-    ``margin``): the distance from ``c_i`` to the rectangle (exact closest point, both sides
-    of the plane) is ``< r_i + margin``.
-
-    Parameters
-    ----------
-    centers: (N, 3) m.  radii: (N,) m.
-    wall_centers: (W, 3) rectangle centres (m).
-    wall_axes: (W, 3, 3), columns (t1, t2, n) orthonormal (see :func:`wall_geometry`).
-    wall_half: (W, 2) half lengths along t1, t2 (m); a third column (thickness) is ignored.
-    margin: skin (m), >= 0.
-
-    Returns
-    -------
-    int64 (K, 2) of (body i, wall k), sorted by i then k (wall index local, 0..W-1).
-    """
-    c, r = _as_centers_radii(centers, radii)
-    wc = np.ascontiguousarray(wall_centers, dtype=np.float64).reshape(-1, 3)
-    wa = np.ascontiguousarray(wall_axes, dtype=np.float64).reshape(-1, 3, 3)
-    wh = np.ascontiguousarray(np.asarray(wall_half, dtype=np.float64).reshape(wc.shape[0], -1)[:, :2])
-    if wa.shape[0] != wc.shape[0] or wh.shape[1] != 2:
-        raise ValueError("wall_centers (W,3), wall_axes (W,3,3), wall_half (W,2) disagree")
-    margin = float(margin)
-    if not (np.isfinite(margin) and margin >= 0):
-        raise ValueError("margin must be finite and >= 0")
-    return sphere_wall_pairs_jit(c, r, wc, wa, wh, margin)

@@ -2,16 +2,17 @@
 names (numba reads module-level integers and arrays as compile-time constants, so the names
 cost nothing in the kernels).
 
-Where each kind's pieces live today (docs/extending.md): the exact sphere in
+Where each kind's pieces live (docs/extending.md): the exact sphere in
 :mod:`nurbsdem.geometry.analytic` and :mod:`nurbsdem.contact.analytic` (closed forms), the
 NURBS particle in :mod:`nurbsdem.geometry` and :mod:`nurbsdem.contact.detect` (the LCP of
 paper Sec. 3.2) and :mod:`nurbsdem.contact.point_surface` (against a sphere), the flat wall
-in :mod:`nurbsdem.contact.wall` and :mod:`nurbsdem.contact.broadphase`, the mesh and surface
-walls in :mod:`nurbsdem.contact.mesh_wall` and :mod:`nurbsdem.contact.surface_wall` (against
-spheres) and :mod:`nurbsdem.contact.mesh_particle` and
-:mod:`nurbsdem.contact.surface_particle` (against NURBS particles); the dispatch of a scene's
-due pairs is :func:`nurbsdem.contact.listed.solve_due_into`, that of the mesh and surface
-walls :class:`nurbsdem.contact.curved_walls.CurvedWallContacts`.
+in :mod:`nurbsdem.contact.flat_wall` (its frame, broad phase and both pair solvers), the
+mesh and surface walls in :mod:`nurbsdem.contact.mesh_wall` and
+:mod:`nurbsdem.contact.surface_wall` (against spheres) and
+:mod:`nurbsdem.contact.mesh_particle` and :mod:`nurbsdem.contact.surface_particle` (against
+NURBS particles); the dispatch of a scene's due pairs is
+:func:`nurbsdem.contact.listed.solve_due_into`, that of the mesh and surface walls
+:class:`nurbsdem.contact.curved_walls.CurvedWallContacts`.
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ N_KINDS = 5
 
 #: pair solvers: the closed forms of :mod:`nurbsdem.contact.analytic`, the point-to-surface
 #: problem of :mod:`nurbsdem.contact.point_surface`, the LCP batch of
-#: :mod:`nurbsdem.contact.detect`, the support-mapping kernel of :mod:`nurbsdem.contact.wall`;
+#: :mod:`nurbsdem.contact.detect`, the support-mapping kernel of :mod:`nurbsdem.contact.flat_wall`;
 #: NO_SOLVER: the two kinds never meet (two walls)
 CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT = 0, 1, 2, 3
 #: a sphere against a mesh wall: per triangle in closed form, one contact per flat or convex

@@ -114,6 +114,16 @@ I_STAGE = 9       # stage that produced the result: 1 = f1 (Eq. 5), 2 = f2/phi (
 NI = 10
 
 
+@njit(cache=True)
+def clear_row(rows_f: np.ndarray, rows_i: np.ndarray, j: int) -> None:
+    """Zero row j of rows_f (P,NF), rows_i (P,NI), in place (a view of the row in a loop over
+    pairs would cost numba's atomic reference counts: more than the closed form)."""
+    for k in range(rows_f.shape[1]):
+        rows_f[j, k] = 0.0
+    for k in range(rows_i.shape[1]):
+        rows_i[j, k] = 0
+
+
 def full_rows(rows_f) -> np.ndarray:
     """Float result rows (..., NF), C-contiguous: rows of an older layout with fewer columns
     (a checkpoint, stored data) are padded with zeros, which :func:`solve_pair` reads as

@@ -17,7 +17,7 @@ it), each by what its shapes are (the scene's module docstring):
   the LCP, a row of the point solver not counting as its warm start;
 * NURBS against NURBS: the LCP batch of :mod:`nurbsdem.contact.detect` (paper Sec. 3.2), warm
   started from the previous row, directed by the pair's candidate patches (paper 3.1);
-* NURBS against a flat wall: the support-mapping kernel of :mod:`nurbsdem.contact.wall`.
+* NURBS against a flat wall: the support-mapping kernel of :mod:`nurbsdem.contact.flat_wall`.
 
 A warm-started LCP that did not converge is solved once more from a cold start before it
 counts as failed (a warm start can stall in the flat valley of a near-touching pair).  The
@@ -39,15 +39,14 @@ from numba import njit
 from ..jit import PointerKernel
 from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
-from .broadphase import (ALL_PAIRS_MAX, sphere_pairs_jit, sphere_pairs_of,
-                         sphere_wall_pairs_jit)
+from .broadphase import ALL_PAIRS_MAX, sphere_pairs_jit, sphere_pairs_of
 from .detect import solve_rows
+from .flat_wall import solve_wall_rows, sphere_wall_pairs_jit
 from .kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, POINT_SURFACE, SPHERE,
                     WALL_SUPPORT, pair_solver)
 from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
 from .point_surface import STAGE_POINT, sphere_nurbs_rows
 from .verlet import merge_find
-from .wall import solve_wall_rows
 
 #: the scene's constant tables: the packed shapes (:class:`~nurbsdem.contact.detect.ContactTable`:
 #: tab, info, centroid, radius, seeds, nonconvexity), the bodies' shapes, the exact spheres
@@ -261,7 +260,7 @@ def _solve_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f, rows
     """The rows idx of the list (bodies list_a[j], list_b[j], candidate patches mask_a[j],
     mask_b[j]) solved in place from the previous rows they hold: the LCP batch
     (:func:`nurbsdem.contact.detect.solve_rows`), or with ``walls`` the particles against the
-    walls list_b[j] − n (:func:`nurbsdem.contact.wall.solve_wall_rows`; masks unused)."""
+    walls list_b[j] − n (:func:`nurbsdem.contact.flat_wall.solve_wall_rows`; masks unused)."""
     if walls:
         solve_wall_rows(st.tab, st.info, st.centroid, st.radius, st.seeds, st.body_shape, pos,
                         R, list_a, list_b, st.n, idx, st.wall_origin + wall_d, st.wall_a,

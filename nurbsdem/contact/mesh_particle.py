@@ -17,7 +17,7 @@ own region of normals, in which the minimum is a contact of that feature:
 * **face** of a triangle with unit normal n facing the particle (the side of its centroid):
   d = −n, the deepest point p = p_A(−n), sd = n · (p − a) (a: a vertex), the wall's point the
   projection of p on the plane; a contact when that projection lies in the triangle.  This is
-  the flat wall of :mod:`nurbsdem.contact.wall` (the same kernel: a flat wall's numbers to
+  the flat wall of :mod:`nurbsdem.contact.flat_wall` (the same kernel: a flat wall's numbers to
   round-off, whichever triangle of a plane holds the contact);
 * **edge** (P0, P1) with unit direction t: d ⊥ t, h_X(−d) = −d · P0, so f(θ) = h_A(d(θ)) −
   d(θ) · P0 over the circle of directions normal to the edge; f'(θ) = (p_A − P0) · d' and

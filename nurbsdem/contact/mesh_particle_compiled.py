@@ -43,7 +43,7 @@ from .mesh_topology import (crosses_beyond_border, deepest_of_a_border_edge, inw
 from .mesh_wall import EDGE_AB, FACE, TIE, VERTEX_A, MeshWall, _triangle_candidates, triangles_near
 from .surface_particle_compiled import (_C, _D, _M, _P, _POS, _start as _pose_start, _support,
                                         make_surface_work)
-from .wall import solve_wall_ptr
+from .flat_wall import solve_wall_ptr
 
 #: columns of a candidate's float row: sd, the particle's point p, the wall's point q, the
 #: normal d (particle to wall), all in the mesh frame

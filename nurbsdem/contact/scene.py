@@ -5,7 +5,7 @@ The global search (levels 1–2) builds a **neighbour list with a skin** (a Verl
 
 1. level 0/1 — bounding spheres (paper Eq. 3) on a cell grid
    (:func:`~nurbsdem.contact.broadphase.sphere_pairs`), bodies against wall rectangles
-   (:func:`~nurbsdem.contact.broadphase.sphere_wall_pairs`), both widened by the skin s;
+   (:func:`~nurbsdem.contact.flat_wall.sphere_wall_pairs`), both widened by the skin s;
 2. level 2 — oriented patch boxes by the separating-axis test
    (:func:`~nurbsdem.contact.boxes.candidate_patch_pairs_batch`), each box inflated by s/2; a
    body pair with no overlapping boxes is dropped.
@@ -81,7 +81,6 @@ import numpy as np
 
 from .contactset import ContactSet
 from .boxes import pack_boxes
-from .broadphase import wall_geometry
 from .detect import ContactTable
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_FAIL, I_VALID, NF, NI, full_rows
 from .listed import SceneTables, scene_list, scene_tables, solve_due
@@ -89,7 +88,7 @@ from .periodic import PeriodicCell, minimum_image, wrap
 from .periodic_scene import image_scene, periodic_list
 from .verlet import (advance_odometers, carry_rows, contact_arrays, due_rows, list_is_stale,
                      renew_certificates, repose, reposed_bodies)
-from .wall import wall_frame
+from .flat_wall import wall_frame, wall_geometry
 
 log = logging.getLogger("nurbsdem")
 

@@ -1,5 +1,5 @@
 """Support points of one convex NURBS body at one pose, from Python: the flat-wall kernel's
-support mapping (:func:`nurbsdem.contact.wall.solve_wall`, paper Eq. 8–9) asked along any
+support mapping (:func:`nurbsdem.contact.flat_wall.solve_wall`, paper Eq. 8–9) asked along any
 direction, with its derivative dp/de (the Hessian of the support function, paper Eq. 14–15).
 
 The pose and every point and direction are in one frame chosen by the caller (a wall's own
@@ -17,7 +17,7 @@ import numpy as np
 from .detect import _work
 from .lcp import F_PA, I_FAIL, I_VALID, NF, NI
 from .stage2 import _MA
-from .wall import solve_wall
+from .flat_wall import solve_wall
 
 __all__ = ["SupportOracle"]
 
@@ -63,7 +63,7 @@ class SupportOracle:
         parallelogram ``origin + α a + β b`` (normal a × b towards the body): the support point
         along −n (``F_PA``), its signed distance to the plane (``F_SD``), its projection
         (``F_PB``) and its coordinates (α, β) in ``F_PAR + 2:4``
-        (:func:`~nurbsdem.contact.wall.solve_wall`)."""
+        (:func:`~nurbsdem.contact.flat_wall.solve_wall`)."""
         ws, (wf, wi, wfs, _) = _work()
         solve_wall(self.table.tab, self.info, self.cen, self.radius, self.table.seeds,
                    self.pos, self.R, np.ascontiguousarray(origin, float),

@@ -10,7 +10,7 @@ the wall point where p lies on the wall's normal line,
     F(u, v) = [ S_u · (p − S),  S_v · (p − S) ] = 0,      signed distance  sd = n · (p − S),
 
 normal from A to the wall −n, points p (on A) and S (on the wall): the flat wall's contact
-(:mod:`nurbsdem.contact.wall`) on the wall's tangent plane at the solution, which is where
+(:mod:`nurbsdem.contact.flat_wall`) on the wall's tangent plane at the solution, which is where
 that tangent plane is the wall's.  It is solved by Newton on (u, v) with the exact Jacobian
 
     ∂F_i/∂u_j = S_ij · (p − S) + S_i · (dp/du_j − S_j),   dp/du_j = −(dp/dd) n_j,

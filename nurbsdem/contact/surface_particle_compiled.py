@@ -3,7 +3,7 @@
 iteration over the wall's (u, v) and the uniqueness test) in one kernel per particle and wall.
 
 The support point p_A(d) along the wall's normal d = −n and its derivative dp/dd (paper Eq.
-8–9, 14–15) come from the flat-wall kernel (:func:`~nurbsdem.contact.wall.solve_wall`,
+8–9, 14–15) come from the flat-wall kernel (:func:`~nurbsdem.contact.flat_wall.solve_wall`,
 through its pointer, compiled once for this caller and the flat walls' batches) against the
 plane through the centroid with normal −d, each query warm-started from the previous
 converged one (the parameters moved to first order to the new direction), exactly as the
@@ -35,7 +35,7 @@ from ..jit import PointerKernel, kernel
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_FAIL, I_IT, I_PA, I_PB, I_VALID,
                   NF, NI, make_work)
 from .stage2 import _MA, _to_world
-from .wall import solve_wall_ptr
+from .flat_wall import solve_wall_ptr
 
 #: Newton iterations before a solve counts as not converged
 MAX_IT = 50
@@ -116,7 +116,7 @@ def _nearest(seed_x, seed_p, c, best_k, best_d):
 def _support(tab, info, cen, rad, seeds, work):
     """The support point of the particle along the unit direction sw[_D] (wall frame) into
     sw[_P] and its dp/dd into sw[_M:_M+3] (wall frame): the flat-wall kernel
-    (:func:`~nurbsdem.contact.wall.solve_wall`, its rows in qf, qi) against the plane
+    (:func:`~nurbsdem.contact.flat_wall.solve_wall`, its rows in qf, qi) against the plane
     through the centroid with normal −d, spanned by a ⊥ d and b = a × d, warm-started from
     the previous converged query's rows (prev_f, prev_i), which a converged query replaces,
     as :class:`~nurbsdem.contact.support_oracle.SupportOracle` asks it.  Returns whether it

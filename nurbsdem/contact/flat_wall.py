@@ -1,22 +1,29 @@
-"""Fast path for a convex body against a flat wall (degree-1 patch with 2×2 control points).
+"""The flat wall kind: a rectangle (a degree-1 NURBS patch with 2×2 control points), its
+frame, its test in the broad phase and its pair solvers.
 
-The deepest point of body A below the plane of a wall with unit normal n (pointing to the
-side where the particles are) is the support point of A along −n (paper Eq. 8 with
-d = −n): one support mapping, no direction search. Then
+* **Frame** (:func:`wall_geometry`, :func:`wall_frame`): the corner o, the edge vectors a, b
+  along u and v, the unit normal n = a × b / |a × b| toward the side where the particles are;
+  the rectangle is o + α a + β b, 0 ≤ α, β ≤ 1 (:func:`parallelogram_coordinates`).
+* **Broad phase** (:func:`sphere_wall_pairs`, paper Eq. 3 with a wall): body i is near the
+  wall when its bounding sphere reaches the rectangle (widened by the skin).
+* **An exact sphere** (centre x, radius r; :func:`sphere_wall_row`, the closed form the
+  scene's dispatch runs with the sphere–sphere one, :mod:`nurbsdem.contact.analytic`):
+  p_A = x − r n, p_B its projection on the plane, signed distance n·(p_A − o).
+* **A NURBS particle** (:func:`solve_wall`, :func:`solve_wall_rows`): the deepest point of
+  body A below the plane is its support point along −n (paper Eq. 8 with d = −n): one
+  support mapping, no direction search; signed_distance = n · (p_A − o), point_b the
+  projection of p_A onto the plane.  A warm start begins at the previous support point moved
+  to first order by the body's turn since (its du/de and body-frame direction are kept in the
+  row: ``lcp._predicted_params``), so that the support mapping usually ends after one
+  evaluation.
 
-    signed_distance = n · (p_A − o)        (o: a corner of the wall),
+Either contact is active only where point_b falls inside the rectangle; its normal (from A
+towards the wall, docs/conventions.md) is −n, and gap = point_a − point_b satisfies
+normal · gap = −signed_distance.  The pair solvers are named in :mod:`nurbsdem.contact.kinds`
+(``CLOSED_FORM`` and ``WALL_SUPPORT`` with ``FLAT_WALL``); the wall's ParaView output is the
+walls' (:meth:`nurbsdem.io.paraview.ParaViewWriter.write_walls`).
 
-point_b is the projection of p_A onto the plane, and the contact is active only when that
-projection falls inside the wall's parallelogram o + α a + β b, 0 <= α, β <= 1 (a, b the
-wall's edge vectors along u and v). The contact normal (from A towards the wall,
-docs/conventions.md) is −n, and gap = point_a − point_b satisfies
-normal · gap = −signed_distance.
-
-A warm start begins at the previous support point moved to first order by the body's turn
-since (its du/de and body-frame direction are kept in the row: ``lcp._predicted_params``),
-so that the support mapping usually ends after one evaluation.
-
-Curved walls: a triangle mesh takes this kernel per face
+Curved walls: a triangle mesh takes the NURBS particle's kernel per face
 (:mod:`nurbsdem.contact.mesh_particle`), an open NURBS surface wall its support mapping along
 the wall's normal (:mod:`nurbsdem.contact.surface_particle`).
 
@@ -34,14 +41,79 @@ from numba import njit, prange
 
 from ..geometry.kernel import make_workspace
 from ..jit import PointerKernel, kernel
-from .analytic import parallelogram_coordinates
+from .broadphase import _as_centers_radii, _push
 from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, next_chunk,
                      table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
-                  I_PA, I_PB, I_VALID, NF, NI, full_rows, make_work,
+                  I_PA, I_PB, I_VALID, NF, NI, clear_row, full_rows, make_work,
                   _predicted_params, _store_prediction)
 from .stage2 import _EA, _EV, _EV2, _GA, _H, _MA, _PA, _TMP, _rot_t, _to_world
 from .support import CREASE, seed_start, support_map
+
+
+# --------------------------------------------------------------------------- geometry and a sphere
+@njit(cache=True)
+def _parallelogram(r0: float, r1: float, r2: float, a0: float, a1: float, a2: float, b0: float,
+                   b1: float, b2: float) -> tuple[float, float]:
+    """:func:`parallelogram_coordinates` of edge vectors given by their components."""
+    aa = a0 * a0 + a1 * a1 + a2 * a2
+    ab = a0 * b0 + a1 * b1 + a2 * b2
+    bb = b0 * b0 + b1 * b1 + b2 * b2
+    ar = a0 * r0 + a1 * r1 + a2 * r2
+    br = b0 * r0 + b1 * r1 + b2 * r2
+    det = aa * bb - ab * ab
+    return (bb * ar - ab * br) / det, (aa * br - ab * ar) / det
+
+
+@njit(cache=True)
+def parallelogram_coordinates(r0: float, r1: float, r2: float, a: np.ndarray,
+                              b: np.ndarray) -> tuple[float, float]:
+    """Coordinates (α, β) of the in-plane offset r (m) from a wall's corner on its edge
+    vectors a, b (3,): r = α a + β b (the 2×2 normal equations); inside when both are in
+    [0, 1]."""
+    return _parallelogram(r0, r1, r2, a[0], a[1], a[2], b[0], b[1], b[2])
+
+
+@njit(cache=True)
+def sphere_wall_row(x0: float, x1: float, x2: float, r: float, w: int, wall_d: np.ndarray,
+                     wall_origin: np.ndarray, wall_a: np.ndarray, wall_b: np.ndarray,
+                     wall_dom: np.ndarray, rows_f: np.ndarray, rows_i: np.ndarray,
+                     j: int) -> None:
+    """One sphere (centre x m, radius r m) against flat wall w (corner wall_origin[w] +
+    wall_d[w], edge vectors wall_a[w], wall_b[w], parameter rectangle wall_dom[w]) into row j
+    of rows_f, rows_i (zeroed first), in the convention of
+    :func:`solve_wall`."""
+    clear_row(rows_f, rows_i, j)
+    a0, a1, a2 = wall_a[w, 0], wall_a[w, 1], wall_a[w, 2]
+    b0, b1, b2 = wall_b[w, 0], wall_b[w, 1], wall_b[w, 2]
+    o0 = wall_origin[w, 0] + wall_d[w, 0]
+    o1 = wall_origin[w, 1] + wall_d[w, 1]
+    o2 = wall_origin[w, 2] + wall_d[w, 2]
+    m0 = a1 * b2 - a2 * b1
+    m1 = a2 * b0 - a0 * b2
+    m2 = a0 * b1 - a1 * b0
+    mm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    m0, m1, m2 = m0 / mm, m1 / mm, m2 / mm
+    rows_f[j, F_N], rows_f[j, F_N + 1], rows_f[j, F_N + 2] = -m0, -m1, -m2
+    p0, p1, p2 = x0 - r * m0, x1 - r * m1, x2 - r * m2
+    rows_f[j, F_PA], rows_f[j, F_PA + 1], rows_f[j, F_PA + 2] = p0, p1, p2
+    sd = m0 * (p0 - o0) + m1 * (p1 - o1) + m2 * (p2 - o2)
+    rows_f[j, F_SD] = sd
+    q0, q1, q2 = p0 - sd * m0, p1 - sd * m1, p2 - sd * m2
+    rows_f[j, F_PB], rows_f[j, F_PB + 1], rows_f[j, F_PB + 2] = q0, q1, q2
+    al, be = _parallelogram(q0 - o0, q1 - o1, q2 - o2, a0, a1, a2, b0, b1, b2)
+    rows_f[j, F_PAR + 2] = wall_dom[w, 0] + al * (wall_dom[w, 1] - wall_dom[w, 0])
+    rows_f[j, F_PAR + 3] = wall_dom[w, 2] + be * (wall_dom[w, 3] - wall_dom[w, 2])
+    rows_i[j, I_PA] = -1
+    rows_i[j, I_PB] = 0
+    rows_i[j, I_VALID] = 1
+    inside = al >= 0.0 and al <= 1.0 and be >= 0.0 and be <= 1.0
+    if not inside:
+        rows_i[j, I_BROAD] = 2
+    rows_i[j, I_ACTIVE] = 1 if (inside and sd < 0.0) else 0
+
+
+# --------------------------------------------------------------------------- a NURBS particle
 
 
 @kernel
@@ -283,3 +355,88 @@ def detect_wall_batch(table, shape_id, pos, rot, origin, a, b, dom=None, prev_f=
                     f(rot, (K, 3, 3)), k, k, 0, k, f(origin, (K, 3)), f(a, (K, 3)),
                     f(b, (K, 3)), f(dom, (K, 4)), res_f, res_i, numba.get_num_threads())
     return res_f, res_i
+
+
+# --------------------------------------------------------------------------- broad phase
+def wall_geometry(patch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre, frame and half sizes of a flat rectangular wall patch (degree 1, 2x2 points,
+    as made by :func:`nurbsdem.shapes.flat_wall`).
+
+    Returns
+    -------
+    center: (3,) m.  axes: (3, 3) with columns (t1, t2, n): t1 along u, t2 in plane with
+    t1 x t2 = n, n the unit normal ``S_u x S_v`` (the wall's active side).
+    half: (2,) half lengths along t1 and t2 (m).
+    """
+    P = np.asarray(patch.control_points, dtype=float)
+    if P.shape[:2] != (2, 2):
+        raise ValueError("a flat wall must have 2 x 2 control points")
+    center = P.reshape(-1, 3).mean(0)
+    eu = 0.5 * ((P[1, 0] - P[0, 0]) + (P[1, 1] - P[0, 1]))
+    ev = 0.5 * ((P[0, 1] - P[0, 0]) + (P[1, 1] - P[1, 0]))
+    n = np.cross(eu, ev)
+    n /= np.linalg.norm(n)
+    t1 = eu / np.linalg.norm(eu)
+    t2 = np.cross(n, t1)
+    half = np.array([0.5 * np.linalg.norm(eu), 0.5 * abs(ev @ t2)])
+    return center, np.stack([t1, t2, n], axis=1), half
+
+
+@njit(cache=True)
+def sphere_wall_pairs_jit(centers, radii, wall_centers, wall_axes, wall_half, margin):
+    """Compiled core of :func:`sphere_wall_pairs` (no input checks). Returns int64 (K, 2)."""
+    n = centers.shape[0]
+    nw = wall_centers.shape[0]
+    buf = np.empty((max(16, 2 * n), 2), dtype=np.int64)
+    npair = np.int64(0)         # not a literal: one specialisation of _push
+    for i in range(n):
+        for k in range(nw):
+            du = 0.0
+            dv = 0.0
+            dn = 0.0
+            for d in range(3):
+                x = centers[i, d] - wall_centers[k, d]
+                du += x * wall_axes[k, d, 0]
+                dv += x * wall_axes[k, d, 1]
+                dn += x * wall_axes[k, d, 2]
+            eu = max(abs(du) - wall_half[k, 0], 0.0)
+            ev = max(abs(dv) - wall_half[k, 1], 0.0)
+            s = radii[i] + margin
+            if s > 0.0 and dn * dn + eu * eu + ev * ev < s * s:
+                buf = _push(buf, npair, i, k)
+                npair += 1
+    return buf[:npair].copy()
+
+
+def sphere_wall_pairs(centers: np.ndarray, radii: np.ndarray, wall_centers: np.ndarray,
+                      wall_axes: np.ndarray, wall_half: np.ndarray,
+                      margin: float = 0.0) -> np.ndarray:
+    """Body-vs-flat-wall candidates of the first global level (paper Eq. 3 with a wall).
+
+    Body i is near wall k when its bounding sphere reaches the wall rectangle (inflated by
+    ``margin``): the distance from ``c_i`` to the rectangle (exact closest point, both sides
+    of the plane) is ``< r_i + margin``.
+
+    Parameters
+    ----------
+    centers: (N, 3) m.  radii: (N,) m.
+    wall_centers: (W, 3) rectangle centres (m).
+    wall_axes: (W, 3, 3), columns (t1, t2, n) orthonormal (see :func:`wall_geometry`).
+    wall_half: (W, 2) half lengths along t1, t2 (m); a third column (thickness) is ignored.
+    margin: skin (m), >= 0.
+
+    Returns
+    -------
+    int64 (K, 2) of (body i, wall k), sorted by i then k (wall index local, 0..W-1).
+    """
+    c, r = _as_centers_radii(centers, radii)
+    wc = np.ascontiguousarray(wall_centers, dtype=np.float64).reshape(-1, 3)
+    wa = np.ascontiguousarray(wall_axes, dtype=np.float64).reshape(-1, 3, 3)
+    wh = np.ascontiguousarray(
+        np.asarray(wall_half, dtype=np.float64).reshape(wc.shape[0], -1)[:, :2])
+    if wa.shape[0] != wc.shape[0] or wh.shape[1] != 2:
+        raise ValueError("wall_centers (W,3), wall_axes (W,3,3), wall_half (W,2) disagree")
+    margin = float(margin)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise ValueError("margin must be finite and >= 0")
+    return sphere_wall_pairs_jit(c, r, wc, wa, wh, margin)
