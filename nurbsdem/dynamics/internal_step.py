@@ -222,7 +222,8 @@ class InternalSteps:
         spin (:meth:`_spun_contacts`)."""
         if self.wall_spin is not None and self.contacts.a.shape[0]:
             return self._spun_contacts(np.ascontiguousarray(u_mean))
-        return self.contacts.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3))
+        return (self.contacts.b, self.wall_d, np.ascontiguousarray(u_mean),
+                np.zeros((self.walls.n, 3)))
 
     def _kick_arguments(self, im: "ImageBodies | None" = None) -> tuple:
         """The stored contacts' arrays and loads as the step's parts take them (with image

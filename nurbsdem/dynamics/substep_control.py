@@ -214,8 +214,8 @@ class SubstepControl:
         dt = critical_step_from_rates(omega2, gamma)
         self._network_zeta = gamma / (2.0 * math.sqrt(omega2)) if omega2 > 0 else 0.0
         n_contacts = int(np.count_nonzero(a == body) + np.count_nonzero(bb == body))
-        why = (f"contact network of {a.shape[0]} pairs ({self.contacts.a.shape[0]} in contact): highest "
-               f"frequency {math.sqrt(omega2):.4g} rad/s, damping rate {gamma:.4g} 1/s, "
+        why = (f"contact network of {a.shape[0]} pairs ({self.contacts.a.shape[0]} in contact): "
+               f"highest frequency {math.sqrt(omega2):.4g} rad/s, damping rate {gamma:.4g} 1/s, "
                f"centred on particle {body} with {n_contacts} contacts")
         return dt, why
 
