@@ -107,7 +107,10 @@ def _headline_md(rep: Report) -> str:
     bv = h.get("beverloo_fills") or h.get("beverloo")
     if bv:
         fills = f" over {bv['fills']} fills" if "fills" in bv else ""
-        out.append(f"* Silo discharge of spheres{fills}: Beverloo's exponent {bv['n']:.2f}; "
+        spread = (f" ({bv['p16']:.2f}–{bv['p84']:.2f} over the fills resampled)"
+                  if "p16" in bv else "")
+        out.append(f"* Silo discharge of spheres{fills}: Beverloo's exponent {bv['n']:.2f}"
+                   f"{spread}; "
                    f"at n = 2.5, k {bv['k']:.2f} and C {bv['C']:.3f} (spheres' published "
                    "range: n 2.5 ± 0.3, k 1–2, C 0.5–0.7), section 5.")
         if "n_from" in bv:

@@ -246,6 +246,7 @@ def _beverloo_fills(rep: Report, cache: Path, par) -> None:
                                               fills=len(f["seeds"]))
         boot = f.get("bootstrap")
         if boot:
+            rep.headline["beverloo_fills"].update(p16=boot["p16"], p84=boot["p84"])
             lo, hi = bb.RANGES["n"]
             rep.add(f"Resampling the fills ({boot['draws']} draws with replacement, each fitted "
                     f"on its mean rates): free exponent {boot['p16']:.2f} to {boot['p84']:.2f} "

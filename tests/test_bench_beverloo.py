@@ -241,3 +241,35 @@ def test_resampling_the_fills_gives_the_exponents_spread():
     assert spreads[1] < spreads[0]
     assert bench_beverloo.bootstrap_exponent(law[None, :].repeat(2, 0), ratios * d, d,
                                              rho) is None
+
+
+def test_the_report_gives_the_exponents_spread_over_three_fills(tmp_path, monkeypatch):
+    """With three fills the report's silo section gives the free exponent's spread over the
+    fills resampled, and its headline the 16th and 84th percentiles."""
+    import json
+
+    import report
+    import report_peers
+    from report_base import Report
+    cache = tmp_path / "benchmarks" / ".cache"
+    cache.mkdir(parents=True)
+    ratios = (6.0, 8.0, 9.5, 11.0, 13.0, 15.0)
+    paths = []
+    for seed, sign in ((3, 1.0), (4, -1.0), (5, 0.5)):
+        run = _synthetic_run(seed, ratios, sign)
+        for i, o in enumerate(run["orifices"]):
+            o["W"] *= 1 + 0.01 * sign * (-1) ** i
+        paths.append(tmp_path / f"s{seed}.json")
+        paths[-1].write_text(json.dumps(run))
+    bench_beverloo.combine(paths, cache / "beverloo_fills.json")
+    (cache / "beverloo.json").write_text(json.dumps(_synthetic_run(3, ratios, 1.0)))
+    monkeypatch.setattr(report_peers, "REPO", tmp_path)
+    info = dict(cpu="a CPU", cores=2, nurbsdem="0", date="today")
+    rep = Report(tmp_path / "out", info, quick=False)
+    report_peers.section_beverloo(rep)
+    text = "".join(rep.parts)
+    assert "Resampling the fills (2000 draws with replacement" in text
+    head = rep.headline["beverloo_fills"]
+    assert head["p16"] <= head["p84"]
+    line = next(x for x in report._headline_md(rep).split("\n") if "Silo discharge" in x)
+    assert f"({head['p16']:.2f}–{head['p84']:.2f} over the fills resampled)" in line
