@@ -117,6 +117,11 @@ def _headline_md(rep: Report) -> str:
             out.append(f"* The same fills through the orifices of at least {bv['start']:g} d: "
                        f"Beverloo's exponent {bv['n_from']:.2f}; at n = 2.5, k "
                        f"{bv['k_from']:.2f} and C {bv['C_from']:.3f}, section 5.")
+    hp = h.get("heap")
+    if hp:
+        names = dict(sphere="spheres", paper="the paper's particles")
+        out.append("* A heap poured onto a floor, angle of repose: " + ", ".join(
+            f"{a:.1f} degrees ({names.get(k, k)})" for k, a in hp.items()) + ", section 5.")
     st = h.get("settled")
     if st:
         lo, hi = st["rows"][0], st["rows"][-1]

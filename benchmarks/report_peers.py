@@ -1,9 +1,10 @@
 """Sections of the verification report that run nurbsdem beside a reference: exact spheres and
 a rotating drum against the real Yade, a silo's discharge against Beverloo's law (and Yade),
-a pour's accounting and energy balance."""
+a pour's accounting and energy balance, a poured heap's angle of repose."""
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -318,3 +319,33 @@ def section_pour(rep: Report) -> None:
             + md_table(["safety", "internal steps", "run s", "balance error"], rows) + "\n")
     rep.headline["pour"] = dict(count=r["count"], count_error=r["count_error"],
                                 balance=r["balance"])
+
+
+def section_heap(rep: Report) -> None:
+    """A heap poured onto a floor (``benchmarks/bench_heap.py``, its JSON
+    ``benchmarks/.cache/heap.json``): the angle of repose of spheres and of the paper's
+    particles with the same law."""
+    rep.add("### A poured heap: the angle of repose\n")
+    path = REPO / "benchmarks" / ".cache" / "heap.json"
+    if not path.exists():
+        rep.add("Not measured: run `benchmarks/bench_heap.py` (it writes "
+                "`benchmarks/.cache/heap.json`, which this section reads).\n")
+        return
+    r = json.loads(path.read_text())
+    names = dict(sphere="exact spheres", paper="the paper's particles (A, B, C scaled)")
+    rows = [[names.get(x["shape"], x["shape"]), x["count"], x["on_floor"],
+             f"{x['angle']:.1f} ± {x['error']:.1f}", f"{x['foot'] * 1e3:.0f}",
+             f"{x['height'] * 1e3:.0f}", fmt(x["wall"], ".1f")] for x in r["runs"]]
+    rep.add(f"`benchmarks/bench_heap.py`{' (quick: a smoke test)' if r['quick'] else ''}: "
+            f"grains of the volumes of spheres of radii "
+            f"{', '.join(f'{x * 1e3:g}' for x in r['radii'])} mm poured at {r['rate']:g} per "
+            f"second from a disc {r['height'] * 1e3:.0f} mm above a flat floor, the silo's "
+            f"linear law with friction {r['friction']:g} and rolling friction {r['rolling']:g} "
+            f"(the rolling torque is at most μ_r R_r f_n, R_r the contact's rolling radius, R/2 "
+            f"between two equal spheres: a sphere rolling over another is held up to a slope of "
+            f"about atan(μ_r / 2), {math.degrees(math.atan(r['rolling'] / 2)):.0f} degrees); "
+            "the angle of the heap's flank by `postproc/repose.py` (± its standard error) "
+            "at the end, one thread:\n\n"
+            + md_table(["grains", "poured", "on the floor", "angle of repose (deg)",
+                        "foot radius mm", "height mm", "run s"], rows) + "\n")
+    rep.headline["heap"] = {x["shape"]: x["angle"] for x in r["runs"]}

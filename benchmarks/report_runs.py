@@ -15,7 +15,8 @@ from common import REPO  # noqa: E402
 
 from report_base import Report, _plt, fmt, md_table  # noqa: E402
 from report_contact import section_point_surface  # noqa: E402
-from report_peers import section_beverloo, section_drum, section_pour, section_spheres  # noqa: E402
+from report_peers import (section_beverloo, section_drum, section_heap,  # noqa: E402
+                          section_pour, section_spheres)
 
 
 def _run_deck(deck: Path, duration: float, safety: float, outdir: Path):
@@ -201,7 +202,7 @@ def section_cost(rep: Report, workdir: Path) -> None:
     if not quick:
         _section_large(rep, workdir)
         _section_settled(rep)
-    for part in (section_spheres, section_drum, section_beverloo, section_pour,
+    for part in (section_spheres, section_drum, section_beverloo, section_pour, section_heap,
                  section_point_surface, lambda r: _section_paper(r, workdir, quick)):
         _guarded(rep, part)
 

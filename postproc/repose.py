@@ -37,13 +37,14 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Repose:
-    """Angle of repose (degrees) with its standard error, and the flank's ring radii (m)
-    and tops (m) it was fitted to."""
+    """Angle of repose (degrees) with its standard error, the flank's ring radii (m) and
+    tops (m) it was fitted to, and the heap's foot radius (m)."""
 
     angle: float
     error: float
     r: np.ndarray
     top: np.ndarray
+    foot: float = float("nan")
 
 
 def ring_tops(x: np.ndarray, radius: np.ndarray, axis: np.ndarray, edges: np.ndarray
@@ -81,7 +82,7 @@ def angle_of_repose(x, radius, axis=None, rings: int = 12, inner: float = 0.25,
     slope, err = coef[0], float(np.sqrt(cov[0, 0]))
     angle = float(np.degrees(np.arctan(-slope)))
     error = float(np.degrees(err / (1.0 + slope ** 2)))
-    return Repose(angle, error, r, tops)
+    return Repose(angle, error, r, tops, float(foot))
 
 
 def bed_angle(x, axis: int = 0, up: int = 2) -> float:
