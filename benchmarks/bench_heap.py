@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 import time
@@ -47,29 +46,16 @@ sys.path.insert(0, str(ROOT / "postproc"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from repose import angle_of_repose  # noqa: E402
 import common  # noqa: E402
+# the silo's grains and linear law (one definition: the heap is poured with the same)
+from bench_beverloo import DENSITY, G, KN, MU, RADII, RESTITUTION, damping  # noqa: E402,F401
 
-G = 9.81
-RADII = (0.0018, 0.0020, 0.0022)          # m, equal numbers (the silo's grains)
-DENSITY = 2500.0                          # kg/m^3
-KN = 5.0e2                                # N/m, normal and tangential penalty
-MU = 0.5
-RESTITUTION = 0.5
 ROLLING = 0.3                             # rolling friction μ_r
 FLOOR = 0.3                               # m, the floor's side
-HEIGHT = 0.05                            # m, the inlet disc above the floor
+HEIGHT = 0.05                             # m, the inlet disc above the floor
 INLET_RADIUS, INLET_THICKNESS = 0.02, 0.03
 RATE = 1000.0                             # grains per second
 SETTLE = 0.6                              # s after the last grain is placed
 SHAPES = ("sphere", "paper")
-
-
-def damping() -> float:
-    """The normal dashpot (N s/m) of a restitution ``RESTITUTION`` for two spheres of the
-    middle radius (the linear law's closed form, ζ = −ln e / √(π² + ln² e))."""
-    m = DENSITY * 4.0 / 3.0 * math.pi * RADII[1] ** 3
-    ln_e = math.log(RESTITUTION)
-    zeta = -ln_e / math.sqrt(math.pi ** 2 + ln_e ** 2)
-    return 2.0 * zeta * math.sqrt(0.5 * m * KN)
 
 
 def grains(shape: str, folder: Path) -> list:
