@@ -1,5 +1,5 @@
 """An exact sphere against a NURBS particle: the 2-parameter point-to-surface problem
-(``nurbsdem/contact/point_surface.py``) against the 4-parameter LCP, speed and error together.
+(``nurbsdem/contact/sphere.py``) against the 4-parameter LCP, speed and error together.
 
 Poses: a sphere (r = 10 mm) whose centre lies along a random direction from the particle's
 centroid, at 0.55–0.95 of (bounding radius + r), the particle randomly rotated: separated and
@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from nurbsdem.contact.detect import ContactTable, detect_batch
 from nurbsdem.contact.lcp import F_N, F_SD, I_PA, NF, NI
-from nurbsdem.contact.point_surface import sphere_nurbs_rows
+from nurbsdem.contact.sphere import sphere_nurbs_rows
 from nurbsdem.geometry.generators import ellipsoid
 from nurbsdem.geometry.particles import paper_particle_shape
 from nurbsdem.shapes import sphere

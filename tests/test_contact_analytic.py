@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nurbsdem.contact.analytic import closed_form_into
 from nurbsdem.contact.detect import ContactTable, detect_batch
-from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_BROAD, I_VALID, NF, NI
-from nurbsdem.contact.stage2 import ANGLE_TOL
 from nurbsdem.contact.flat_wall import detect_wall_batch, wall_frame
+from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, I_BROAD, I_VALID, NF, NI
+from nurbsdem.contact.sphere import closed_form_into
+from nurbsdem.contact.stage2 import ANGLE_TOL
 from nurbsdem.geometry.analytic import exact_sphere
 from nurbsdem.geometry.rotation import quats_to_matrices, random_quaternions
 from nurbsdem.shapes import ellipsoid, flat_wall, single_patch_sphere, sphere

@@ -6,10 +6,10 @@ import itertools
 import numpy as np
 import pytest
 
-from nurbsdem.contact.analytic import _sphere_sphere_row
 from nurbsdem.contact.lcp import NF, NI
 from nurbsdem.contact.periodic import (make_cell, minimum_image, periodic_sphere_pairs,
                                        wrap)
+from nurbsdem.contact.sphere import _sphere_sphere_row
 
 
 def brute(x, r, margin, cell):

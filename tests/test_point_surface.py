@@ -1,4 +1,4 @@
-"""An exact sphere against a NURBS body as a point-to-surface problem (contact/point_surface.py):
+"""An exact sphere against a NURBS body as a point-to-surface problem (contact/sphere.py):
 against the closed-form distance to an ellipsoid, against the 4-parameter LCP on the same
 geometry, and in a scene (the same dynamics as with the LCP, fewer LCPs)."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from nurbsdem.contact.detect import ContactTable, detect_batch
 from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_DEG, I_FAIL, I_PA, I_PB, NF, NI
-from nurbsdem.contact.point_surface import sphere_nurbs_rows
+from nurbsdem.contact.sphere import sphere_nurbs_rows
 from nurbsdem.geometry.generators import ellipsoid
 from nurbsdem.geometry.particles import paper_particle_shape
 from nurbsdem.shapes import sphere

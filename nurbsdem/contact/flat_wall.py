@@ -7,7 +7,7 @@ frame, its test in the broad phase and its pair solvers.
 * **Broad phase** (:func:`sphere_wall_pairs`, paper Eq. 3 with a wall): body i is near the
   wall when its bounding sphere reaches the rectangle (widened by the skin).
 * **An exact sphere** (centre x, radius r; :func:`sphere_wall_row`, the closed form the
-  scene's dispatch runs with the sphere–sphere one, :mod:`nurbsdem.contact.analytic`):
+  scene's dispatch runs with the sphere–sphere one, :mod:`nurbsdem.contact.sphere`):
   p_A = x − r n, p_B its projection on the plane, signed distance n·(p_A − o).
 * **A NURBS particle** (:func:`solve_wall`, :func:`solve_wall_rows`): the deepest point of
   body A below the plane is its support point along −n (paper Eq. 8 with d = −n): one

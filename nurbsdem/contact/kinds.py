@@ -3,9 +3,10 @@ names (numba reads module-level integers and arrays as compile-time constants, s
 cost nothing in the kernels).
 
 Where each kind's pieces live (docs/extending.md): the exact sphere in
-:mod:`nurbsdem.geometry.analytic` and :mod:`nurbsdem.contact.analytic` (closed forms), the
-NURBS particle in :mod:`nurbsdem.geometry` and :mod:`nurbsdem.contact.detect` (the LCP of
-paper Sec. 3.2) and :mod:`nurbsdem.contact.point_surface` (against a sphere), the flat wall
+:mod:`nurbsdem.geometry.analytic` (which shapes are spheres) and :mod:`nurbsdem.contact.sphere`
+(its pair solvers: against a sphere in closed form, against a NURBS particle by the
+point-to-surface problem), the NURBS particle in :mod:`nurbsdem.geometry` and
+:mod:`nurbsdem.contact.detect` (the LCP of paper Sec. 3.2), the flat wall
 in :mod:`nurbsdem.contact.flat_wall` (its frame, broad phase and both pair solvers), the
 mesh and surface walls in :mod:`nurbsdem.contact.mesh_wall` and
 :mod:`nurbsdem.contact.surface_wall` (against spheres) and
@@ -25,8 +26,8 @@ from numba import njit
 SPHERE, NURBS_PARTICLE, FLAT_WALL, MESH_WALL, SURFACE_WALL = 0, 1, 2, 3, 4
 N_KINDS = 5
 
-#: pair solvers: the closed forms of :mod:`nurbsdem.contact.analytic`, the point-to-surface
-#: problem of :mod:`nurbsdem.contact.point_surface`, the LCP batch of
+#: pair solvers: the closed forms and the point-to-surface problem of
+#: :mod:`nurbsdem.contact.sphere`, the LCP batch of
 #: :mod:`nurbsdem.contact.detect`, the support-mapping kernel of :mod:`nurbsdem.contact.flat_wall`;
 #: NO_SOLVER: the two kinds never meet (two walls)
 CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT = 0, 1, 2, 3

@@ -10,10 +10,10 @@ Then the pairs of the list that are not certified apart (``due``) get their rows
 :func:`solve_due_into`, in place in the list's rows (:func:`solve_due`: the scene's copy of
 it), each by what its shapes are (the scene's module docstring):
 
-* exact sphere against exact sphere or a flat wall: the closed forms of
-  :mod:`nurbsdem.contact.analytic`;
-* exact sphere against a NURBS particle: the point-to-surface problem of
-  :mod:`nurbsdem.contact.point_surface` (when the scene allows it); the pairs it leaves go to
+* exact sphere against exact sphere or a flat wall: the closed forms
+  (:mod:`nurbsdem.contact.sphere`);
+* exact sphere against a NURBS particle: the point-to-surface problem of the same module
+  (when the scene allows it); the pairs it leaves go to
   the LCP, a row of the point solver not counting as its warm start;
 * NURBS against NURBS: the LCP batch of :mod:`nurbsdem.contact.detect` (paper Sec. 3.2), warm
   started from the previous row, directed by the pair's candidate patches (paper 3.1);
@@ -37,7 +37,6 @@ import numpy as np
 from numba import njit
 
 from ..jit import PointerKernel
-from .analytic import closed_form_into, sphere_centres
 from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
 from .broadphase import ALL_PAIRS_MAX, sphere_pairs_jit, sphere_pairs_of
 from .detect import solve_rows
@@ -45,7 +44,7 @@ from .flat_wall import solve_wall_rows, sphere_wall_pairs_jit
 from .kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, POINT_SURFACE, SPHERE,
                     WALL_SUPPORT, pair_solver)
 from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
-from .point_surface import STAGE_POINT, sphere_nurbs_rows
+from .sphere import STAGE_POINT, closed_form_into, sphere_centres, sphere_nurbs_rows
 from .verlet import merge_find
 
 #: the scene's constant tables: the packed shapes (:class:`~nurbsdem.contact.detect.ContactTable`:

@@ -31,7 +31,7 @@ own region of normals, in which the minimum is a contact of that feature:
   the arc holds two, one on either side of the mesh;
 * **vertex** V: h_X(−d) = −d · V, stationary where p_A(d) − V ∥ d, a Newton on the tangent
   components with the Jacobian (dp/dd)_t − λ I (λ = d · (p_A − V)): the point-to-surface
-  problem of :mod:`nurbsdem.contact.point_surface` in the support-function form (it holds
+  problem of :mod:`nurbsdem.contact.sphere` in the support-function form (it holds
   with V inside A; where h_A(d) − d · V is not convex, steepest-descent turns of d lead
   Newton in); a contact when d lies in the vertex's normal cone (d · (x − V) ≥ 0 for every
   vertex x of the triangles around V), or when V is the deepest point of a boundary edge at

@@ -14,7 +14,7 @@ its distance d = |c − q|; the contact is active when d < r, with
     signed distance = d − r,
 
 the row layout of :mod:`nurbsdem.contact.lcp` (the same as the flat wall's closed form of
-:mod:`nurbsdem.contact.analytic`).
+:mod:`nurbsdem.contact.sphere`).
 
 **One contact per smooth or convex region.**  The surface of the mesh is the union of its
 triangles, and a contact is a *local minimum* of the distance from c to that surface.  A

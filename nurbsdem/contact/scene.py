@@ -33,9 +33,9 @@ found (up to the round-off of a different warm start).
 
 **Only the work a scene needs**: a pair of exact spheres (recognised from their NURBS
 surfaces, :func:`~nurbsdem.geometry.analytic.exact_sphere`) and an exact sphere against a
-flat wall are solved in closed form (:mod:`nurbsdem.contact.analytic`), an exact sphere
-against a NURBS particle as a point-to-surface problem in 2 parameters
-(:mod:`nurbsdem.contact.point_surface`; the LCP where that does not apply: the sphere's centre
+flat wall are solved in closed form, an exact sphere against a NURBS particle as a
+point-to-surface problem in 2 parameters (both in :mod:`nurbsdem.contact.sphere`; the LCP
+where that does not apply: the sphere's centre
 inside the particle, a closest point on a crease or another patch), NURBS against NURBS or
 a flat wall by the LCP.
 

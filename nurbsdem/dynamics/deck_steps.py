@@ -55,7 +55,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..contact.analytic import closed_form_into
+from ..contact.sphere import closed_form_into
 from ..contact.curved_compiled import curved_contacts_ptr, pack_curved, with_curved_contacts
 from ..contact.kinds import MESH_WALL, SURFACE_WALL
 from ..contact.listed import scene_list_ptr, solve_due_into_ptr

@@ -1,7 +1,7 @@
 """Shapes that are exactly an analytic solid, recognised from their NURBS surfaces.
 
 A shape whose every patch lies on one sphere is an exact sphere: the contact search can then
-use closed forms (:mod:`nurbsdem.contact.analytic`) instead of the local contact problem.
+use closed forms (:mod:`nurbsdem.contact.sphere`) instead of the local contact problem.
 
 Exactness test: on a knot span a rational patch of degrees (p, q) is S = P/w with P, w
 polynomials of bidegree (p, q), so |P − c w|² − r² w² is a polynomial of bidegree (2p, 2q).  It
