@@ -87,7 +87,7 @@ from .listed import SceneTables, scene_list, scene_tables, solve_due
 from .periodic import PeriodicCell, minimum_image, wrap
 from .periodic_scene import image_scene, periodic_list
 from .verlet import (advance_odometers, carry_rows, contact_arrays, due_rows, list_is_stale,
-                     renew_certificates, repose, reposed_bodies)
+                     renew_certificates, repose, reposed_bodies, swap_rows)
 from .flat_wall import wall_frame, wall_geometry
 
 log = logging.getLogger("nurbsdem")
@@ -205,6 +205,9 @@ class SceneContacts:
         #: on several ranks, the owned particles (N,) bool the list holds the pairs of (None:
         #: not known, the next build is a full one)
         self._list_owned: np.ndarray | None = None
+        #: the list's (rows_f, rows_i, budget) the last evaluation wrote, while nobody else
+        #: holds them (:meth:`_writable_rows`)
+        self._rows_written: tuple | None = None
 
     # ------------------------------------------------------------------ state
     def state(self) -> dict[str, np.ndarray]:
@@ -222,7 +225,9 @@ class SceneContacts:
         self.domain.after_build(self.pairs.a, self.pairs.b)
 
     def local_state(self) -> dict[str, np.ndarray]:
-        """This rank's list and per-body arrays (the whole state on one rank)."""
+        """This rank's list and per-body arrays (the whole state on one rank; the caller may
+        keep them: the next evaluation writes its rows into copies)."""
+        self._rows_written = None
         st = self.pairs.as_dict()
         st["odo"] = self.odo
         if self.built_pose is not None:
@@ -269,7 +274,9 @@ class SceneContacts:
 
     def snapshot(self):
         """What a rolled-back time step must restore (cheap: a call replaces these objects,
-        never mutates them)."""
+        never mutates them; the list's rows it holds are written into copies, once, by the
+        next evaluation: :meth:`_writable_rows`)."""
+        self._rows_written = None
         plan = self.domain.plan if self.domain is not None else None
         return (self.pairs, self.odo, self.built_pose, self.prev_pose, self.last, plan,
                 self.pair_shift)
@@ -419,26 +426,26 @@ class SceneContacts:
         once, or left out: module docstring), renew the certificates, and make the ContactSet."""
         ps = self.pairs
         keys = ps.keys
-        prev_f, prev_i = ps.rows_f[due], ps.rows_i[due]
         failed = ri[:, I_FAIL].astype(bool)
+        rows_f, rows_i, budget = self._writable_rows(ps)
+        prev_f, prev_i = rf, ri
+        swap_rows(rows_f, rows_i, due, prev_f, prev_i)   # the new rows in, the previous out
         reused = np.zeros(ps.a.shape[0], bool)
         dropped = []
         for r in np.nonzero(failed)[0].tolist():
             j = int(due[r])
             a, b, k = int(ps.a[j]), int(ps.b[j]), int(keys[j])
             if prev_i[r, I_VALID] and not ps.reused[j] and self.prev_pose is not None:
-                rf[r], ri[r] = self._moved(prev_f[r], prev_i[r], a, b, pose)
+                rows_f[j], rows_i[j] = self._moved(prev_f[r], prev_i[r], a, b, pose)
                 reused[j] = True
                 self._warn(k, a, b, "its last converged solution, moved rigidly "
                            "with the two bodies, is used for this evaluation only")
             else:
-                ri[r, I_ACTIVE] = 0
-                ri[r, I_VALID] = 0
+                rows_i[j, I_ACTIVE] = 0
+                rows_i[j, I_VALID] = 0
                 dropped.append(k)
                 self._warn(k, a, b, "no fresh converged solution to fall back on: "
                            "the pair is left out of the force evaluation")
-        rows_f, rows_i, budget = ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy()
-        rows_f[due], rows_i[due] = rf, ri
         renew_certificates(budget, due, rows_f, rows_i, reach)
         self.pairs = ps.replaced(rows_f, rows_i, budget, reused)
         self.prev_pose = pose
@@ -449,6 +456,19 @@ class SceneContacts:
                                     dropped=np.array(dropped, np.int64))
         return self.contact_set(reach, monitored=int(due.shape[0]), failed=int(failed.sum()),
                                 dropped=np.array(dropped, np.int64))
+
+    def _writable_rows(self, ps: "_PairState") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The list's rows, rows_i and certificate budgets for an evaluation to write into:
+        the arrays themselves when this scene's last evaluation made them and nobody took
+        them since (:meth:`snapshot`, :meth:`local_state`), else copies, which the next
+        evaluations then write into in place.  A deck step thus copies the list's rows once,
+        not at each of its internal steps."""
+        own = self._rows_written
+        if (own is not None and own[0] is ps.rows_f and own[1] is ps.rows_i
+                and own[2] is ps.budget):
+            return own
+        self._rows_written = (ps.rows_f.copy(), ps.rows_i.copy(), ps.budget.copy())
+        return self._rows_written
 
     def contact_set(self, reach: np.ndarray, monitored: int, failed: int = 0,
                     dropped: np.ndarray | None = None) -> ContactSet:

@@ -72,7 +72,8 @@ import numpy as np
 from ..contact.contactset import ContactSet
 from ..dynamics.contact_state import ContactState
 from ..dynamics.energy import EnergyLedger
-from ..dynamics.forces import N_TERMS, match_history, wall_loads
+from ..dynamics.forces import (N_TERMS, T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_B,
+                               match_history, wall_loads)
 from ..dynamics.images import ImageBodies
 from ..dynamics.rigid import omega_world
 from ..dynamics.rolling import NSPRING
@@ -108,6 +109,8 @@ PERIODIC_CS_NEAR = ("near_image",)
 PERIODIC_PAIR_FIELDS = ("pair_shift",)
 
 _TAG_LOADS = 11
+#: the work terms a counted contact's half kick logs (body A is a particle: no T_WALL_A)
+KICK_TERMS = np.array([T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_B])
 
 
 def _timed(kind: str) -> Callable:
@@ -182,6 +185,14 @@ def merge_by_key(pieces: list[dict], key: str, order: Callable | None = None) ->
     return {name: arr[rank] for name, arr in out.items()}
 
 
+def _all_terms(kept: np.ndarray) -> np.ndarray:
+    """A half kick's work terms (K, N_TERMS) from the columns :data:`KICK_TERMS` logged."""
+    kept = np.asarray(kept).reshape(-1, len(KICK_TERMS))
+    terms = np.zeros((kept.shape[0], N_TERMS))
+    terms[:, KICK_TERMS] = kept
+    return terms
+
+
 def positions_of(keys_in_order: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """The rows of ``keys`` (each present, unique) in ``keys_in_order`` (any order)."""
     by_key = np.argsort(keys_in_order, kind="stable")
@@ -217,6 +228,8 @@ class Domain:
         self._steps_since_cut = 0
         self.cuts = 1
         self.events: list[tuple] = []
+        #: the contact keys (array) of the last logged kick (:meth:`log_kick`)
+        self._kicked: np.ndarray | None = None
         self.lcps = 0                  # counted LCPs since the last deck end
         self.failed = 0                # counted failed LCPs since the last deck end
         #: bytes this rank sent: ghosts' loads (point-to-point) and its part of the gathers
@@ -311,6 +324,7 @@ class Domain:
         """Before the internal steps of a deck step (also when one is repeated): a fresh log,
         and the idle particles frozen."""
         self.events = []
+        self._kicked = None
         self.failed = 0
         self.freeze()
 
@@ -438,10 +452,17 @@ class Domain:
     # ------------------------------------------------------------------ the energy ledger
     def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
         """Keep the work terms (K, N_TERMS) of a half kick's counted contacts, with their keys
-        and bodies, for the deck end's replay."""
+        and bodies, for the deck end's replay.  The second half kick of an internal step and
+        the first of the next one kick with the same contacts: the later one logs its terms
+        alone (its rows' keys and bodies are the earlier one's).  Body A is a particle, so
+        its wall term (``T_WALL_A``) is not kept."""
         sel = self.counted(a)
-        self.events.append(("kick", dict(key=key[sel], a=a[sel], b=b[sel],
-                                         t=np.ascontiguousarray(terms[sel]))))
+        t = np.ascontiguousarray(terms[sel][:, KICK_TERMS])
+        if self._kicked is not None and self._kicked is key:
+            self.events.append(("kick", dict(t=t)))
+            return
+        self._kicked = key
+        self.events.append(("kick", dict(key=key[sel], a=a[sel], b=b[sel], t=t)))
 
     def log_dropped(self, a: np.ndarray, key: np.ndarray, elastic: np.ndarray) -> None:
         """Keep the normal elastic energy (J) of counted contacts left out after failed LCPs
@@ -458,19 +479,29 @@ class Domain:
     def _replay(self, logs: list[list[tuple]]) -> None:
         """The serial ledger updates from all ranks' logs: each event's rows merged in key
         order and booked as one rank books them (:func:`~nurbsdem.dynamics.step.book_kick`,
-        ``DemSystem._book_dropped``, ``DemSystem._apply_wrap``)."""
+        ``DemSystem._book_dropped``, ``DemSystem._apply_wrap``).  A kick logged without
+        keys (:meth:`log_kick`) takes the rows and order of that rank's last kick."""
         s = self.system
+        last: list[dict | None] = [None] * len(logs)
         for k, (kind, *_) in enumerate(logs[0]):
             if kind == "wrap":
                 s.ledger.external_work += logs[0][k][1]
                 continue
-            rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
             if kind == "kick":
+                pieces = []
+                for r, log in enumerate(logs):
+                    ev = log[k][1]
+                    if "key" in ev:
+                        last[r] = ev
+                    pieces.append(dict(last[r], t=ev["t"]))
+                rows = merge_by_key(pieces, "key", self.order)
                 ledger = s.ledger.to_array()
-                book_kick(np.ascontiguousarray(rows["t"]).reshape(-1, N_TERMS), rows["a"],
-                          rows["b"], self.n, ledger, s.wall_work)
+                book_kick(_all_terms(rows["t"]), rows["a"], rows["b"], self.n, ledger,
+                          s.wall_work)
                 s.ledger = EnergyLedger.from_array(ledger)
-            elif rows["key"].shape[0]:
+                continue
+            rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
+            if rows["key"].shape[0]:
                 s.ledger.dissipated_normal += float(rows["e"].sum())
 
     # ------------------------------------------------------------------ deck ends
@@ -512,6 +543,7 @@ class Domain:
             s.contacts = c._replace(radius=radius)
         self._replay([g[3] for g in gathered])
         self.events = []
+        self._kicked = None
         counts = np.sum([g[4] for g in gathered], axis=0)
         sc.timers.lcps += int(counts[0])
         s.failed_in_step = int(counts[1])
