@@ -6,17 +6,21 @@ the cache folder and reused), then ``--measure`` more deck steps are run from th
 on 1 rank with 1 thread, 1 rank with all cores as threads (numba), and P = 2.. ranks with
 one thread each, each run after :data:`WARM_STEPS` deck steps that are not measured (a
 process loads its cached kernels at their first call: one rank loads its compiled loop in
-the set-up, several ranks the Python driver's kernels in their first steps).  Printed per configuration: wall time per deck step, speed-up and efficiency
-against 1 rank x 1 thread, the ranks' ghost counts, the bytes each rank sent per internal step,
-and whether results.h5 equals the 1-rank run bit for bit (it must).
+the set-up, several ranks the Python driver's kernels in their first steps).  Each
+configuration runs ``--repeat`` times, the configurations alternated, and its median counts:
+on a shared machine one run's time per deck step can be 20 % off the next one's.  Printed
+per configuration: wall time per deck step (the median, and the range of the runs),
+speed-up and efficiency against 1 rank x 1 thread, the ranks' ghost counts, the bytes each
+rank sent per internal step, and whether results.h5 equals the 1-rank run bit for bit (it
+must).
 
 Weak scaling: settled packs of N/P particles per rank (the same deck and settling), and
 falling packs of ``--weak-n`` particles per rank (where the work each rank repeats for all
-particles shows; after :data:`WARM_STEPS` deck steps too), on 1.. P ranks (as far as a 2-core machine goes), 1 thread each:
-efficiency = t(1 rank) / t(P ranks).
+particles shows; after :data:`WARM_STEPS` deck steps too), on 1.. P ranks (as far as a
+2-core machine goes), 1 thread each, one run each: efficiency = t(1 rank) / t(P ranks).
 
 Usage: .venv/bin/python benchmarks/bench_mpi.py [--n 10000] [--settle 0.9] [--measure 20]
-       [--ranks 2] [--weak-n 1500] [--cache DIR]
+       [--ranks 2] [--weak-n 1500] [--repeat 3] [--cache DIR]
 Prints one JSON line at the end (``RESULT {...}``) for benchmarks/report.py.
 """
 from __future__ import annotations
@@ -166,34 +170,54 @@ def _measure(deck: Path, ckpt: Path, p: int, t: int, out: Path) -> dict:
                 domain=res.get("ranks", []))
 
 
-def strong(n: int, settle: float, measure: int, ranks: int, cache: Path) -> list[dict]:
+def strong(n: int, settle: float, measure: int, ranks: int, cache: Path,
+           repeat: int = 1) -> list[dict]:
+    """The strong scaling: each configuration measured ``repeat`` times, the configurations
+    alternated (in reverse order every other round), so that a change of the machine's speed
+    during the runs falls on all of them; each row's ``per_step`` is the median of its runs,
+    ``per_step_runs`` all of them."""
     deck, ckpt = settled_checkpoint(n, settle, measure, cache, ranks)
     cores = os.cpu_count() or 1
     configs = [(1, 1), (1, cores)] + [(p, 1) for p in range(2, ranks + 1)]
-    rows = []
+    runs: dict[tuple, list[dict]] = {c: [] for c in configs}
     with tempfile.TemporaryDirectory() as tmp:
         ref = None
-        for p, t in configs:
-            out = Path(tmp) / f"r{p}t{t}"
-            row = _measure(deck, ckpt, p, t, out)
-            row["same"] = True if ref is None else _same_results(out / "results.h5", ref)
-            ref = ref or out / "results.h5"
-            rows.append(row)
+        for k in range(max(repeat, 1)):
+            for p, t in (configs if k % 2 == 0 else configs[::-1]):
+                out = Path(tmp) / f"r{p}t{t}k{k}"
+                row = _measure(deck, ckpt, p, t, out)
+                row["same"] = True if ref is None else _same_results(out / "results.h5", ref)
+                ref = ref or out / "results.h5"
+                runs[(p, t)].append(row)
+    rows = [_median_row(runs[c]) for c in configs]
     base = rows[0]["per_step"]
     print(f"strong scaling, {n} settled paper particles, {measure} deck steps of 1e-3 s from the "
           f"checkpoint ({rows[0]['substeps'] / max(rows[0]['steps'], 1):.1f} sub-steps, "
-          f"{rows[0]['active'] / max(rows[0]['steps'], 1):.0f} contacts per deck step):")
+          f"{rows[0]['active'] / max(rows[0]['steps'], 1):.0f} contacts per deck step"
+          + (f"; medians of {repeat} alternated runs" if repeat > 1 else "") + "):")
     for r in rows:
         r["speedup"] = base / r["per_step"]
         r["efficiency"] = r["speedup"] / (r["ranks"] * r["threads"])
         ghosts = [d.get("ghosts", 0) for d in r["domain"]]
         sent = [d.get("bytes_per_internal_step", 0) for d in r["domain"]]
+        spread = (f" (runs {min(r['per_step_runs']):.3f}-{max(r['per_step_runs']):.3f})"
+                  if len(r["per_step_runs"]) > 1 else "")
         print(f"  {r['ranks']} rank(s) x {r['threads']} thread(s): {r['per_step']:.3f} s per deck "
-              f"step, speed-up {r['speedup']:.2f}, efficiency {r['efficiency']:.2f}"
+              f"step{spread}, speed-up {r['speedup']:.2f}, efficiency {r['efficiency']:.2f}"
               + (f", ghosts {ghosts}, sent {[f'{b / 1e3:.1f} kB' for b in sent]} per internal step"
                  if ghosts else "")
               + f", results {'equal to 1 rank bit for bit' if r['same'] else 'DIFFER'}", flush=True)
     return rows
+
+
+def _median_row(runs: list[dict]) -> dict:
+    """One configuration's row: its median run (the lower middle one for an even count), with
+    every run's time per deck step, and ``same`` only when every run's results were equal."""
+    order = sorted(range(len(runs)), key=lambda i: runs[i]["per_step"])
+    row = dict(runs[order[(len(runs) - 1) // 2]])
+    row["per_step_runs"] = [r["per_step"] for r in runs]
+    row["same"] = all(r["same"] for r in runs)
+    return row
 
 
 def weak_settled(n_per_rank: int, ranks: int, settle: float, measure: int, cache: Path,
@@ -253,6 +277,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--ranks", type=int, default=2)
     ap.add_argument("--weak-n", type=int, default=1500)
     ap.add_argument("--cache", type=Path, default=HERE / ".cache")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="alternated runs of each strong-scaling configuration (their median)")
     a = ap.parse_args(argv)
     if _mpiexec() is None:
         print("bench_mpi: no mpiexec (pip install 'nurbsdem[mpi]'): nothing measured")
@@ -262,7 +288,7 @@ def main(argv: list[str] | None = None) -> dict:
     except ImportError:
         print("bench_mpi: mpi4py is not installed (pip install 'nurbsdem[mpi]'): nothing measured")
         return {}
-    rows = strong(a.n, a.settle, a.measure, a.ranks, a.cache)
+    rows = strong(a.n, a.settle, a.measure, a.ranks, a.cache, a.repeat)
     res = dict(n=a.n, cores=os.cpu_count(), strong=rows,
                weak_settled=weak_settled(a.n // a.ranks, a.ranks, a.settle, a.measure, a.cache,
                                          rows, a.n),

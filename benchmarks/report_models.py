@@ -164,8 +164,9 @@ def section_mpi(rep: Report) -> None:
     from bench_settled_pack import pack_region
     rep.add("## 8. Runs on several MPI ranks\n")
     n, settle, measure = (600, 0.05, 3) if rep.quick else (10000, 0.9, 20)
+    repeat = 1 if rep.quick else 3
     res = bench_mpi.main(["--n", str(n), "--settle", str(settle), "--measure", str(measure),
-                          "--weak-n", "300" if rep.quick else "1500"])
+                          "--weak-n", "300" if rep.quick else "1500", "--repeat", str(repeat)])
     if not res:
         rep.add("**Not measured**: mpi4py or mpiexec is missing (`pip install "
                 "'nurbsdem[mpi]'`).\n")
@@ -174,7 +175,10 @@ def section_mpi(rep: Report) -> None:
     for r in res["strong"]:
         ghosts = [d["ghosts"] for d in r["domain"]]
         wait = [sum(d["seconds"].values()) / max(r["steps"], 1) for d in r["domain"]]
-        rows.append([r["ranks"], r["threads"], fmt(r["per_step"], ".3f"), fmt(r["speedup"], ".2f"),
+        runs = r.get("per_step_runs", [r["per_step"]])
+        rows.append([r["ranks"], r["threads"], fmt(r["per_step"], ".3f")
+                     + (f" ({min(runs):.3f}–{max(runs):.3f})" if len(runs) > 1 else ""),
+                     fmt(r["speedup"], ".2f"),
                      fmt(r["efficiency"], ".2f"), str(ghosts) if ghosts else "",
                      ", ".join(f"{w:.3f}" for w in wait),
                      "yes" if r["same"] else "**no**"])
@@ -183,7 +187,9 @@ def section_mpi(rep: Report) -> None:
             "deck steps of 1e-3 s from its checkpoint on each configuration, after "
             f"{bench_mpi.WARM_STEPS} deck steps that load the cached kernels (`mpiexec -n P`, "
             "`NUMBA_NUM_THREADS` threads per rank); time of the time loop per deck step, "
-            "including the communication and the wait for the slowest rank.\n\n" +
+            "including the communication and the wait for the slowest rank"
+            + (f"; each configuration run {repeat} times, alternated: the median, with the "
+               "range of the runs in brackets" if repeat > 1 else "") + ".\n\n" +
             md_table(["ranks", "threads", "s per deck step", "speed-up", "efficiency",
                       "ghosts per rank", "s per deck step in communication (per rank)",
                       "results.h5 equal to 1 rank"], rows) + "\n")
