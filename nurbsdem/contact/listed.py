@@ -7,8 +7,8 @@ then for each pair of NURBS bodies the patch boxes, whose overlaps become the pa
 patches (masks that direct a cold start); exact spheres need no boxes.
 
 Then the pairs of the list that are not certified apart (``due``) get their rows from
-:func:`solve_due_into`, in place in the list's rows (:func:`solve_due`: the scene's copy of
-it), each by what its shapes are (the scene's module docstring):
+:func:`solve_due_into`, in place in the list's rows (:func:`solve_due`: the scene's entry
+to it), each by what its shapes are (the scene's module docstring):
 
 * exact sphere against exact sphere or a flat wall: the closed forms
   (:mod:`nurbsdem.contact.sphere`);
@@ -422,14 +422,12 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
 
 @njit(cache=True)
 def solve_due(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, wall_d, nt):
-    """Rows (len(due), NF) and (len(due), NI) of the listed pairs ``due``: a copy of their
-    previous rows solved by :func:`solve_due_into` (the list's rows unchanged).  Returns
-    (rows_f, rows_i, pairs solved by the point solver)."""
-    rf, ri = rows_f[due], rows_i[due]
-    D = due.shape[0]
-    points, _ = solve_due_into_ptr((st, list_a[due], list_b[due], mask_a[due], mask_b[due], rf,
-                                    ri, np.arange(D), pos, R, wall_d, nt))
-    return rf, ri, points
+    """The listed pairs ``due`` solved in place in the list's rows rows_f (L,NF), rows_i (L,NI)
+    by :func:`solve_due_into` (the scene's entry to it; the compiled loop calls that
+    directly).  Returns the pairs solved by the point solver."""
+    points, _ = solve_due_into_ptr((st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due,
+                                    pos, R, wall_d, nt))
+    return points
 
 
 #: :func:`scene_list` and :func:`solve_due_into` compiled once and called by the compiled

@@ -87,7 +87,7 @@ from .listed import SceneTables, scene_list, scene_tables, solve_due
 from .periodic import PeriodicCell, minimum_image, wrap
 from .periodic_scene import image_scene, periodic_list
 from .verlet import (advance_odometers, carry_rows, contact_arrays, due_rows, list_is_stale,
-                     renew_certificates, repose, reposed_bodies, swap_rows)
+                     renew_certificates, repose, reposed_bodies)
 from .flat_wall import wall_frame, wall_geometry
 
 log = logging.getLogger("nurbsdem")
@@ -393,9 +393,9 @@ class SceneContacts:
         ps = self.pairs
         reach, due = due_rows(ps.a, ps.b, self.odo, ps.budget, np.bool_(self.certificates))
         t1 = time.perf_counter()
-        rf, ri = self._solve(due, pos, R, pose[2])
+        rows, prev = self._solve(due, pos, R, pose[2])
         t2 = time.perf_counter()
-        cs = self._assemble(due, rf, ri, reach, pose)
+        cs = self._assemble(due, rows, prev, reach, pose)
         cs.wrap = wrap_shift
         self.timers.global_search += t1 - t0
         self.timers.lcp += t2 - t1
@@ -409,27 +409,31 @@ class SceneContacts:
         return cs
 
     def _solve(self, due: np.ndarray, pos: np.ndarray, R: np.ndarray, wall_d: np.ndarray):
-        """LCP rows of the listed pairs ``due``, each by what its shapes are, warm-started,
-        failed warm starts retried cold (:func:`~nurbsdem.contact.listed.solve_due`)."""
+        """The listed pairs ``due`` solved in place in the list's rows (:meth:`_writable_rows`),
+        each by what its shapes are, warm-started, failed warm starts retried cold
+        (:func:`~nurbsdem.contact.listed.solve_due`).  Returns the rows (rows_f, rows_i,
+        budget) and the due pairs' previous rows (what a failed pair falls back on)."""
         ps = self.pairs
+        rows = self._writable_rows(ps)
+        prev = (rows[0][due], rows[1][due])
         st, list_b = self.tables(), ps.b
         if self.cell is not None:          # images of B as extra particles (periodic_scene)
             st, list_b, pos, R = image_scene(st, self.cell, ps.b, self.pair_shift, pos, R)
-        rf, ri, points = solve_due(st, ps.a, list_b, ps.mask_a, ps.mask_b, ps.rows_f,
-                                   ps.rows_i, np.ascontiguousarray(due, np.int64), pos, R,
-                                   np.ascontiguousarray(wall_d, float), numba.get_num_threads())
-        self.point_solves += points
-        return rf, ri
+        self.point_solves += solve_due(st, ps.a, list_b, ps.mask_a, ps.mask_b, rows[0], rows[1],
+                                       np.ascontiguousarray(due, np.int64), pos, R,
+                                       np.ascontiguousarray(wall_d, float),
+                                       numba.get_num_threads())
+        return rows, prev
 
-    def _assemble(self, due, rf, ri, reach, pose) -> ContactSet:
-        """Store the new rows (failed ones answered by the previous solution moved rigidly,
-        once, or left out: module docstring), renew the certificates, and make the ContactSet."""
+    def _assemble(self, due, rows, prev, reach, pose) -> ContactSet:
+        """Store the new rows (failed ones answered by the previous solution ``prev`` moved
+        rigidly, once, or left out: module docstring), renew the certificates, and make the
+        ContactSet."""
         ps = self.pairs
         keys = ps.keys
-        failed = ri[:, I_FAIL].astype(bool)
-        rows_f, rows_i, budget = self._writable_rows(ps)
-        prev_f, prev_i = rf, ri
-        swap_rows(rows_f, rows_i, due, prev_f, prev_i)   # the new rows in, the previous out
+        rows_f, rows_i, budget = rows
+        prev_f, prev_i = prev
+        failed = rows_i[due, I_FAIL] != 0
         reused = np.zeros(ps.a.shape[0], bool)
         dropped = []
         for r in np.nonzero(failed)[0].tolist():

@@ -261,24 +261,6 @@ def _renew_threads(budget, due, rows_f, rows_i, reach) -> None:
 
 
 @njit(cache=True)
-def swap_rows(rows_f: np.ndarray, rows_i: np.ndarray, due: np.ndarray, new_f: np.ndarray,
-              new_i: np.ndarray) -> None:
-    """Exchange (in place) the listed pairs' rows rows_f[due[r]], rows_i[due[r]] of the whole
-    list with an evaluation's rows new_f[r], new_i[r]: the new rows go into the list and its
-    previous ones come out in new_f, new_i (what a failed pair falls back on)."""
-    for r in range(due.shape[0]):
-        j = due[r]
-        for c in range(rows_f.shape[1]):
-            t = rows_f[j, c]
-            rows_f[j, c] = new_f[r, c]
-            new_f[r, c] = t
-        for c in range(rows_i.shape[1]):
-            k = rows_i[j, c]
-            rows_i[j, c] = new_i[r, c]
-            new_i[r, c] = k
-
-
-@njit(cache=True)
 def renew_certificates(budget: np.ndarray, due: np.ndarray, rows_f: np.ndarray,
                        rows_i: np.ndarray, reach: np.ndarray) -> None:
     """Certificates (in place) of the listed pairs ``due`` just solved (their rows
