@@ -109,8 +109,8 @@ PERIODIC_CS_NEAR = ("near_image",)
 PERIODIC_PAIR_FIELDS = ("pair_shift",)
 
 _TAG_LOADS = 11
-#: the work terms a counted contact's half kick logs (body A is a particle: no T_WALL_A)
-KICK_TERMS = np.array([T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_B])
+#: the work terms every counted contact's half kick logs (:meth:`Domain.log_kick`)
+KICK_TERMS = np.array([T_DAMP_N, T_SPRING])
 
 
 def _timed(kind: str) -> Callable:
@@ -185,11 +185,27 @@ def merge_by_key(pieces: list[dict], key: str, order: Callable | None = None) ->
     return {name: arr[rank] for name, arr in out.items()}
 
 
-def _all_terms(kept: np.ndarray) -> np.ndarray:
-    """A half kick's work terms (K, N_TERMS) from the columns :data:`KICK_TERMS` logged."""
-    kept = np.asarray(kept).reshape(-1, len(KICK_TERMS))
+def _logged_terms(terms: np.ndarray, wall: np.ndarray) -> dict:
+    """A half kick's work terms (K, N_TERMS) of a rank's counted contacts as
+    :meth:`Domain.log_kick` keeps them: the columns :data:`KICK_TERMS`; ``T_DAMP_T`` unless
+    every entry is +0.0 (no tangential dashpot); ``T_WALL_B`` of the contacts with a wall
+    (``wall`` (K,) bool) only.  Body A is a particle, so ``T_WALL_A`` is never booked."""
+    out = dict(t=np.ascontiguousarray(terms[:, KICK_TERMS]),
+               w=np.ascontiguousarray(terms[wall, T_WALL_B]))
+    damp_t = np.ascontiguousarray(terms[:, T_DAMP_T])
+    if np.any(damp_t.view(np.int64)):          # +0.0 alone is all-zero bits
+        out["dt"] = damp_t
+    return out
+
+
+def _all_terms(logged: dict, wall: np.ndarray) -> np.ndarray:
+    """The work terms (K, N_TERMS) of :func:`_logged_terms` again (the same bits)."""
+    kept = np.asarray(logged["t"]).reshape(-1, len(KICK_TERMS))
     terms = np.zeros((kept.shape[0], N_TERMS))
     terms[:, KICK_TERMS] = kept
+    if "dt" in logged:
+        terms[:, T_DAMP_T] = logged["dt"]
+    terms[wall, T_WALL_B] = logged["w"]
     return terms
 
 
@@ -452,17 +468,17 @@ class Domain:
     # ------------------------------------------------------------------ the energy ledger
     def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
         """Keep the work terms (K, N_TERMS) of a half kick's counted contacts, with their keys
-        and bodies, for the deck end's replay.  The second half kick of an internal step and
-        the first of the next one kick with the same contacts: the later one logs its terms
-        alone (its rows' keys and bodies are the earlier one's).  Body A is a particle, so
-        its wall term (``T_WALL_A``) is not kept."""
+        and bodies, for the deck end's replay (the terms as :func:`_logged_terms` keeps
+        them).  The second half kick of an internal step and the first of the next one kick
+        with the same contacts: the later one logs its terms alone (its rows' keys and bodies
+        are the earlier one's)."""
         sel = self.counted(a)
-        t = np.ascontiguousarray(terms[sel][:, KICK_TERMS])
+        t = _logged_terms(terms[sel], b[sel] >= self.n)
         if self._kicked is not None and self._kicked is key:
-            self.events.append(("kick", dict(t=t)))
+            self.events.append(("kick", t))
             return
         self._kicked = key
-        self.events.append(("kick", dict(key=key[sel], a=a[sel], b=b[sel], t=t)))
+        self.events.append(("kick", dict(t, key=key[sel], a=a[sel], b=b[sel])))
 
     def log_dropped(self, a: np.ndarray, key: np.ndarray, elastic: np.ndarray) -> None:
         """Keep the normal elastic energy (J) of counted contacts left out after failed LCPs
@@ -493,11 +509,12 @@ class Domain:
                     ev = log[k][1]
                     if "key" in ev:
                         last[r] = ev
-                    pieces.append(dict(last[r], t=ev["t"]))
+                    rows = last[r]
+                    pieces.append(dict(key=rows["key"], a=rows["a"], b=rows["b"],
+                                       t=_all_terms(ev, rows["b"] >= self.n)))
                 rows = merge_by_key(pieces, "key", self.order)
                 ledger = s.ledger.to_array()
-                book_kick(_all_terms(rows["t"]), rows["a"], rows["b"], self.n, ledger,
-                          s.wall_work)
+                book_kick(rows["t"], rows["a"], rows["b"], self.n, ledger, s.wall_work)
                 s.ledger = EnergyLedger.from_array(ledger)
                 continue
             rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
