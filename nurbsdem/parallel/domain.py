@@ -496,30 +496,41 @@ class Domain:
         """The serial ledger updates from all ranks' logs: each event's rows merged in key
         order and booked as one rank books them (:func:`~nurbsdem.dynamics.step.book_kick`,
         ``DemSystem._book_dropped``, ``DemSystem._apply_wrap``).  A kick logged without
-        keys (:meth:`log_kick`) takes the rows and order of that rank's last kick."""
+        keys (:meth:`log_kick`) takes the rows of that rank's last kick; while no rank's rows
+        change, the merged order of the last kick is used again."""
         s = self.system
         last: list[dict | None] = [None] * len(logs)
+        merged = None
         for k, (kind, *_) in enumerate(logs[0]):
             if kind == "wrap":
                 s.ledger.external_work += logs[0][k][1]
                 continue
             if kind == "kick":
-                pieces = []
-                for r, log in enumerate(logs):
-                    ev = log[k][1]
-                    if "key" in ev:
-                        last[r] = ev
-                    rows = last[r]
-                    pieces.append(dict(key=rows["key"], a=rows["a"], b=rows["b"],
-                                       t=_all_terms(ev, rows["b"] >= self.n)))
-                rows = merge_by_key(pieces, "key", self.order)
+                events = [log[k][1] for log in logs]
+                fresh = [r for r, ev in enumerate(events) if "key" in ev]
+                for r in fresh:
+                    last[r] = events[r]
+                if fresh or merged is None:
+                    merged = self._kick_rows(last)
+                rank, a, b, walls = merged
+                terms = np.concatenate([_all_terms(ev, w) for ev, w in zip(events, walls)])
                 ledger = s.ledger.to_array()
-                book_kick(rows["t"], rows["a"], rows["b"], self.n, ledger, s.wall_work)
+                book_kick(terms[rank], a, b, self.n, ledger, s.wall_work)
                 s.ledger = EnergyLedger.from_array(ledger)
                 continue
             rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
             if rows["key"].shape[0]:
                 s.ledger.dissipated_normal += float(rows["e"].sum())
+
+    def _kick_rows(self, last: list[dict]) -> tuple:
+        """The serial order of the ranks' kick rows ``last`` (each rank's keys, bodies), as
+        :func:`merge_by_key` orders them: (the permutation of the ranks' rows concatenated,
+        body A and body B in that order, each rank's wall contacts (K_r,) bool)."""
+        keys = np.concatenate([p["key"] for p in last])
+        rank = np.argsort(self.order(keys), kind="stable")
+        a = np.concatenate([p["a"] for p in last])[rank]
+        b = np.concatenate([p["b"] for p in last])[rank]
+        return rank, a, b, [p["b"] >= self.n for p in last]
 
     # ------------------------------------------------------------------ deck ends
     @_timed("gathers")
