@@ -523,14 +523,15 @@ class Domain:
                 s.ledger.dissipated_normal += float(rows["e"].sum())
 
     def _kick_rows(self, last: list[dict]) -> tuple:
-        """The serial order of the ranks' kick rows ``last`` (each rank's keys, bodies), as
-        :func:`merge_by_key` orders them: (the permutation of the ranks' rows concatenated,
-        body A and body B in that order, each rank's wall contacts (K_r,) bool)."""
-        keys = np.concatenate([p["key"] for p in last])
-        rank = np.argsort(self.order(keys), kind="stable")
-        a = np.concatenate([p["a"] for p in last])[rank]
-        b = np.concatenate([p["b"] for p in last])[rank]
-        return rank, a, b, [p["b"] >= self.n for p in last]
+        """The ranks' kick rows ``last`` (each rank's keys, bodies) merged in the serial order
+        (:func:`merge_by_key`): (the position of each merged row among the ranks' rows
+        concatenated, body A and body B in that order, each rank's wall contacts (K_r,)
+        bool)."""
+        start = np.cumsum([0] + [p["key"].shape[0] for p in last])
+        rows = merge_by_key([dict(key=p["key"], a=p["a"], b=p["b"],
+                                  at=np.arange(start[r], start[r + 1]))
+                             for r, p in enumerate(last)], "key", self.order)
+        return rows["at"], rows["a"], rows["b"], [p["b"] >= self.n for p in last]
 
     # ------------------------------------------------------------------ deck ends
     @_timed("gathers")
