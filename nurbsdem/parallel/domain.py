@@ -4,12 +4,17 @@ communicator, **bit for bit equal to the serial run**.
 Ownership
 ---------
 Space is cut by recursive coordinate bisection (:func:`decompose`): the particles are split
-at the median of the longest extent of their centroids, recursively, into P groups of equal
-count (ties broken by particle index, so every rank computes the same cut).  A rank *owns* the
-particles of its group: it integrates them and decides everything about them.  The cut is
-redone (particles *migrate*) after an accepted deck step when the ghost count has grown by
-half since the last cut, or every :data:`REBALANCE_EVERY` deck steps: rebalanced by particle
-count as the pack settles.
+across the longest extent of their centroids, recursively, into P groups of equal weight
+(ties broken by particle index, so every rank computes the same cut).  A rank *owns* the
+particles of its group: it integrates them and decides everything about them.  The first cut
+weighs every particle alike.  Then each rank counts the contact work of its pairs (each due
+pair's solver cost, :data:`~nurbsdem.contact.kinds.SOLVE_COST`, to both its particles) and
+the cut is redone (particles *migrate*) with those weights after an accepted deck step when
+the ranks' shares of the work differ from even by more than :data:`WORK_IMBALANCE` and the
+weighted cut lowers that by as much (a dense pack's bottom half has more contacts per
+particle than its top), when the ghost count has grown by half since the last cut, or every
+:data:`REBALANCE_EVERY` deck steps.  The cut changes who computes what, never a result's
+bits.
 
 Contacts and ghosts
 -------------------
@@ -70,6 +75,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..contact.contactset import ContactSet
+from ..contact.kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, PAIR_SOLVER,
+                             POINT_SURFACE, SPHERE, WALL_SUPPORT)
 from ..dynamics.contact_state import ContactState
 from ..dynamics.energy import EnergyLedger
 from ..dynamics.forces import (N_TERMS, T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_B,
@@ -84,6 +91,22 @@ from ..geometry.rotation import quats_to_matrices
 #: by GHOST_GROWTH since the last cut
 REBALANCE_EVERY = 200
 GHOST_GROWTH = 1.5
+#: a re-cut also happens when the most loaded rank's share of the counted work exceeds the
+#: even share by more than this fraction and a cut by the work lowers that excess by as much
+#: (the 5 % of LIGGGHTS' ``fix balance`` default threshold of 1.05)
+WORK_IMBALANCE = 0.05
+#: what one solve of each pair solver of the scene's list (CLOSED_FORM, POINT_SURFACE, LCP,
+#: WALL_SUPPORT of :mod:`nurbsdem.contact.kinds`) costs, in hundredths of a warm LCP of two
+#: paper particles: the solvers' warm times in the report's contact benchmarks, rounded (a
+#: closed form is a few lines of arithmetic; the point solver and the wall's support mapping
+#: have two and three unknowns against the LCP's six).  Integers, so that the ranks' sums are
+#: exact and every rank computes the same cut.
+SOLVE_COST = np.zeros(max(CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT) + 1, np.int64)
+SOLVE_COST[[CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT]] = 5, 30, 100, 50
+#: the work of one particle's integration and loads per evaluation, in the units of
+#: :data:`~nurbsdem.contact.kinds.SOLVE_COST` (the step outside the contact problems takes
+#: about a third of a warm LCP per particle in the settled packs of the report)
+BODY_COST = 30
 
 #: the fields of a DemSystem's last contacts (:class:`~nurbsdem.dynamics.contact_state.
 #: ContactState`) merged by pair key at each deck end (the images: in a periodic cell only)
@@ -139,16 +162,21 @@ def _nbytes(obj: Any) -> int:
     return 8
 
 
-def decompose(x: np.ndarray, parts: int) -> np.ndarray:
+def decompose(x: np.ndarray, parts: int, weight: np.ndarray | None = None) -> np.ndarray:
     """Owner rank (N,) of each particle: recursive coordinate bisection of the centroids x (N,3)
-    m into ``parts`` groups of equal count (±1), cut at the median of the longest extent, ties
-    by particle index (deterministic)."""
+    m into ``parts`` groups, cut across the longest extent, ties by particle index
+    (deterministic).  Without ``weight`` the groups have equal counts (±1); with ``weight``
+    (N,) int64 >= 0, equal weights: each cut leaves on its low side the particles, in order
+    along the axis, whose running sum stays within the low groups' share, and at least one
+    particle per group."""
     owner = np.zeros(x.shape[0], np.int64)
-    _bisect(x, np.arange(x.shape[0]), 0, parts, owner)
+    w = np.ones(x.shape[0], np.int64) if weight is None else np.asarray(weight, np.int64)
+    _bisect(x, w, np.arange(x.shape[0]), 0, parts, owner)
     return owner
 
 
-def _bisect(x: np.ndarray, ids: np.ndarray, first: int, parts: int, owner: np.ndarray) -> None:
+def _bisect(x: np.ndarray, w: np.ndarray, ids: np.ndarray, first: int, parts: int,
+            owner: np.ndarray) -> None:
     if parts == 1 or ids.size == 0:
         owner[ids] = first
         return
@@ -156,9 +184,37 @@ def _bisect(x: np.ndarray, ids: np.ndarray, first: int, parts: int, owner: np.nd
     axis = int(np.argmax(pts.max(axis=0) - pts.min(axis=0)))
     order = ids[np.lexsort((ids, pts[:, axis]))]
     left = parts // 2
-    k = (ids.size * left) // parts
-    _bisect(x, order[:k], first, left, owner)
-    _bisect(x, order[k:], first + left, parts - left, owner)
+    running = np.cumsum(w[order])
+    k = int(np.searchsorted(running, (int(running[-1]) * left) // parts, side="right"))
+    if ids.size >= parts:
+        k = min(max(k, left), ids.size - (parts - left))
+    _bisect(x, w, order[:k], first, left, owner)
+    _bisect(x, w, order[k:], first + left, parts - left, owner)
+
+
+def pair_solvers(is_sphere: np.ndarray, a: np.ndarray, b: np.ndarray, n: int,
+                 point_surface: bool) -> np.ndarray:
+    """The pair solver (:mod:`nurbsdem.contact.kinds`) of each listed pair (a[k], b[k]) of a
+    scene, as :func:`~nurbsdem.contact.kinds.pair_solver` picks it: body a is a particle, b a
+    particle or a flat wall (index >= n); ``is_sphere`` (n,) which particles are exact
+    spheres; ``point_surface``: the scene solves spheres against NURBS particles by the
+    point solver."""
+    kind_a = np.where(is_sphere[a], SPHERE, NURBS_PARTICLE)
+    part = b < n
+    kind_b = np.full(b.shape[0], FLAT_WALL, np.int64)
+    kind_b[part] = np.where(is_sphere[b[part]], SPHERE, NURBS_PARTICLE)
+    solver = PAIR_SOLVER[kind_a, kind_b]
+    if not point_surface:
+        solver[solver == POINT_SURFACE] = LCP
+    return solver
+
+
+def imbalance(owner: np.ndarray, weight: np.ndarray, parts: int) -> float:
+    """How far the most loaded of ``parts`` groups is above the even share of the total
+    ``weight`` (N,) (0: even; 0.1: 10 % above)."""
+    loads = np.bincount(owner, weights=weight.astype(float), minlength=parts)
+    mean = loads.sum() / parts
+    return float(loads.max() / mean - 1.0) if mean > 0 else 0.0
 
 
 @dataclass
@@ -246,6 +302,10 @@ class Domain:
         self.events: list[tuple] = []
         #: the contact keys (array) of the last logged kick (:meth:`log_kick`)
         self._kicked: np.ndarray | None = None
+        #: each particle's counted contact work since the last cut (:meth:`count_work`), and
+        #: the evaluations it spans
+        self.work = np.zeros(self.n, np.int64)
+        self.work_evaluations = 0
         self.lcps = 0                  # counted LCPs since the last deck end
         self.failed = 0                # counted failed LCPs since the last deck end
         #: bytes this rank sent: ghosts' loads (point-to-point) and its part of the gathers
@@ -322,6 +382,29 @@ class Domain:
         part = b < self.n
         own_b[part] = self.owned[b[part]]
         return self.owned[a] | own_b
+
+    def count_work(self, a: np.ndarray, b: np.ndarray) -> None:
+        """Count the solves of an evaluation's due pairs (a, b) of the scene's list (b may be
+        a flat wall), each at its solver's :data:`SOLVE_COST`, as the work of both their
+        particles (a wall pair's twice to its particle): the counted pairs only, so that the
+        ranks' counts summed give each pair once."""
+        sel = self.counted(a)
+        a, b = a[sel], b[sel]
+        sc = self.scene
+        cost = SOLVE_COST[pair_solvers(sc.is_sphere, a, b, self.n, sc.point_surface)]
+        part = b < self.n
+        self.work += np.bincount(a, weights=np.where(part, 1, 2) * cost,
+                                 minlength=self.n).astype(np.int64)
+        self.work += np.bincount(b[part], weights=cost[part], minlength=self.n).astype(np.int64)
+        self.work_evaluations += 1
+
+    def _weights(self) -> np.ndarray:
+        """Every particle's work since the last cut, summed over the ranks (collective; the
+        same integers on every rank), with :data:`BODY_COST` per particle and evaluation."""
+        total = np.empty_like(self.work)
+        self.comm.Allreduce(self.work, total, op=self._MPI.SUM)
+        self.sent["gathers"] += self.work.nbytes
+        return total + 2 * BODY_COST * self.work_evaluations
 
     # ------------------------------------------------------------------ ghosts
     def plan_ghosts(self, a: np.ndarray, b: np.ndarray) -> None:
@@ -653,25 +736,36 @@ class Domain:
                 f"{[c[0] for c in counts]}, ghosts {[c[1] for c in counts]}")
 
     def after_deck_step(self) -> None:
-        """After an accepted deck step: re-cut when the ghosts have grown or after
-        REBALANCE_EVERY deck steps (particles migrate with their pairs' histories)."""
+        """After an accepted deck step: re-cut by the counted work when it is uneven over the
+        ranks (module docstring), when the ghosts have grown, or after REBALANCE_EVERY deck
+        steps (particles migrate with their pairs' histories; collective)."""
         self._steps_since_cut += 1
         ghosts = self.total(self.plan.ghosts)
         if self._ghosts_at_cut < 0:
             self._ghosts_at_cut = ghosts
-        if (self._steps_since_cut < REBALANCE_EVERY
-                and ghosts <= GHOST_GROWTH * self._ghosts_at_cut + self.size):
+        weight = self._weights()
+        if (self._steps_since_cut >= REBALANCE_EVERY
+                or ghosts > GHOST_GROWTH * self._ghosts_at_cut + self.size):
+            self.recut(decompose(self.system.bodies.x, self.size, weight))
             return
-        self.recut()
+        now = imbalance(self.owner, weight, self.size)
+        if now <= WORK_IMBALANCE:
+            return
+        owner = decompose(self.system.bodies.x, self.size, weight)
+        if now - imbalance(owner, weight, self.size) > WORK_IMBALANCE:
+            self.recut(owner)
 
     @_timed("gathers")
-    def recut(self) -> None:
-        """Cut the domain anew at the current positions (collective)."""
+    def recut(self, owner: np.ndarray | None = None) -> None:
+        """Cut the domain anew (collective): to ``owner`` (N,) ranks, the same on every rank,
+        or by particle count at the current positions; the work counts start again."""
         sc = self.scene
         full = self.global_scene_state(sc.local_state())
-        self._set_owner(decompose(self.system.bodies.x, self.size))
+        self._set_owner(decompose(self.system.bodies.x, self.size) if owner is None else owner)
         sc.set_local_state(self.local_scene_state(full))
         self.plan_ghosts(sc.pairs.a, sc.pairs.b)
         self._ghosts_at_cut = self.total(self.plan.ghosts)
         self._steps_since_cut = 0
+        self.work[:] = 0
+        self.work_evaluations = 0
         self.cuts += 1
