@@ -62,8 +62,10 @@ def _mesh_floor(folder, deck):
 
 
 @needs_mpi
-@pytest.mark.parametrize("implicit, mesh", [(False, False), (True, False), (False, True)],
-                         ids=["explicit", "implicit", "mesh floor"])
+@pytest.mark.parametrize("implicit, mesh", [
+    # the suite's time: the implicit and mesh-floor runs hold the explicit run's scene
+    pytest.param(False, False, id="explicit", marks=pytest.mark.slow),
+    pytest.param(True, False, id="implicit"), pytest.param(False, True, id="mesh floor")])
 def test_the_periodic_shear_box_on_two_ranks(tmp_path, implicit, mesh):
     deck = _deck(tmp_path, implicit)
     if mesh:

@@ -50,6 +50,7 @@ from ..jit import kernel
 from .flat_wall import sphere_wall_row
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_IT, I_NEV, I_PA, I_PB, I_STAGE,
                   I_VALID, NF, NI, clear_row)
+from .point_distance import distance_gradient, distance_hessian
 from .support import evaluate
 
 #: Newton iterations before the pair is handed to the LCP
@@ -92,20 +93,13 @@ def closest_point(tab, ip, u, v, c, scale, ws, ev):
     for it in range(MAX_IT):
         evaluate(tab, ip, u, v, 2, ws, ev)
         nev += 1
-        d0, d1, d2 = ev[0, 0] - c[0], ev[0, 1] - c[1], ev[0, 2] - c[2]
-        gu = d0 * ev[1, 0] + d1 * ev[1, 1] + d2 * ev[1, 2]
-        gv = d0 * ev[2, 0] + d1 * ev[2, 1] + d2 * ev[2, 2]
-        su2 = ev[1, 0] ** 2 + ev[1, 1] ** 2 + ev[1, 2] ** 2
-        sv2 = ev[2, 0] ** 2 + ev[2, 1] ** 2 + ev[2, 2] ** 2
+        d0, d1, d2, gu, gv, su2, sv2 = distance_gradient(ev, c)
         if not (su2 > 0.0 and sv2 > 0.0):
             return False, u, v, it, nev
         # tangential offset of c from the normal line at S, relative to the body scale
         if abs(gu) <= TOL * scale * math.sqrt(su2) and abs(gv) <= TOL * scale * math.sqrt(sv2):
             return True, u, v, it, nev
-        huu = su2 + d0 * ev[3, 0] + d1 * ev[3, 1] + d2 * ev[3, 2]
-        huv = (ev[1, 0] * ev[2, 0] + ev[1, 1] * ev[2, 1] + ev[1, 2] * ev[2, 2]
-               + d0 * ev[4, 0] + d1 * ev[4, 1] + d2 * ev[4, 2])
-        hvv = sv2 + d0 * ev[5, 0] + d1 * ev[5, 1] + d2 * ev[5, 2]
+        huu, huv, hvv = distance_hessian(ev, d0, d1, d2, su2, sv2)
         det = huu * hvv - huv * huv
         if not (huu > 0.0 and det > 1e-14 * su2 * sv2):
             return False, u, v, it, nev

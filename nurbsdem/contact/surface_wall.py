@@ -39,6 +39,7 @@ from numba import njit
 from ..geometry.kernel import PatchPool, power_derivs, power_form
 from ..geometry.nurbs import Patch
 from .lcp import F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_IT, I_PA, I_PB, I_VALID, NF, NI
+from .point_distance import distance_gradient, distance_hessian
 
 #: projected Newton iterations before a solve counts as not converged
 MAX_IT = 60
@@ -133,11 +134,7 @@ def closest_on_patch(deg, ncp, koff, knots, pw, poff, dom, periodic, ip, u, v, c
     wrap_u, wrap_v = periodic[ip, 0], periodic[ip, 1]
     for it in range(MAX_IT):
         power_derivs(deg, ncp, koff, knots, pw, poff, ip, u, v, 2, ev)
-        d0, d1, d2 = ev[0, 0] - c[0], ev[0, 1] - c[1], ev[0, 2] - c[2]
-        gu = d0 * ev[1, 0] + d1 * ev[1, 1] + d2 * ev[1, 2]
-        gv = d0 * ev[2, 0] + d1 * ev[2, 1] + d2 * ev[2, 2]
-        su2 = ev[1, 0] ** 2 + ev[1, 1] ** 2 + ev[1, 2] ** 2
-        sv2 = ev[2, 0] ** 2 + ev[2, 1] ** 2 + ev[2, 2] ** 2
+        d0, d1, d2, gu, gv, su2, sv2 = distance_gradient(ev, c)
         if not (su2 > 0.0 and sv2 > 0.0):
             return False, u, v, it
         fix_u = not wrap_u and _projected(gu, u, u0, u1)
@@ -146,10 +143,7 @@ def closest_on_patch(deg, ncp, koff, knots, pw, poff, dom, periodic, ip, u, v, c
         pgv = 0.0 if fix_v else gv
         if abs(pgu) <= TOL * scale * math.sqrt(su2) and abs(pgv) <= TOL * scale * math.sqrt(sv2):
             return True, u, v, it
-        huu = su2 + d0 * ev[3, 0] + d1 * ev[3, 1] + d2 * ev[3, 2]
-        huv = (ev[1, 0] * ev[2, 0] + ev[1, 1] * ev[2, 1] + ev[1, 2] * ev[2, 2]
-               + d0 * ev[4, 0] + d1 * ev[4, 1] + d2 * ev[4, 2])
-        hvv = sv2 + d0 * ev[5, 0] + d1 * ev[5, 1] + d2 * ev[5, 2]
+        huu, huv, hvv = distance_hessian(ev, d0, d1, d2, su2, sv2)
         du, dv = _newton_step(pgu, pgv, huu, huv, hvv, su2, sv2, fix_u, fix_v)
         u = _wrap(u + du, u0, u1) if wrap_u else min(max(u + du, u0), u1)
         v = _wrap(v + dv, v0, v1) if wrap_v else min(max(v + dv, v0), v1)
