@@ -153,7 +153,7 @@ class _RankOwning:
     def counted(self, a) -> np.ndarray:
         return self.owned[np.asarray(a, np.int64)]
 
-    def count_work(self, a, b) -> None:
+    def count_work(self, a, b, due) -> None:
         pass
 
 

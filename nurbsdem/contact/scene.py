@@ -403,7 +403,7 @@ class SceneContacts:
         if dom is None:
             self.timers.lcps += int(due.shape[0])
         else:           # each pair counted by one rank (the owner of body A), summed per deck step
-            dom.count_work(ps.a[due], ps.b[due])
+            dom.count_work(ps.a, ps.b, due)
             dom.lcps += cs.monitored
             dom.failed += cs.failed
         self.last = cs

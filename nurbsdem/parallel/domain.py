@@ -306,6 +306,8 @@ class Domain:
         #: the evaluations it spans
         self.work = np.zeros(self.n, np.int64)
         self.work_evaluations = 0
+        #: (a, b, solves) of the scene's list whose solves are counted now (:meth:`count_work`)
+        self._hits: tuple | None = None
         self.lcps = 0                  # counted LCPs since the last deck end
         self.failed = 0                # counted failed LCPs since the last deck end
         #: bytes this rank sent: ghosts' loads (point-to-point) and its part of the gathers
@@ -383,24 +385,38 @@ class Domain:
         own_b[part] = self.owned[b[part]]
         return self.owned[a] | own_b
 
-    def count_work(self, a: np.ndarray, b: np.ndarray) -> None:
-        """Count the solves of an evaluation's due pairs (a, b) of the scene's list (b may be
-        a flat wall), each at its solver's :data:`SOLVE_COST`, as the work of both their
-        particles (a wall pair's twice to its particle): the counted pairs only, so that the
-        ranks' counts summed give each pair once."""
-        sel = self.counted(a)
-        a, b = a[sel], b[sel]
+    def count_work(self, a: np.ndarray, b: np.ndarray, due: np.ndarray) -> None:
+        """Count an evaluation's solves: the rows ``due`` of the scene's list (a, b) (b may be
+        a flat wall).  Each listed pair counts its solves; the counts become the particles'
+        work (:meth:`_fold_work`) when the list changes and before a cut is weighed."""
+        if self._hits is None or self._hits[0] is not a:
+            self._fold_work()
+            self._hits = (a, b, np.zeros(a.shape[0], np.int64))
+        self._hits[2][due] += 1
+        self.work_evaluations += 1
+
+    def _fold_work(self) -> None:
+        """Add the counted solves of the list's pairs to their particles' work: each at its
+        solver's :data:`SOLVE_COST`, to both particles (a wall pair's twice to its
+        particle), the counted pairs only, so that the ranks' work summed has each pair
+        once."""
+        if self._hits is None:
+            return
+        a, b, hits = self._hits
+        self._hits = None
+        sel = self.counted(a) & (hits > 0)
+        a, b, hits = a[sel], b[sel], hits[sel]
         sc = self.scene
-        cost = SOLVE_COST[pair_solvers(sc.is_sphere, a, b, self.n, sc.point_surface)]
+        cost = hits * SOLVE_COST[pair_solvers(sc.is_sphere, a, b, self.n, sc.point_surface)]
         part = b < self.n
-        self.work += np.bincount(a, weights=np.where(part, 1, 2) * cost,
+        self.work += np.bincount(a, weights=np.where(part, cost, 2 * cost),
                                  minlength=self.n).astype(np.int64)
         self.work += np.bincount(b[part], weights=cost[part], minlength=self.n).astype(np.int64)
-        self.work_evaluations += 1
 
     def _weights(self) -> np.ndarray:
         """Every particle's work since the last cut, summed over the ranks (collective; the
         same integers on every rank), with :data:`BODY_COST` per particle and evaluation."""
+        self._fold_work()
         total = np.empty_like(self.work)
         self.comm.Allreduce(self.work, total, op=self._MPI.SUM)
         self.sent["gathers"] += self.work.nbytes
@@ -768,4 +784,5 @@ class Domain:
         self._steps_since_cut = 0
         self.work[:] = 0
         self.work_evaluations = 0
+        self._hits = None
         self.cuts += 1
