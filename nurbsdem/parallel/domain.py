@@ -280,8 +280,13 @@ class Domain:
     def __init__(self, comm: Any, system: Any, scene: Any, owner: np.ndarray | None = None,
                  plan: GhostPlan | None = None) -> None:
         from mpi4py import MPI
+        from mpi4py.util import pkl5
         self._MPI = MPI
         self.comm = comm
+        #: allgather of the large payloads (states, contacts, logs): pickle protocol 5 with
+        #: the arrays sent as out-of-band buffers (``mpi4py.util.pkl5``), not copied into and
+        #: out of the pickled bytes; the same objects in the same order as ``comm.allgather``
+        self._gather = pkl5.Intracomm(comm).allgather
         self.rank = int(comm.rank)
         self.size = int(comm.size)
         self.system = system
@@ -484,7 +489,7 @@ class Domain:
         mine = self.owned_ids
         payload = (mine, [arr[mine] for arr in arrays])
         self.sent["gathers"] += _nbytes(payload)
-        for ids, rows in self.comm.allgather(payload):
+        for ids, rows in self._gather(payload):
             for arr, r in zip(arrays, rows):
                 arr[ids] = r
 
@@ -535,7 +540,7 @@ class Domain:
                     d=depth[sel], r=radius[sel], s=spring[sel])
         if image is not None:
             mine["im"] = image[sel]
-        pieces = self.comm.allgather(mine)
+        pieces = self._gather(mine)
         self.sent["gathers"] += _nbytes(mine)
         net = merge_by_key(pieces, "key", self.order)
         if net["key"].shape[0] == 0:
@@ -649,7 +654,7 @@ class Domain:
         cs = s.last_contacts
         mine = (rows, hist, self._counted_contacts(cs), self.events, (self.lcps, self.failed))
         self.sent["gathers"] += _nbytes(mine)
-        gathered = self.comm.allgather(mine)
+        gathered = self._gather(mine)
         rows = merge_by_key([g[0] for g in gathered], "key", self.order)
         if "image" not in rows:
             rows["image"] = np.zeros((rows["a"].shape[0], 3))
@@ -712,7 +717,7 @@ class Domain:
         mine = self.owned_ids
         pairs = {f: local[f][sel] for f in self.pair_fields} if sel is not None else None
         per_body = {f: local[f][mine] for f in ("prev_pos", "prev_R", "prev_x") if f in local}
-        gathered = self.comm.allgather((pairs, mine, per_body, local["odo"][mine]))
+        gathered = self._gather((pairs, mine, per_body, local["odo"][mine]))
         out = dict(local)
         if sel is not None:
             out.update(merge_by_key([g[0] for g in gathered], "keys"))
