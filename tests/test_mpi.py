@@ -18,11 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nurbsdem.contact.kinds import CLOSED_FORM, LCP, POINT_SURFACE, WALL_SUPPORT
 from nurbsdem.io.checkpoint import load_checkpoint
 from nurbsdem.io.results import read_results_sample, read_results_times
 from nurbsdem.parallel import decompose
-from nurbsdem.contact.kinds import CLOSED_FORM, LCP, POINT_SURFACE, WALL_SUPPORT
-from nurbsdem.parallel.domain import imbalance, merge_by_key, pair_solvers
+from nurbsdem.parallel.cut import BODY_COST, SOLVE_COST, ContactWork, imbalance, pair_solvers
+from nurbsdem.parallel.domain import merge_by_key
 
 HERE = Path(__file__).resolve().parent
 DECK = HERE / "data" / "mpi" / "pack.inp"
@@ -172,6 +173,37 @@ def test_the_work_counts_name_each_pairs_solver():
     np.testing.assert_array_equal(pair_solvers(sphere, a, b, 4, True),
                                   [CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT, WALL_SUPPORT])
     assert pair_solvers(sphere, a, b, 4, False)[1] == LCP
+
+
+def test_the_work_counts_each_solve_once_over_the_ranks_across_list_changes():
+    """Two ranks count the solves of their lists' due pairs; a list replaced mid-way (a
+    rebuild) folds the old list's counts first.  The ranks' work summed gives each solve of
+    each pair once, at its solver's cost, to both its particles (a wall pair's twice to its
+    particle), plus the particles' own work per evaluation."""
+    class Scene:
+        is_sphere = np.array([False, False, False, True])
+        point_surface = True
+
+    owner = np.array([0, 0, 1, 1])
+    a1, b1 = np.array([0, 1, 2, 3]), np.array([1, 2, 4, 4])      # 4: a flat wall
+    a2, b2 = np.array([0, 2]), np.array([2, 3])                  # after a rebuild
+    total = np.zeros(4, np.int64)
+    for rank in (0, 1):
+        work = ContactWork(owner == rank, Scene())
+        listed = [(a1, b1, np.array([0, 1, 2, 3]))] * 2 + [(a2, b2, np.array([0, 1]))]
+        for a, b, due in listed:
+            work.count(a, b, due)
+        total += work.folded()
+        assert work.evaluations == 3
+    lcp, wall, sphere_wall, point = (SOLVE_COST[k] for k in (LCP, WALL_SUPPORT, CLOSED_FORM,
+                                                             POINT_SURFACE))
+    expected = np.zeros(4, np.int64)
+    for a, b, cost, times in ((0, 1, lcp, 2), (1, 2, lcp, 2), (0, 2, lcp, 1), (2, 3, point, 1)):
+        expected[[a, b]] += cost * times
+    expected[2] += 2 * wall * 2
+    expected[3] += 2 * sphere_wall * 2
+    np.testing.assert_array_equal(total, expected)
+    assert np.all(work.weights(total) == expected + 2 * BODY_COST * 3)
 
 
 def test_rows_merged_by_key_come_in_the_serial_order():

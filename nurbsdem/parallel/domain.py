@@ -3,18 +3,18 @@ communicator, **bit for bit equal to the serial run**.
 
 Ownership
 ---------
-Space is cut by recursive coordinate bisection (:func:`decompose`): the particles are split
-across the longest extent of their centroids, recursively, into P groups of equal weight
-(ties broken by particle index, so every rank computes the same cut).  A rank *owns* the
-particles of its group: it integrates them and decides everything about them.  The first cut
-weighs every particle alike.  Then each rank counts the contact work of its pairs (each due
-pair's solver cost, :data:`~nurbsdem.contact.kinds.SOLVE_COST`, to both its particles) and
-the cut is redone (particles *migrate*) with those weights after an accepted deck step when
-the ranks' shares of the work differ from even by more than :data:`WORK_IMBALANCE` and the
-weighted cut lowers that by as much (a dense pack's bottom half has more contacts per
-particle than its top), when the ghost count has grown by half since the last cut, or every
-:data:`REBALANCE_EVERY` deck steps.  The cut changes who computes what, never a result's
-bits.
+Space is cut by recursive coordinate bisection (:func:`~nurbsdem.parallel.cut.decompose`):
+the particles are split across the longest extent of their centroids, recursively, into P
+groups of equal weight (ties broken by particle index, so every rank computes the same cut).
+A rank *owns* the particles of its group: it integrates them and decides everything about
+them.  The first cut weighs every particle alike.  Then each rank counts the contact work of
+its pairs (each solve at its solver's cost, :data:`~nurbsdem.parallel.cut.SOLVE_COST`, to
+both its particles) and the cut is redone (particles *migrate*) with those weights after an
+accepted deck step when the most loaded rank's share exceeds the even share by more than
+:data:`~nurbsdem.parallel.cut.WORK_IMBALANCE` and the weighted cut lowers that by as much
+(scenes whose contacts crowd in one part: a heap, a hopper, a half-filled drum), when the
+ghost count has grown by half since the last cut, or every :data:`REBALANCE_EVERY` deck
+steps.  The cut changes who computes what, never a result's bits.
 
 Contacts and ghosts
 -------------------
@@ -75,8 +75,6 @@ from typing import Any, Callable
 import numpy as np
 
 from ..contact.contactset import ContactSet
-from ..contact.kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, PAIR_SOLVER,
-                             POINT_SURFACE, SPHERE, WALL_SUPPORT)
 from ..dynamics.contact_state import ContactState
 from ..dynamics.energy import EnergyLedger
 from ..dynamics.forces import (N_TERMS, T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_B,
@@ -86,27 +84,12 @@ from ..dynamics.rigid import omega_world
 from ..dynamics.rolling import NSPRING
 from ..dynamics.step import all_kinematics, book_kick
 from ..geometry.rotation import quats_to_matrices
+from .cut import WORK_IMBALANCE, ContactWork, decompose, imbalance
 
 #: deck steps between re-cuts at the latest; a re-cut also happens when the ghosts have grown
 #: by GHOST_GROWTH since the last cut
 REBALANCE_EVERY = 200
 GHOST_GROWTH = 1.5
-#: a re-cut also happens when the most loaded rank's share of the counted work exceeds the
-#: even share by more than this fraction and a cut by the work lowers that excess by as much
-#: (the 5 % of LIGGGHTS' ``fix balance`` default threshold of 1.05)
-WORK_IMBALANCE = 0.05
-#: what one solve of each pair solver of the scene's list (CLOSED_FORM, POINT_SURFACE, LCP,
-#: WALL_SUPPORT of :mod:`nurbsdem.contact.kinds`) costs, in hundredths of a warm LCP of two
-#: paper particles: the solvers' warm times in the report's contact benchmarks, rounded (a
-#: closed form is a few lines of arithmetic; the point solver and the wall's support mapping
-#: have two and three unknowns against the LCP's six).  Integers, so that the ranks' sums are
-#: exact and every rank computes the same cut.
-SOLVE_COST = np.zeros(max(CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT) + 1, np.int64)
-SOLVE_COST[[CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT]] = 5, 30, 100, 50
-#: the work of one particle's integration and loads per evaluation, in the units of
-#: :data:`~nurbsdem.contact.kinds.SOLVE_COST` (the step outside the contact problems takes
-#: about a third of a warm LCP per particle in the settled packs of the report)
-BODY_COST = 30
 
 #: the fields of a DemSystem's last contacts (:class:`~nurbsdem.dynamics.contact_state.
 #: ContactState`) merged by pair key at each deck end (the images: in a periodic cell only)
@@ -160,61 +143,6 @@ def _nbytes(obj: Any) -> int:
     if isinstance(obj, (list, tuple)):
         return sum(_nbytes(v) for v in obj)
     return 8
-
-
-def decompose(x: np.ndarray, parts: int, weight: np.ndarray | None = None) -> np.ndarray:
-    """Owner rank (N,) of each particle: recursive coordinate bisection of the centroids x (N,3)
-    m into ``parts`` groups, cut across the longest extent, ties by particle index
-    (deterministic).  Without ``weight`` the groups have equal counts (±1); with ``weight``
-    (N,) int64 >= 0, equal weights: each cut leaves on its low side the particles, in order
-    along the axis, whose running sum stays within the low groups' share, and at least one
-    particle per group."""
-    owner = np.zeros(x.shape[0], np.int64)
-    w = np.ones(x.shape[0], np.int64) if weight is None else np.asarray(weight, np.int64)
-    _bisect(x, w, np.arange(x.shape[0]), 0, parts, owner)
-    return owner
-
-
-def _bisect(x: np.ndarray, w: np.ndarray, ids: np.ndarray, first: int, parts: int,
-            owner: np.ndarray) -> None:
-    if parts == 1 or ids.size == 0:
-        owner[ids] = first
-        return
-    pts = x[ids]
-    axis = int(np.argmax(pts.max(axis=0) - pts.min(axis=0)))
-    order = ids[np.lexsort((ids, pts[:, axis]))]
-    left = parts // 2
-    running = np.cumsum(w[order])
-    k = int(np.searchsorted(running, (int(running[-1]) * left) // parts, side="right"))
-    if ids.size >= parts:
-        k = min(max(k, left), ids.size - (parts - left))
-    _bisect(x, w, order[:k], first, left, owner)
-    _bisect(x, w, order[k:], first + left, parts - left, owner)
-
-
-def pair_solvers(is_sphere: np.ndarray, a: np.ndarray, b: np.ndarray, n: int,
-                 point_surface: bool) -> np.ndarray:
-    """The pair solver (:mod:`nurbsdem.contact.kinds`) of each listed pair (a[k], b[k]) of a
-    scene, as :func:`~nurbsdem.contact.kinds.pair_solver` picks it: body a is a particle, b a
-    particle or a flat wall (index >= n); ``is_sphere`` (n,) which particles are exact
-    spheres; ``point_surface``: the scene solves spheres against NURBS particles by the
-    point solver."""
-    kind_a = np.where(is_sphere[a], SPHERE, NURBS_PARTICLE)
-    part = b < n
-    kind_b = np.full(b.shape[0], FLAT_WALL, np.int64)
-    kind_b[part] = np.where(is_sphere[b[part]], SPHERE, NURBS_PARTICLE)
-    solver = PAIR_SOLVER[kind_a, kind_b]
-    if not point_surface:
-        solver[solver == POINT_SURFACE] = LCP
-    return solver
-
-
-def imbalance(owner: np.ndarray, weight: np.ndarray, parts: int) -> float:
-    """How far the most loaded of ``parts`` groups is above the even share of the total
-    ``weight`` (N,) (0: even; 0.1: 10 % above)."""
-    loads = np.bincount(owner, weights=weight.astype(float), minlength=parts)
-    mean = loads.sum() / parts
-    return float(loads.max() / mean - 1.0) if mean > 0 else 0.0
 
 
 @dataclass
@@ -307,12 +235,8 @@ class Domain:
         self.events: list[tuple] = []
         #: the contact keys (array) of the last logged kick (:meth:`log_kick`)
         self._kicked: np.ndarray | None = None
-        #: each particle's counted contact work since the last cut (:meth:`count_work`), and
-        #: the evaluations it spans
-        self.work = np.zeros(self.n, np.int64)
-        self.work_evaluations = 0
-        #: (a, b, solves) of the scene's list whose solves are counted now (:meth:`count_work`)
-        self._hits: tuple | None = None
+        #: each particle's counted contact work since the last cut (:meth:`count_work`)
+        self.work = ContactWork(self.owned, scene)
         self.lcps = 0                  # counted LCPs since the last deck end
         self.failed = 0                # counted failed LCPs since the last deck end
         #: bytes this rank sent: ghosts' loads (point-to-point) and its part of the gathers
@@ -391,41 +315,18 @@ class Domain:
         return self.owned[a] | own_b
 
     def count_work(self, a: np.ndarray, b: np.ndarray, due: np.ndarray) -> None:
-        """Count an evaluation's solves: the rows ``due`` of the scene's list (a, b) (b may be
-        a flat wall).  Each listed pair counts its solves; the counts become the particles'
-        work (:meth:`_fold_work`) when the list changes and before a cut is weighed."""
-        if self._hits is None or self._hits[0] is not a:
-            self._fold_work()
-            self._hits = (a, b, np.zeros(a.shape[0], np.int64))
-        self._hits[2][due] += 1
-        self.work_evaluations += 1
-
-    def _fold_work(self) -> None:
-        """Add the counted solves of the list's pairs to their particles' work: each at its
-        solver's :data:`SOLVE_COST`, to both particles (a wall pair's twice to its
-        particle), the counted pairs only, so that the ranks' work summed has each pair
-        once."""
-        if self._hits is None:
-            return
-        a, b, hits = self._hits
-        self._hits = None
-        sel = self.counted(a) & (hits > 0)
-        a, b, hits = a[sel], b[sel], hits[sel]
-        sc = self.scene
-        cost = hits * SOLVE_COST[pair_solvers(sc.is_sphere, a, b, self.n, sc.point_surface)]
-        part = b < self.n
-        self.work += np.bincount(a, weights=np.where(part, cost, 2 * cost),
-                                 minlength=self.n).astype(np.int64)
-        self.work += np.bincount(b[part], weights=cost[part], minlength=self.n).astype(np.int64)
+        """Count an evaluation's solves: the rows ``due`` of the scene's list (a, b)
+        (:meth:`~nurbsdem.parallel.cut.ContactWork.count`)."""
+        self.work.count(a, b, due)
 
     def _weights(self) -> np.ndarray:
         """Every particle's work since the last cut, summed over the ranks (collective; the
-        same integers on every rank), with :data:`BODY_COST` per particle and evaluation."""
-        self._fold_work()
-        total = np.empty_like(self.work)
-        self.comm.Allreduce(self.work, total, op=self._MPI.SUM)
-        self.sent["gathers"] += self.work.nbytes
-        return total + 2 * BODY_COST * self.work_evaluations
+        same integers on every rank)."""
+        mine = self.work.folded()
+        total = np.empty_like(mine)
+        self.comm.Allreduce(mine, total, op=self._MPI.SUM)
+        self.sent["gathers"] += mine.nbytes
+        return self.work.weights(total)
 
     # ------------------------------------------------------------------ ghosts
     def plan_ghosts(self, a: np.ndarray, b: np.ndarray) -> None:
@@ -787,7 +688,5 @@ class Domain:
         self.plan_ghosts(sc.pairs.a, sc.pairs.b)
         self._ghosts_at_cut = self.total(self.plan.ghosts)
         self._steps_since_cut = 0
-        self.work[:] = 0
-        self.work_evaluations = 0
-        self._hits = None
+        self.work = ContactWork(self.owned, sc)
         self.cuts += 1
