@@ -17,14 +17,15 @@ from ..contact.kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, PAIR_S
 
 #: a re-cut also happens when the most loaded rank's share of the counted work exceeds the
 #: even share by more than this fraction and a cut by the work lowers that excess by as much
-#: (the 5 % of LIGGGHTS' ``fix balance`` default threshold of 1.05)
+#: (the imbalance threshold 1.05 of the first example of LAMMPS' and LIGGGHTS' ``fix balance``,
+#: where the user sets it)
 WORK_IMBALANCE = 0.05
 #: what one solve of each pair solver of the scene's list (CLOSED_FORM, POINT_SURFACE, LCP,
 #: WALL_SUPPORT of :mod:`nurbsdem.contact.kinds`) costs, in hundredths of a warm LCP of two
-#: paper particles: the solvers' warm times in the report's contact benchmarks, rounded (a
-#: closed form is a few lines of arithmetic; the point solver and the wall's support mapping
-#: have two and three unknowns against the LCP's six).  Integers, so that the ranks' sums are
-#: exact and every rank computes the same cut.
+#: paper particles: the LCP's and the point solver's warm times in the report's contact
+#: benchmarks (about 5 and 1.3 µs), rounded; the others estimated (a closed form is a few
+#: lines of arithmetic, the wall's support mapping has three unknowns against the LCP's six).
+#: Integers, so that the ranks' sums are exact and every rank computes the same cut.
 SOLVE_COST = np.zeros(max(CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT) + 1, np.int64)
 SOLVE_COST[[CLOSED_FORM, POINT_SURFACE, LCP, WALL_SUPPORT]] = 5, 30, 100, 50
 #: the work of one particle's integration and loads per evaluation, in the units of
