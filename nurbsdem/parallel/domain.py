@@ -678,12 +678,12 @@ class Domain:
             self.recut(owner)
 
     @_timed("gathers")
-    def recut(self, owner: np.ndarray | None = None) -> None:
-        """Cut the domain anew (collective): to ``owner`` (N,) ranks, the same on every rank,
-        or by particle count at the current positions; the work counts start again."""
+    def recut(self, owner: np.ndarray) -> None:
+        """Cut the domain anew to ``owner`` (N,) ranks, the same on every rank (collective);
+        the work counts start again."""
         sc = self.scene
         full = self.global_scene_state(sc.local_state())
-        self._set_owner(decompose(self.system.bodies.x, self.size) if owner is None else owner)
+        self._set_owner(owner)
         sc.set_local_state(self.local_scene_state(full))
         self.plan_ghosts(sc.pairs.a, sc.pairs.b)
         self._ghosts_at_cut = self.total(self.plan.ghosts)
