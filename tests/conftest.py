@@ -14,6 +14,7 @@ every test, as usual.
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -38,6 +39,20 @@ def _file_key(item) -> str:
     return str(Path(item.path).relative_to(TESTS))
 
 
+#: words of a test file that may run the compiled time loop (a deck, a simulation, the
+#: command line, a benchmark's scene, another process)
+_TIME_LOOP_WORDS = re.compile(r"Simulation|DemSystem|from_deck|DeckSteps|run_deck|Solver|"
+                              r"\.inp|\bcli\b|subprocess|warm_up|bench_|importlib|nurbsdem\.api")
+
+
+def _may_drive_time_loop(path: Path) -> bool:
+    """Whether the test file ``path`` may run the compiled time loop.  A worker started while
+    the runner's warm-up still compiles the loop (``NURBSDEM_TEST_EARLY``) takes the other
+    files first, so that it does not compile the loop a second time meanwhile.  An order
+    only: a file taken too early compiles what it needs, with the same results."""
+    return bool(_TIME_LOOP_WORDS.search(path.read_text(encoding="utf-8")))
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config, items):
     """In a shared run: the test files in this worker's order (each file's tests in theirs),
@@ -47,7 +62,10 @@ def pytest_collection_modifyitems(config, items):
     files = list(dict.fromkeys(_file_key(it) for it in items))
     k, n = _worker()
     start = len(files) * k // n
-    rank = {f: i for i, f in enumerate(files[start:] + files[:start])}
+    order = files[start:] + files[:start]
+    if os.environ.get("NURBSDEM_TEST_EARLY"):
+        order.sort(key=lambda f: _may_drive_time_loop(TESTS / f))     # stable: False first
+    rank = {f: i for i, f in enumerate(order)}
     items.sort(key=lambda it: rank[_file_key(it)])
     if k == 0:
         (Path(CLAIMS) / "files.txt").write_text("\n".join(sorted(files)) + "\n")

@@ -5,7 +5,9 @@
    so that the test processes load them instead of each compiling them again.
 2. One pytest process per usable core (at most :data:`MAX_WORKERS`) then shares the test
    files (``tests/conftest.py``: each claims whole files as it reaches them, so the load
-   balances itself).  Progress is told every 30 s, the reports at the end.
+   balances itself).  The first starts as soon as the warm-up leaves a core free (its last
+   stage, the time loop, compiles alone) and takes the files that do not run the time loop
+   first.  Progress is told every 30 s, the reports at the end.
 3. Each process's report is printed; the exit status is the first non-zero one, and a file
    no process ran fails the run.
 
@@ -39,13 +41,21 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def _warm_up() -> None:
+def _warm_up(on_free_core=None) -> None:
     """Compile the kernels into numba's cache; a failure is reported and the tests go on
-    (they show the error where it matters)."""
+    (they show the error where it matters).  ``on_free_core()`` is called once, when fewer
+    stages are left than there are cores (the last stage, the time loop, compiles alone)."""
     from nurbsdem.warmup import ALL_STAGES, warm_up
     t0 = time.perf_counter()
+    done: set[str] = set()
+
+    def on_done(name: str, seconds: float) -> None:
+        done.add(name)
+        if on_free_core is not None and len(ALL_STAGES) - len(done) < _cores():
+            on_free_core()
+
     try:
-        times = warm_up(stages=ALL_STAGES)
+        times = warm_up(stages=ALL_STAGES, on_done=on_done)
     except Exception as exc:        # noqa: BLE001 - the tests report it properly
         print(f"run_parallel: the warm-up failed ({type(exc).__name__}: {exc}); "
               "the tests compile what they need", flush=True)
@@ -71,21 +81,34 @@ def _wait(procs: list, claims: Path, every: float = 30.0) -> list[int]:
 
 
 def main(argv: list[str]) -> int:
-    _warm_up()
     n = min(_cores(), MAX_WORKERS)
     with tempfile.TemporaryDirectory(prefix="nurbsdem-tests-") as tmp:
         claims = Path(tmp) / "claims"
         claims.mkdir()
         procs, logs = [], []
-        for k in range(n):
+
+        def start_worker(early: bool = False) -> None:
+            k = len(procs)
             log = open(Path(tmp) / f"worker{k}.log", "w+", encoding="utf-8")
             env = dict(os.environ, NURBSDEM_TEST_CLAIMS=str(claims),
                        NURBSDEM_TEST_WORKER=f"{k}/{n}")
+            if early:
+                env["NURBSDEM_TEST_EARLY"] = "1"
+                print(f"run_parallel: a core is free, worker 1 starts ("
+                      f"{time.perf_counter() - T0:.0f} s)", flush=True)
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
                  f"--basetemp={Path(tmp) / f'basetemp{k}'}", *argv],
                 cwd=TESTS.parent, env=env, stdout=log, stderr=subprocess.STDOUT))
             logs.append(log)
+
+        def start_early() -> None:
+            if not procs:
+                start_worker(early=True)
+
+        _warm_up(on_free_core=start_early if n > 1 else None)
+        while len(procs) < n:
+            start_worker()
         codes = _wait(procs, claims)
         summaries = []
         for k, log in enumerate(logs):
