@@ -193,12 +193,14 @@ class PointerKernel:
     ``kernel.call((a, b, ...))`` takes the arguments as one tuple and returns what the
     kernel returns.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
 
-    ``lazy``: the kernel returns nothing and its slot stays empty until
-    :func:`fill_lazy_kernels` of its group (``True``: "lcp") is called by a scene that needs
-    it: the LCP kernels, which a scene of exact spheres never calls, and the mesh and surface
-    walls' kernels ("curved"), which a scene without them never calls, so that a first run
-    does not compile them.  A call through an empty slot raises ``RuntimeError`` naming the
-    kernel.
+    ``lazy``: the kernel's slot stays empty until :func:`fill_lazy_kernels` of its group
+    (``True``: "lcp") is called by a scene that needs it: the LCP kernels, which a scene of
+    exact spheres never calls, the mesh and surface walls' kernels ("curved") and the periodic
+    cell's ("periodic"), which a scene without them never calls, so that a first run does not
+    compile them.  A call through an empty slot raises ``RuntimeError`` naming the kernel.
+    A lazy kernel returns nothing, or what ``result(argtypes)`` declares (numba types): its
+    callers are typed without compiling it, and the kernel compiled later must return exactly
+    that (else ``TypeError``).
 
     :meth:`redirect` points every slot at another kernel of the same signatures and results
     (the force kernels' copies whose dispatch includes contact laws registered at run time,
@@ -206,13 +208,16 @@ class PointerKernel:
     loaded call it from then on.
     """
 
-    def __init__(self, dispatcher, name: str, lazy: bool | str = False) -> None:
+    def __init__(self, dispatcher, name: str, lazy: bool | str = False,
+                 result: Callable[[tuple], types.Type] | None = None) -> None:
         from numba.core import config
 
         self.dispatcher = dispatcher
         self.name = name
         #: the lazy group (None: not lazy)
         self.lazy = ("lcp" if lazy is True else lazy) or None
+        #: the declared result type of a lazy kernel, from its argument types (None: nothing)
+        self.result = result
         self._slots: dict[tuple, tuple] = {}
         #: the kernel the slots hold (:meth:`redirect`; the dispatcher's own by default)
         self.target = dispatcher
@@ -261,16 +266,18 @@ class PointerKernel:
         if argtypes not in self._slots:
             slot = ctypes.c_int64(0)
             llb.add_symbol(self.symbol(argtypes), ctypes.addressof(slot))
-            self._slots[argtypes] = (slot, types.none)
+            declared = self.result(argtypes) if self.lazy and self.result else types.none
+            self._slots[argtypes] = (slot, declared)
         slot, restype = self._slots[argtypes]
         if not slot.value and (self.lazy is None or self.lazy in _LAZY_WANTED):
             address = self._compiled(self.target, argtypes, restype)
-            restype = self.target.overloads[argtypes].signature.return_type
-            if self.lazy is not None and restype != types.none:
-                raise TypeError(f"the lazy pointer kernel {self.name} returns {restype}")
+            compiled = self.target.overloads[argtypes].signature.return_type
+            if self.lazy is not None and compiled != restype:
+                raise TypeError(f"the lazy pointer kernel {self.name} returns {compiled}, "
+                                f"not the {restype} it declares")
             slot.value = address
-            self._slots[argtypes] = (slot, restype)
-        return restype
+            self._slots[argtypes] = (slot, compiled)
+        return restype if self.lazy else self._slots[argtypes][1]
 
     def fill_all(self) -> None:
         """Fill the slot of every signature typed or loaded so far."""
@@ -288,8 +295,10 @@ def fill_lazy_kernels(group: str = "lcp") -> None:
     """Fill the slots of the lazy :class:`PointerKernel` s of ``group`` (compiling or loading
     them), now and, for callers typed or loaded later, at once: "lcp" where a scene with
     bodies other than exact spheres is set up (:class:`~nurbsdem.contact.detect.ContactTable`),
-    "curved" where the compiled deck steps take mesh or surface walls, "surface_particles"
-    and "mesh_particles" where they take NURBS particles with surface or mesh walls."""
+    "sphere_nurbs" where the table also holds exact spheres, "curved" where the compiled
+    deck steps take mesh or surface walls, "surface_particles"
+    and "mesh_particles" where they take NURBS particles with surface or mesh walls,
+    "periodic" where they take a periodic cell."""
     if group in _LAZY_WANTED:
         return
     _LAZY_WANTED.add(group)

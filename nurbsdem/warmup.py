@@ -213,9 +213,45 @@ def _walls() -> None:
         sim.run()
 
 
+def _periodic_deck(folder: Path) -> Path:
+    """A small deck in ``folder``: exact spheres in a cell periodic in x and y over a floor
+    (the periodic cell's kernels of the compiled loop, which a scene without a cell does not
+    compile)."""
+    text = f"""Environment
+  Gravity 0 0 -9.81
+  Periodic X 0 0.03 Y 0 0.03
+Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 Sphere Radius 0.005
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.0051 0.015 0.0051
+  Particle 2 Shape 1 Material 1 Position 0.0249 0.015 0.0051
+  Particle 3 Shape 1 Material 1 Position 0.015 0.015 0.02
+Walls
+  Wall 1 Name floor Point 0.015 0.015 0 Normal 0 0 1 Size 0.06 0.06
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.004 TimeStep 1e-3
+Output
+  Directory {folder / 'results'}
+  VTK Every 1.0
+  Monitors Every 0.002
+"""
+    (folder / "periodic.inp").write_text(text)
+    return folder / "periodic.inp"
+
+
 def _loop() -> None:
-    """The compiled time loop with its output: loads the kernels the other stages cached."""
+    """The compiled time loop with its output (loads the kernels the other stages cached),
+    then with a periodic cell."""
+    from .simulation import Simulation
     _run_deck(compiled_steps=True, output=True)
+    with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
+        sim = Simulation.from_deck(_periodic_deck(Path(tmp)), quiet=True)
+        sim.solver.write_output = False
+        sim.run()
 
 
 @dataclass(frozen=True)

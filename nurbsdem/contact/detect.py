@@ -182,6 +182,8 @@ class ContactTable:
         self.spheres = [exact_sphere(s) for s in shapes]
         if any(sp is None for sp in self.spheres):
             fill_lazy_kernels()              # the LCP kernels: a scene of spheres needs none
+            if any(sp is not None for sp in self.spheres):
+                fill_lazy_kernels("sphere_nurbs")    # the sphere–particle pairs' solver
 
     def __len__(self) -> int:
         return len(self.shapes)

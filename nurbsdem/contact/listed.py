@@ -34,7 +34,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from ..jit import PointerKernel
 from .boxes import candidate_patch_masks_batch_jit, candidate_patches_wall_batch_jit
@@ -362,6 +362,14 @@ def _sphere_nurbs(st, a, b, pos, R, prev_f, prev_i, rf, ri):
     return ok
 
 
+#: :func:`_sphere_nurbs` through a pointer of the lazy group "sphere_nurbs" (its point solver
+#: and the bounding-sphere test), filled where a scene holds exact spheres and other
+#: particles (:class:`~nurbsdem.contact.detect.ContactTable`): a scene without such pairs
+#: does not compile it
+_sphere_nurbs_ptr = PointerKernel(_sphere_nurbs, "sphere_nurbs", lazy="sphere_nurbs",
+                                  result=lambda argtypes: types.boolean[::1]).call
+
+
 @njit(cache=True)
 def _point_rows(st, a, b, pos, R, prev_f, prev_i, rf, ri):
     """Rows of the sphere–NURBS pairs (a[k], b[k]) by the point solver, into rf/ri; returns
@@ -397,7 +405,7 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
         rows = due[mixed]
         f = np.empty((mixed.shape[0], NF))
         i = np.empty((mixed.shape[0], NI), np.int64)
-        ok = _sphere_nurbs(st, a[mixed], b[mixed], pos, R, rows_f[rows], rows_i[rows], f, i)
+        ok = _sphere_nurbs_ptr((st, a[mixed], b[mixed], pos, R, rows_f[rows], rows_i[rows], f, i))
         for k in range(mixed.shape[0]):
             j = rows[k]
             if ok[k]:

@@ -77,11 +77,12 @@ from .loop_state import (ACC_CALM, ACC_REFINE, ACC_REPEATS, ACTIVE_MAX, ACTIVE_S
                         RATES_BOUND, RATES_GAMMA, RATES_OMEGA2, RATES_STEP, RECOUNT, REFINE,
                         ROW_CYCLES, SEARCH_CYCLES, STEP_COUNT, SceneConst, _restore, _snapshot)
 from .monitor import record_row, row_width
-from .periodic_steps import (apply_wrap, has_images, image_contact_part, image_kick_part,
-                             image_step_start, network_images, pair_images, periodic_const,
-                             periodic_list, shift_rows, solve_images, stored_images, wrapped)
-from .step import (all_kinematics, contact_part_kernel, interfaces_defined, kick_part_ptr,
-                   spun_contacts, step_start_ptr)
+from .periodic_steps import (apply_wrap, has_images, image_contact_part_ptr,
+                             image_kick_part_ptr, image_step_start_ptr, network_images,
+                             pair_images, periodic_const, periodic_list_ptr, shift_rows,
+                             solve_images_ptr, stored_images, wrapped)
+from .step import (all_kinematics, contact_part_kernel, contact_part_ptr, interfaces_defined,
+                   kick_part_ptr, spun_contacts, step_start_ptr)
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
@@ -107,8 +108,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     stale = list_is_stale(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
     if stale and sc.cell.on:        # wrapped into the cell, then built through its faces
         x, pos, moved = wrapped(sc.cell, x, pos)
-        a, b, keys, mask_a, mask_b, shift = periodic_list(sc.tables, sc.cell, x, pos, R, wall_d,
-                                                          sc.margin + sc.skin)
+        a, b, keys, mask_a, mask_b, shift = periodic_list_ptr((sc.tables, sc.cell, x, pos, R,
+                                                               wall_d, sc.margin + sc.skin))
         built_x, built_R, built_wall, built_pos = x.copy(), R, wall_d.copy(), pos.copy()
     elif stale:
         fresh = reposed_bodies(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
@@ -129,8 +130,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     c1 = cycles()
     failed = False
     if sc.cell.on:          # B's images as extra particles
-        points, failed = solve_images(sc.tables, sc.cell, a, b, mask_a, mask_b, rows_f, rows_i,
-                                      due, shift, pos, R, wall_d, sc.threads)
+        points, failed = solve_images_ptr((sc.tables, sc.cell, a, b, mask_a, mask_b, rows_f,
+                                           rows_i, due, shift, pos, R, wall_d, sc.threads))
         counters[POINT_SOLVES] += points
     elif sc.all_spheres:    # closed forms only (what solve_due_into does for them)
         t = sc.tables
@@ -230,10 +231,16 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
                 pos_all[n + w, k] += spin[w, 3 + k]
                 omg_all[n + w, k] = spin[w, k]
     solves = np.zeros(4, np.int64)
+    if has_images(image):          # a contact with a particle's image in a periodic cell
+        part = image_contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                       ev.hist_keys, ev.hist_springs, pos_all, vel_all,
+                                       omg_all, q, L, h, solves, image))
+    else:
+        part = contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                 ev.hist_keys, ev.hist_springs, pos_all, vel_all, omg_all, q,
+                                 L, h, solves, np.zeros(0), np.zeros(0, np.int64)))
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
-     hist_springs, _) = image_contact_part(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
-                                           ev.hist_keys, ev.hist_springs, pos_all, vel_all,
-                                           omg_all, q, L, h, solves, image)
+     hist_springs, _) = part
     counters[DASHPOT_SOLVES] += solves[0]
     counters[DASHPOT_SOLVES + 1] += solves[1]
     counters[DASHPOT_SOLVES + 2] += solves[2]
@@ -410,9 +417,10 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
             if has_images(ev.image):    # contacts with periodic images (.periodic_steps)
-                omega, worst, run = image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h,
-                                                     ledger, wall_work, alt_prev_v, alt_prev_L,
-                                                     alt_count, cc.watch_period2)
+                omega, worst, run = image_step_start_ptr((bc, ev, x, v, q, L, wall_d, u_mean, h,
+                                                          ledger, wall_work, alt_prev_v,
+                                                          alt_prev_L, alt_count,
+                                                          cc.watch_period2))
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
@@ -445,8 +453,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 break
             c4 = cycles()
             if has_images(ev.image):
-                omega = image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h, ledger,
-                                        wall_work)
+                omega = image_kick_part_ptr((bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h,
+                                             ledger, wall_work))
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
@@ -542,6 +550,8 @@ class DeckSteps:
         W = s.walls.n
         self.curved, self.cwork = pack_curved(curved, W, scene.table)
         self.provider = curved
+        if scene.cell is not None:
+            fill_lazy_kernels("periodic")    # the periodic cell's kernels
         if curved is not None:
             fill_lazy_kernels("curved")      # the mesh and surface walls' kernels
         kinds = set(self.curved.kind.tolist())

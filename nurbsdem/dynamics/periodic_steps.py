@@ -25,15 +25,16 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from ..contact.listed import SceneTables, scene_list_ptr, solve_due_into_ptr
 from ..contact.lcp import F_PA, F_PB
-from ..jit import internal
+from ..jit import PointerKernel, internal
 from .images import fold_images as _fold, image_particles as _particles, \
     image_positions as _positions, image_rows as _bodies
 from .rigid import omega_world
-from .step import BodyConst, L_EXTERNAL, L_INITIAL, contact_part_ptr, kick_part_ptr, step_start_ptr
+from .step import BodyConst, L_EXTERNAL, L_INITIAL, contact_part_kernel, contact_part_ptr, \
+    kick_part_ptr, step_start_ptr
 
 #: a periodic cell as the compiled loop takes it: ``on`` (False: no cell, the other fields
 #: unused), the box [lo, hi) (3,) m, its lengths (3,) m and which axes repeat (3,) bool
@@ -431,3 +432,37 @@ def network_images(image, near_image, near_a, near_b, a, b) -> np.ndarray:
         out[c] = near_image[r]
         r += 1
     return out
+
+
+# --------------------------------------------------------------------------- called lazily
+# The compiled loop calls the cell's larger kernels through pointers of the lazy group
+# "periodic" (:class:`~nurbsdem.jit.PointerKernel`): a scene without a cell never compiles
+# them, and the loop and its evaluation are typed with the results declared here.
+_I1, _I2 = types.int64[::1], types.int64[:, ::1]
+_F2, _B2 = types.float64[:, ::1], types.boolean[:, ::1]
+
+
+def _contact_part_result(argtypes: tuple) -> types.Type:
+    """What :func:`image_contact_part` returns: :func:`~nurbsdem.dynamics.step.contact_part`'s
+    result for its arguments without images."""
+    return contact_part_kernel.fill(argtypes[:-1] + (types.float64[::1], _I1))
+
+
+#: :func:`periodic_list` through a lazy pointer: (a, b, keys, mask_a, mask_b, shift)
+periodic_list_ptr = PointerKernel(
+    periodic_list, "periodic_list", lazy="periodic",
+    result=lambda argtypes: types.Tuple((_I1, _I1, _I1, _B2, _B2, _I2))).call
+#: :func:`solve_images` through a lazy pointer: (pairs of the point solver, an LCP failed)
+solve_images_ptr = PointerKernel(
+    solve_images, "solve_images", lazy="periodic",
+    result=lambda argtypes: types.Tuple((types.int64, types.boolean))).call
+#: :func:`image_contact_part` through a lazy pointer
+image_contact_part_ptr = PointerKernel(image_contact_part, "image_contact_part",
+                                       lazy="periodic", result=_contact_part_result).call
+#: :func:`image_step_start` through a lazy pointer: (ω, particle, run)
+image_step_start_ptr = PointerKernel(
+    image_step_start, "image_step_start", lazy="periodic",
+    result=lambda argtypes: types.Tuple((_F2, types.int64, types.int64))).call
+#: :func:`image_kick_part` through a lazy pointer: ω
+image_kick_part_ptr = PointerKernel(image_kick_part, "image_kick_part", lazy="periodic",
+                                    result=lambda argtypes: _F2).call
