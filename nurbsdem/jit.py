@@ -195,9 +195,9 @@ class PointerKernel:
 
     ``lazy``: the kernel's slot stays empty until :func:`fill_lazy_kernels` of its group
     (``True``: "lcp") is called by a scene that needs it: the LCP kernels, which a scene of
-    exact spheres never calls, the mesh and surface walls' kernels ("curved") and the periodic
-    cell's ("periodic"), which a scene without them never calls, so that a first run does not
-    compile them.  A call through an empty slot raises ``RuntimeError`` naming the kernel.
+    exact spheres never calls, the sphere–particle solver ("sphere_nurbs"), the mesh and
+    surface walls' kernels ("curved") and the periodic cell's ("periodic"), which a scene
+    without such pairs, walls or cell never calls, so that a first run does not compile them.  A call through an empty slot raises ``RuntimeError`` naming the kernel.
     A lazy kernel returns nothing, or what ``result(argtypes)`` declares (numba types): its
     callers are typed without compiling it, and the kernel compiled later must return exactly
     that (else ``TypeError``).
