@@ -43,8 +43,9 @@ def _cores() -> int:
 
 def _warm_up(on_free_core=None) -> None:
     """Compile the kernels into numba's cache; a failure is reported and the tests go on
-    (they show the error where it matters).  ``on_free_core()`` is called once, when fewer
-    stages are left than there are cores (the last stage, the time loop, compiles alone)."""
+    (they show the error where it matters).  ``on_free_core()`` is called after each stage
+    that leaves fewer stages than there are cores (the last stage, the time loop, compiles
+    alone)."""
     from nurbsdem.warmup import ALL_STAGES, warm_up
     t0 = time.perf_counter()
     done: set[str] = set()
