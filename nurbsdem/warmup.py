@@ -83,11 +83,14 @@ Output
     return folder / "warmup.inp"
 
 
-def _run_deck(compiled_steps: bool, output: bool) -> None:
-    """Solve the small deck (:func:`_deck`) in a temporary folder."""
+def _run_deck(compiled_steps: bool, output: bool,
+              write_deck: Callable[[Path], Path] | None = None) -> None:
+    """Solve the deck ``write_deck(folder)`` writes in a temporary folder (default: the small
+    deck, :func:`_deck`, with VTU output when ``output``), with the compiled loop or the
+    Python driver; without ``output`` nothing is written."""
     from .simulation import Simulation
     with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
-        deck = _deck(Path(tmp), output)
+        deck = write_deck(Path(tmp)) if write_deck else _deck(Path(tmp), output)
         sim = Simulation.from_deck(deck, quiet=True)
         sim.solver.compiled_steps = compiled_steps
         if not output:
@@ -205,12 +208,7 @@ Output
 def _walls() -> None:
     """The mesh and surface walls' kernels as the Python driver calls them (:func:`_walls_deck`,
     no output)."""
-    from .simulation import Simulation
-    with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
-        sim = Simulation.from_deck(_walls_deck(Path(tmp)), quiet=True)
-        sim.solver.compiled_steps = False
-        sim.solver.write_output = False
-        sim.run()
+    _run_deck(compiled_steps=False, output=False, write_deck=_walls_deck)
 
 
 def _periodic_deck(folder: Path) -> Path:
@@ -246,12 +244,8 @@ Output
 def _loop() -> None:
     """The compiled time loop with its output (loads the kernels the other stages cached),
     then with a periodic cell."""
-    from .simulation import Simulation
     _run_deck(compiled_steps=True, output=True)
-    with tempfile.TemporaryDirectory(prefix="nurbsdem-warmup-") as tmp:
-        sim = Simulation.from_deck(_periodic_deck(Path(tmp)), quiet=True)
-        sim.solver.write_output = False
-        sim.run()
+    _run_deck(compiled_steps=True, output=False, write_deck=_periodic_deck)
 
 
 @dataclass(frozen=True)
