@@ -341,12 +341,9 @@ def _const(bc, own, n: int):
 def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys,
                        hist_springs, pos, vel, omg, q, L, h, solves, image):
     """:func:`~nurbsdem.dynamics.step.contact_part` (bodies' pos, vel, omg (B,3)), with the
-    image bodies of the contacts whose B is an image (``image`` (K,3) m; none: as it is),
-    their loads folded onto their owners (the Python driver's ``_evaluate``)."""
-    if not has_images(image):
-        return contact_part_ptr((bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_keys,
-                                 hist_springs, pos, vel, omg, q, L, h, solves, np.zeros(0),
-                                 np.zeros(0, np.int64)))
+    image bodies of the contacts whose B is an image (``image`` (K,3) m, some non-zero: the
+    compiled loop's evaluation calls ``contact_part`` itself when none is), their loads
+    folded onto their owners (the Python driver's ``_evaluate``)."""
     n = q.shape[0]
     own, offset, b_ext = image_bodies(n, b, image)
     pos_e = np.concatenate((pos[:n], pos[own] + offset, pos[n:]))
