@@ -190,8 +190,11 @@ class PointerKernel:
     ``reload_init`` hooks of the caller's library).  The arithmetic is the kernel's own: the
     same bits as a direct call.
 
-    ``kernel.call((a, b, ...))`` takes the arguments as one tuple and returns what the
-    kernel returns.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
+    ``kernel.call(a, b, ...)`` takes the kernel's arguments and returns what the kernel
+    returns.  The arguments reach the call as numba's ``*args`` tuple, which counts no
+    references: a tuple written at the call site (``call((a, b))``) would count every array of
+    every named tuple in it up and down again, and in the compiled loop those counts were most
+    of the code LLVM optimised.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
 
     ``lazy``: the kernel's slot stays empty until :func:`fill_lazy_kernels` of its group
     (``True``: "lcp") is called by a scene that needs it: the LCP kernels, which a scene of
@@ -223,7 +226,7 @@ class PointerKernel:
         self.target = dispatcher
         _POINTER_KERNELS[name] = self
         if config.DISABLE_JIT:
-            self.call = lambda args: self.target(*args)
+            self.call = lambda *args: self.target(*args)
         else:
             self.call = _pointer_call(self)
 
@@ -349,15 +352,13 @@ def _pointer_call(pk: PointerKernel):
     """The intrinsic that calls ``pk``'s kernel through the address in its slot."""
     import functools
 
-    from numba.core.errors import TypingError
-
     module = pk.dispatcher.py_func.__module__
 
     @intrinsic
-    def call(typingctx, args):
-        if not isinstance(args, types.BaseTuple):
-            raise TypingError(f"{pk.name}.call takes the arguments as one tuple, not {args}")
-        argtypes = tuple(args.types)
+    def call(typingctx, *args):
+        if len(args) == 1 and isinstance(args[0], (types.StarArgTuple, types.StarArgUniTuple)):
+            args = tuple(args[0].types)       # typed again with the arguments packed
+        argtypes = tuple(args)
         restype = pk.fill(argtypes)
         symbol = pk.symbol(argtypes)
 
@@ -380,5 +381,5 @@ def _pointer_call(pk: PointerKernel):
             with cgutils.if_unlikely(builder, status.is_error):
                 context.call_conv.return_status_propagate(builder, status)
             return res
-        return restype(args), codegen
+        return restype(types.StarArgTuple(argtypes)), codegen
     return call

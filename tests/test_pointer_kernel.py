@@ -23,7 +23,7 @@ _axpy_ptr = AXPY.call
 
 @njit
 def _twice(a, x, y):
-    return _axpy_ptr((a, x, y)) + _axpy_ptr((a, x, y))
+    return _axpy_ptr(a, x, y) + _axpy_ptr(a, x, y)
 
 
 @njit
@@ -41,7 +41,7 @@ def lazy_kernel(monkeypatch):
 
     @njit
     def caller(a, x, y):
-        ptr((a, x, y))
+        ptr(a, x, y)
     return pk, caller
 
 
@@ -115,7 +115,7 @@ def test_a_lazy_kernel_with_a_declared_result_types_its_callers_without_compilin
 
     @njit
     def caller(a, x, y):
-        return ptr((a, x, y)) + 1.0
+        return ptr(a, x, y) + 1.0
 
     x, y = np.arange(3.0), np.zeros(3)
     with pytest.raises(RuntimeError, match="test_axpy_sum_lazy not loaded"):
@@ -130,7 +130,7 @@ def test_a_lazy_kernel_with_a_declared_result_types_its_callers_without_compilin
 
     @njit
     def wrong_caller(a, x, y):
-        return wrong_ptr((a, x, y))
+        return wrong_ptr(a, x, y)
 
     with pytest.raises(RuntimeError, match="not loaded"):
         wrong_caller(2.0, x, y)

@@ -322,11 +322,11 @@ def _nurbs_rows(cc, w, idx, pos, rot, R, t, rows_f, owner, rank, n):
     K = idx.shape[0]
     rf, ri = np.zeros((K, NF)), np.zeros((K, NI), np.int64)
     status = np.zeros((K, 2), np.int64)
-    particle_surface_rows_ptr((idx, cc.body_shape, pos, rot, R, t, cc.ptab, cc.pinfo, cc.pcen,
-                               cc.prad, cc.pseeds, cc.deg[p0:p1], cc.ncp[p0:p1],
-                               cc.koff[p0:p1], cc.knots, cc.pw, cc.poff[p0:p1], cc.dom[p0:p1],
-                               cc.periodic[p0:p1], cc.seed_x[s0:s1], cc.seed_p[s0:s1],
-                               cc.seed_uv[s0:s1], cc.spacing[w], cc.ssize[w], rf, ri, status))
+    particle_surface_rows_ptr(idx, cc.body_shape, pos, rot, R, t, cc.ptab, cc.pinfo, cc.pcen,
+                              cc.prad, cc.pseeds, cc.deg[p0:p1], cc.ncp[p0:p1],
+                              cc.koff[p0:p1], cc.knots, cc.pw, cc.poff[p0:p1], cc.dom[p0:p1],
+                              cc.periodic[p0:p1], cc.seed_x[s0:s1], cc.seed_p[s0:s1],
+                              cc.seed_uv[s0:s1], cc.spacing[w], cc.ssize[w], rf, ri, status)
     for m in range(K):
         if status[m, 0] == NOT_CONVERGED or status[m, 0] == NOT_UNIQUE:
             return -1
@@ -349,15 +349,15 @@ def _mesh_nurbs_contacts(cc, wk, w, idx, pos, rot, R, t, c):
     rows_f, rows_i = np.zeros((room, NF)), np.zeros((room, NI), np.int64)
     owner, rank, count = (np.zeros(room, np.int64), np.zeros(room, np.int64),
                           np.zeros(1, np.int64))
-    particle_mesh_rows_ptr((idx, cc.body_shape, pos, rot, R, t, cc.ptab, cc.pinfo, cc.pcen,
-                            cc.prad, cc.pseeds, cc.vertices[v0:v1], cc.faces[f0:f1],
-                            cc.normals[f0:f1], cc.two_sided[w], cc.msize[w], cc.grid_origin[w],
-                            cc.grid_cell[w], cc.grid_dims[w], cc.cell_start[cc.co[w]:cc.co[w + 1]],
-                            cc.cell_tris[cc.to[w]:cc.to[w + 1]],
-                            cc.feat[cc.mfo[w]:cc.mfo[w + 1]],
-                            cc.feat_tris[cc.mlo[w]:cc.mlo[w + 1]], cc.tri_feat_range[f0:f1],
-                            cc.tri_feat[cc.mto[w]:cc.mto[w + 1]], MAX_PER_WALL, wk.particle_work,
-                            rows_f, rows_i, owner, rank, count))
+    particle_mesh_rows_ptr(idx, cc.body_shape, pos, rot, R, t, cc.ptab, cc.pinfo, cc.pcen,
+                           cc.prad, cc.pseeds, cc.vertices[v0:v1], cc.faces[f0:f1],
+                           cc.normals[f0:f1], cc.two_sided[w], cc.msize[w], cc.grid_origin[w],
+                           cc.grid_cell[w], cc.grid_dims[w], cc.cell_start[cc.co[w]:cc.co[w + 1]],
+                           cc.cell_tris[cc.to[w]:cc.to[w + 1]],
+                           cc.feat[cc.mfo[w]:cc.mfo[w + 1]],
+                           cc.feat_tris[cc.mlo[w]:cc.mlo[w + 1]], cc.tri_feat_range[f0:f1],
+                           cc.tri_feat[cc.mto[w]:cc.mto[w + 1]], MAX_PER_WALL, wk.particle_work,
+                           rows_f, rows_i, owner, rank, count)
     return _put(cc, wk, w, pos.shape[0] + cc.first + w, c, count[0], rows_f, owner, rank)
 
 

@@ -306,10 +306,10 @@ def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b
             prev_f[c] = res_f[j, c]
         for c in range(prev_i.shape[0]):
             prev_i[c] = res_i[j, c]
-        solve_pair_ptr((tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
-                        pos[ia], rot[ia], pos[ib], rot[ib], prev_f, prev_i, mask_a[j],
-                        mask_b[j], seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j],
-                        nc[a] + nc[b]))
+        solve_pair_ptr(tab, info[a], cen[a], rad[a], tab, info[b], cen[b], rad[b],
+                       pos[ia], rot[ia], pos[ib], rot[ib], prev_f, prev_i, mask_a[j],
+                       mask_b[j], seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j],
+                       nc[a] + nc[b])
 
 
 @njit(cache=True, inline="always")

@@ -271,9 +271,9 @@ def _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_ba
             prev_f[c] = res_f[j, c]
         for c in range(prev_i.shape[0]):
             prev_i[c] = res_i[j, c]
-        solve_wall_ptr((tab, info[s], cen[s], rad[s], seeds, pos[i], rot[i], origin[w], wa[w],
-                        wb[w], wdom[w], prev_f, prev_i, ws, wf, wi, wfs, no_mask, res_f[j],
-                        res_i[j]))
+        solve_wall_ptr(tab, info[s], cen[s], rad[s], seeds, pos[i], rot[i], origin[w], wa[w],
+                       wb[w], wdom[w], prev_f, prev_i, ws, wf, wi, wfs, no_mask, res_f[j],
+                       res_i[j])
 
 
 @njit(cache=True, inline="always")

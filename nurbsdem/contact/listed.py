@@ -405,7 +405,7 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
         rows = due[mixed]
         f = np.empty((mixed.shape[0], NF))
         i = np.empty((mixed.shape[0], NI), np.int64)
-        ok = _sphere_nurbs_ptr((st, a[mixed], b[mixed], pos, R, rows_f[rows], rows_i[rows], f, i))
+        ok = _sphere_nurbs_ptr(st, a[mixed], b[mixed], pos, R, rows_f[rows], rows_i[rows], f, i)
         for k in range(mixed.shape[0]):
             j = rows[k]
             if ok[k]:
@@ -433,8 +433,8 @@ def solve_due(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos, R, w
     """The listed pairs ``due`` solved in place in the list's rows rows_f (L,NF), rows_i (L,NI)
     by :func:`solve_due_into` (the scene's entry to it; the compiled loop calls that
     directly).  Returns the pairs solved by the point solver."""
-    points, _ = solve_due_into_ptr((st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due,
-                                    pos, R, wall_d, nt))
+    points, _ = solve_due_into_ptr(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due,
+                                   pos, R, wall_d, nt)
     return points
 
 

@@ -274,8 +274,8 @@ def _face(tab, info, cen, rad, seeds, vertices, faces, normals, feat, tri_feat_r
         mv[_O, k] = a[k]
         mv[_EA, k] = (b[k] if front else c[k]) - a[k]
         mv[_EB, k] = (c[k] if front else b[k]) - a[k]
-    solve_wall_ptr((tab, info, cen, rad, seeds, sw[_POS], rw, mv[_O], mv[_EA], mv[_EB], wdom,
-                    prev_f, prev_i, ws, wf, wi, wfs, no_mask, qf, qi))
+    solve_wall_ptr(tab, info, cen, rad, seeds, sw[_POS], rw, mv[_O], mv[_EA], mv[_EB], wdom,
+                   prev_f, prev_i, ws, wf, wi, wfs, no_mask, qf, qi)
     if qi[I_VALID] == 1 and qi[I_FAIL] == 0:      # the next query's warm start
         for k in range(qf.shape[0]):
             prev_f[k] = qf[k]

@@ -136,8 +136,8 @@ def _support(tab, info, cen, rad, seeds, work):
     b[0] = a[1] * d[2] - a[2] * d[1]     # a × b = −d: the plane's normal is −d
     b[1] = a[2] * d[0] - a[0] * d[2]
     b[2] = a[0] * d[1] - a[1] * d[0]
-    solve_wall_ptr((tab, info, cen, rad, seeds, sw[_POS], rw, sw[_C], a, b, wdom, prev_f,
-                    prev_i, ws, wf, wi, wfs, no_mask, qf, qi))
+    solve_wall_ptr(tab, info, cen, rad, seeds, sw[_POS], rw, sw[_C], a, b, wdom, prev_f,
+                   prev_i, ws, wf, wi, wfs, no_mask, qf, qi)
     for c in range(3):
         sw[_P, c] = qf[F_PA + c]
     Mb = wf[_MA:_MA + 3]

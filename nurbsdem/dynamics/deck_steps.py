@@ -108,16 +108,16 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     stale = list_is_stale(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
     if stale and sc.cell.on:        # wrapped into the cell, then built through its faces
         x, pos, moved = wrapped(sc.cell, x, pos)
-        a, b, keys, mask_a, mask_b, shift = periodic_list_ptr((sc.tables, sc.cell, x, pos, R,
-                                                               wall_d, sc.margin + sc.skin))
+        a, b, keys, mask_a, mask_b, shift = periodic_list_ptr(sc.tables, sc.cell, x, pos, R,
+                                                              wall_d, sc.margin + sc.skin)
         built_x, built_R, built_wall, built_pos = x.copy(), R, wall_d.copy(), pos.copy()
     elif stale:
         fresh = reposed_bodies(built_x, built_R, built_wall, x, R, wall_d, sc.radius, sc.skin)
         built_x, built_R, built_wall, built_pos = repose(built_x, built_R, built_wall, built_pos,
                                                          x, R, wall_d, pos, fresh)
-        a, b, keys, mask_a, mask_b = scene_list_ptr((sc.tables, built_x, built_pos, built_R,
-                                                     built_wall, sc.owned, sc.margin + sc.skin,
-                                                     pl.keys, pl.mask_a, pl.mask_b, fresh))
+        a, b, keys, mask_a, mask_b = scene_list_ptr(sc.tables, built_x, built_pos, built_R,
+                                                    built_wall, sc.owned, sc.margin + sc.skin,
+                                                    pl.keys, pl.mask_a, pl.mask_b, fresh)
     if stale:
         rows_f, rows_i, budget, _ = carry_rows(pl.keys, pl.rows_f, pl.rows_i, pl.budget,
                                                np.zeros(pl.keys.shape[0], np.bool_), keys)
@@ -130,8 +130,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
     c1 = cycles()
     failed = False
     if sc.cell.on:          # B's images as extra particles
-        points, failed = solve_images_ptr((sc.tables, sc.cell, a, b, mask_a, mask_b, rows_f,
-                                           rows_i, due, shift, pos, R, wall_d, sc.threads))
+        points, failed = solve_images_ptr(sc.tables, sc.cell, a, b, mask_a, mask_b, rows_f,
+                                          rows_i, due, shift, pos, R, wall_d, sc.threads)
         counters[POINT_SOLVES] += points
     elif sc.all_spheres:    # closed forms only (what solve_due_into does for them)
         t = sc.tables
@@ -139,8 +139,8 @@ def _search(sc, pl, x: np.ndarray, R: np.ndarray, pos: np.ndarray, wall_d: np.nd
                          t.sphere_center, t.sphere_radius, t.wall_origin, t.wall_a, t.wall_b,
                          t.wall_dom)
     else:                   # in place: the loop owns these arrays
-        points, failed = solve_due_into_ptr((sc.tables, a, b, mask_a, mask_b, rows_f, rows_i,
-                                             due, pos, R, wall_d, sc.threads))
+        points, failed = solve_due_into_ptr(sc.tables, a, b, mask_a, mask_b, rows_f, rows_i,
+                                            due, pos, R, wall_d, sc.threads)
         counters[POINT_SOLVES] += points
     c2 = cycles()
     renew_certificates(budget, due, rows_f, rows_i, reach)
@@ -204,7 +204,7 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
     act = active_rows(pl.rows_i, due)
     k = 0
     if curved.n_walls:             # the particles' contacts with the mesh and surface walls
-        curved_contacts_ptr((curved, cwork, time, x, R, pos, wall_d))
+        curved_contacts_ptr(curved, cwork, time, x, R, pos, wall_d)
         if cwork.count[0] < 0:     # a refused surface contact: the Python driver raises it
             return False, ev
         k = cwork.count[0]
@@ -232,13 +232,13 @@ def _evaluate(sc, bc, cc, pl, reach: np.ndarray, due: np.ndarray, full: bool, ev
                 omg_all[n + w, k] = spin[w, k]
     solves = np.zeros(4, np.int64)
     if has_images(image):          # a contact with a particle's image in a periodic cell
-        part = image_contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
-                                       ev.hist_keys, ev.hist_springs, pos_all, vel_all,
-                                       omg_all, q, L, h, solves, image))
+        part = image_contact_part_ptr(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                      ev.hist_keys, ev.hist_springs, pos_all, vel_all,
+                                      omg_all, q, L, h, solves, image)
     else:
-        part = contact_part_ptr((bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
-                                 ev.hist_keys, ev.hist_springs, pos_all, vel_all, omg_all, q,
-                                 L, h, solves, np.zeros(0), np.zeros(0, np.int64)))
+        part = contact_part_ptr(bc, cc.implicit, a, b, pa, pb, nrm, dep, key, radius,
+                                ev.hist_keys, ev.hist_springs, pos_all, vel_all, omg_all, q,
+                                L, h, solves, np.zeros(0), np.zeros(0, np.int64))
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, hist_keys,
      hist_springs, _) = part
     counters[DASHPOT_SOLVES] += solves[0]
@@ -417,18 +417,18 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             u_mean = (d_new - wall_d) / h
             c0 = cycles()
             if has_images(ev.image):    # contacts with periodic images (.periodic_steps)
-                omega, worst, run = image_step_start_ptr((bc, ev, x, v, q, L, wall_d, u_mean, h,
-                                                          ledger, wall_work, alt_prev_v,
-                                                          alt_prev_L, alt_count,
-                                                          cc.watch_period2))
+                omega, worst, run = image_step_start_ptr(bc, ev, x, v, q, L, wall_d, u_mean, h,
+                                                         ledger, wall_work, alt_prev_v,
+                                                         alt_prev_L, alt_count,
+                                                         cc.watch_period2)
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
-                omega, _, worst, run = step_start_ptr((
+                omega, _, worst, run = step_start_ptr(
                     bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force,
                     ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, kick_w, h, ledger,
                     wall_work, alt_prev_v, alt_prev_L, alt_count, cc.watch_period2,
-                    np.bool_(True)))
+                    np.bool_(True))
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 status = GUARD
                 break
@@ -445,23 +445,23 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             counters[MONITORED] += due.shape[0]
             c3, dashpots = cycles(), counters[DASHPOT_CYCLES]
             turn_walls(curved, spin, turns, t)
-            ok, ev = _evaluate_ptr((sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
-                                    omega, R, pos, wall_d, wall_u, h, counters, curved, cwork,
-                                    spin, times[t]))
+            ok, ev = _evaluate_ptr(sc, bc, cc, pl, reach, due, k == n_run - 1, ev, x, v, q, L,
+                                   omega, R, pos, wall_d, wall_u, h, counters, curved, cwork,
+                                   spin, times[t])
             if not ok:
                 status = GUARD
                 break
             c4 = cycles()
             if has_images(ev.image):
-                omega = image_kick_part_ptr((bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h,
-                                             ledger, wall_work))
+                omega = image_kick_part_ptr(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h,
+                                            ledger, wall_work)
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
-                omega, _ = kick_part_ptr((bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt,
-                                          ev.fet, ev.force, ev.torque, x, v, q, L, omega, kick_b,
-                                          kick_d, kick_u, kick_w, 0.5 * h, ledger, wall_work,
-                                          np.bool_(True)))
+                omega, _ = kick_part_ptr(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt,
+                                         ev.fet, ev.force, ev.torque, x, v, q, L, omega, kick_b,
+                                         kick_d, kick_u, kick_w, 0.5 * h, ledger, wall_work,
+                                         np.bool_(True))
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -509,8 +509,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
         if state_at[j]:
             states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         c0 = cycles()
-        stands = _step_control_ptr((bc, cc, ev, x, v, q, omega, wall_u, substeps, counters,
-                                    estimate))
+        stands = _step_control_ptr(bc, cc, ev, x, v, q, omega, wall_u, substeps, counters,
+                                   estimate)
         counters[CONTROL_CYCLES] += cycles() - c0
         if not stands:
             status, done = CONTROL, j + 1

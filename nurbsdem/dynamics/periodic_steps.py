@@ -200,12 +200,12 @@ def periodic_list(st, cell, x, pos, R, wall_d, m: float):
         for k in range(3):
             pos_g[g, k] = pos[gown[g], k] + gsft[g, k] * L[k]
     P = st.n_patches
-    a, b, _, ma, mb = scene_list_ptr((ext, np.concatenate((x, gx)),
-                                      np.concatenate((pos, pos_g)),
-                                      np.concatenate((R, R[gown])), wall_d,
-                                      np.ones(N + G, np.bool_), m, np.zeros(0, np.int64),
-                                      np.zeros((0, P), np.bool_), np.zeros((0, P), np.bool_),
-                                      np.ones(nb + G, np.bool_)))
+    a, b, _, ma, mb = scene_list_ptr(ext, np.concatenate((x, gx)),
+                                     np.concatenate((pos, pos_g)),
+                                     np.concatenate((R, R[gown])), wall_d,
+                                     np.ones(N + G, np.bool_), m, np.zeros(0, np.int64),
+                                     np.zeros((0, P), np.bool_), np.zeros((0, P), np.bool_),
+                                     np.ones(nb + G, np.bool_))
     # a pair of two ghosts, or a ghost and a wall, repeats a real one
     keep = np.flatnonzero((a < N) | ((b < N + G) & (b < N)))
     K = keep.shape[0]
@@ -280,8 +280,8 @@ def solve_images(st, cell, a, b, mask_a, mask_b, rows_f, rows_i, due, shift, pos
     particles (:func:`image_scene`).  Returns (pairs solved by the point solver, whether an
     LCP failed)."""
     st_e, b_e, pos_e, R_e = image_scene(st, cell, b, shift, pos, R)
-    return solve_due_into_ptr((st_e, a, b_e, mask_a, mask_b, rows_f, rows_i, due, pos_e, R_e,
-                               wall_d, threads))
+    return solve_due_into_ptr(st_e, a, b_e, mask_a, mask_b, rows_f, rows_i, due, pos_e, R_e,
+                              wall_d, threads)
 
 
 @internal
@@ -348,11 +348,11 @@ def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_k
     own, offset, b_ext = image_bodies(n, b, image)
     pos_e = np.concatenate((pos[:n], pos[own] + offset, pos[n:]))
     (force, torque, point, ftot, fdn, fdt, fet, fn, eel, stick, coeffs, slip, keys, springs,
-     repeated) = contact_part_ptr((_const(bc, own, n), implicit, a, b_ext, pa, pb, nrm, dep,
-                                   key, radius, hist_keys, hist_springs, pos_e,
-                                   _bodies(vel, own, n), _bodies(omg, own, n),
-                                   _particles(q, own), _particles(L, own), h, solves,
-                                   np.zeros(0), own))
+     repeated) = contact_part_ptr(_const(bc, own, n), implicit, a, b_ext, pa, pb, nrm, dep,
+                                  key, radius, hist_keys, hist_springs, pos_e,
+                                  _bodies(vel, own, n), _bodies(omg, own, n),
+                                  _particles(q, own), _particles(L, own), h, solves,
+                                  np.zeros(0), own)
     return (_fold(force, own, n), _fold(torque, own, n), point, ftot, fdn, fdt, fet, fn, eel,
             stick, coeffs, slip, keys, springs, repeated)
 
@@ -372,11 +372,11 @@ def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, a
         _particles(L, own)
     pv, pL, count = _particles(alt_prev_v, own), _particles(alt_prev_L, own), \
         _particles(alt_count, own)
-    omega, _, worst, run = step_start_ptr((
+    omega, _, worst, run = step_start_ptr(
         bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, _bodies(ev.force, own, n),
         _bodies(ev.torque, own, n), x_e, v_e, q_e, L_e, omega_world(q_e, L_e, bc_e.inv_I), b_ext,
         wall_d, u_mean, np.zeros((wall_d.shape[0], 3)), h, ledger, wall_work, pv, pL, count,
-        watch, np.bool_(True)))
+        watch, np.bool_(True))
     x[:] = x_e[:n]
     v[:] = v_e[:n]
     q[:] = q_e[:n]
@@ -398,12 +398,12 @@ def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work):
     own, offset, b_ext = image_bodies(n, ev.b, ev.image)
     bc_e = _const(bc, own, n)
     v_e, q_e, L_e = _particles(v, own), _particles(q, own), _particles(L, own)
-    omega, _ = kick_part_ptr((bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
-                              _bodies(ev.force, own, n), _bodies(ev.torque, own, n),
-                              _positions(x, own, offset), v_e, q_e, L_e,
-                              omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean,
-                              np.zeros((wall_d.shape[0], 3)), hk, ledger, wall_work,
-                              np.bool_(True)))
+    omega, _ = kick_part_ptr(bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
+                             _bodies(ev.force, own, n), _bodies(ev.torque, own, n),
+                             _positions(x, own, offset), v_e, q_e, L_e,
+                             omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean,
+                             np.zeros((wall_d.shape[0], 3)), hk, ledger, wall_work,
+                             np.bool_(True))
     v[:] = v_e[:n]
     L[:] = L_e[:n]
     return omega[:n].copy()
