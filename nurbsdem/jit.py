@@ -339,6 +339,41 @@ def _cached_libraries_keep_reload_hooks() -> None:
 _cached_libraries_keep_reload_hooks()
 
 
+def _plain_shape_mismatch_errors() -> None:
+    """Make an array assignment whose shapes differ (``a[i] = b``, ``a[:] = b``) raise numba's
+    plain message ("cannot assign slice from input of different size", its generic targets')
+    instead of one that formats both shapes.  The formatted message is compiled code of its
+    own (string joins and integer formatting) for each pair of dimension counts, in each
+    process, and linked into every kernel that assigns a row or a slice: it cost seconds per
+    pair in a first run, for an error that only a bug in a kernel can raise.  The assignment
+    itself is unchanged.  Where numba no longer has the overload this does nothing."""
+    from numba.core.typing.templates import builtin_registry
+    from numba.np import arrayobj
+
+    def plain(src_shapes, index_shape):
+        if (isinstance(src_shapes, types.UniTuple) and isinstance(index_shape, types.UniTuple)
+                and src_shapes.dtype == index_shape.dtype
+                and isinstance(src_shapes.dtype, types.Integer)):
+            def impl(src_shapes, index_shape):
+                raise ValueError("cannot assign slice from input of different size")
+            return impl
+        return None
+
+    stub = getattr(arrayobj, "raise_with_shape_context", None)
+    if stub is None:
+        return
+    for value, function_type in builtin_registry.globals:
+        if value is not stub:
+            continue
+        for template in getattr(function_type, "templates", ()):
+            func = getattr(template, "_overload_func", None)
+            if getattr(func, "__name__", "") == "ol_raise_with_shape_context_cpu":
+                template._overload_func = staticmethod(plain)
+
+
+_plain_shape_mismatch_errors()
+
+
 def _reload_pointer(module: str, name: str, argtypes: tuple) -> None:
     """Fill the slot of kernel ``name`` of ``module`` for ``argtypes``: run by numba before it
     links a cached caller's machine code."""
