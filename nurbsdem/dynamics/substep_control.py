@@ -157,15 +157,15 @@ class SubstepControl:
         return net if net[0].shape[0] else None
 
     def _network_images(self, net, cs) -> tuple:
-        """() or (image,): the translation (K,3) m of the periodic image of B for each pair of
-        the network (:mod:`nurbsdem.contact.periodic`), as the network's kernels take it (an
-        extra argument only where a pair touches an image: the other calls keep their
-        compiled types)."""
+        """(image,): the translation (K,3) m of the periodic image of B for each pair of the
+        network (:mod:`nurbsdem.contact.periodic`; zeros where no pair touches an image, which
+        subtract nothing from a lever arm), as the network's kernels take it: always given,
+        as the compiled loop gives it, so that both call the same compiled kernels."""
         near_image = getattr(cs, "near_image", None)
         c = self.contacts
         image = c.image
         if near_image is None or not (np.any(image != 0.0) or np.any(near_image != 0.0)):
-            return ()
+            return (np.zeros((net[0].shape[0], 3)),)
         nb = self.n_bodies
         keys = np.concatenate([c.a * nb + c.b,
                                np.asarray(cs.near_a, np.int64) * nb + np.asarray(cs.near_b)])
