@@ -604,8 +604,8 @@ def network_rates(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray,
     damping operators, and the particle with the largest share of the stiffest mode (−1 when
     there is no contact).  coeffs (K,4): εn, cn, εt, ct of each contact; mass (N,) kg, I (N,3)
     principal inertias kg m² (:func:`network_rates_scaled` with their square roots); image
-    (K,3) m: as :func:`network_blocks` (passed on only when given: the compiled loop's call
-    types stay those of the calls without it)."""
+    (K,3) m: as :func:`network_blocks` (the time-step control always gives it, zeros without
+    a periodic cell, as the compiled loop does: both call the same compiled kernels)."""
     extra = () if image is None else (image,)
     omega2, gamma, body = network_rates_scaled(body_a, body_b, point, normal,
                                                np.ascontiguousarray(coeffs, float), x, Q,
