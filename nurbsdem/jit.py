@@ -193,8 +193,8 @@ class PointerKernel:
     ``kernel.call(a, b, ...)`` takes the kernel's arguments and returns what the kernel
     returns.  The arguments reach the call as numba's ``*args`` tuple, which counts no
     references: a tuple written at the call site (``call((a, b))``) would count every array of
-    every named tuple in it up and down again, and in the compiled loop those counts were most
-    of the code LLVM optimised.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
+    every named tuple in it up and down again, and in the compiled loop those counts were about
+    a third of the code LLVM optimised.  With ``NUMBA_DISABLE_JIT=1`` it calls the Python function.
 
     ``lazy``: the kernel's slot stays empty until :func:`fill_lazy_kernels` of its group
     (``True``: "lcp") is called by a scene that needs it: the LCP kernels, which a scene of
