@@ -1,7 +1,10 @@
 """Kernels called through pointers (:class:`nurbsdem.jit.PointerKernel`): the same results as
-a direct call, one compilation per signature, and a lazy kernel whose slot is still empty
-raises instead of jumping to address 0."""
+a direct call (named tuples of arrays among the arguments too), one compilation per
+signature, and a lazy kernel whose slot is still empty raises instead of jumping to address
+0."""
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numpy as np
 import pytest
@@ -24,6 +27,22 @@ _axpy_ptr = AXPY.call
 @njit
 def _twice(a, x, y):
     return _axpy_ptr(a, x, y) + _axpy_ptr(a, x, y)
+
+
+_Pair = namedtuple("_Pair", "a b")
+
+
+@njit
+def _weighted(t, x):
+    return (t.a * x).sum() + t.b[0]
+
+
+_weighted_ptr = jit.PointerKernel(_weighted, "test_weighted").call
+
+
+@njit
+def _through_pointer(t, x):
+    return _weighted_ptr(t, x)
 
 
 @njit
@@ -52,6 +71,11 @@ def test_a_pointer_call_returns_what_a_direct_call_does():
     s_ref = _axpy(0.5, x, y2) + _axpy(0.5, x, y2)
     assert s == s_ref and np.array_equal(y1, y2)
     assert len(AXPY._slots) == 1 and len(_axpy.overloads) == 1     # compiled once
+
+
+def test_a_pointer_call_takes_a_named_tuple_of_arrays_as_a_direct_call_does():
+    t, x = _Pair(np.arange(3.0), np.array([2.5])), np.array([1.0, -2.0, 0.5])
+    assert _through_pointer(t, x) == _weighted(t, x) == -1.0 + 2.5
 
 
 def test_an_empty_lazy_slot_raises_until_filled(lazy_kernel):
