@@ -112,28 +112,6 @@ def serial(tmp_path_factory) -> Path:
 
 
 # ---------------------------------------------------------------------- the cut
-def test_a_kicks_logged_terms_give_back_its_terms_bit_for_bit():
-    """The deck end's replay books the terms a rank logged (domain._logged_terms): every
-    column, the signed zeros and the walls' column of wall contacts included, comes back
-    with the same bits; an all +0.0 tangential column is not sent."""
-    from nurbsdem.dynamics.forces import N_TERMS, T_DAMP_T, T_WALL_A
-    from nurbsdem.parallel.domain import _all_terms, _logged_terms
-    rng = np.random.default_rng(3)
-    terms = rng.normal(size=(7, N_TERMS))
-    terms[:, T_WALL_A] = 0.0                      # body A is a particle: never booked
-    wall = np.array([0, 1, 0, 0, 1, 0, 0], bool)
-    terms[~wall, -1] = 0.0
-    terms[2, 0] = -0.0
-    back = _all_terms(_logged_terms(terms, wall), wall)
-    assert back.tobytes() == terms.tobytes()
-    terms[:, T_DAMP_T] = 0.0
-    logged = _logged_terms(terms, wall)
-    assert "dt" not in logged
-    assert _all_terms(logged, wall).tobytes() == terms.tobytes()
-    terms[4, T_DAMP_T] = -0.0                      # a signed zero is sent
-    assert "dt" in _logged_terms(terms, wall)
-
-
 def test_the_cut_gives_equal_counts_and_does_not_depend_on_the_rank():
     rng = np.random.default_rng(1)
     x = rng.uniform(0, 1, (1001, 3)) * [4.0, 1.0, 1.0]

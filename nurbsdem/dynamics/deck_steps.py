@@ -371,8 +371,8 @@ _step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
 
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
-                   walls_d, walls_u, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                   counters, peak, acc_growth, estimate, sample_at, rows, state_at, times,
+                   walls_d, walls_u, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
+                   alt_count, counters, peak, acc_growth, estimate, sample_at, rows, state_at, times,
                    curved, cwork, spin, turns):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
@@ -389,7 +389,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     :data:`~nurbsdem.contact.curved_compiled.CurvedConst`; ``cwork``: their workspaces; spin
     (W,6): each wall's angular velocity, rad/s, and centre, m; ``turns``: the poses and spin
     of the walls a table turns at those times, :mod:`~nurbsdem.dynamics.curved_turns`).
-    Body state (x, v, q, L), ledger (5,) J, wall_work (W,) J, the period-2 watch arrays,
+    Body state (x, v, q, L), ledger (5,) J, wall_work (W,) J with their exact accumulators
+    ``exact`` (:data:`~nurbsdem.dynamics.step.EXACT_WALLS`), the period-2 watch arrays,
     counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy
@@ -406,11 +407,12 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     # the balance error at the start of the deck step (then carried from its end)
     balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
     states = [_kept(np.int64(0), x, q, v, L, wall_d, ev) for _ in range(0)]   # typed by items
+    every = np.zeros(0, np.bool_)   # one rank books the work of every contact
     status, done = DONE, n_deck     # one exit: the code of each return is large
     for j in range(n_deck):
         if accuracy:
-            sn = _snapshot(x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                           pl, ev, wall_d, wall_u, peak)
+            sn = _snapshot(x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
+                           alt_count, pl, ev, wall_d, wall_u, peak)
         for k in range(n_run):
             t = j * n_run + k
             d_new, u_new = walls_d[t], walls_u[t]
@@ -418,7 +420,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c0 = cycles()
             if has_images(ev.image):    # contacts with periodic images (.periodic_steps)
                 omega, worst, run = image_step_start_ptr(bc, ev, x, v, q, L, wall_d, u_mean, h,
-                                                         ledger, wall_work, alt_prev_v,
+                                                         ledger, wall_work, exact, alt_prev_v,
                                                          alt_prev_L, alt_count,
                                                          cc.watch_period2)
             else:
@@ -427,8 +429,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                 omega, _, worst, run = step_start_ptr(
                     bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force,
                     ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, kick_w, h, ledger,
-                    wall_work, alt_prev_v, alt_prev_L, alt_count, cc.watch_period2,
-                    np.bool_(True))
+                    wall_work, exact, every, alt_prev_v, alt_prev_L, alt_count,
+                    cc.watch_period2)
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 status = GUARD
                 break
@@ -438,7 +440,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c2 = cycles()
             pl, reach, due, failed, moved = _search(sc, pl, x.copy(), R, pos,  # the flat walls
                                                     wall_d[:sc.flat_walls].copy(), counters)
-            if failed or not apply_wrap(x, moved, bc.mass, bc.gravity, ledger):
+            if failed or not apply_wrap(x, moved, bc.mass, bc.gravity, ledger, wall_work,
+                                                  exact):
                 status = GUARD
                 break
             counters[EVALS] += 1
@@ -454,14 +457,14 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c4 = cycles()
             if has_images(ev.image):
                 omega = image_kick_part_ptr(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h,
-                                            ledger, wall_work)
+                                            ledger, wall_work, exact)
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
                 omega, _ = kick_part_ptr(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt,
                                          ev.fet, ev.force, ev.torque, x, v, q, L, omega, kick_b,
                                          kick_d, kick_u, kick_w, 0.5 * h, ledger, wall_work,
-                                         np.bool_(True))
+                                         exact, every)
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -480,8 +483,8 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             growth = abs(balance - balance0)
             budget = accuracy_budget(cc.accuracy, sn.peak, cc.scale_floor)
             if repeat_for_accuracy(growth, budget, acc, n_run, cc.max_substeps, acc_growth[0]):
-                _restore(sn, x, v, q, L, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-                         peak)
+                _restore(sn, x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
+                         alt_count, peak)
                 counters[STEP_COUNT] -= 1
                 counters[ACC_REFINE] = 2 * acc
                 counters[ACC_CALM] = 0
@@ -675,9 +678,9 @@ class DeckSteps:
         return run_deck_steps(
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
             self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
-            s.wall_work, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak, acc_growth,
-            estimate, sample_at, rows, state_at, times, self.curved, self.cwork, self.spin,
-            table_turns(self.provider, self.curved, self.spin, times))
+            s.wall_work, s.exact_ledger, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak,
+            acc_growth, estimate, sample_at, rows, state_at, times, self.curved, self.cwork,
+            self.spin, table_turns(self.provider, self.curved, self.spin, times))
 
     def run(self, n_deck: int, sample_at: np.ndarray,
             state_at: np.ndarray | None = None) -> tuple[int, int, np.ndarray, np.ndarray, list]:

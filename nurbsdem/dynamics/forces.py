@@ -52,6 +52,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..jit import ROW_CHUNK, THREADED_ROWS, n_chunks
+from .exact_sum import exact_add
 from .laws import law_normal, law_spring_scale
 from .laws.linear_penalty import LinearPenalty
 from .laws.table import MU, RD, RF, InterfaceTable
@@ -462,21 +463,25 @@ def kick_work_terms(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
 
 @njit(cache=True)
 def add_kick_work(terms: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
-                  acc: np.ndarray, wall_work: np.ndarray) -> None:
-    """Add the terms of :func:`kick_work_terms` in contact order: acc (4,) [0] normal damping
-    dissipation, [1] tangential damping dissipation, [2] external work by walls, [3] work done
-    on the tangential springs (J); wall_work (W,) per wall.  The order of the contacts (sorted
-    pair keys) fixes the bits; a domain decomposition replays the same sums."""
+                  counted: np.ndarray, exact: np.ndarray) -> None:
+    """Add the terms of :func:`kick_work_terms` of the contacts ``counted`` (K,) bool (empty:
+    all) exactly (:mod:`~nurbsdem.dynamics.exact_sum`) to the accumulators exact (4 + W,
+    WIDTH): rows 0 the normal and 1 the tangential damping dissipation, 2 the work done on the
+    tangential springs, 3 the external work by walls, then each wall's work (J).  The sums
+    are exact, so their bits depend neither on the contacts' order nor on how ranks share
+    them."""
     for c in range(terms.shape[0]):
-        acc[0] -= terms[c, T_DAMP_N]
-        acc[1] -= terms[c, T_DAMP_T]
-        acc[3] -= terms[c, T_SPRING]
+        if counted.shape[0] and not counted[c]:
+            continue
+        exact_add(exact, 0, -terms[c, T_DAMP_N])
+        exact_add(exact, 1, -terms[c, T_DAMP_T])
+        exact_add(exact, 2, -terms[c, T_SPRING])
         if body_a[c] >= n_particles:
-            acc[2] += terms[c, T_WALL_A]
-            wall_work[body_a[c] - n_particles] += terms[c, T_WALL_A]
+            exact_add(exact, 3, terms[c, T_WALL_A])
+            exact_add(exact, 4 + body_a[c] - n_particles, terms[c, T_WALL_A])
         if body_b[c] >= n_particles:
-            acc[2] += terms[c, T_WALL_B]
-            wall_work[body_b[c] - n_particles] += terms[c, T_WALL_B]
+            exact_add(exact, 3, terms[c, T_WALL_B])
+            exact_add(exact, 4 + body_b[c] - n_particles, terms[c, T_WALL_B])
 
 
 @njit(cache=True)

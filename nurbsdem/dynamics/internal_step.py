@@ -3,8 +3,8 @@ around one contact-provider call per internal step.
 
 The compiled deck steps (:mod:`nurbsdem.dynamics.deck_steps`) drive the same parts for a scene
 on one rank; this driver runs the rest: several MPI ranks (the ghosts' loads exchanged after
-the contact part, the kicks' work logged for the deck end's replay, the guards reduced over
-the ranks), walls that turn (each contact with a turning wall kicks against that wall's point
+the contact part, each rank booking the kicks' work of its counted contacts, the guards
+reduced over the ranks), walls that turn (each contact with a turning wall kicks against that wall's point
 velocity), contact providers other than a scene, and each deck step the compiled loop
 hands back.  Units: SI; global body indices particles 0..N-1, walls N..N+W-1.
 """
@@ -24,7 +24,8 @@ from .images import ImageBodies
 from .integrator import state_is_finite
 from .periodic_steps import wrap_work
 from .rigid import body_poses, omega_world
-from .step import interfaces_defined, kick_part, spun_contacts, step_start
+from .step import (L_DISS_N, L_EXTERNAL, book_terms, interfaces_defined, kick_part,
+                   spun_contacts, step_start)
 from .stepcontrol import ALTERNATION_STEPS
 
 
@@ -188,13 +189,10 @@ class InternalSteps:
         jump = wrap_work(b.mass, np.ascontiguousarray(shift, float),
                          np.ascontiguousarray(self.gravity, float))
         b.x -= shift
-        if self.ledger.initial_mechanical == self.ledger.initial_mechanical:   # not NaN
-            if self.domain is not None:     # booked at the deck end, among the kicks' terms
-                self.domain.log_wrap(jump)
-                return
-            self.ledger.external_work += jump
-        else:
+        if self.ledger.initial_mechanical != self.ledger.initial_mechanical:   # NaN
             self.initial_wrap_work += jump
+        elif self.domain is None or self.domain.books():   # every rank takes the same wrap
+            self._book(L_EXTERNAL, np.array([jump]))
 
     def _images(self) -> "ImageBodies | None":
         """The image bodies of the stored contacts (:mod:`nurbsdem.dynamics.images`)."""
@@ -202,16 +200,31 @@ class InternalSteps:
 
     def _book_dropped(self, cs: Any) -> None:
         """A pair the provider left out after a failed contact problem takes its normal elastic
-        energy with it: book it as dissipated (normal), so the energy balance stays closed."""
+        energy with it: book it as dissipated (normal), so the energy balance stays closed
+        (several MPI ranks: each its counted pairs')."""
         dropped = getattr(cs, "dropped_keys", None)
-        c = self.contacts
-        gone = (np.isin(c.key, dropped) if dropped is not None and len(dropped)
-                else np.zeros(c.key.shape[0], bool))
-        if self.domain is not None:          # booked at the deck end, in the serial order
-            self.domain.log_dropped(c.a[gone], c.key[gone], c.eel[gone, 0])
+        if dropped is None or len(dropped) == 0:
             return
+        c = self.contacts
+        gone = np.isin(c.key, dropped)
+        if self.domain is not None:
+            gone &= self.domain.counted(c.a)
         if gone.any():
-            self.ledger.dissipated_normal += float(c.eel[gone, 0].sum())
+            self._book(L_DISS_N, np.ascontiguousarray(c.eel[gone, 0], float))
+
+    def _book(self, row: int, amounts: np.ndarray) -> None:
+        """Book the amounts (J) exactly in the ledger's accumulator ``row``
+        (:func:`~nurbsdem.dynamics.step.book_terms`)."""
+        ledger = self.ledger.to_array()
+        book_terms(self.exact_ledger, row, amounts, ledger, self.wall_work)
+        self.ledger = EnergyLedger.from_array(ledger)
+
+    def _counted(self) -> np.ndarray:
+        """The stored contacts whose kicks' work this rank books (:meth:`Domain.counted
+        <nurbsdem.parallel.domain.Domain.counted>`); empty on one rank: every contact."""
+        if self.domain is None:
+            return np.zeros(0, np.bool_)
+        return self.domain.counted(self.contacts.a)
 
     def _kick_walls(self, u_mean: np.ndarray) -> tuple:
         """(body_b, wall_d, wall_u, wall_w) of the stored contacts for a half kick's work
@@ -234,14 +247,6 @@ class InternalSteps:
                     im.bodies(self.force), im.bodies(self.torque))
         return self._bc, c.a, c.b, c.point, c.ftot, c.fdn, c.fdt, c.fet, self.force, self.torque
 
-    def _booked(self, ledger: np.ndarray, terms: np.ndarray) -> None:
-        """After a half kick: the ledger array back into :attr:`ledger` (one rank), or the
-        terms logged for the deck end's replay in the serial order (several ranks)."""
-        if self.domain is not None:
-            self.domain.log_kick(self.contacts.a, self.contacts.b, self.contacts.key, terms)
-        else:
-            self.ledger = EnergyLedger.from_array(ledger)
-
     def _internal_step(self, t_new: float, h: float) -> None:
         """One internal step of length h (s) ending at t_new (s): the parts of
         :mod:`nurbsdem.dynamics.step` around the provider's contact search."""
@@ -252,13 +257,14 @@ class InternalSteps:
         ledger = self.ledger.to_array()
         im = self._images()
         if im is not None:
-            worst, run, terms = self._step_start_images(im, u_mean, h, ledger)
+            worst, run = self._step_start_images(im, u_mean, h, ledger)
         else:
-            _, terms, worst, run = step_start(
+            _, _, worst, run = step_start(
                 *self._kick_arguments(), b.x, b.v, b.q, b.L, omega_world(b.q, b.L, self._inv_I),
-                *self._kick_walls(u_mean), h, ledger, self.wall_work, self.alt_prev_v,
-                self.alt_prev_L, self.alt_count, self.watch_period2, self.domain is None)
-        self._booked(ledger, terms)
+                *self._kick_walls(u_mean), h, ledger, self.wall_work, self.exact_ledger,
+                self._counted(), self.alt_prev_v, self.alt_prev_L, self.alt_count,
+                self.watch_period2)
+        self.ledger = EnergyLedger.from_array(ledger)
         self._watch_alternation(int(worst), int(run), h)
         t1 = time.perf_counter()
         self._evaluate(t_new, h)
@@ -267,40 +273,39 @@ class InternalSteps:
         im = self._images()
         if im is not None:
             v, L = im.particles(b.v), im.particles(b.L)
-            _, terms = kick_part(*self._kick_arguments(im), im.positions(b.x), v,
-                                 im.particles(b.q), L, omega_world(im.particles(b.q), L,
-                                                                   im.particles(self._inv_I)),
-                                 im.b, self.wall_d, np.ascontiguousarray(u_mean),
-                                 np.zeros((self.walls.n, 3)), 0.5 * h, ledger, self.wall_work,
-                                 self.domain is None)
+            kick_part(*self._kick_arguments(im), im.positions(b.x), v, im.particles(b.q), L,
+                      omega_world(im.particles(b.q), L, im.particles(self._inv_I)), im.b,
+                      self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)),
+                      0.5 * h, ledger, self.wall_work, self.exact_ledger, self._counted())
             b.v[:], b.L[:] = v[:b.n], L[:b.n]
         else:
-            _, terms = kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
-                                 omega_world(b.q, b.L, self._inv_I),   # ghosts may be re-synced
-                                 *self._kick_walls(u_mean), 0.5 * h, ledger, self.wall_work,
-                                 self.domain is None)
-        self._booked(ledger, terms)
+            kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
+                      omega_world(b.q, b.L, self._inv_I),   # ghosts may be re-synced
+                      *self._kick_walls(u_mean), 0.5 * h, ledger, self.wall_work,
+                      self.exact_ledger, self._counted())
+        self.ledger = EnergyLedger.from_array(ledger)
         self.split["integration"] += (t1 - t0) + (time.perf_counter() - t2)
 
     def _step_start_images(self, im: "ImageBodies", u_mean: np.ndarray, h: float,
-                           ledger: np.ndarray) -> tuple[int, int, np.ndarray]:
+                           ledger: np.ndarray) -> tuple[int, int]:
         """:func:`~nurbsdem.dynamics.step.step_start` with the stored contacts' image bodies
         (walls that do not turn): the particles and their images kicked, watched and
-        drifted together, the particles' rows kept.  Returns (worst, run, terms) as
-        step_start does, ``worst`` an owner."""
+        drifted together, the particles' rows kept.  Returns (worst, run) as step_start
+        does, ``worst`` an owner."""
         b, n = self.bodies, self.bodies.n
         x, v, q, L = (im.positions(b.x), im.particles(b.v), im.particles(b.q),
                       im.particles(b.L))
         pv, pL, count = (im.particles(a) for a in (self.alt_prev_v, self.alt_prev_L,
                                                      self.alt_count))
-        _, terms, worst, run = step_start(
+        _, _, worst, run = step_start(
             *self._kick_arguments(im), x, v, q, L, omega_world(q, L, im.particles(self._inv_I)),
             im.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)), h,
-            ledger, self.wall_work, pv, pL, count, self.watch_period2, self.domain is None)
+            ledger, self.wall_work, self.exact_ledger, self._counted(), pv, pL, count,
+            self.watch_period2)
         b.x[:], b.v[:], b.q[:], b.L[:] = x[:n], v[:n], q[:n], L[:n]
         self.alt_prev_v[:], self.alt_prev_L[:], self.alt_count[:] = pv[:n], pL[:n], count[:n]
         worst = int(worst)
-        return (int(im.own[worst - n]) if worst >= n else worst), int(run), terms
+        return (int(im.own[worst - n]) if worst >= n else worst), int(run)
 
     def _watch_alternation(self, worst: int, run: int, h: float) -> None:
         """The period-2 guard (:mod:`nurbsdem.dynamics.system`) on the watch of the step's start:

@@ -28,6 +28,7 @@ from numba import njit
 
 from ..geometry.rotation import quats_to_matrices
 from ..jit import PointerKernel, cycles
+from .exact_sum import exact_add, exact_value
 from .forces import add_kick_work, contact_loads, match_history
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
@@ -43,45 +44,66 @@ BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass
 
 #: entries of the ledger array (J)
 L_DISS_N, L_DISS_T, L_SPRING, L_EXTERNAL, L_INITIAL = range(5)
+#: the ledger's exact accumulators (:mod:`.exact_sum`, an array (EXACT_WALLS + W, WIDTH)): the
+#: entries L_DISS_N … L_EXTERNAL, then each wall's work from this row on
+EXACT_WALLS = 4
 
 
 @njit(cache=True)
-def book_kick(terms, a, b, n_particles, ledger, wall_work) -> None:
-    """Book a half kick's work terms (K, N_TERMS) in the ledger (5,) J and the walls' work (W,)
-    J (:func:`~nurbsdem.dynamics.forces.add_kick_work`)."""
-    acc = np.zeros(4)
-    add_kick_work(terms, a, b, n_particles, acc, wall_work)
-    if a.shape[0]:
-        ledger[L_DISS_N] += acc[0]
-        ledger[L_DISS_T] += acc[1]
-        ledger[L_EXTERNAL] += acc[2]
-        ledger[L_SPRING] += acc[3]
+def book_kick(terms, a, b, n_particles, counted, ledger, wall_work, exact) -> None:
+    """Book a half kick's work terms (K, N_TERMS) of the contacts ``counted`` (K,) bool (empty:
+    all) exactly in the accumulators ``exact``
+    (:func:`~nurbsdem.dynamics.forces.add_kick_work`), and read them into the ledger (5,) J
+    and the walls' work (W,) J."""
+    if a.shape[0] == 0:
+        return
+    add_kick_work(terms, a, b, n_particles, counted, exact)
+    read_ledger(exact, ledger, wall_work)
+
+
+@njit(cache=True)
+def read_ledger(exact, ledger, wall_work) -> None:
+    """The ledger's entries L_DISS_N … L_EXTERNAL (J) and the walls' work (W,) J from their
+    exact accumulators (:data:`EXACT_WALLS`)."""
+    for k in range(EXACT_WALLS):
+        ledger[k] = exact_value(exact, k)
+    for w in range(wall_work.shape[0]):
+        wall_work[w] = exact_value(exact, EXACT_WALLS + w)
+
+
+@njit(cache=True)
+def book_terms(exact, row, amounts, ledger, wall_work) -> None:
+    """Book the amounts (n,) J exactly in accumulator ``row`` and read the ledger
+    (:func:`read_ledger`)."""
+    for k in range(amounts.shape[0]):
+        exact_add(exact, row, amounts[k])
+    read_ledger(exact, ledger, wall_work)
 
 
 @njit(cache=True)
 def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
-              wall_d, u_mean, wall_w, hk, ledger, wall_work, book):
+              wall_d, u_mean, wall_w, hk, ledger, wall_work, exact, counted):
     """Half kick of length hk (s) from the loads force, torque (B,3) of the contacts a, b
     (their per-contact arrays: point, total, damping and tangential elastic forces (K,3)),
     from the angular velocities omega (N,3) rad/s of the state before it.  body_b (K,): the
     body B of each contact as the work terms see it (a turning wall's contacts each have a
     wall index of their own, moving at wall_d, u_mean (m, m/s) of that index and turning at
-    wall_w (rad/s), :func:`spun_contacts`).  With ``book``
-    the work is booked in ledger and wall_work (one MPI rank; several ranks log the terms and
-    book them at the deck step's end, in the serial order).  Returns (the angular velocities
+    wall_w (rad/s), :func:`spun_contacts`).  The work of the contacts ``counted`` (K,) bool
+    (empty: all; several MPI ranks: each its own, :meth:`Domain.counted
+    <nurbsdem.parallel.domain.Domain.counted>`) is booked exactly in ``exact`` and read into
+    ledger and wall_work (:func:`book_kick`).  Returns (the angular velocities
     after the kick, the terms)."""
     terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, force, torque, hk,
                                    a, body_b, point, wall_d, u_mean, wall_w, ftot, fdn, fdt,
                                    fet)
-    if book:
-        book_kick(terms, a, b, x.shape[0], ledger, wall_work)
+    book_kick(terms, a, b, x.shape[0], counted, ledger, wall_work, exact)
     return omega_after, terms
 
 
 @njit(cache=True)
 def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
-               wall_d, u_mean, wall_w, h, ledger, wall_work, alt_prev_v, alt_prev_L, alt_count,
-               watch, book):
+               wall_d, u_mean, wall_w, h, ledger, wall_work, exact, counted, alt_prev_v,
+               alt_prev_L, alt_count, watch):
     """Parts 1 of the internal step (module docstring): the half kick (:func:`kick_part`), the
     period-2 watch (with ``watch``) and the drift by h (s).  Returns (the angular velocities
     after the drift, the kick's terms, the particle with the longest run of reversals or −1,
@@ -89,7 +111,7 @@ def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, 
     :data:`~nurbsdem.dynamics.stepcontrol.ALTERNATION_STEPS`)."""
     omega, terms = kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L,
                              omega, body_b, wall_d, u_mean, wall_w, 0.5 * h, ledger, wall_work,
-                             book)
+                             exact, counted)
     worst, run = -1, 0
     if watch and x.shape[0]:
         worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count, bc.alt_floor_x,

@@ -84,7 +84,8 @@ from .rigid import PrescribedMotion, RigidBodies, Walls, kind_rows
 from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD, REFINE,
                          DeckSteps)
 from .internal_step import ContactProvider, InternalSteps, Kinematics, _Unstable
-from .step import BodyConst
+from .exact_sum import exact_zeros
+from .step import EXACT_WALLS, L_SPRING, BodyConst
 from .stepcontrol import REFINE_DECAY_STEPS
 from .substep_control import ModeLimit, SubstepControl
 from .rolling import NSPRING, widened
@@ -121,7 +122,7 @@ SPLIT_PARTS = ("integration", "contact forces", "implicit dashpots", "time-step 
 
 #: the arrays of the state besides the bodies' x, q, v, L that the compiled deck steps change
 #: in place (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`)
-_LOOP_IN_PLACE = ("wall_work", "alt_count", "alt_prev_v", "alt_prev_L")
+_LOOP_IN_PLACE = ("wall_work", "exact_ledger", "alt_count", "alt_prev_v", "alt_prev_L")
 
 
 @dataclass(frozen=True)
@@ -365,6 +366,10 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
             self.hist_springs = widened(self.initial_history[1])
         self.wall_work = np.zeros(self.walls.n)
         self.ledger = EnergyLedger()
+        #: the exact sums behind the ledger's entries and the walls' work (:mod:`.exact_sum`,
+        #: rows as :data:`~nurbsdem.dynamics.step.EXACT_WALLS` says): their bits depend on
+        #: neither the order of the terms nor the MPI ranks' shares
+        self.exact_ledger = exact_zeros(EXACT_WALLS + self.walls.n)
         #: the last evaluation's contacts (:mod:`.contact_state`); none before the first
         self.contacts = no_contacts()
         #: the potential energy (J) a wrap into the periodic cell changed at the first
@@ -379,7 +384,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         if self.initial_history is not None:
             # carried-over springs bring their stored energy with them: none of it is dissipated
             eel = self.contacts.eel
-            self.ledger.tangential_spring_work = float(eel[:, 1].sum()) if eel.shape[0] else 0.0
+            self._book(L_SPRING, np.ascontiguousarray(eel[:, 1], float))
         e = self.energy()
         self.ledger.initial_mechanical = e.mechanical
         self._peak = e.kinetic + e.elastic

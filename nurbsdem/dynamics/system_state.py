@@ -13,15 +13,17 @@ from ..errors import InputError
 from ..geometry.rotation import matrix_to_quat
 from .contact_state import checkpoint_arrays, from_checkpoint
 from .energy import EnergyLedger, EnergySample, energy_terms
+from .exact_sum import exact_of
 from .laws import needs_contact_radius, rolls
 from .monitor import MonitorSample, StateSample, contact_output_of, energy_sample
 from .rigid import body_poses, omega_world
 from .rolling import widened
+from .step import EXACT_WALLS
 
 #: the system's arrays a checkpoint holds besides the body state, the contacts
 #: (:func:`~nurbsdem.dynamics.contact_state.checkpoint_arrays`) and the ledger
 _STATE_KEYS = ("force", "torque", "hist_keys", "hist_springs", "wall_d", "wall_u", "wall_work",
-               "alt_count", "alt_prev_v", "alt_prev_L")
+               "exact_ledger", "alt_count", "alt_prev_v", "alt_prev_L")
 
 
 class SystemState:
@@ -158,6 +160,9 @@ class SystemState:
         self.contacts = from_checkpoint(st, self.contacts)
         self.hist_springs = widened(self.hist_springs)   # a checkpoint without rolling springs
         self.ledger = EnergyLedger.from_array(st["ledger"])
+        if "exact_ledger" not in st:      # a checkpoint without the exact sums: its values
+            self.exact_ledger = exact_of(np.concatenate([st["ledger"][:EXACT_WALLS],
+                                                         self.wall_work]))
         self.step_count = int(st["counters"][0])
         if st["counters"].shape[0] >= 4:
             self.substeps, self.refine, self.calm_steps = (int(c) for c in st["counters"][1:4])

@@ -38,9 +38,11 @@ Synchronisation
   particle and every rank's *counted* contacts (those whose body A it owns: each contact is
   counted by exactly one rank) are gathered and merged in the serial order (their pair keys';
   with mesh and surface walls the provider's order, :meth:`Domain.order`); the walls' loads
-  are summed from them in that order; the energy ledger replays the exact-work terms of every
-  half kick of the deck step in that order
-  (:func:`~nurbsdem.dynamics.forces.add_kick_work`).  After it, every rank holds the serial
+  are summed from them in that order.  Each rank books the exact work of its counted
+  contacts' half kicks in the ledger's exact accumulators
+  (:func:`~nurbsdem.dynamics.forces.add_kick_work`, :mod:`~nurbsdem.dynamics.exact_sum`); the
+  deck end adds the ranks' shares exactly, so the ledger holds the serial sums' bits whatever
+  the ranks' order.  After it, every rank holds the serial
   system's state bit for bit: energies, guards, the time-step control (Lanczos over the whole
   network), monitors, output and checkpoints run unchanged.
 
@@ -50,8 +52,8 @@ At a list build every rank wraps every particle into the cell (all of them synch
 from their owners first, so every rank takes the same wrap) and lists the pairs with an
 owned particle, a pair with the image of its body B across a face among them.  The merged
 rows, contacts and list carry each contact's image translation (:data:`PERIODIC_ROW_FIELDS`
-and the others); a wrap's potential jump is logged and booked at the deck end among the
-kicks' work, in the serial order (:meth:`Domain.log_wrap`); the implicit dashpots of the
+and the others); rank 0 books a wrap's potential jump (every rank takes the same wrap); the
+implicit dashpots of the
 gathered network form its image bodies as the serial solve does.
 
 Global decisions (the period-2 and finite-state guards after every internal step, the rebuild
@@ -77,12 +79,12 @@ import numpy as np
 from ..contact.contactset import ContactSet
 from ..dynamics.contact_state import ContactState
 from ..dynamics.energy import EnergyLedger
-from ..dynamics.forces import (N_TERMS, T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_B,
-                               match_history, wall_loads)
+from ..dynamics.exact_sum import SPECIAL, exact_add_rows
+from ..dynamics.forces import match_history, wall_loads
 from ..dynamics.images import ImageBodies
 from ..dynamics.rigid import omega_world
 from ..dynamics.rolling import NSPRING
-from ..dynamics.step import all_kinematics, book_kick
+from ..dynamics.step import all_kinematics, read_ledger
 from ..geometry.rotation import quats_to_matrices
 from .cut import WORK_IMBALANCE, ContactWork, decompose, imbalance
 
@@ -115,8 +117,6 @@ PERIODIC_CS_NEAR = ("near_image",)
 PERIODIC_PAIR_FIELDS = ("pair_shift",)
 
 _TAG_LOADS = 11
-#: the work terms every counted contact's half kick logs (:meth:`Domain.log_kick`)
-KICK_TERMS = np.array([T_DAMP_N, T_SPRING])
 
 
 def _timed(kind: str) -> Callable:
@@ -169,30 +169,6 @@ def merge_by_key(pieces: list[dict], key: str, order: Callable | None = None) ->
     return {name: arr[rank] for name, arr in out.items()}
 
 
-def _logged_terms(terms: np.ndarray, wall: np.ndarray) -> dict:
-    """A half kick's work terms (K, N_TERMS) of a rank's counted contacts as
-    :meth:`Domain.log_kick` keeps them: the columns :data:`KICK_TERMS`; ``T_DAMP_T`` unless
-    every entry is +0.0 (no tangential dashpot); ``T_WALL_B`` of the contacts with a wall
-    (``wall`` (K,) bool) only.  Body A is a particle, so ``T_WALL_A`` is never booked."""
-    out = dict(t=np.ascontiguousarray(terms[:, KICK_TERMS]),
-               w=np.ascontiguousarray(terms[wall, T_WALL_B]))
-    damp_t = np.ascontiguousarray(terms[:, T_DAMP_T])
-    if np.any(damp_t.view(np.int64)):          # +0.0 alone is all-zero bits
-        out["dt"] = damp_t
-    return out
-
-
-def _all_terms(logged: dict, wall: np.ndarray) -> np.ndarray:
-    """The work terms (K, N_TERMS) of :func:`_logged_terms` again (the same bits)."""
-    kept = np.asarray(logged["t"]).reshape(-1, len(KICK_TERMS))
-    terms = np.zeros((kept.shape[0], N_TERMS))
-    terms[:, KICK_TERMS] = kept
-    if "dt" in logged:
-        terms[:, T_DAMP_T] = logged["dt"]
-    terms[wall, T_WALL_B] = logged["w"]
-    return terms
-
-
 def positions_of(keys_in_order: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """The rows of ``keys`` (each present, unique) in ``keys_in_order`` (any order)."""
     by_key = np.argsort(keys_in_order, kind="stable")
@@ -232,9 +208,9 @@ class Domain:
         self._ghosts_at_cut = -1
         self._steps_since_cut = 0
         self.cuts = 1
-        self.events: list[tuple] = []
-        #: the contact keys (array) of the last logged kick (:meth:`log_kick`)
-        self._kicked: np.ndarray | None = None
+        #: the system's exact ledger accumulators at the start of the deck step (None: no
+        #: deck step begun; nothing booked yet): what this rank booked since is its share
+        self._exact_start: np.ndarray | None = None
         #: each particle's counted contact work since the last cut (:meth:`count_work`)
         self.work = ContactWork(self.owned, scene)
         self.lcps = 0                  # counted LCPs since the last deck end
@@ -342,10 +318,10 @@ class Domain:
                               {r: np.asarray(s, np.int64) for r, s in enumerate(asked) if len(s)})
 
     def begin_deck_step(self) -> None:
-        """Before the internal steps of a deck step (also when one is repeated): a fresh log,
-        and the idle particles frozen."""
-        self.events = []
-        self._kicked = None
+        """Before the internal steps of a deck step (also when one is repeated): the ledger's
+        accumulators noted (every rank holds the serial ones), and the idle particles
+        frozen."""
+        self._exact_start = self.system.exact_ledger.copy()
         self.failed = 0
         self.freeze()
 
@@ -471,72 +447,34 @@ class Domain:
         return np.ascontiguousarray(f[positions_of(net["key"], key)])
 
     # ------------------------------------------------------------------ the energy ledger
-    def log_kick(self, a: np.ndarray, b: np.ndarray, key: np.ndarray, terms: np.ndarray) -> None:
-        """Keep the work terms (K, N_TERMS) of a half kick's counted contacts, with their keys
-        and bodies, for the deck end's replay (the terms as :func:`_logged_terms` keeps
-        them).  The second half kick of an internal step and the first of the next one kick
-        with the same contacts: the later one logs its terms alone (its rows' keys and bodies
-        are the earlier one's)."""
-        sel = self.counted(a)
-        t = _logged_terms(terms[sel], b[sel] >= self.n)
-        if self._kicked is not None and self._kicked is key:
-            self.events.append(("kick", t))
-            return
-        self._kicked = key
-        self.events.append(("kick", dict(t, key=key[sel], a=a[sel], b=b[sel])))
+    def books(self) -> bool:
+        """Whether this rank books the amounts every rank computes alike (a wrap's jump):
+        rank 0 alone."""
+        return self.rank == 0
 
-    def log_dropped(self, a: np.ndarray, key: np.ndarray, elastic: np.ndarray) -> None:
-        """Keep the normal elastic energy (J) of counted contacts left out after failed LCPs
-        (every evaluation logs one, possibly empty, so the ranks' logs stay aligned)."""
-        sel = self.counted(a)
-        self.events.append(("dropped", dict(key=key[sel], e=elastic[sel])))
-
-    def log_wrap(self, jump: float) -> None:
-        """Keep the potential's jump (J) of a wrap into the periodic cell (every rank wraps
-        every particle at a list build, so every rank logs the same jump) for the deck end's
-        replay, in its place among the kicks."""
-        self.events.append(("wrap", jump))
-
-    def _replay(self, logs: list[list[tuple]]) -> None:
-        """The serial ledger updates from all ranks' logs: each event's rows merged in key
-        order and booked as one rank books them (:func:`~nurbsdem.dynamics.step.book_kick`,
-        ``DemSystem._book_dropped``, ``DemSystem._apply_wrap``).  A kick logged without
-        keys (:meth:`log_kick`) takes the rows of that rank's last kick; while no rank's rows
-        change, the merged order of the last kick is used again."""
+    def _ledger_share(self) -> np.ndarray:
+        """What this rank booked in the ledger's exact accumulators since the deck step began
+        (limb by limb; the non-finite flags as they are)."""
         s = self.system
-        last: list[dict | None] = [None] * len(logs)
-        merged = None
-        for k, (kind, *_) in enumerate(logs[0]):
-            if kind == "wrap":
-                s.ledger.external_work += logs[0][k][1]
-                continue
-            if kind == "kick":
-                events = [log[k][1] for log in logs]
-                fresh = [r for r, ev in enumerate(events) if "key" in ev]
-                for r in fresh:
-                    last[r] = events[r]
-                if fresh or merged is None:
-                    merged = self._kick_rows(last)
-                rank, a, b, walls = merged
-                terms = np.concatenate([_all_terms(ev, w) for ev, w in zip(events, walls)])
-                ledger = s.ledger.to_array()
-                book_kick(terms[rank], a, b, self.n, ledger, s.wall_work)
-                s.ledger = EnergyLedger.from_array(ledger)
-                continue
-            rows = merge_by_key([log[k][1] for log in logs], "key", self.order)
-            if rows["key"].shape[0]:
-                s.ledger.dissipated_normal += float(rows["e"].sum())
+        if self._exact_start is None:
+            return np.zeros_like(s.exact_ledger)
+        share = s.exact_ledger - self._exact_start
+        share[:, SPECIAL] = s.exact_ledger[:, SPECIAL]
+        return share
 
-    def _kick_rows(self, last: list[dict]) -> tuple:
-        """The ranks' kick rows ``last`` (each rank's keys, bodies) merged in the serial order
-        (:func:`merge_by_key`): (the position of each merged row among the ranks' rows
-        concatenated, body A and body B in that order, each rank's wall contacts (K_r,)
-        bool)."""
-        start = np.cumsum([0] + [p["key"].shape[0] for p in last])
-        rows = merge_by_key([dict(key=p["key"], a=p["a"], b=p["b"],
-                                  at=np.arange(start[r], start[r + 1]))
-                             for r, p in enumerate(last)], "key", self.order)
-        return rows["at"], rows["a"], rows["b"], [p["b"] >= self.n for p in last]
+    def _add_ledger_shares(self, shares: list[np.ndarray]) -> None:
+        """The serial ledger: the accumulators at the deck step's start plus every rank's share,
+        added exactly (:func:`~nurbsdem.dynamics.exact_sum.exact_add_rows`), and read."""
+        s = self.system
+        start = s.exact_ledger if self._exact_start is None else self._exact_start
+        exact = start.copy()
+        for share in shares:
+            exact_add_rows(exact, share)
+        s.exact_ledger = exact
+        ledger = s.ledger.to_array()
+        read_ledger(exact, ledger, s.wall_work)
+        s.ledger = EnergyLedger.from_array(ledger)
+        self._exact_start = None
 
     # ------------------------------------------------------------------ deck ends
     @_timed("gathers")
@@ -553,7 +491,8 @@ class Domain:
         hsel = self.counted(self.particles_of(s.hist_keys))
         hist = dict(key=s.hist_keys[hsel], spring=s.hist_springs[hsel])
         cs = s.last_contacts
-        mine = (rows, hist, self._counted_contacts(cs), self.events, (self.lcps, self.failed))
+        mine = (rows, hist, self._counted_contacts(cs), self._ledger_share(),
+                (self.lcps, self.failed))
         self.sent["gathers"] += _nbytes(mine)
         gathered = self._gather(mine)
         rows = merge_by_key([g[0] for g in gathered], "key", self.order)
@@ -575,9 +514,7 @@ class Domain:
             from ..geometry.curvature import contact_radii_for
             radius, s.hertz_fallback = contact_radii_for(sc, merged, s.bodies, c.a.shape[0])
             s.contacts = c._replace(radius=radius)
-        self._replay([g[3] for g in gathered])
-        self.events = []
-        self._kicked = None
+        self._add_ledger_shares([g[3] for g in gathered])
         counts = np.sum([g[4] for g in gathered], axis=0)
         sc.timers.lcps += int(counts[0])
         s.failed_in_step = int(counts[1])
