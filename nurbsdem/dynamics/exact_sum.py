@@ -11,8 +11,8 @@ An accumulator is a row of :data:`WIDTH` int64 entries: :data:`N_LIMBS` limbs of
 :data:`LIMB_BITS` bits (limb i is worth 2^(LIMB_BITS·i + LOW_EXP); the last limb carries the
 sign) and a flag column (:data:`SPECIAL`) that records the non-finite terms (+inf, −inf, NaN:
 a sum with NaN or both infinities reads NaN, as a float sum would).  A double is an integer
-mantissa M (|M| < 2^53) times 2^e with e ≥ :data:`LOW_EXP` (subnormals included), so every
-term is an integer multiple of the lowest bit.  Each term adds less than 2^LIMB_BITS to at
+mantissa M (M < 2^53, read from its bits) times 2^e with e ≥ :data:`LOW_EXP` (subnormals
+included), so every term is an integer multiple of the lowest bit.  Each term adds less than 2^LIMB_BITS to at
 most three limbs; :func:`exact_normalize` carries the limbs back into [0, 2^LIMB_BITS) and
 must run before 2^31 terms have gone into one accumulator (the bookings normalise after every
 call).  The canonical (normalised) form is unique for each value, so its reading
@@ -24,6 +24,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import types
+from numba.core import config
+from numba.extending import intrinsic
 
 from ..jit import kernel
 
@@ -32,40 +35,56 @@ from ..jit import kernel
 LIMB_BITS = 32
 _BASE = 1 << LIMB_BITS
 _MASK = _BASE - 1
-#: the exponent of bit 0 of limb 0: the lowest bit of the 53-bit mantissa integer of the
-#: smallest subnormal (2^-1074 = 2^52 · 2^-1126)
-LOW_EXP = -1126
-#: limbs per accumulator: bits from 2^LOW_EXP up past 2^1024 (the largest double's top bit is
-#: 2^1023), with room for the carries of a sum of many large terms
-N_LIMBS = 72
+#: the exponent of bit 0 of limb 0: the smallest subnormal, 2^-1074 (the lowest bit of every
+#: double's mantissa integer lies at or above it)
+LOW_EXP = -1074
+#: limbs per accumulator: bits from 2^LOW_EXP up to 2^1024 (the largest double's top bit is
+#: 2^1023: 66 limbs), and two more for the carries of a sum of many large terms
+N_LIMBS = 68
 #: the column of the non-finite flags (1: +inf, 2: −inf, 4: NaN)
 SPECIAL = N_LIMBS
 #: int64 entries per accumulator
 WIDTH = N_LIMBS + 1
-_TWO53 = 9007199254740992.0
+#: the fields of a double's bits: the stored mantissa, its hidden bit, the biased exponent
+_FRACTION = (1 << 52) - 1
+_HIDDEN = 1 << 52
+_EXPONENT = 0x7FF
+
+if config.DISABLE_JIT:
+    # plain Python (NUMBA_DISABLE_JIT=1): an intrinsic has no Python form
+    def float_bits(x: float) -> int:
+        """The IEEE 754 bits of the double x as a signed 64-bit integer."""
+        return int(np.array(x, np.float64).view(np.int64))
+else:
+    @intrinsic
+    def float_bits(typingctx, x):
+        """The IEEE 754 bits of the double x as a signed 64-bit integer (a bit cast)."""
+        sig = types.int64(types.float64)
+
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(args[0], context.get_value_type(types.int64))
+        return sig, codegen
 
 
 @kernel(inline="always")
 def exact_add(acc: np.ndarray, row: int, x: float) -> None:
     """Add the double x exactly to accumulator ``row`` of acc (R, WIDTH) int64."""
-    if x == 0.0:
+    bits = float_bits(x)
+    biased = (bits >> 52) & _EXPONENT
+    mant = bits & _FRACTION
+    if biased == _EXPONENT:              # inf or NaN
+        acc[row, SPECIAL] |= 4 if mant else (2 if bits < 0 else 1)
         return
-    if not math.isfinite(x):
-        if x != x:
-            acc[row, SPECIAL] |= 4
-        elif x > 0.0:
-            acc[row, SPECIAL] |= 1
-        else:
-            acc[row, SPECIAL] |= 2
-        return
-    m, e = math.frexp(x)                 # x = m 2^e, 0.5 <= |m| < 1
-    mant = np.int64(m * _TWO53)          # exact: |mant| < 2^53, x = mant 2^(e - 53)
-    shift = e - 53 - LOW_EXP             # >= 0 for every finite double
+    if biased == 0:                      # zero or subnormal: x = ±mant 2^-1074
+        if mant == 0:
+            return
+        biased = 1
+    else:                                # normal: x = ±(2^52 + mant) 2^(biased - 1075)
+        mant |= _HIDDEN
+    shift = biased - 1                   # the position of mant's bit 0 above 2^LOW_EXP
     limb = shift // LIMB_BITS
     off = shift - limb * LIMB_BITS
-    neg = mant < 0
-    if neg:
-        mant = -mant
+    neg = bits < 0
     lo = (mant & _MASK) << off           # < 2^63
     hi = (mant >> LIMB_BITS) << off      # < 2^52
     p0 = lo & _MASK
