@@ -275,20 +275,49 @@ Output
 
 # --------------------------------------------------------------------------- failed LCPs
 def failing(monkeypatch, when):
-    """Make the scene's particle LCPs fail (garbage rows flagged failed) while ``when()``."""
+    """Make the scene's particle LCPs fail while ``when()``: as the solve kernels leave a
+    failed pair (:func:`~nurbsdem.contact.detect.kept_on_failure`), its previous row flagged
+    failed, whatever the solve found."""
     import nurbsdem.contact.scene as scene_mod
-    from nurbsdem.contact.lcp import F_SD, I_FAIL
+    from nurbsdem.contact.lcp import I_FAIL
 
     real = scene_mod.solve_due
 
     def solve(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, *args):
+        before_f, before_i = rows_f[due].copy(), rows_i[due].copy()
         points = real(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, *args)
         if when():
-            pair = due[list_b[due] < st.n]      # particle pairs (their cold retries too)
-            rows_f[pair, F_SD] = -1.0           # a 1 m "penetration": must never act
+            particles = list_b[due] < st.n       # particle pairs (their cold retries too)
+            pair = due[particles]
+            rows_f[pair] = before_f[particles]
+            rows_i[pair] = before_i[particles]
             rows_i[pair, I_FAIL] = 1
         return points
     monkeypatch.setattr(scene_mod, "solve_due", solve)
+
+
+def test_a_failed_solve_keeps_its_previous_row_unless_within_the_nonconvexity():
+    """kept_on_failure, after each pair's solve in the LCP and wall batches: a converged row
+    stays; a failed one gets its previous row back, flagged failed; a failed valid one within
+    the shapes' non-convexity heights (tol > 0) of touching is accepted as it is."""
+    from nurbsdem.contact.detect import kept_on_failure
+    from nurbsdem.contact.lcp import F_SD, I_FAIL, I_VALID, NF, NI
+    prev_f, prev_i = np.full(NF, 7.0), np.full(NI, 3, np.int64)
+    prev_i[I_FAIL] = 0
+    res_f, res_i = np.zeros((3, NF)), np.zeros((3, NI), np.int64)
+    res_f[:, F_SD] = [-1e-3, -1e-3, 2e-6]
+    res_i[:, I_VALID] = 1
+    res_i[1:, I_FAIL] = 1
+    new_f, new_i = res_f.copy(), res_i.copy()
+    for j in range(3):
+        kept_on_failure(res_f, res_i, j, prev_f, prev_i, 5e-6)
+    assert res_f[0].tobytes() == new_f[0].tobytes() and res_i[0].tobytes() == new_i[0].tobytes()
+    np.testing.assert_array_equal(res_f[1], prev_f)
+    assert res_i[1, I_FAIL] == 1 and (np.delete(res_i[1], I_FAIL) == 3).all()
+    assert res_f[2].tobytes() == new_f[2].tobytes() and res_i[2, I_FAIL] == 0
+    kept_on_failure(new_f, new_i, 2, prev_f, prev_i, 0.0)     # a convex pair: no tolerance
+    np.testing.assert_array_equal(new_f[2], prev_f)
+    assert new_i[2, I_FAIL] == 1
 
 
 def two_spheres_kin(gap_x, r=0.02):

@@ -293,7 +293,8 @@ def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b
     k0..k1-1, bodies body_a[j], body_b[j] (shape[·], pos[·], rot[·]), candidate patches
     mask_a[j], mask_b[j]; its rows res_f[j], res_i[j] hold the previous solution (warm
     start) and receive the new one in place, the previous one copied into prev_f (NF,),
-    prev_i (NI,) first.  Without reference counting (:func:`nurbsdem.jit.kernel`): the rows
+    prev_i (NI,) first: a pair that fails keeps it (:func:`kept_on_failure`).  Without
+    reference counting (:func:`nurbsdem.jit.kernel`): the rows
     it hands to ``solve_pair`` are views of arrays that every thread shares, whose reference
     counts were updated atomically by all threads (8 % of the LCP time of a compaction)."""
     for k in range(k0, k1):
@@ -310,6 +311,27 @@ def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b
                        pos[ia], rot[ia], pos[ib], rot[ib], prev_f, prev_i, mask_a[j],
                        mask_b[j], seeds, seeds, ws, wf, wi, wfs, w4, res_f[j], res_i[j],
                        nc[a] + nc[b])
+        kept_on_failure(res_f, res_i, j, prev_f, prev_i, nc[a] + nc[b])
+
+
+@kernel(inline="always")
+def kept_on_failure(res_f, res_i, j: int, prev_f, prev_i, tol: float) -> None:
+    """After the solve of row j: a failed one (``I_FAIL``) whose valid result lies within the
+    shapes' non-convexity heights tol = h_A + h_B (m) of touching is accepted
+    (:func:`accept_within_nonconvexity`); any other failed row gets its previous solution
+    prev_f (NF,), prev_i (NI,) back, flagged failed.  That is the solution a scene falls back
+    on, moved rigidly (:mod:`nurbsdem.contact.scene`), so it needs no copy of the rows
+    before a solve, and a cold retry that fails too leaves it in place."""
+    if res_i[j, I_FAIL] == 0:
+        return
+    if tol > 0.0 and res_i[j, I_VALID] == 1 and abs(res_f[j, F_SD]) <= tol:
+        res_i[j, I_FAIL] = 0
+        return
+    for c in range(prev_f.shape[0]):
+        res_f[j, c] = prev_f[c]
+    for c in range(prev_i.shape[0]):
+        res_i[j, c] = prev_i[c]
+    res_i[j, I_FAIL] = 1
 
 
 @njit(cache=True, inline="always")
@@ -368,9 +390,9 @@ def _batch_kernel(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_
 @njit(cache=True, inline="always")
 def solve_rows(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows, mask_a,
                mask_b, res_f, res_i, nt) -> None:
-    """The LCPs of the pairs ``rows`` in place (:func:`_solve_range`): on nt threads from
-    :data:`PARALLEL_MIN_PAIRS` pairs, else on this one; then
-    :func:`accept_within_nonconvexity` of their rows."""
+    """The LCPs of the pairs ``rows`` in place (:func:`_solve_range`: a failed pair keeps its
+    previous row, flagged, unless accepted within the shapes' non-convexity): on nt threads
+    from :data:`PARALLEL_MIN_PAIRS` pairs, else on this one."""
     K = rows.shape[0]
     if K >= PARALLEL_MIN_PAIRS:
         _batch_kernel(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
@@ -378,10 +400,6 @@ def solve_rows(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, 
     elif K:
         _solve_chunk(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b, rows,
                      mask_a, mask_b, res_f, res_i, np.int64(0), K)
-    tol = np.empty(K)
-    for k in range(K):
-        tol[k] = nc[shape[body_a[rows[k]]]] + nc[shape[body_b[rows[k]]]]
-    accept_within_nonconvexity(tol, res_f, res_i, rows)
 
 
 def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, rot_a: np.ndarray,
@@ -408,6 +426,8 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     (res_f (K, NF), res_i (K, NI)); columns: :mod:`nurbsdem.contact.lcp` constants
     (``F_SD`` signed distance, ``F_N`` normal, ``F_PA``/``F_PB`` points, ``F_PAR`` params,
     ``I_ACTIVE``, ``I_PA``/``I_PB`` patches, ``I_DEG``, ``I_IT``, ``I_FAIL``, ``I_VALID``).
+    A pair whose LCP failed has its previous row (zeros after a cold start) with ``I_FAIL``
+    set (:func:`kept_on_failure`).
     """
     K = len(shape_a)
     sa = np.ascontiguousarray(shape_a, dtype=np.int64)

@@ -42,8 +42,8 @@ from numba import njit, prange
 from ..geometry.kernel import make_workspace
 from ..jit import PointerKernel, kernel
 from .broadphase import _as_centers_radii, _push
-from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work, next_chunk,
-                     table_of)
+from .detect import (PARALLEL_MIN_PAIRS, ContactResult, _pose, _prev_rows, _work,
+                     kept_on_failure, next_chunk, table_of)
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_BROAD, I_DEG, I_FAIL, I_IT, I_NEV,
                   I_PA, I_PB, I_VALID, NF, NI, clear_row, full_rows, make_work,
                   _predicted_params, _store_prediction)
@@ -260,8 +260,9 @@ def _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_ba
     """The loop of :func:`_wall_chunk`: contact j = rows[k] for k in k0..k1-1 of body
     body[j] (shape[·], pos[·], rot[·]) against wall w = wall[j] − wall_base (origin[w],
     wa[w], wb[w], wdom[w]); its rows res_f[j], res_i[j] hold the previous solution and
-    receive the new one in place (the previous one copied into prev_f, prev_i first).
-    Without reference counting (see :func:`nurbsdem.contact.detect._solve_range`)."""
+    receive the new one in place (the previous one copied into prev_f, prev_i first, and kept
+    by a contact that fails: :func:`~nurbsdem.contact.detect.kept_on_failure`).  Without
+    reference counting (see :func:`nurbsdem.contact.detect._solve_range`)."""
     for k in range(k0, k1):
         j = rows[k]
         i = body[j]
@@ -274,6 +275,7 @@ def _wall_range(tab, info, cen, rad, seeds, shape, pos, rot, body, wall, wall_ba
         solve_wall_ptr(tab, info[s], cen[s], rad[s], seeds, pos[i], rot[i], origin[w], wa[w],
                        wb[w], wdom[w], prev_f, prev_i, ws, wf, wi, wfs, no_mask, res_f[j],
                        res_i[j])
+        kept_on_failure(res_f, res_i, j, prev_f, prev_i, 0.0)
 
 
 @njit(cache=True, inline="always")

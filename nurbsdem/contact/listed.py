@@ -390,8 +390,9 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
     """The rows of the listed pairs ``due`` (indices into the list: bodies list_a/list_b,
     candidate patch masks (L, P), rows (L, NF/NI)) solved in place from the previous rows
     they hold, each by what its shapes are; poses pos (N,3) m, R (N,3,3); wall displacements
-    wall_d (W,3) m; nt threads.  Returns (pairs solved by the point solver, whether one of
-    them failed).  No copies of the rows: a pack of 10^5 particles solves 3·10^5 of them per
+    wall_d (W,3) m; nt threads.  A pair that failed keeps its previous row, flagged
+    ``I_FAIL`` (:func:`~nurbsdem.contact.detect.kept_on_failure`).  Returns (pairs solved by
+    the point solver, whether one of them failed).  No copies of the rows: a pack of 10^5 particles solves 3·10^5 of them per
     evaluation."""
     a = list_a[due]
     b = list_b[due]
@@ -401,8 +402,9 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
                      st.wall_a, st.wall_b, st.wall_dom)
     mixed = np.nonzero(kind == POINT_SURFACE)[0]
     point_solved = 0
+    rows = due[mixed]
+    valid = np.full(mixed.shape[0], -1)   # a point row's flag, kept while the LCP starts cold
     if mixed.shape[0]:
-        rows = due[mixed]
         f = np.empty((mixed.shape[0], NF))
         i = np.empty((mixed.shape[0], NI), np.int64)
         ok = _sphere_nurbs_ptr(st, a[mixed], b[mixed], pos, R, rows_f[rows], rows_i[rows], f, i)
@@ -416,12 +418,16 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
                 kind[mixed[k]] = LCP
                 # a row of the point solver cannot warm-start the LCP (no sphere patch)
                 if rows_i[j, I_STAGE] == STAGE_POINT:
+                    valid[k] = rows_i[j, I_VALID]
                     rows_i[j, I_VALID] = 0
     for walls in (False, True):          # NURBS pairs (LCP), then NURBS–wall pairs
         part = due[kind == (WALL_SUPPORT if walls else LCP)]
         if part.shape[0]:
             _solve_retried_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f,
                                 rows_i, part, nt, walls)
+    for k in range(mixed.shape[0]):      # a failed LCP kept the point row: its flag back
+        if valid[k] >= 0 and rows_i[rows[k], I_FAIL] != 0:
+            rows_i[rows[k], I_VALID] = valid[k]
     failed = False
     for r in range(due.shape[0]):
         failed = failed or rows_i[due[r], I_FAIL] != 0

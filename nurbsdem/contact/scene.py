@@ -393,9 +393,9 @@ class SceneContacts:
         ps = self.pairs
         reach, due = due_rows(ps.a, ps.b, self.odo, ps.budget, np.bool_(self.certificates))
         t1 = time.perf_counter()
-        rows, prev = self._solve(due, pos, R, pose[2])
+        rows = self._solve(due, pos, R, pose[2])
         t2 = time.perf_counter()
-        cs = self._assemble(due, rows, prev, reach, pose)
+        cs = self._assemble(due, rows, reach, pose)
         cs.wrap = wrap_shift
         self.timers.global_search += t1 - t0
         self.timers.lcp += t2 - t1
@@ -412,11 +412,10 @@ class SceneContacts:
     def _solve(self, due: np.ndarray, pos: np.ndarray, R: np.ndarray, wall_d: np.ndarray):
         """The listed pairs ``due`` solved in place in the list's rows (:meth:`_writable_rows`),
         each by what its shapes are, warm-started, failed warm starts retried cold
-        (:func:`~nurbsdem.contact.listed.solve_due`).  Returns the rows (rows_f, rows_i,
-        budget) and the due pairs' previous rows (what a failed pair falls back on)."""
+        (:func:`~nurbsdem.contact.listed.solve_due`; a pair that fails keeps its previous
+        row, flagged: what it falls back on).  Returns the rows (rows_f, rows_i, budget)."""
         ps = self.pairs
         rows = self._writable_rows(ps)
-        prev = (rows[0][due], rows[1][due])
         st, list_b = self.tables(), ps.b
         if self.cell is not None:          # images of B as extra particles (periodic_scene)
             st, list_b, pos, R = image_scene(st, self.cell, ps.b, self.pair_shift, pos, R)
@@ -424,24 +423,23 @@ class SceneContacts:
                                        np.ascontiguousarray(due, np.int64), pos, R,
                                        np.ascontiguousarray(wall_d, float),
                                        numba.get_num_threads())
-        return rows, prev
+        return rows
 
-    def _assemble(self, due, rows, prev, reach, pose) -> ContactSet:
-        """Store the new rows (failed ones answered by the previous solution ``prev`` moved
-        rigidly, once, or left out: module docstring), renew the certificates, and make the
-        ContactSet."""
+    def _assemble(self, due, rows, reach, pose) -> ContactSet:
+        """Store the new rows (a failed pair answered by its previous solution, which its row
+        kept, moved rigidly, once, or left out: module docstring), renew the certificates, and
+        make the ContactSet."""
         ps = self.pairs
         keys = ps.keys
         rows_f, rows_i, budget = rows
-        prev_f, prev_i = prev
         failed = rows_i[due, I_FAIL] != 0
         reused = np.zeros(ps.a.shape[0], bool)
         dropped = []
         for r in np.nonzero(failed)[0].tolist():
             j = int(due[r])
             a, b, k = int(ps.a[j]), int(ps.b[j]), int(keys[j])
-            if prev_i[r, I_VALID] and not ps.reused[j] and self.prev_pose is not None:
-                rows_f[j], rows_i[j] = self._moved(prev_f[r], prev_i[r], a, b, pose)
+            if rows_i[j, I_VALID] and not ps.reused[j] and self.prev_pose is not None:
+                rows_f[j], rows_i[j] = self._moved(rows_f[j], rows_i[j], a, b, pose)
                 reused[j] = True
                 self._warn(k, a, b, "its last converged solution, moved rigidly "
                            "with the two bodies, is used for this evaluation only")

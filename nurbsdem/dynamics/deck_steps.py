@@ -372,8 +372,8 @@ _step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
                    walls_d, walls_u, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
-                   alt_count, counters, peak, acc_growth, estimate, sample_at, rows, state_at, times,
-                   curved, cwork, spin, turns):
+                   alt_count, counters, peak, acc_growth, estimate, sample_at, rows, state_at,
+                   times, curved, cwork, spin, turns):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
     (``substeps``: the stability control's count; module docstring).
 
@@ -426,7 +426,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
-                omega, _, worst, run = step_start_ptr(
+                omega, worst, run = step_start_ptr(
                     bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force,
                     ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, kick_w, h, ledger,
                     wall_work, exact, every, alt_prev_v, alt_prev_L, alt_count,
@@ -461,10 +461,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
-                omega, _ = kick_part_ptr(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt,
-                                         ev.fet, ev.force, ev.torque, x, v, q, L, omega, kick_b,
-                                         kick_d, kick_u, kick_w, 0.5 * h, ledger, wall_work,
-                                         exact, every)
+                omega = kick_part_ptr(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
+                                      ev.force, ev.torque, x, v, q, L, omega, kick_b, kick_d,
+                                      kick_u, kick_w, 0.5 * h, ledger, wall_work, exact, every)
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):

@@ -12,12 +12,13 @@ An accumulator is a row of :data:`WIDTH` int64 entries: :data:`N_LIMBS` limbs of
 sign) and a flag column (:data:`SPECIAL`) that records the non-finite terms (+inf, −inf, NaN:
 a sum with NaN or both infinities reads NaN, as a float sum would).  A double is an integer
 mantissa M (M < 2^53, read from its bits) times 2^e with e ≥ :data:`LOW_EXP` (subnormals
-included), so every term is an integer multiple of the lowest bit.  Each term adds less than 2^LIMB_BITS to at
-most three limbs; :func:`exact_normalize` carries the limbs back into [0, 2^LIMB_BITS) and
-must run before 2^31 terms have gone into one accumulator (the bookings normalise after every
-call).  The canonical (normalised) form is unique for each value, so its reading
-(:func:`exact_value`: the three leading limbs summed in floating point, within about one unit
-in the last place of the exact sum) is the same bits for the same exact sum.
+included), so every term is an integer multiple of the lowest bit.  Each term adds less than
+2^LIMB_BITS to at most three limbs; :func:`exact_normalize` carries the limbs back into
+[0, 2^LIMB_BITS) and must run before 2^31 terms have gone into one accumulator (the bookings
+read, and so normalise, after every call).  The canonical (normalised) form is unique for
+each value, so its reading (:func:`exact_value`: the three leading limbs summed in floating
+point, within about one unit in the last place of the exact sum) is the same bits for the
+same exact sum.
 """
 from __future__ import annotations
 

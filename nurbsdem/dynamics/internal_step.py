@@ -4,9 +4,9 @@ around one contact-provider call per internal step.
 The compiled deck steps (:mod:`nurbsdem.dynamics.deck_steps`) drive the same parts for a scene
 on one rank; this driver runs the rest: several MPI ranks (the ghosts' loads exchanged after
 the contact part, each rank booking the kicks' work of its counted contacts, the guards
-reduced over the ranks), walls that turn (each contact with a turning wall kicks against that wall's point
-velocity), contact providers other than a scene, and each deck step the compiled loop
-hands back.  Units: SI; global body indices particles 0..N-1, walls N..N+W-1.
+reduced over the ranks), walls that turn (each contact with a turning wall kicks against
+that wall's point velocity), contact providers other than a scene, and each deck step the
+compiled loop hands back.  Units: SI; global body indices particles 0..N-1, walls N..N+W-1.
 """
 from __future__ import annotations
 
@@ -259,7 +259,7 @@ class InternalSteps:
         if im is not None:
             worst, run = self._step_start_images(im, u_mean, h, ledger)
         else:
-            _, _, worst, run = step_start(
+            _, worst, run = step_start(
                 *self._kick_arguments(), b.x, b.v, b.q, b.L, omega_world(b.q, b.L, self._inv_I),
                 *self._kick_walls(u_mean), h, ledger, self.wall_work, self.exact_ledger,
                 self._counted(), self.alt_prev_v, self.alt_prev_L, self.alt_count,
@@ -297,7 +297,7 @@ class InternalSteps:
                       im.particles(b.L))
         pv, pL, count = (im.particles(a) for a in (self.alt_prev_v, self.alt_prev_L,
                                                      self.alt_count))
-        _, _, worst, run = step_start(
+        _, worst, run = step_start(
             *self._kick_arguments(im), x, v, q, L, omega_world(q, L, im.particles(self._inv_I)),
             im.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)), h,
             ledger, self.wall_work, self.exact_ledger, self._counted(), pv, pL, count,

@@ -77,9 +77,9 @@ N_COUNTERS = 23
 
 
 #: what a deck step rolled back by the accuracy control restores: the body state, ledger,
-#: wall work, their exact accumulators, the period-2 watch, the pair list (its rows copied: the loop updates them in
-#: place), the last evaluation, the walls' kinematics and the energy peak (the angular
-#: velocities follow from q, L when the next call starts)
+#: wall work, their exact accumulators, the period-2 watch, the pair list (its rows copied:
+#: the loop updates them in place), the last evaluation, the walls' kinematics and the energy
+#: peak (the angular velocities follow from q, L when the next call starts)
 Snapshot = namedtuple("Snapshot", "x v q L ledger wall_work exact alt_prev_v alt_prev_L "
                       "alt_count pl ev wall_d wall_u peak")
 
@@ -93,8 +93,8 @@ def _snapshot(x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L, alt_
                        pl.built_wall, pl.built_pos, pl.prev_pos, pl.prev_R, pl.prev_wall,
                        pl.prev_x, pl.shift)
     return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
-                    wall_work.copy(), exact.copy(), alt_prev_v.copy(), alt_prev_L.copy(), alt_count.copy(),
-                    pl_copy, ev, wall_d, wall_u, peak[0])
+                    wall_work.copy(), exact.copy(), alt_prev_v.copy(), alt_prev_L.copy(),
+                    alt_count.copy(), pl_copy, ev, wall_d, wall_u, peak[0])
 
 
 @internal

@@ -374,7 +374,7 @@ def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, e
         _particles(L, own)
     pv, pL, count = _particles(alt_prev_v, own), _particles(alt_prev_L, own), \
         _particles(alt_count, own)
-    omega, _, worst, run = step_start_ptr(
+    omega, worst, run = step_start_ptr(
         bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, _bodies(ev.force, own, n),
         _bodies(ev.torque, own, n), x_e, v_e, q_e, L_e, omega_world(q_e, L_e, bc_e.inv_I), b_ext,
         wall_d, u_mean, np.zeros((wall_d.shape[0], 3)), h, ledger, wall_work, exact,
@@ -400,12 +400,12 @@ def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work, e
     own, offset, b_ext = image_bodies(n, ev.b, ev.image)
     bc_e = _const(bc, own, n)
     v_e, q_e, L_e = _particles(v, own), _particles(q, own), _particles(L, own)
-    omega, _ = kick_part_ptr(bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
-                             _bodies(ev.force, own, n), _bodies(ev.torque, own, n),
-                             _positions(x, own, offset), v_e, q_e, L_e,
-                             omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean,
-                             np.zeros((wall_d.shape[0], 3)), hk, ledger, wall_work, exact,
-                             np.zeros(0, np.bool_))
+    omega = kick_part_ptr(bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
+                          _bodies(ev.force, own, n), _bodies(ev.torque, own, n),
+                          _positions(x, own, offset), v_e, q_e, L_e,
+                          omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean,
+                          np.zeros((wall_d.shape[0], 3)), hk, ledger, wall_work, exact,
+                          np.zeros(0, np.bool_))
     v[:] = v_e[:n]
     L[:] = L_e[:n]
     return omega[:n].copy()

@@ -91,13 +91,13 @@ def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, o
     wall_w (rad/s), :func:`spun_contacts`).  The work of the contacts ``counted`` (K,) bool
     (empty: all; several MPI ranks: each its own, :meth:`Domain.counted
     <nurbsdem.parallel.domain.Domain.counted>`) is booked exactly in ``exact`` and read into
-    ledger and wall_work (:func:`book_kick`).  Returns (the angular velocities
-    after the kick, the terms)."""
+    ledger and wall_work (:func:`book_kick`).  Returns the angular velocities after the
+    kick."""
     terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, force, torque, hk,
                                    a, body_b, point, wall_d, u_mean, wall_w, ftot, fdn, fdt,
                                    fet)
     book_kick(terms, a, b, x.shape[0], counted, ledger, wall_work, exact)
-    return omega_after, terms
+    return omega_after
 
 
 @njit(cache=True)
@@ -106,12 +106,12 @@ def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, 
                alt_prev_L, alt_count, watch):
     """Parts 1 of the internal step (module docstring): the half kick (:func:`kick_part`), the
     period-2 watch (with ``watch``) and the drift by h (s).  Returns (the angular velocities
-    after the drift, the kick's terms, the particle with the longest run of reversals or −1,
-    and that run's length: the caller's guard fires at
+    after the drift, the particle with the longest run of reversals or −1, and that run's
+    length: the caller's guard fires at
     :data:`~nurbsdem.dynamics.stepcontrol.ALTERNATION_STEPS`)."""
-    omega, terms = kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L,
-                             omega, body_b, wall_d, u_mean, wall_w, 0.5 * h, ledger, wall_work,
-                             exact, counted)
+    omega = kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega,
+                      body_b, wall_d, u_mean, wall_w, 0.5 * h, ledger, wall_work, exact,
+                      counted)
     worst, run = -1, 0
     if watch and x.shape[0]:
         worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count, bc.alt_floor_x,
@@ -119,7 +119,7 @@ def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, 
         if worst >= 0:
             run = alt_count[worst]
     drift(x, v, q, L, bc.inv_I, h)
-    return omega_world(q, L, bc.inv_I), terms, worst, run
+    return omega_world(q, L, bc.inv_I), worst, run
 
 
 @njit(cache=True)

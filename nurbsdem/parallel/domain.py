@@ -41,10 +41,10 @@ Synchronisation
   are summed from them in that order.  Each rank books the exact work of its counted
   contacts' half kicks in the ledger's exact accumulators
   (:func:`~nurbsdem.dynamics.forces.add_kick_work`, :mod:`~nurbsdem.dynamics.exact_sum`); the
-  deck end adds the ranks' shares exactly, so the ledger holds the serial sums' bits whatever
-  the ranks' order.  After it, every rank holds the serial
-  system's state bit for bit: energies, guards, the time-step control (Lanczos over the whole
-  network), monitors, output and checkpoints run unchanged.
+  deck end adds the ranks' shares exactly, so the ledger is the serial run's to the bit.
+  After it, every rank holds the serial system's state bit for bit: energies, guards, the
+  time-step control (Lanczos over the whole network), monitors, output and checkpoints run
+  unchanged.
 
 Periodic cells
 --------------
@@ -53,8 +53,7 @@ from their owners first, so every rank takes the same wrap) and lists the pairs 
 owned particle, a pair with the image of its body B across a face among them.  The merged
 rows, contacts and list carry each contact's image translation (:data:`PERIODIC_ROW_FIELDS`
 and the others); rank 0 books a wrap's potential jump (every rank takes the same wrap); the
-implicit dashpots of the
-gathered network form its image bodies as the serial solve does.
+implicit dashpots of the gathered network form its image bodies as the serial solve does.
 
 Global decisions (the period-2 and finite-state guards after every internal step, the rebuild
 of the neighbour list) are reduced over the ranks, so every rank takes the serial run's
