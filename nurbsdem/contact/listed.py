@@ -392,8 +392,8 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
     they hold, each by what its shapes are; poses pos (N,3) m, R (N,3,3); wall displacements
     wall_d (W,3) m; nt threads.  A pair that failed keeps its previous row, flagged
     ``I_FAIL`` (:func:`~nurbsdem.contact.detect.kept_on_failure`).  Returns (pairs solved by
-    the point solver, whether one of them failed).  No copies of the rows: a pack of 10^5 particles solves 3·10^5 of them per
-    evaluation."""
+    the point solver, whether one of them failed).  No copies of the rows: a pack of 10^5
+    particles solves 3·10^5 of them per evaluation."""
     a = list_a[due]
     b = list_b[due]
     kind = _kinds(st, a, b)

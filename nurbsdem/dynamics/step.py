@@ -17,7 +17,8 @@ momenta, paper §2.3; the rotation is the exact free rotation of
 
 Both drivers call these parts with the same arrays, so a run gives the same bits whichever
 drives it (tested).  Units: SI; global body indices particles 0..N-1, walls N..N+W-1; the
-energy ledger is the array of :meth:`~nurbsdem.dynamics.energy.EnergyLedger.to_array`.
+energy ledger is the array of :meth:`~nurbsdem.dynamics.energy.EnergyLedger.to_array`, read
+from its exact sums (:data:`EXACT_WALLS`, :mod:`.exact_sum`) after every booking.
 """
 from __future__ import annotations
 
