@@ -390,7 +390,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     (W,6): each wall's angular velocity, rad/s, and centre, m; ``turns``: the poses and spin
     of the walls a table turns at those times, :mod:`~nurbsdem.dynamics.curved_turns`).
     Body state (x, v, q, L), ledger (5,) J, wall_work (W,) J with their exact accumulators
-    ``exact`` (:data:`~nurbsdem.dynamics.step.EXACT_WALLS`), the period-2 watch arrays,
+    ``exact`` (:data:`~nurbsdem.dynamics.forces.EXACT_WALLS`), the period-2 watch arrays,
     counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy

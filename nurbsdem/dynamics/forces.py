@@ -398,6 +398,10 @@ def contact_loads(body_a, body_b, point_a, point_b, normal, depth, pos, vel, omg
 
 #: columns of the per-contact terms of one half-kick's work (:func:`kick_work_terms`)
 T_DAMP_N, T_DAMP_T, T_SPRING, T_WALL_A, T_WALL_B, N_TERMS = 0, 1, 2, 3, 4, 5
+#: the energy ledger's exact accumulators (:mod:`.exact_sum`, an array (EXACT_WALLS + W,
+#: WIDTH)): rows 0 … 3 the ledger's entries (``L_DISS_N`` … ``L_EXTERNAL`` of
+#: :mod:`.step`), then each wall's work from this row on
+EXACT_WALLS = 4
 
 
 @njit(cache=True)
@@ -465,11 +469,11 @@ def kick_work_terms(body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
 def add_kick_work(terms: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, n_particles: int,
                   counted: np.ndarray, exact: np.ndarray) -> None:
     """Add the terms of :func:`kick_work_terms` of the contacts ``counted`` (K,) bool (empty:
-    all) exactly (:mod:`~nurbsdem.dynamics.exact_sum`) to the accumulators exact (4 + W,
-    WIDTH): rows 0 the normal and 1 the tangential damping dissipation, 2 the work done on the
-    tangential springs, 3 the external work by walls, then each wall's work (J).  The sums
-    are exact, so their bits depend neither on the contacts' order nor on how ranks share
-    them."""
+    all) exactly (:mod:`~nurbsdem.dynamics.exact_sum`) to the accumulators exact
+    (:data:`EXACT_WALLS` + W, WIDTH): rows 0 the normal and 1 the tangential damping
+    dissipation, 2 the work done on the tangential springs, 3 the external work by walls,
+    then each wall's work (J).  The sums are exact, so their bits depend neither on the
+    contacts' order nor on how ranks share them."""
     for c in range(terms.shape[0]):
         if counted.shape[0] and not counted[c]:
             continue
@@ -478,10 +482,10 @@ def add_kick_work(terms: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, n_p
         exact_add(exact, 2, -terms[c, T_SPRING])
         if body_a[c] >= n_particles:
             exact_add(exact, 3, terms[c, T_WALL_A])
-            exact_add(exact, 4 + body_a[c] - n_particles, terms[c, T_WALL_A])
+            exact_add(exact, EXACT_WALLS + body_a[c] - n_particles, terms[c, T_WALL_A])
         if body_b[c] >= n_particles:
             exact_add(exact, 3, terms[c, T_WALL_B])
-            exact_add(exact, 4 + body_b[c] - n_particles, terms[c, T_WALL_B])
+            exact_add(exact, EXACT_WALLS + body_b[c] - n_particles, terms[c, T_WALL_B])
 
 
 @njit(cache=True)

@@ -30,7 +30,7 @@ from numba import njit
 from ..geometry.rotation import quats_to_matrices
 from ..jit import PointerKernel, cycles
 from .exact_sum import exact_add, exact_value
-from .forces import add_kick_work, contact_loads, match_history
+from .forces import EXACT_WALLS, add_kick_work, contact_loads, match_history
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
 from .rigid import omega_world
@@ -45,9 +45,6 @@ BodyConst = namedtuple("BodyConst", "mass inv_mass inv_I P centroid ell inv_mass
 
 #: entries of the ledger array (J)
 L_DISS_N, L_DISS_T, L_SPRING, L_EXTERNAL, L_INITIAL = range(5)
-#: the ledger's exact accumulators (:mod:`.exact_sum`, an array (EXACT_WALLS + W, WIDTH)): the
-#: entries L_DISS_N … L_EXTERNAL, then each wall's work from this row on
-EXACT_WALLS = 4
 
 
 @njit(cache=True)

@@ -367,7 +367,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         self.wall_work = np.zeros(self.walls.n)
         self.ledger = EnergyLedger()
         #: the exact sums behind the ledger's entries and the walls' work (:mod:`.exact_sum`,
-        #: rows as :data:`~nurbsdem.dynamics.step.EXACT_WALLS` says): their bits depend on
+        #: rows as :data:`~nurbsdem.dynamics.forces.EXACT_WALLS` says): their bits depend on
         #: neither the order of the terms nor the MPI ranks' shares
         self.exact_ledger = exact_zeros(EXACT_WALLS + self.walls.n)
         #: the last evaluation's contacts (:mod:`.contact_state`); none before the first
