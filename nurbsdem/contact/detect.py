@@ -272,8 +272,9 @@ def detect(shape_a, pose_a, shape_b, pose_b, previous: ContactResult | None = No
             rf, ri = np.array(previous.row_f), np.array(previous.row_i)
         ri[I_FAIL] = 1
         ri[I_VALID] = 0
-    accept_within_nonconvexity(np.asarray(ta.nonconvexity + tb.nonconvexity, float).reshape(1),
-                               rf.reshape(1, -1), ri.reshape(1, -1), np.zeros(1, np.int64))
+    if ri[I_FAIL] == 1 and within_nonconvexity(rf.reshape(1, -1), ri.reshape(1, -1), 0,
+                                               float(ta.nonconvexity[0] + tb.nonconvexity[0])):
+        ri[I_FAIL] = 0
     return ContactResult.from_rows(rf, ri)
 
 
@@ -318,13 +319,13 @@ def _solve_range(tab, info, cen, rad, seeds, nc, shape, pos, rot, body_a, body_b
 def kept_on_failure(res_f, res_i, j: int, prev_f, prev_i, tol: float) -> None:
     """After the solve of row j: a failed one (``I_FAIL``) whose valid result lies within the
     shapes' non-convexity heights tol = h_A + h_B (m) of touching is accepted
-    (:func:`accept_within_nonconvexity`); any other failed row gets its previous solution
+    (:func:`within_nonconvexity`); any other failed row gets its previous solution
     prev_f (NF,), prev_i (NI,) back, flagged failed.  That is the solution a scene falls back
     on, moved rigidly (:mod:`nurbsdem.contact.scene`), so it needs no copy of the rows
     before a solve, and a cold retry that fails too leaves it in place."""
     if res_i[j, I_FAIL] == 0:
         return
-    if tol > 0.0 and res_i[j, I_VALID] == 1 and abs(res_f[j, F_SD]) <= tol:
+    if within_nonconvexity(res_f, res_i, j, tol):
         res_i[j, I_FAIL] = 0
         return
     for c in range(prev_f.shape[0]):
@@ -454,23 +455,17 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     return out
 
 
-@njit(cache=True)
-def accept_within_nonconvexity(tol: np.ndarray, res_f: np.ndarray, res_i: np.ndarray,
-                               rows: np.ndarray) -> None:
-    """A direction search that stalls on a *nearly* convex shape (a saddle at a CAD patch
-    corner makes the support function non-smooth there) is accepted, not counted as failed,
-    when its valid result lies within the two shapes' non-convexity heights of touching,
-    |signed distance| <= h_A + h_B: the contact is grazing to within the geometric tolerance
-    the shapes were accepted with (a force of at most εn (h_A + h_B)); stalls at deeper
-    contacts are handled in the kernel (:func:`lcp.solve_pair`, "saddle stall").  Convex
-    shapes have h = 0: nothing changes for them.  tol (K,) = h_A + h_B (m) of the rows
-    rows[k] of res_f (·, NF), res_i (·, NI), updated in place."""
-    if not np.any(tol != 0.0):
-        return
-    for k in range(rows.shape[0]):
-        j = rows[k]
-        if res_i[j, I_FAIL] == 1 and res_i[j, I_VALID] == 1 and abs(res_f[j, F_SD]) <= tol[k]:
-            res_i[j, I_FAIL] = 0
+@kernel(inline="always")
+def within_nonconvexity(res_f, res_i, j: int, tol: float) -> bool:
+    """Whether the failed row j of res_f (·, NF), res_i (·, NI) is accepted: a direction
+    search that stalls on a *nearly* convex shape (a saddle at a CAD patch corner makes the
+    support function non-smooth there) whose valid result lies within the two shapes'
+    non-convexity heights of touching, |signed distance| <= tol = h_A + h_B (m).  The contact
+    is then grazing to within the geometric tolerance the shapes were accepted with (a force
+    of at most εn (h_A + h_B)); stalls at deeper contacts are handled in the kernel
+    (:func:`lcp.solve_pair`, "saddle stall").  Convex shapes have h = 0: nothing is accepted
+    for them."""
+    return tol > 0.0 and res_i[j, I_VALID] == 1 and abs(res_f[j, F_SD]) <= tol
 
 
 # --------------------------------------------------------------------------- stage 1 alone
