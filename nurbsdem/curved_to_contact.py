@@ -132,25 +132,24 @@ def curved_to_contact(model, bodies, wall_offset: np.ndarray, step, curved,
 
 def _spheres(geom, x: np.ndarray, r: np.ndarray, g: float, R, t, d, along) -> float:
     """The least travel (m) bringing the wall (at pose R, t) within g of the spheres (centres
-    x (N,3) m, radii r (N,))."""
-    from .contact.mesh_sweep import sweep_entries
-    from .contact.mesh_wall import MeshWall
-    if isinstance(geom, MeshWall):
-        centres = np.ascontiguousarray((x - t) @ R)          # Rᵀ (x − t), row by row
-        return float(sweep_entries(centres, r + g, np.ascontiguousarray(R.T @ d),
-                                   geom.vertices, geom.faces, geom.normals,
-                                   bool(geom.two_sided)).min())
+    x (N,3) m, radii r (N,)): in closed form where the wall's kind has one
+    (:meth:`~nurbsdem.contact.wall_kinds.WallKind.sphere_travels`), else the root find on
+    each sphere's exact gap (:meth:`~nurbsdem.contact.wall_kinds.WallKind.sphere_row`)."""
     from .contact.lcp import F_N, F_SD
-    from .contact.surface_wall import sphere_contact
+    from .contact.wall_kinds import kind_of
+    kind = kind_of(geom)
+    travels = kind.sphere_travels(geom, x, r + g, R, t, d)
+    if travels is not None:
+        return float(travels.min())
 
     def gap_of(i):
         def gap(s):
-            f, _, ok = sphere_contact(geom, x[i], r[i], R, t + s * d)
-            if not ok:
-                raise RuntimeError("ToContact: no closest point on the surface wall")
+            f = kind.sphere_row(geom, x[i], r[i], R, t + s * d)
+            if f is None:
+                raise RuntimeError(f"ToContact: no closest point on the {kind.name} wall")
             return f[F_SD] - g, float(f[F_N:F_N + 3] @ d)
         return gap
-    return _least(gap_of, x @ d, r + g, along, geom.size)
+    return _least(gap_of, x @ d, r + g, along, kind.size(geom))
 
 
 def _least(gap_of, centre_along: np.ndarray, reach: np.ndarray, along: np.ndarray,
@@ -178,6 +177,7 @@ def _nurbs(model, bodies, mask, geom, g: float, R, t, d, along, where: str) -> f
     crossing: no contact before it), the root find on the particle's exact distance
     (:func:`_nurbs_gap`)."""
     from .contact.detect import ContactTable
+    from .contact.wall_kinds import kind_of
     idx = np.flatnonzero(mask)
     tables = {}
     for sid in np.unique(bodies.shape_id[idx]).tolist():
@@ -189,7 +189,7 @@ def _nurbs(model, bodies, mask, geom, g: float, R, t, d, along, where: str) -> f
     for m, i in enumerate(idx.tolist()):
         table = tables[int(bodies.shape_id[i])]
         pos = bodies.position[i] - Rs[i] @ table.centroid[0]
-        scale = geom.size + radius[m]
+        scale = kind_of(geom).size(geom) + radius[m]
         s0 = _spheres(geom, centre[m:m + 1], radius[m:m + 1], g, R, t, d, along)
         if not s0 < best:
             continue
@@ -202,29 +202,19 @@ def _nurbs(model, bodies, mask, geom, g: float, R, t, d, along, where: str) -> f
 def _nurbs_gap(table, pos, Rb, geom, g: float, R, t, d, reach: float, where: str):
     """gap(s) = (G(s) − g, dG/ds) of the NURBS particle (pose pos, Rb; shape 0 of ``table``)
     and the wall moved by s d: the least signed distance over the wall's features within
-    ``reach`` (m) of its centroid (paper Eq. 8–9 through the support mapping), its slope
-    the contact normal's component along d; with none there, G − g ≥ reach − radius − g
-    (the bounding sphere), a safe advance with slope 0."""
+    ``reach`` (m) of its centroid (paper Eq. 8–9 through the support mapping,
+    :meth:`~nurbsdem.contact.wall_kinds.WallKind.particle_row`), its slope the contact
+    normal's component along d; with none there, G − g ≥ reach − radius − g (the bounding
+    sphere), a safe advance with slope 0."""
     from .contact.lcp import F_N, F_SD
-    from .contact.mesh_particle import particle_mesh_contacts
-    from .contact.mesh_wall import MeshWall, make_workspace
-    from .contact.surface_particle import particle_surface_row_reference
+    from .contact.wall_kinds import kind_of
     clear = reach - float(table.radius[0]) - g
-    work = make_workspace(geom) if isinstance(geom, MeshWall) else None
+    kind = kind_of(geom)
+    work = kind.row_work(geom)
 
     def gap(s):
-        ts = t + s * d
-        if work is not None:
-            rows_f, _ = particle_mesh_contacts(table, 0, pos, Rb, geom, R, ts, work=work,
-                                               active_only=False, reach=reach)
-            if not len(rows_f):
-                return clear, 0.0
-            k = int(np.argmin(rows_f[:, F_SD]))
-            f = rows_f[k]
-        else:
-            f, _, found = particle_surface_row_reference(table, 0, pos, Rb, geom, R, ts,
-                                                         where=where, reach=reach)
-            if not found:
-                return clear, 0.0
+        f = kind.particle_row(geom, table, pos, Rb, R, t + s * d, reach, where, work)
+        if f is None:
+            return clear, 0.0
         return float(f[F_SD]) - g, float(f[F_N:F_N + 3] @ d)
     return gap

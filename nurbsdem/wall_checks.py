@@ -33,7 +33,6 @@ angles in radians.
 """
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
@@ -174,116 +173,33 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 # ---------------------------------------------------------------------------- particles
 
 
-def _mesh_rows(geometry, x: np.ndarray, r: np.ndarray, idx: np.ndarray):
-    """(rows_f, rows_i, owner) of the contacts of spheres ``idx`` (centres x, radii r) with
-    the mesh at rest: the solver's kernel (:func:`nurbsdem.contact.curved_walls._mesh_rows_of`)."""
-    from .contact.curved_walls import MAX_PER_WALL, _mesh_rows_of
-    from .contact.lcp import NF, NI
-    from .contact.mesh_wall import make_workspace
-    work = make_workspace(geometry)
-    cap = MAX_PER_WALL * len(idx)
-    rf, ri = np.zeros((cap, NF)), np.zeros((cap, NI), np.int64)
-    owner, rank = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
-    g = geometry
-    n = _mesh_rows_of(np.ascontiguousarray(idx, np.int64), x, r, np.eye(3), np.zeros(3),
-                      g.vertices, g.faces, g.normals, g.two_sided, g.size, g.grid_origin,
-                      g.grid_cell, g.grid_dims, g.cell_start, g.cell_tris, work[0], 0,
-                      *work[1:], rf, ri, owner, rank)
-    return rf[:n], ri[:n], owner[:n]
-
-
 def _near_box(x: np.ndarray, r: np.ndarray, pts: np.ndarray, pad: float) -> np.ndarray:
     """Indices of the spheres (x, r) whose boxes meet the box of ``pts`` widened by pad (m)."""
     lo, hi = pts.min(axis=0) - pad, pts.max(axis=0) + pad
     return np.flatnonzero(np.all((x + r[:, None] >= lo) & (x - r[:, None] <= hi), axis=1))
 
 
-def mesh_crossings(geometry, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def sphere_crossings(geometry, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(front (N,), back (N,)): the depth (m, 0: none) by which each sphere (centres x (N,3),
-    radii r (N,)) crosses the mesh wall ``geometry`` (at rest) from a side the wall acts on
-    (the contact law's deepest contact), and from behind a one-sided mesh (a contact of the
-    same mesh made two-sided whose centre is behind the triangle that holds it)."""
-    from .contact.lcp import F_N, F_SD, I_PB
+    radii r (N,)) crosses the mesh or surface wall ``geometry`` (at rest) from a side the wall
+    acts on, and from behind it: its kind's answer
+    (:meth:`~nurbsdem.contact.wall_kinds.WallKind.sphere_crossings`: the solver's kernels)
+    for the spheres whose boxes meet the wall's."""
+    from .contact.wall_kinds import kind_of
+    kind = kind_of(geometry)
     x = np.ascontiguousarray(x, float)
     r = np.ascontiguousarray(r, float)
-    front, back = np.zeros(len(x)), np.zeros(len(x))
-    idx = _near_box(x, r, geometry.vertices, 0.0)
-    if not len(idx):
-        return front, back
-    rf, _, owner = _mesh_rows(geometry, x, r, idx)
-    np.maximum.at(front, owner, -rf[:, F_SD])
-    if not geometry.two_sided:
-        rf, ri, owner = _mesh_rows(replace(geometry, two_sided=True), x, r, idx)
-        behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], geometry.normals[ri[:, I_PB]]) > 0
-        np.maximum.at(back, owner[behind], -rf[behind, F_SD])
-    return front, back
-
-
-def surface_crossings(geometry, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(front (N,), back (N,)) as :func:`mesh_crossings`, for a surface wall at rest: the
-    exact closest point of its patches (:func:`nurbsdem.contact.surface_wall.sphere_contact`),
-    in front of the surface or behind it."""
-    from .contact.lcp import F_SD, I_ACTIVE
-    from .contact.surface_wall import sphere_contact
-    front, back = np.zeros(len(x)), np.zeros(len(x))
-    for k in _near_box(x, r, geometry.seed_x, geometry.spacing).tolist():
-        res_f, res_i, ok = sphere_contact(geometry, x[k], r[k])
-        if ok and res_f[F_SD] < 0:
-            (front if res_i[I_ACTIVE] else back)[k] = -res_f[F_SD]
-    return front, back
+    return kind.sphere_crossings(geometry, x, r, _near_box(x, r, *kind.box_points(geometry)))
 
 
 def nurbs_crossings(geometry, shapes: Sequence, x: np.ndarray,
                     R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(front (N,), back (N,)) as :func:`mesh_crossings`, for NURBS particles (``shapes``
+    """(front (N,), back (N,)) as :func:`sphere_crossings`, for NURBS particles (``shapes``
     (N,), centroids x (N,3) m, rotations R (N,3,3)) against a mesh or surface wall at rest:
     the deepest contact of the solver's kernels, in front of the wall or (a one-sided wall)
-    behind it."""
-    from .contact.detect import table_of
-    from .contact.lcp import F_SD, I_ACTIVE
-    from .contact.mesh_wall import MeshWall
-    from .contact.surface_particle import particle_surface_row
-    if isinstance(geometry, MeshWall):
-        return _nurbs_mesh_crossings(geometry, shapes, x, R)
-    front, back = np.zeros(len(x)), np.zeros(len(x))
-    for k, shape in enumerate(shapes):
-        pos = x[k] - R[k] @ np.asarray(shape.centroid, float)
-        res_f, res_i, ok = particle_surface_row(table_of(shape), 0, pos, R[k], geometry)
-        if ok and res_f[F_SD] < 0:
-            (front if res_i[I_ACTIVE] else back)[k] = -res_f[F_SD]
-    return front, back
-
-
-#: contacts of one NURBS particle with a mesh kept by the check (the deepest is what counts)
-_CHECK_ROWS = 32
-
-
-def _nurbs_mesh_crossings(mesh, shapes: Sequence, x: np.ndarray,
-                          R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`nurbs_crossings` against a mesh wall: the compiled contact rows of all the
-    particles in one call (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_rows`, the
-    solver's kernel), the deepest of each; behind a one-sided mesh, those of the two-sided
-    mesh whose normal points along the triangle's front."""
-    from .contact.detect import ContactTable
-    from .contact.lcp import F_N, F_SD, I_PB
-    from .contact.mesh_particle_compiled import mesh_rows
-    kinds: dict = {}                 # each distinct shape once, in the order first met
-    for s in shapes:
-        kinds.setdefault(id(s), (len(kinds), s))
-    body_shape = np.array([kinds[id(s)][0] for s in shapes], np.int64)
-    table = ContactTable([s for _, s in kinds.values()])
-    pos = np.array([x[k] - R[k] @ np.asarray(s.centroid, float) for k, s in enumerate(shapes)])
-    idx = np.arange(len(shapes), dtype=np.int64)
-    front, back = np.zeros(len(x)), np.zeros(len(x))
-    rf, _, owner, _ = mesh_rows(table, mesh, idx, body_shape, pos, R, np.eye(3), np.zeros(3),
-                                _CHECK_ROWS)
-    np.maximum.at(front, owner, -rf[:, F_SD])
-    if not mesh.two_sided:
-        rf, ri, owner, _ = mesh_rows(table, replace(mesh, two_sided=True), idx, body_shape,
-                                     pos, R, np.eye(3), np.zeros(3), _CHECK_ROWS)
-        behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], mesh.normals[ri[:, I_PB]]) > 0
-        np.maximum.at(back, owner[behind], -rf[behind, F_SD])
-    return front, back
+    behind it (:meth:`~nurbsdem.contact.wall_kinds.WallKind.particle_crossings`)."""
+    from .contact.wall_kinds import kind_of
+    return kind_of(geometry).particle_crossings(geometry, shapes, x, R)
 
 
 def _solid_side(spec: "CurvedWallSpec", geometry, x: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -346,10 +262,8 @@ def _check_nurbs_against_curved_wall(model: "Model", bodies: "Bodies", idx: np.n
 def _box_filtered(geometry, x: np.ndarray, r: np.ndarray, crossings):
     """(front, back) (N,) of ``crossings`` (of the indices into x) for the particles whose
     bounding boxes (x ± r) meet the wall's box, 0 for the others."""
-    from .contact.mesh_wall import MeshWall
-    pts, pad = ((geometry.vertices, 0.0) if isinstance(geometry, MeshWall)
-                else (geometry.seed_x, geometry.spacing))
-    near = _near_box(x, r, pts, pad)
+    from .contact.wall_kinds import kind_of
+    near = _near_box(x, r, *kind_of(geometry).box_points(geometry))
     front, back = np.zeros(len(x)), np.zeros(len(x))
     if len(near):
         front[near], back[near] = crossings(near)
@@ -369,8 +283,7 @@ def check_bodies_against_curved_wall(model: "Model", bodies: "Bodies", idx: np.n
         k = int(np.flatnonzero(solid)[0])
         raise model.error(_solid_text(bodies, int(idx[k]), x[k], spec, outward),
                           int(bodies.line[idx[k]]))
-    crossings = mesh_crossings if spec.kind == "mesh" else surface_crossings
-    front, back = crossings(geometry, x, r) if depths is None else depths
+    front, back = sphere_crossings(geometry, x, r) if depths is None else depths
     from .check_rules import pile_mass
     pile = None             # the particles' mass, once a crossing needs it
     for k in np.flatnonzero((front > 0) | (back > 0)).tolist():
@@ -395,8 +308,9 @@ def _judge(model: "Model", bodies: "Bodies", i: int, x: np.ndarray, r: float,
         model, "particle-wall", (int(bodies.material_id[i]),), pile, r, spec.material_id))
     line = int(bodies.line[i])
     if back > tol:
-        side = ("its triangles' vertex order" if spec.kind == "mesh" else "S_u x S_v")
-        fix = (" or make the wall two-sided (OneSided no)" if spec.kind == "mesh" else "")
+        from .contact.wall_kinds import kind_named
+        kind = kind_named(spec.kind)
+        side, fix = kind.front_rule, kind.two_sided_hint
         raise model.error(
             f"particle {bodies.id[i]} (centre {_vec(x)} m) is behind one-sided {_title(spec)} "
             f"(on the side {side} faces away from) and crosses its surface by {back:.3g} m; at "

@@ -263,18 +263,18 @@ def test_an_ellipsoid_rolling_off_a_mesh_ridge_gives_the_same_bits_on_both_drive
     hands a deck step back) and gives the Python driver's bits; the Python driver's contacts
     were the edge's, then the face's."""
     import trimesh
-    from nurbsdem.contact import curved_walls
+    from nurbsdem.contact import mesh_kind
     from nurbsdem.contact.lcp import F_PB
     used = _counting_steps(monkeypatch)
     statuses = _recorded_statuses(monkeypatch)
     points = []                                       # the wall points of the rows (m)
-    rows_of = curved_walls.mesh_rows
+    rows_of = mesh_kind.mesh_rows
 
     def recording(*args, **kwargs):
         out = rows_of(*args, **kwargs)
         points.extend(out[0][:, F_PB:F_PB + 3].tolist())
         return out
-    monkeypatch.setattr(curved_walls, "mesh_rows", recording)
+    monkeypatch.setattr(mesh_kind, "mesh_rows", recording)
     v = np.array([[-0.1, -0.1, 0], [-0.1, 0.1, 0], [0, -0.1, 0.02], [0, 0.1, 0.02],
                   [0.1, -0.1, 0], [0.1, 0.1, 0]], float)
     trimesh.Trimesh(v, np.array([[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]]),

@@ -10,8 +10,9 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from nurbsdem.contact.curved_walls import MAX_PER_WALL, _mesh_rows_of
+from nurbsdem.contact.kinds import MAX_PER_WALL
 from nurbsdem.contact.lcp import F_SD, NF, NI
+from nurbsdem.contact.mesh_kind import _mesh_rows_of
 from nurbsdem.contact.mesh_wall import (build_mesh_wall, make_lists, make_workspace,
                                         mesh_rows_listed)
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from nurbsdem.contact.curved_walls import _surface_rows_of
+from nurbsdem.contact.surface_kind import _surface_rows_of
 from nurbsdem.contact.lcp import NF
 from nurbsdem.contact.surface_wall import build_surface_wall
 from nurbsdem.contact.wall_skin import WallSkin

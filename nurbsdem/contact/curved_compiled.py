@@ -30,13 +30,13 @@ from numba import njit
 
 from ..jit import PointerKernel, internal
 
-from .curved_walls import (MAX_PER_WALL, _surface_rows_of, wall_contact_key, wall_pose_at,
-                           world_box)
-from .kinds import MESH_WALL
+from .curved_walls import wall_contact_key, wall_pose_at, world_box
+from .kinds import MAX_PER_WALL, MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
 from .mesh_particle_compiled import make_mesh_particle_work, particle_mesh_rows_ptr
 from .mesh_topology import pack_topology
 from .mesh_wall import LIST_ROOM, NO_LIST, MeshWall, mesh_rows_listed
+from .surface_kind import _surface_rows_of
 from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
                                         particle_surface_rows_ptr)
 from .wall_skin import due_spheres, pose_travel, wall_reach

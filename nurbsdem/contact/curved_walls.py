@@ -1,9 +1,9 @@
 """Mesh and NURBS-surface walls in the step: a contact provider that adds the contacts of the
 particles with triangle-mesh walls and open NURBS surface walls to those of another provider
 (the scene of the particles and the flat walls, :class:`~nurbsdem.contact.scene.SceneContacts`):
-exact spheres by :mod:`nurbsdem.contact.mesh_wall` and :mod:`nurbsdem.contact.surface_wall`,
-NURBS particles by their support mapping (:mod:`nurbsdem.contact.mesh_particle_compiled`,
-:mod:`nurbsdem.contact.surface_particle`).
+the contacts of the exact spheres and of the NURBS particles (by their support mapping) with
+a wall are its kind's answers (:mod:`nurbsdem.contact.wall_kinds`: the mesh,
+:mod:`nurbsdem.contact.mesh_kind`, and the surface, :mod:`nurbsdem.contact.surface_kind`).
 
 Each curved wall is a body of the system (global index ``N + first_wall + w``) held in its own
 frame and placed by a pose ``x_world = R(t) x_wall + t(t) + d(t)`` (:class:`WallPose`: fixed,
@@ -14,7 +14,7 @@ broad-phase grid stays valid as it moves.
 
 Per evaluation and wall: the world box of the wall's points at its pose is tested against
 each particle's bounding box (centroid ± bounding radius; a sphere's own radius); a particle
-that overlaps it is handed to the wall's kernel (the mesh's triangle grid, or the surface's
+that overlaps it is handed to the wall's kind (the mesh's triangle grid, or the surface's
 nearest samples and projected Newton).  The pair solver of each (particle kind, wall kind)
 comes from :data:`nurbsdem.contact.kinds.PAIR_SOLVER`.
 
@@ -38,19 +38,10 @@ from numba import njit
 
 from ..geometry.rotation import quat_matrix
 from .contactset import ContactSet
-from .kinds import (MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE, SURFACE_POINT,
-                    SURFACE_SUPPORT, pair_solver)
-from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_particle_compiled import mesh_rows, mesh_work
-from .mesh_wall import (MeshWall, make_lists, make_workspace, mesh_rows_listed,
-                        sphere_mesh_rows)
-from .surface_particle import refusal, surface_rows
-from .surface_particle_compiled import CONTACT, NOT_CONVERGED, NOT_UNIQUE
-from .surface_wall import SurfaceWall, sphere_surface_row
-from .wall_skin import WallSkin
-
-#: most contacts one sphere keeps with one mesh wall per evaluation (faces of a concave fold)
-MAX_PER_WALL = 8
+from .kinds import (MAX_PER_WALL, MESH_ROWS, MESH_SUPPORT, NURBS_PARTICLE, SPHERE,
+                    SURFACE_POINT, SURFACE_SUPPORT, pair_solver)
+from .lcp import F_N, F_PA, F_PB, F_SD
+from .wall_kinds import kind_of
 
 
 @njit(cache=True)
@@ -144,84 +135,27 @@ class WallPose:
 
 @dataclass
 class CurvedWall:
-    """One mesh or surface wall: its kind (:data:`~nurbsdem.contact.kinds.MESH_WALL` or
-    ``SURFACE_WALL``), geometry (:class:`MeshWall` or :class:`SurfaceWall`), pose and
-    name."""
+    """One mesh or surface wall: its kind's code (:data:`~nurbsdem.contact.kinds.MESH_WALL`
+    or ``SURFACE_WALL``), geometry (that kind's, :mod:`nurbsdem.contact.wall_kinds`), pose
+    and name."""
 
     kind: int
-    geometry: MeshWall | SurfaceWall
+    geometry: object
     pose: WallPose = field(default_factory=WallPose)
     #: the wall's name (in messages; empty: its index)
     name: str = ""
     corners: np.ndarray = field(init=False)
-    work: tuple = field(init=False, default=())
 
     def __post_init__(self) -> None:
-        g = self.geometry
-        pts = g.vertices if isinstance(g, MeshWall) else g.seed_x
-        pad = 0.0 if isinstance(g, MeshWall) else g.spacing
+        pts, pad = kind_of(self.geometry).box_points(self.geometry)
         lo, hi = pts.min(axis=0) - pad, pts.max(axis=0) + pad
         self.corners = np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]]
                                  for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-        if isinstance(g, MeshWall):
-            self.work = make_workspace(g)
 
     def world_box(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The world box (lo, hi) of the wall's bounding box at pose (R, t)."""
         return world_box(self.corners, np.ascontiguousarray(R, float),
                          np.ascontiguousarray(t, float))
-
-
-@njit(cache=True)
-def _mesh_rows_of(idx, x, r, R, t, vertices, faces, normals, two_sided, size, grid_origin,
-                  grid_cell, grid_dims, cell_start, cell_tris, stamp, mark0, tris, cand_q,
-                  cand_d, cand_f, rows_f, rows_i, owner, rank):
-    """The contact rows of spheres ``idx`` (centres x, radii r) with one mesh wall at (R, t)
-    into rows_f / rows_i from row 0, each row's sphere in ``owner`` and its rank among that
-    sphere's contacts with the wall in ``rank``; returns the count (at most
-    ``MAX_PER_WALL`` per sphere)."""
-    n = 0
-    one_f = np.zeros((MAX_PER_WALL, NF))
-    one_i = np.zeros((MAX_PER_WALL, NI), np.int64)
-    for m in range(idx.shape[0]):
-        i = idx[m]
-        k = sphere_mesh_rows(x[i], r[i], R, t, vertices, faces, normals, two_sided, size,
-                             grid_origin, grid_cell, grid_dims, cell_start, cell_tris, stamp,
-                             mark0 + m, tris, cand_q, cand_d, cand_f, one_f, one_i)
-        for j in range(min(k, MAX_PER_WALL)):
-            rows_f[n, :] = one_f[j, :]
-            rows_i[n, :] = one_i[j, :]
-            owner[n] = i
-            rank[n] = j
-            n += 1
-    return n
-
-
-@njit(cache=True)
-def _surface_rows_of(idx, x, r, R, t, deg, ncp, koff, knots, pw, poff, dom, periodic, seed_x,
-                     seed_p, seed_uv, spacing, size, rows_f, owner, gap):
-    """The active contact rows of spheres ``idx`` (centres x, radii r) with one surface wall
-    at (R, t) into rows_f from row 0, each row's sphere in ``owner``; returns the count (one
-    row per sphere at most: the closest point of :func:`sphere_surface_row`).  ``gap`` (m)
-    gets, for each sphere of idx, its distance to the wall less its radius where it is
-    apart, else 0 (the certificates of :mod:`nurbsdem.contact.wall_skin`)."""
-    n = 0
-    ev = np.zeros((6, 3))
-    one_f = np.zeros(NF)
-    one_i = np.zeros(NI, np.int64)
-    for m in range(idx.shape[0]):
-        i = idx[m]
-        ok = sphere_surface_row(x[i], r[i], R, t, deg, ncp, koff, knots, pw, poff, dom,
-                                periodic, seed_x, seed_p, seed_uv, spacing, size, ev, one_f,
-                                one_i)
-        gap[m] = 0.0
-        if ok and one_i[I_ACTIVE]:
-            rows_f[n, :] = one_f
-            owner[n] = i
-            n += 1
-        elif ok and one_f[F_SD] > 0.0:
-            gap[m] = one_f[F_SD]
-    return n
 
 
 class CurvedWallContacts:
@@ -247,10 +181,9 @@ class CurvedWallContacts:
         self.nurbs = ~self.spheres if table is not None else np.zeros_like(self.spheres)
         if table is not None:
             self.reach[self.nurbs] = np.asarray(table.radius, float)[self.body_shape[self.nurbs]]
-        self._mark = 0
-        self._skins: dict[int, WallSkin] = {}
-        self._near: dict[int, tuple] = {}        # id(wall): (its mesh, the lists)
-        self._particle_work: dict[int, tuple] = {}   # id(wall): (its mesh, the workspace)
+        #: id(wall): (its geometry, its kind's state: :meth:`WallKind.new_state
+        #: <nurbsdem.contact.wall_kinds.WallKind.new_state>`)
+        self._states: dict[int, tuple] = {}
         for w in self.walls:
             if pair_solver(SPHERE, w.kind, True) not in (MESH_ROWS, SURFACE_POINT):
                 raise ValueError(f"no pair solver for a sphere and wall kind {w.kind}")
@@ -297,94 +230,32 @@ class CurvedWallContacts:
             near &= domain.owned
         return np.flatnonzero(near).astype(np.int64)
 
-    def _nurbs_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
-        """(rows_f, owner, rank) of the NURBS particles ``idx``' contacts with wall w at the
-        pose (R, tv): a mesh's in one compiled call
-        (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_rows`, at most
-        ``MAX_PER_WALL`` each)."""
+    def _state(self, w: CurvedWall):
+        """(kind, state) of wall w (:mod:`nurbsdem.contact.wall_kinds`), the state made again
+        when the wall's geometry changes."""
         g = w.geometry
-        if not isinstance(g, MeshWall):
-            return self._nurbs_surface_rows(w, idx, kin, R, tv, w_i)
-        rf, _, owner, rank = mesh_rows(self.table, g, idx, self.body_shape, kin.pose_origin,
-                                       kin.R, R, tv, MAX_PER_WALL, self._mesh_work(w, g))
-        return rf, owner, rank
-
-    def _nurbs_surface_rows(self, w: CurvedWall, idx: np.ndarray, kin, R, tv, w_i: int):
-        """(rows_f, owner, rank) of the NURBS particles ``idx``' active contacts with surface
-        wall w at the pose (R, tv), in one compiled call
-        (:func:`~nurbsdem.contact.surface_particle.surface_rows`); the first refusal in
-        ``idx``'s order raises :class:`~nurbsdem.contact.surface_particle.ContactNotUnique`."""
-        rf, ri, status = surface_rows(self.table, w.geometry, idx, self.body_shape,
-                                      kin.pose_origin, kin.R, R, tv)
-        bad = np.flatnonzero((status[:, 0] == NOT_CONVERGED) | (status[:, 0] == NOT_UNIQUE))
-        if len(bad):
-            m, i = bad[0], idx[bad[0]]
-            raise refusal(f"surface wall {w.name or w_i!r}", kin.pose_origin[i] + kin.R[i]
-                          @ self.table.centroid[self.body_shape[i]], int(status[m, 1]),
-                          int(status[m, 0]))
-        keep = (status[:, 0] == CONTACT) & (ri[:, I_ACTIVE] == 1)
-        return rf[keep], idx[keep], np.zeros(int(keep.sum()), np.int64)
+        kind = kind_of(g)
+        held = self._states.get(id(w))
+        if held is None or held[0] is not g:
+            held = self._states[id(w)] = (g, kind.new_state(g))
+        return kind, held[1]
 
     def _wall_rows(self, w: CurvedWall, kin, w_i: int, d: np.ndarray):
         """(rows_f, owner, rank) of the particles' contacts with wall ``w`` (the w_i-th) at
-        the time of ``kin``, displaced by d (3,) m."""
+        the time of ``kin``, displaced by d (3,) m: the exact spheres', then the NURBS
+        particles' (the first refusal of a contact raises naming the wall)."""
         x = np.ascontiguousarray(kin.x, float)
         R, tv = w.pose.at(kin.t, d)
         near = self._candidates(x, *w.world_box(R, tv))
-        sphere_rows = self._sphere_rows(w, near[self.spheres[near]], x, R, tv)
+        kind, state = self._state(w)
+        rows = kind.sphere_rows(state, w.geometry, near[self.spheres[near]], x, self.radii, R,
+                                tv)
         if not self.nurbs[near].any():
-            return sphere_rows
-        nurbs_rows = self._nurbs_rows(w, near[self.nurbs[near]], kin, R, tv, w_i)
-        return tuple(np.concatenate([a, b]) for a, b in zip(sphere_rows, nurbs_rows))
-
-    def _sphere_rows(self, w: CurvedWall, idx: np.ndarray, x: np.ndarray, R, tv):
-        """(rows_f, owner, rank) of the spheres ``idx``' contacts with wall w at the pose
-        (R, tv)."""
-        g = w.geometry
-        if isinstance(g, MeshWall):
-            cap = MAX_PER_WALL * len(idx)
-            rf, ri = np.zeros((cap, NF)), np.zeros((cap, NI), np.int64)
-            owner, rank = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
-            n = mesh_rows_listed(idx, x, self.radii, R, tv, g.vertices, g.faces, g.normals,
-                                 g.two_sided, g.size, g.grid_origin, g.grid_cell, g.grid_dims,
-                                 g.cell_start, g.cell_tris, g.tri_cells, w.work[0], self._mark,
-                                 *w.work[1:], *self._lists(w, g), MAX_PER_WALL, rf, ri, owner,
-                                 rank)
-            self._mark += len(idx)
-            return rf[:n], owner[:n], rank[:n]
-        skin = self._skin(w, g)
-        skin.advance(R, tv)
-        idx = skin.due(idx, x)
-        rf, owner = np.zeros((len(idx), NF)), np.zeros(len(idx), np.int64)
-        gap = np.zeros(len(idx))
-        n = _surface_rows_of(idx, x, self.radii, R, tv, g.deg, g.ncp, g.koff, g.knots, g.pw,
-                             g.poff, g.dom, g.periodic, g.seed_x, g.seed_p, g.seed_uv,
-                             g.spacing, g.size, rf, owner, gap)
-        skin.certify(idx, x, gap)
-        return rf[:n], owner[:n], np.zeros(n, np.int64)
-
-    def _lists(self, w: CurvedWall, g: MeshWall) -> tuple:
-        """The spheres' kept lists of nearby triangles of mesh wall w
-        (:func:`~nurbsdem.contact.mesh_wall.make_lists`)."""
-        held = self._near.get(id(w))
-        if held is None or held[0] is not g or len(held[1][1]) != len(self.radii):
-            held = self._near[id(w)] = (g, make_lists(g, len(self.radii)))
-        return held[1]
-
-    def _mesh_work(self, w: CurvedWall, g: MeshWall):
-        """The NURBS particles' workspace against mesh wall w
-        (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_work`)."""
-        held = self._particle_work.get(id(w))
-        if held is None or held[0] is not g:
-            held = self._particle_work[id(w)] = (g, mesh_work(g))
-        return held[1]
-
-    def _skin(self, w: CurvedWall, g: SurfaceWall) -> WallSkin:
-        """The gap certificates of the spheres against surface wall w."""
-        skin = self._skins.get(id(w))
-        if skin is None or len(skin.gap) != len(self.radii):
-            skin = self._skins[id(w)] = WallSkin(len(self.radii), g.seed_x, g.spacing)
-        return skin
+            return rows
+        more = kind.particle_rows(state, w.geometry, self.table, near[self.nurbs[near]],
+                                  self.body_shape, kin.pose_origin, kin.R, R, tv,
+                                  f"{kind.name} wall {w.name or w_i!r}")
+        return tuple(np.concatenate([a, b]) for a, b in zip(rows, more))
 
     def __call__(self, kin) -> ContactSet:
         cs = self.base(self._base_kinematics(kin)) if self.base is not None else None

@@ -8,12 +8,10 @@ Where each kind's pieces live (docs/extending.md): the exact sphere in
 point-to-surface problem), the NURBS particle in :mod:`nurbsdem.geometry` and
 :mod:`nurbsdem.contact.detect` (the LCP of paper Sec. 3.2), the flat wall
 in :mod:`nurbsdem.contact.flat_wall` (its frame, broad phase and both pair solvers), the
-mesh and surface walls in :mod:`nurbsdem.contact.mesh_wall` and
-:mod:`nurbsdem.contact.surface_wall` (against spheres) and
-:mod:`nurbsdem.contact.mesh_particle` and :mod:`nurbsdem.contact.surface_particle` (against
-NURBS particles); the dispatch of a scene's due pairs is
-:func:`nurbsdem.contact.listed.solve_due_into`, that of the mesh and surface walls
-:class:`nurbsdem.contact.curved_walls.CurvedWallContacts`.
+mesh and surface walls each an object of its own module, :mod:`nurbsdem.contact.mesh_kind`
+and :mod:`nurbsdem.contact.surface_kind` (what they answer: :mod:`nurbsdem.contact.wall_kinds`);
+the dispatch of a scene's due pairs is :func:`nurbsdem.contact.listed.solve_due_into`, that
+of the mesh and surface walls :class:`nurbsdem.contact.curved_walls.CurvedWallContacts`.
 """
 from __future__ import annotations
 
@@ -43,6 +41,10 @@ MESH_ROWS, SURFACE_POINT = 4, 5
 #: (:func:`~nurbsdem.contact.surface_particle.particle_surface_row`); run by the same provider
 MESH_SUPPORT, SURFACE_SUPPORT = 6, 7
 NO_SOLVER = -1
+#: most contacts one particle keeps with one mesh or surface wall per evaluation (the faces of
+#: a concave fold); the keys of those contacts leave room for as many
+#: (:func:`~nurbsdem.contact.curved_walls.wall_contact_key`)
+MAX_PER_WALL = 8
 
 #: (kind, kind) -> pair solver (symmetric).  A sphere against a NURBS particle takes the LCP
 #: where the scene does not allow the point solver (:func:`pair_solver`).

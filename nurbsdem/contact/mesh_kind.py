@@ -1,0 +1,233 @@
+"""The triangle-mesh wall as a geometry kind (:data:`~nurbsdem.contact.kinds.MESH_WALL`):
+everything the step's contact provider (:class:`~nurbsdem.contact.curved_walls.
+CurvedWallContacts`), the pre-run checks (:mod:`nurbsdem.wall_checks`) and ``MoveWall
+ToContact`` (:mod:`nurbsdem.curved_to_contact`) ask of a mesh wall, answered in one place
+(the protocol: :class:`~nurbsdem.contact.wall_kinds.WallKind`).
+
+The pieces it calls: the geometry, its triangle grid and the spheres' contacts per triangle
+(one per flat or convex region) in :mod:`.mesh_wall`, the NURBS particles' support-mapping
+kernel per face, edge and vertex in :mod:`.mesh_particle_compiled`, and the spheres swept
+against the triangles in closed form in :mod:`.mesh_sweep`.  The compiled deck steps reach
+the same kernels through :mod:`.curved_compiled`.  Lengths in metres; a pose (R, t) places
+the wall: ``x_world = R x_wall + t``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numba import njit
+
+from .kinds import MAX_PER_WALL, MESH_WALL
+from .lcp import F_N, F_SD, I_PB, NF, NI
+from .mesh_particle_compiled import mesh_rows, mesh_work
+from .mesh_wall import MeshWall, make_lists, make_workspace, mesh_rows_listed, sphere_mesh_rows
+
+
+@njit(cache=True)
+def _mesh_rows_of(idx, x, r, R, t, vertices, faces, normals, two_sided, size, grid_origin,
+                  grid_cell, grid_dims, cell_start, cell_tris, stamp, mark0, tris, cand_q,
+                  cand_d, cand_f, rows_f, rows_i, owner, rank):
+    """The contact rows of spheres ``idx`` (centres x, radii r) with one mesh wall at (R, t)
+    into rows_f / rows_i from row 0, each row's sphere in ``owner`` and its rank among that
+    sphere's contacts with the wall in ``rank``; returns the count (at most
+    ``MAX_PER_WALL`` per sphere)."""
+    n = 0
+    one_f = np.zeros((MAX_PER_WALL, NF))
+    one_i = np.zeros((MAX_PER_WALL, NI), np.int64)
+    for m in range(idx.shape[0]):
+        i = idx[m]
+        k = sphere_mesh_rows(x[i], r[i], R, t, vertices, faces, normals, two_sided, size,
+                             grid_origin, grid_cell, grid_dims, cell_start, cell_tris, stamp,
+                             mark0 + m, tris, cand_q, cand_d, cand_f, one_f, one_i)
+        for j in range(min(k, MAX_PER_WALL)):
+            rows_f[n, :] = one_f[j, :]
+            rows_i[n, :] = one_i[j, :]
+            owner[n] = i
+            rank[n] = j
+            n += 1
+    return n
+
+
+@dataclass
+class MeshState:
+    """What a provider keeps of one mesh wall between evaluations: the spheres' workspaces
+    (:func:`~nurbsdem.contact.mesh_wall.make_workspace`), their kept lists of nearby
+    triangles (:func:`~nurbsdem.contact.mesh_wall.make_lists`, one per particle: made at the
+    first spheres' query and again when the particle count changes), the NURBS particles'
+    workspace (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_work`, made at their
+    first query) and the next query's stamp (each sphere's query marks the triangles it
+    visited with a stamp of its own)."""
+
+    work: tuple
+    lists: tuple | None = None
+    particle_work: object = None
+    mark: int = 0
+
+
+class MeshKind:
+    """The mesh wall's answers (:class:`~nurbsdem.contact.wall_kinds.WallKind`)."""
+
+    code = MESH_WALL
+    name = "mesh"
+    geometry_type = MeshWall
+    #: what makes a triangle's front (messages of one-sided walls), and how to make the wall
+    #: act on both sides
+    front_rule = "its triangles' vertex order"
+    two_sided_hint = " or make the wall two-sided (OneSided no)"
+
+    @staticmethod
+    def box_points(g: MeshWall) -> tuple[np.ndarray, float]:
+        """(points (P,3) m, pad m) whose box, widened by pad, holds the wall: its vertices."""
+        return g.vertices, 0.0
+
+    @staticmethod
+    def size(g: MeshWall) -> float:
+        """The diagonal (m) of the wall's bounding box."""
+        return float(g.size)
+
+    @staticmethod
+    def new_state(g: MeshWall) -> MeshState:
+        """A provider's state of the wall."""
+        return MeshState(make_workspace(g))
+
+    @staticmethod
+    def sphere_rows(state: MeshState, g: MeshWall, idx: np.ndarray, x: np.ndarray,
+                    radii: np.ndarray, R: np.ndarray, t: np.ndarray) -> tuple:
+        """(rows_f, owner, rank) of the touching contacts of the spheres ``idx`` (centres x
+        (N,3), radii (N,)) with the wall at (R, t), at most
+        :data:`~nurbsdem.contact.kinds.MAX_PER_WALL` each
+        (:func:`~nurbsdem.contact.mesh_wall.mesh_rows_listed`: each sphere's kept list of
+        nearby triangles)."""
+        if state.lists is None or len(state.lists[1]) != len(radii):
+            state.lists = make_lists(g, len(radii))
+        cap = MAX_PER_WALL * len(idx)
+        rf, ri = np.zeros((cap, NF)), np.zeros((cap, NI), np.int64)
+        owner, rank = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+        n = mesh_rows_listed(idx, x, radii, R, t, g.vertices, g.faces, g.normals, g.two_sided,
+                             g.size, g.grid_origin, g.grid_cell, g.grid_dims, g.cell_start,
+                             g.cell_tris, g.tri_cells, state.work[0], state.mark,
+                             *state.work[1:], *state.lists, MAX_PER_WALL, rf, ri,
+                             owner, rank)
+        state.mark += len(idx)
+        return rf[:n], owner[:n], rank[:n]
+
+    @staticmethod
+    def particle_rows(state: MeshState, g: MeshWall, table, idx: np.ndarray,
+                      body_shape: np.ndarray, pose_origin: np.ndarray, rot: np.ndarray,
+                      R: np.ndarray, t: np.ndarray, label: str) -> tuple:
+        """(rows_f, owner, rank) of the touching contacts of the NURBS particles ``idx``
+        (shapes ``body_shape`` in the :class:`~nurbsdem.contact.detect.ContactTable`
+        ``table``, poses pose_origin (N,3) m, rot (N,3,3)) with the wall at (R, t), at most
+        :data:`~nurbsdem.contact.kinds.MAX_PER_WALL` each, in one compiled call
+        (:func:`~nurbsdem.contact.mesh_particle_compiled.mesh_rows`)."""
+        if state.particle_work is None:
+            state.particle_work = mesh_work(g)
+        rf, _, owner, rank = mesh_rows(table, g, idx, body_shape, pose_origin, rot, R, t,
+                                       MAX_PER_WALL, state.particle_work)
+        return rf, owner, rank
+
+    @staticmethod
+    def _rest_rows(g: MeshWall, x: np.ndarray, r: np.ndarray, idx: np.ndarray) -> tuple:
+        """(rows_f, rows_i, owner) of every contact (touching or not) of the spheres ``idx``
+        with the wall at rest: the solver's kernel
+        (:func:`_mesh_rows_of`)."""
+        work = make_workspace(g)
+        cap = MAX_PER_WALL * len(idx)
+        rf, ri = np.zeros((cap, NF)), np.zeros((cap, NI), np.int64)
+        owner, rank = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+        n = _mesh_rows_of(np.ascontiguousarray(idx, np.int64), x, r, np.eye(3), np.zeros(3),
+                          g.vertices, g.faces, g.normals, g.two_sided, g.size, g.grid_origin,
+                          g.grid_cell, g.grid_dims, g.cell_start, g.cell_tris, work[0], 0,
+                          *work[1:], rf, ri, owner, rank)
+        return rf[:n], ri[:n], owner[:n]
+
+    def sphere_crossings(self, g: MeshWall, x: np.ndarray, r: np.ndarray,
+                         idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(front (N,), back (N,)): the depth (m, 0: none) by which each sphere of ``idx``
+        (centres x (N,3), radii r (N,)) crosses the wall at rest from a side it acts on (the
+        contact law's deepest contact), and from behind a one-sided mesh (a contact of the
+        same mesh made two-sided whose centre is behind the triangle that holds it)."""
+        front, back = np.zeros(len(x)), np.zeros(len(x))
+        if not len(idx):
+            return front, back
+        rf, _, owner = self._rest_rows(g, x, r, idx)
+        np.maximum.at(front, owner, -rf[:, F_SD])
+        if not g.two_sided:
+            rf, ri, owner = self._rest_rows(replace(g, two_sided=True), x, r, idx)
+            behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], g.normals[ri[:, I_PB]]) > 0
+            np.maximum.at(back, owner[behind], -rf[behind, F_SD])
+        return front, back
+
+    @staticmethod
+    def particle_crossings(g: MeshWall, shapes, x: np.ndarray,
+                           rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(front (N,), back (N,)) as :meth:`sphere_crossings` for NURBS particles (``shapes``
+        (N,), centroids x (N,3) m, rotations rot (N,3,3)) against the wall at rest: the
+        compiled contact rows of all of them in one call, the deepest of each; behind a
+        one-sided mesh, those of the two-sided mesh whose normal points along the triangle's
+        front."""
+        from .detect import ContactTable
+        kinds: dict = {}                 # each distinct shape once, in the order first met
+        for s in shapes:
+            kinds.setdefault(id(s), (len(kinds), s))
+        body_shape = np.array([kinds[id(s)][0] for s in shapes], np.int64)
+        table = ContactTable([s for _, s in kinds.values()])
+        pos = np.array([x[k] - rot[k] @ np.asarray(s.centroid, float)
+                        for k, s in enumerate(shapes)])
+        rows = 4 * MAX_PER_WALL        # the deepest is what counts
+        idx = np.arange(len(shapes), dtype=np.int64)
+        front, back = np.zeros(len(x)), np.zeros(len(x))
+        rf, _, owner, _ = mesh_rows(table, g, idx, body_shape, pos, rot, np.eye(3),
+                                    np.zeros(3), rows)
+        np.maximum.at(front, owner, -rf[:, F_SD])
+        if not g.two_sided:
+            rf, ri, owner, _ = mesh_rows(table, replace(g, two_sided=True), idx, body_shape,
+                                         pos, rot, np.eye(3), np.zeros(3), rows)
+            behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], g.normals[ri[:, I_PB]]) > 0
+            np.maximum.at(back, owner[behind], -rf[behind, F_SD])
+        return front, back
+
+    @staticmethod
+    def sphere_travels(g: MeshWall, x: np.ndarray, reach: np.ndarray, R: np.ndarray,
+                       t: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """The travel (N,) m along the unit direction d that brings the wall at (R, t) within
+        ``reach`` (N,) m of each centre x (N,3) (inf: never), in closed form
+        (:func:`~nurbsdem.contact.mesh_sweep.sweep_entries`)."""
+        from .mesh_sweep import sweep_entries
+        centres = np.ascontiguousarray((x - t) @ R)          # Rᵀ (x − t), row by row
+        return sweep_entries(centres, reach, np.ascontiguousarray(R.T @ d), g.vertices,
+                             g.faces, g.normals, bool(g.two_sided))
+
+    @staticmethod
+    def sphere_row(g: MeshWall, x: np.ndarray, r: float, R: np.ndarray, t: np.ndarray):
+        """The contact row (NF,) of least signed distance of the sphere (centre x (3,) m,
+        radius r m) with the wall at (R, t) (:func:`~nurbsdem.contact.mesh_wall.
+        sphere_contacts`); None without one."""
+        from .mesh_wall import sphere_contacts
+        rows_f, _ = sphere_contacts(g, x, r, R, t)
+        return rows_f[int(np.argmin(rows_f[:, F_SD]))] if len(rows_f) else None
+
+    @staticmethod
+    def particle_row(g: MeshWall, table, pos: np.ndarray, Rb: np.ndarray, R: np.ndarray,
+                     t: np.ndarray, reach: float, where: str, work=None):
+        """The contact row (NF,) of least signed distance of the NURBS particle (shape 0 of
+        ``table``, pose pos (3,) m, Rb (3,3)) with the wall at (R, t) among its features
+        within ``reach`` (m) of the centroid (the Python reference,
+        :func:`~nurbsdem.contact.mesh_particle.particle_mesh_contacts`); None with none
+        there.  ``work``: the wall's :func:`~nurbsdem.contact.mesh_wall.make_workspace`."""
+        from .mesh_particle import particle_mesh_contacts
+        rows_f, _ = particle_mesh_contacts(table, 0, pos, Rb, g, R, t, work=work,
+                                           active_only=False, reach=reach)
+        if not len(rows_f):
+            return None
+        return rows_f[int(np.argmin(rows_f[:, F_SD]))]
+
+    @staticmethod
+    def row_work(g: MeshWall):
+        """The workspace :meth:`particle_row` reuses across calls."""
+        return make_workspace(g)
+
+
+#: the mesh wall kind
+MESH = MeshKind()
