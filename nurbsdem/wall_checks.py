@@ -339,12 +339,12 @@ def _solid_text(bodies: "Bodies", i: int, x: np.ndarray, spec: "CurvedWallSpec",
 
 
 def rest_points(model: "Model", spec: "CurvedWallSpec") -> np.ndarray:
-    """Points (P,3) m of a wall at rest: a mesh's vertices, a surface's start samples."""
-    from .io.deck_curved import mesh_triangles, surface_patches
-    if spec.kind == "mesh":
-        return mesh_triangles(spec, _where(model, spec)).vertices
-    from .contact.surface_wall import build_surface_wall
-    return build_surface_wall(surface_patches(spec, _where(model, spec))).seed_x
+    """Points (P,3) m of a wall at rest: those its kind bounds it by (a mesh's vertices, a
+    surface's start samples: :meth:`~nurbsdem.contact.wall_kinds.WallKind.box_points`)."""
+    from .contact.wall_kinds import kind_named
+    from .io.deck_curved import curved_wall_geometry
+    _, geometry = curved_wall_geometry(spec, _where(model, spec))
+    return kind_named(spec.kind).box_points(geometry)[0]
 
 
 def used_shapes(model: "Model") -> set[int]:

@@ -16,7 +16,7 @@ from ..errors import InputError
 from ..model import (DAMPING_SCHEMES, DynamicStep, Material, Model, MoveWallStep, Output,
                      ParticleSpec, PeriodicSpec, RandomGroup, ReplicateStep, ShapeEntry, Step, WallSpec)
 from ..ranges import ASPECT_MAX
-from .deck_curved import check_curved_walls, curved_entry, rotate_step
+from .deck_curved import CURVED_WALL_FILES, check_curved_walls, curved_entry, rotate_step
 from .deck_moves import (MODES, add_wall_move, check_moves, force_step, table_step,
                          unit_direction)
 from .deck_flow import check_inlet, check_outlet, inlet_spec, outlet_spec
@@ -476,13 +476,14 @@ _HANDLERS: dict[tuple[str, str], Callable[[DeckBuilder, Entry], None]] = {
     ("Particles", "Particle"): DeckBuilder.particle,
     ("Walls", "Box"): DeckBuilder.box,
     ("Walls", "Wall"): DeckBuilder.wall,
-    ("Walls", "Mesh"): lambda b, e: curved_entry(b, e, "mesh"),
-    ("Walls", "Surface"): lambda b, e: curved_entry(b, e, "surface"),
     ("Contact", "Interface"): DeckBuilder.interface,
     ("Steps", "Step"): DeckBuilder.step,
     ("Flow", "Inlet"): DeckBuilder.flow,
     ("Flow", "Outlet"): DeckBuilder.flow,
 }
+#: each curved wall kind's entry (``Mesh``, ``Surface``: :data:`.deck_curved.CURVED_WALL_FILES`)
+_HANDLERS.update({("Walls", f.keyword): (lambda b, e, kind=f.name: curved_entry(b, e, kind))
+                  for f in CURVED_WALL_FILES.values()})
 
 
 #: the blocks in the order they are built: definitions before uses, whatever the deck's order

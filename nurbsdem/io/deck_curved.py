@@ -16,7 +16,9 @@ from __future__ import annotations
 import functools
 import logging
 import weakref
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
@@ -61,25 +63,85 @@ def mesh_triangles(spec: CurvedWallSpec, where: str):
                           one_sided=spec.one_sided)
 
 
-def curved_wall_geometry(spec: CurvedWallSpec, where: str):
-    """(kind, geometry) of a wall for :class:`~nurbsdem.contact.curved_walls.CurvedWall`:
-    the mesh's triangle grid or the surface's patch tables, in the world at rest."""
-    from ..contact.kinds import MESH_WALL, SURFACE_WALL
-    if spec.kind == "mesh":
-        from ..contact.mesh_wall import build_mesh_wall
-        mesh = mesh_triangles(spec, where)
-        return MESH_WALL, build_mesh_wall(mesh.vertices, mesh.faces, not spec.one_sided,
-                                          source=where)
+def _mesh_geometry(spec: CurvedWallSpec, where: str):
+    """The mesh's triangle grid (:func:`~nurbsdem.contact.mesh_wall.build_mesh_wall`)."""
+    from ..contact.mesh_wall import build_mesh_wall
+    mesh = mesh_triangles(spec, where)
+    return build_mesh_wall(mesh.vertices, mesh.faces, not spec.one_sided, source=where)
+
+
+def _surface_geometry(spec: CurvedWallSpec, where: str):
+    """The surface's patch tables (:func:`~nurbsdem.contact.surface_wall.build_surface_wall`)."""
     from ..contact.surface_wall import build_surface_wall
-    return SURFACE_WALL, build_surface_wall(surface_patches(spec, where))
+    return build_surface_wall(surface_patches(spec, where))
+
+
+def _mesh_warnings(spec: CurvedWallSpec, where: str) -> list[str]:
+    return list(mesh_triangles(spec, where).warnings)
+
+
+def _surface_warnings(spec: CurvedWallSpec, where: str) -> list[str]:
+    surface_patches(spec, where)
+    return []
+
+
+def _mesh_triangles(spec: CurvedWallSpec, where: str, resolution: int) -> tuple:
+    mesh = mesh_triangles(spec, where)
+    return mesh.vertices, mesh.faces
+
+
+def _surface_triangles(spec: CurvedWallSpec, where: str, resolution: int) -> tuple:
+    from ..geometry.tessellate import tessellate_patch
+    pts, tris, off = [], [], 0
+    for patch in surface_patches(spec, where):
+        p, quads = tessellate_patch(patch, resolution)
+        q = np.asarray(quads, np.int64) + off
+        pts.append(np.asarray(p, float))
+        tris += [q[:, [0, 1, 2]], q[:, [0, 2, 3]]]
+        off += len(p)
+    return np.concatenate(pts), np.concatenate(tris)
+
+
+@dataclass(frozen=True)
+class CurvedWallFile:
+    """How a deck (and :class:`~nurbsdem.simulation.Simulation`) gives one kind of curved wall
+    (:mod:`nurbsdem.contact.wall_kinds`, whose ``name`` is its
+    :attr:`~nurbsdem.model.CurvedWallSpec.kind`): its ``Walls`` entry ``keyword``, the keys
+    it takes beside ``Name File Position Rotation Material``, and, from its file (``where``
+    names the wall in errors): ``geometry`` (the kind's geometry in the world at rest),
+    ``warnings`` (the file read once: its warnings) and ``triangles`` (points (P,3) m,
+    triangles (T,3) for ``walls.pvd``, curved patches cut into ``resolution`` quads per
+    direction)."""
+
+    name: str
+    keyword: str
+    keys: frozenset
+    geometry: Callable[[CurvedWallSpec, str], Any]
+    warnings: Callable[[CurvedWallSpec, str], list]
+    triangles: Callable[[CurvedWallSpec, str, int], tuple]
+
+
+#: the curved wall kinds' files, by :attr:`~nurbsdem.model.CurvedWallSpec.kind`
+CURVED_WALL_FILES = {f.name: f for f in (
+    CurvedWallFile("mesh", "Mesh", frozenset({"Scale", "OneSided"}), _mesh_geometry,
+                   _mesh_warnings, _mesh_triangles),
+    CurvedWallFile("surface", "Surface", frozenset(), _surface_geometry, _surface_warnings,
+                   _surface_triangles))}
+
+
+def curved_wall_geometry(spec: CurvedWallSpec, where: str):
+    """(kind code, geometry) of a wall for :class:`~nurbsdem.contact.curved_walls.CurvedWall`:
+    its kind's geometry in the world at rest (a mesh's triangle grid, a surface's patch
+    tables)."""
+    from ..contact.wall_kinds import kind_named
+    return kind_named(spec.kind).code, CURVED_WALL_FILES[spec.kind].geometry(spec, where)
 
 
 def curved_entry(builder, e, kind: str) -> None:
-    """A ``Mesh`` (kind ``"mesh"``) or ``Surface`` (``"surface"``) entry of the Walls block."""
+    """A curved wall's entry of the Walls block (``Mesh``: kind ``"mesh"``, ``Surface``:
+    ``"surface"``, :data:`CURVED_WALL_FILES`)."""
     label = f"{e.keyword} {e.id}"
-    keys = {"Name", "File", "Position", "Rotation", "Material"}
-    if kind == "mesh":
-        keys |= {"Scale", "OneSided"}
+    keys = {"Name", "File", "Position", "Rotation", "Material"} | CURVED_WALL_FILES[kind].keys
     builder.only(e, keys, f"a {e.keyword} wall")
     builder.require(e, "File")
     scale = float(e.get("Scale", 1.0))
@@ -100,11 +162,8 @@ def curved_entry(builder, e, kind: str) -> None:
 
 
 def _read_check(spec: CurvedWallSpec, label: str) -> list[str]:
-    """Read the wall's file once (errors at the deck line); the mesh's warnings."""
-    if spec.kind == "mesh":
-        return list(mesh_triangles(spec, label).warnings)
-    surface_patches(spec, label)
-    return []
+    """Read the wall's file once (errors at the deck line); its warnings."""
+    return CURVED_WALL_FILES[spec.kind].warnings(spec, label)
 
 
 def sphere_radii(model, shape_ids) -> tuple[np.ndarray, np.ndarray]:
@@ -180,20 +239,8 @@ def curved_tessellation(model, resolution: int = 16) -> list:
     """[(wall id, points (P,3) m, triangles (T,3))] of the model's mesh and surface walls at
     rest, for ``walls.pvd``: a mesh's own triangles; a surface's patches tessellated
     (``resolution`` quads per direction, each cut into two triangles)."""
-    from ..geometry.tessellate import tessellate_patch
     out = []
     for w in model.curved_walls:
         where = f"{model.path}:{w.line}" if w.line else w.name
-        if w.kind == "mesh":
-            mesh = mesh_triangles(w, where)
-            out.append((w.id, mesh.vertices, mesh.faces))
-            continue
-        pts, tris, off = [], [], 0
-        for patch in surface_patches(w, where):
-            p, quads = tessellate_patch(patch, resolution)
-            q = np.asarray(quads, np.int64) + off
-            pts.append(np.asarray(p, float))
-            tris += [q[:, [0, 1, 2]], q[:, [0, 2, 3]]]
-            off += len(p)
-        out.append((w.id, np.concatenate(pts), np.concatenate(tris)))
+        out.append((w.id, *CURVED_WALL_FILES[w.kind].triangles(w, where, resolution)))
     return out

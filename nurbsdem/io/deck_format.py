@@ -23,6 +23,7 @@ import numpy as np
 from ..model import (CurvedWallSpec, DynamicStep, Interface, Model, MoveWallStep, ReplicateStep,
                      ShapeEntry, Step, WallSpec)
 from .deck import split_tokens, strip_comment
+from .deck_curved import CURVED_WALL_FILES
 from .deck_flow import inlet_values, outlet_values
 from .deck_schema import SCHEMA, Arg, Entry
 
@@ -156,15 +157,16 @@ def wall_entry(wid: int, name: str, point, normal, size, axis, material: int | N
 
 def curved_wall_entry(w: CurvedWallSpec) -> Entry:
     """A ``Mesh`` or ``Surface`` entry (its file as written)."""
+    kind = CURVED_WALL_FILES[w.kind]
     values: dict[str, Any] = {"Name": w.name, "File": w.file}
-    if w.kind == "mesh":
+    if "Scale" in kind.keys:
         values["Scale"] = w.scale
     values.update(Position=w.position, Rotation=w.rotation)
     if w.material_id is not None:
         values["Material"] = w.material_id
     if w.one_sided:
         values["OneSided"] = True
-    return _entry("Walls", "Mesh" if w.kind == "mesh" else "Surface", w.id, **values)
+    return _entry("Walls", kind.keyword, w.id, **values)
 
 
 def interface_entry(itf: Interface) -> Entry:
