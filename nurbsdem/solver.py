@@ -265,30 +265,26 @@ class Solver:
                 self._write_monitors(writers, s.monitor_sample())
         for st in states:
             self._write_state(writers, st)
-        vtk = force or due(t, out.vtk_every, s.dt)
-        results = force or due(t, out.results_interval, s.dt)
-        if vtk or results:
+        if force or due(t, out.vtk_every, s.dt) or due(t, out.results_interval, s.dt):
             self._sync_bodies_from_system()
-        if vtk:
-            writers.paraview.write(t, self.bodies, wall_displacement=s.wall_displacement,
-                                   contacts=self._contact_output(),
-                                   curved_poses=self.curved.poses(t, s.wall_displacement))
-        if results:
-            writers.results.append(t, self.bodies)
+            b = self.bodies
+            self._write_state(writers, StateSample(t, b.position, b.quaternion, b.velocity,
+                                                   b.angular_velocity, s.wall_displacement,
+                                                   self._contact_output()), force)
         self.timers["output"] += time.perf_counter() - t0
 
-    def _write_state(self, writers: OutputWriters, st: StateSample) -> None:
-        """The ParaView and results samples due at a state the deck steps kept (what
-        :meth:`_sample` writes live from the system at the present time)."""
+    def _write_state(self, writers: OutputWriters, st: StateSample, force: bool = False) -> None:
+        """The ParaView and results samples due (all with ``force``) at the state ``st``: one
+        the deck steps kept, or the present one (:meth:`_sample`)."""
         out = self.model.output
         bodies = replace(self.bodies, position=st.position, quaternion=st.quaternion,
                          velocity=st.velocity, angular_velocity=st.angular_velocity)
         dt = self.system.dt
-        if due(st.time, out.vtk_every, dt):
+        if force or due(st.time, out.vtk_every, dt):
             writers.paraview.write(st.time, bodies, wall_displacement=st.wall_displacement,
                                    contacts=st.contacts,
                                    curved_poses=self.curved.poses(st.time, st.wall_displacement))
-        if due(st.time, out.results_interval, dt):
+        if force or due(st.time, out.results_interval, dt):
             writers.results.append(st.time, bodies)
 
     def _contact_output(self) -> dict | None:
