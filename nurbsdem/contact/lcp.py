@@ -112,6 +112,9 @@ I_NEV = 7         # patch evaluations spent
 I_BROAD = 8       # 1 = rejected by the bounding spheres (Eq. 3), no LCP solved
 I_STAGE = 9       # stage that produced the result: 1 = f1 (Eq. 5), 2 = f2/phi (Eq. 6-9), 0 none
 NI = 10
+#: I_STAGE of a row the point-to-surface solver of a sphere and a NURBS particle gave
+#: (:mod:`nurbsdem.contact.sphere`)
+STAGE_POINT = 3
 
 
 @njit(cache=True)
@@ -343,10 +346,19 @@ def bounding_spheres_apart(posA, RA, cenA, scA, posB, RB, cenB, scB, cA, cB, d, 
 
 
 @kernel(inline="always")
+def warm_start(prevI) -> bool:
+    """Whether a previous row (NI,) warm-starts the LCP: a valid row the LCP gave.  A row of
+    the point-to-surface solver (``STAGE_POINT``) names no patch of the sphere, so the LCP
+    starts cold from it (and a failed pair keeps it: :func:`~nurbsdem.contact.detect.
+    kept_on_failure`)."""
+    return prevI[I_VALID] == 1 and prevI[I_STAGE] != STAGE_POINT
+
+
+@kernel(inline="always")
 def _warm_normal(prevF, prevI):
-    """Whether the previous row is a warm start (valid, with a nonzero normal) and the
-    length of its normal. Returns (warm, |n|)."""
-    if prevI[I_VALID] != 1:
+    """Whether the previous row is a warm start (:func:`warm_start`, with a nonzero normal)
+    and the length of its normal. Returns (warm, |n|)."""
+    if not warm_start(prevI):
         return False, 0.0
     nn = norm3(prevF[F_N:F_N + 3])
     return nn > 0.0, nn
@@ -599,7 +611,7 @@ def solve_pair(tabA, infoA, cenA, scA, tabB, infoB, cenB, scB,
     infoA, infoB: int64 (4,) (first patch, patch count, first seed, seed count) in the tables.
     cenA, cenB: centroid (file frame, m) and scA, scB bounding radius (m, paper Eq. 3).
     posA, RA, posB, RB: poses (x_world = pos + R x_file).
-    prevF, prevI: previous result rows (warm start when prevI[I_VALID] == 1).
+    prevF, prevI: previous result rows (a warm start: :func:`warm_start`).
     maskA, maskB: bool per patch, allowed starting patches (empty: all).
     seedsA, seedsB: (x (S, 3), patch (S,), uv (S, 2)) surface samples for cold starts.
     ws, wf, wi, wfs, w4: per-thread workspaces (kernel.make_workspace, make_work()).

@@ -43,8 +43,8 @@ from .detect import solve_rows
 from .flat_wall import solve_wall_rows, sphere_wall_pairs_jit
 from .kinds import (CLOSED_FORM, FLAT_WALL, LCP, NURBS_PARTICLE, POINT_SURFACE, SPHERE,
                     WALL_SUPPORT, pair_solver)
-from .lcp import I_FAIL, I_STAGE, I_VALID, NF, NI, bounding_spheres_apart
-from .sphere import STAGE_POINT, closed_form_into, sphere_centres, sphere_nurbs_rows
+from .lcp import I_FAIL, NF, NI, bounding_spheres_apart, warm_start
+from .sphere import closed_form_into, sphere_centres, sphere_nurbs_rows
 from .verlet import merge_find
 
 #: the scene's constant tables: the packed shapes (:class:`~nurbsdem.contact.detect.ContactTable`:
@@ -301,7 +301,7 @@ def _solve_retried_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows
     near-touching pair): a cold solution that converged replaces the failed one."""
     warm = np.empty(idx.shape[0], np.bool_)
     for k in range(idx.shape[0]):
-        warm[k] = rows_i[idx[k], I_VALID] == 1
+        warm[k] = warm_start(rows_i[idx[k]])
     _solve_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f, rows_i, idx, nt,
                 walls)
     again = _retry_cold(rows_i, idx, warm)
@@ -403,7 +403,6 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
     mixed = np.nonzero(kind == POINT_SURFACE)[0]
     point_solved = 0
     rows = due[mixed]
-    valid = np.full(mixed.shape[0], -1)   # a point row's flag, kept while the LCP starts cold
     if mixed.shape[0]:
         f = np.empty((mixed.shape[0], NF))
         i = np.empty((mixed.shape[0], NI), np.int64)
@@ -415,19 +414,12 @@ def solve_due_into(st, list_a, list_b, mask_a, mask_b, rows_f, rows_i, due, pos,
                 rows_i[j] = i[k]
                 point_solved += 1
             else:
-                kind[mixed[k]] = LCP
-                # a row of the point solver cannot warm-start the LCP (no sphere patch)
-                if rows_i[j, I_STAGE] == STAGE_POINT:
-                    valid[k] = rows_i[j, I_VALID]
-                    rows_i[j, I_VALID] = 0
+                kind[mixed[k]] = LCP    # from a cold start (lcp.warm_start)
     for walls in (False, True):          # NURBS pairs (LCP), then NURBS–wall pairs
         part = due[kind == (WALL_SUPPORT if walls else LCP)]
         if part.shape[0]:
             _solve_retried_into(st, list_a, list_b, mask_a, mask_b, pos, R, wall_d, rows_f,
                                 rows_i, part, nt, walls)
-    for k in range(mixed.shape[0]):      # a failed LCP kept the point row: its flag back
-        if valid[k] >= 0 and rows_i[rows[k], I_FAIL] != 0:
-            rows_i[rows[k], I_VALID] = valid[k]
     failed = False
     for r in range(due.shape[0]):
         failed = failed or rows_i[due[r], I_FAIL] != 0

@@ -33,7 +33,8 @@ parameters) or, cold, from B's nearest tabulated surface sample.  A solve that d
 converge on its patch within ``MAX_IT`` iterations, would have to migrate to a neighbouring
 patch, meets a singular parametrisation (a pole) or finds c inside B returns ``ok = False``:
 the caller then solves the pair with the full LCP.  The sphere's side has patch −1 (a closed
-form), ``I_STAGE`` = :data:`STAGE_POINT`.
+form), ``I_STAGE`` = :data:`~nurbsdem.contact.lcp.STAGE_POINT` (the LCP starts cold from
+such a row: :func:`~nurbsdem.contact.lcp.warm_start`).
 
 Which shapes are exact spheres is decided in :mod:`nurbsdem.geometry.analytic`.  Lengths in
 metres.
@@ -49,7 +50,7 @@ from ..geometry.kernel import MAX_DEGREE, _WS_ROWS
 from ..jit import kernel
 from .flat_wall import sphere_wall_row
 from .lcp import (F_N, F_PA, F_PAR, F_PB, F_SD, I_ACTIVE, I_IT, I_NEV, I_PA, I_PB, I_STAGE,
-                  I_VALID, NF, NI, clear_row)
+                  I_VALID, NF, NI, STAGE_POINT, clear_row)
 from .point_distance import distance_gradient, distance_hessian
 from .support import evaluate
 
@@ -57,8 +58,6 @@ from .support import evaluate
 MAX_IT = 12
 #: convergence: |S − c| × sin(angle to the normal) below this × the body's bounding radius
 TOL = 1e-12
-#: I_STAGE of a row solved here
-STAGE_POINT = 3
 
 
 @kernel
