@@ -9,7 +9,8 @@ from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
 from nurbsdem.contact.detect import ContactTable, detect_batch
-from nurbsdem.contact.lcp import F_N, F_PA, F_PB, F_SD, I_DEG, I_FAIL, I_PA, I_PB, NF, NI
+from nurbsdem.contact.lcp import (F_N, F_PA, F_PB, F_SD, I_DEG, I_FAIL, I_NEV, I_PA, I_PB,
+                                  I_STAGE, I_VALID, NF, NI, STAGE_POINT, warm_start)
 from nurbsdem.contact.sphere import sphere_nurbs_rows
 from nurbsdem.geometry.generators import ellipsoid
 from nurbsdem.geometry.particles import paper_particle_shape
@@ -103,6 +104,30 @@ def test_equals_the_lcp_on_the_same_geometry(table, sb, sphere_is_a):
         for col in (F_PA, F_PB):
             assert np.linalg.norm(r[ok, col:col + 3] - f[ok, col:col + 3], axis=1).max() \
                 <= 1e-9 * scale
+
+
+def test_the_lcp_starts_cold_from_a_point_solvers_row(table):
+    """A pair the point solver hands to the LCP (its centre inside the body) holds the point
+    solver's row, valid but naming no patch of the sphere: the LCP starts cold from it (the
+    same bits as from no row), and from its own row warm (fewer patch evaluations)."""
+    rng = np.random.default_rng(7)
+    K = 200
+    c, pb, Rb = _poses(table, 2, K, rng)
+    sph = np.zeros(K, np.int64)
+    ps, Rs = c - table.centroid[0], np.tile(np.eye(3), (K, 1, 1))
+    args = (table, sph, ps, Rs, np.full(K, 2), pb, Rb)
+    cold_f, cold_i = detect_batch(*args)
+    point_i = cold_i.copy()
+    point_i[:, I_PA] = -1                    # the sphere's side: a closed form
+    point_i[:, I_STAGE] = STAGE_POINT
+    assert all(warm_start(row) for row in cold_i) and not any(warm_start(r) for r in point_i)
+    f, i = detect_batch(*args, prev_f=cold_f, prev_i=point_i)
+    assert np.array_equal(f, cold_f) and np.array_equal(i, cold_i)
+    invalid = cold_i.copy()
+    invalid[:, I_VALID] = 0
+    assert not any(warm_start(r) for r in invalid)
+    _, warm_i = detect_batch(*args, prev_f=cold_f, prev_i=cold_i)
+    assert warm_i[:, I_NEV].sum() < cold_i[:, I_NEV].sum()
 
 
 def test_scene_with_spheres_and_particles_matches_the_lcp(tmp_path):

@@ -417,7 +417,8 @@ def detect_batch(table: ContactTable, shape_a: np.ndarray, pos_a: np.ndarray, ro
     shape_a, shape_b: int64 (K,) shape index (into ``table``) of each pair's bodies.
     pos_a, pos_b: (K, 3) positions (m); rot_a, rot_b: (K, 3, 3) rotation matrices.
     prev_f, prev_i: previous result rows of the same pairs (K, NF), (K, NI) for warm starts
-        (rows with ``prev_i[:, I_VALID] == 0`` start cold); None: all cold.
+        (a row that is no warm start, :func:`~nurbsdem.contact.lcp.warm_start`, starts
+        cold); None: all cold.
     out: optional preallocated (res_f, res_i).
     mask_a, mask_b: optional bool (K, P) candidate patches of each pair from the patch-box
         test (paper 3.1): a cold start begins on them ("the LCP is directed to them").
