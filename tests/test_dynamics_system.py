@@ -209,3 +209,16 @@ def test_a_checkpoint_without_exact_sums_restarts_from_its_ledger(tmp_path):
     assert e.dissipated == pytest.approx(e_ref.dissipated, rel=1e-12)
     assert e.external_work == pytest.approx(e_ref.external_work, rel=1e-12, abs=1e-15)
     assert abs(e.balance_error - e_ref.balance_error) < 1e-12 * max(e.dissipated, 1e-12)
+
+
+def test_the_diagnosis_names_the_deepest_penetration_over_the_smaller_size():
+    """An instability's diagnosis reads the deepest contact relative to the smaller of its
+    bodies (a wall has no size); no contacts: 0."""
+    from types import SimpleNamespace
+
+    from nurbsdem.dynamics.system import max_relative_depth
+    ell = np.array([0.02, 0.01, 0.04])
+    cs = SimpleNamespace(depth=np.array([0.001, 0.003, 0.002]), body_a=np.array([0, 1, 2]),
+                         body_b=np.array([2, 2, 3]))          # body 3: a wall
+    assert max_relative_depth(cs, ell, 1) == pytest.approx(0.3)
+    assert max_relative_depth(None, ell, 1) == 0.0

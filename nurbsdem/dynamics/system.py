@@ -594,38 +594,10 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
     def _give_up(self, tried: list[str]) -> None:
         """Raise InstabilityError with what was tried and a diagnosis (the state is the last
         good one, at the start of the deck step)."""
-        t = self.time
-        depth = self._max_relative_depth()
-        cause = []
-        if self.failed_in_step:
-            cause.append(f"{self.failed_in_step} contact problem(s) (LCP) failed in this step")
-        if depth > 0.1:
-            cause.append(f"contacts penetrate up to {depth:.2g} of the particle size (the normal "
-                         f"penalty is too soft for this load or impact speed)")
-        if self.forced_substeps is not None:
-            advice = "the sub-steps are forced: let the solver choose them"
-        elif len(tried) > 1:
-            advice = (f"repeating it with up to {2 ** (len(tried) - 1)}x the sub-steps did not "
-                      f"help" + (": " + "; ".join(cause) if cause else ""))
-        else:
-            advice = "; ".join(cause) if cause else "reduce the time step"
-        msg = (f"integration unstable in the deck step starting at t = {t:.6g} s (deck dt "
-               f"{self.dt:.4g} s, estimated critical step {self.dt_critical:.4g} s, safety "
-               f"{self.safety}); tried {' / '.join(tried)}. Rolled back to the last good state "
-               f"(t = {t:.6g} s): {advice}")
+        msg = instability_text(self, tried)
         log.error(msg)
-        raise InstabilityError(msg, time=t, reason=tried[-1], step=self.step_count) from None
-
-    def _max_relative_depth(self) -> float:
-        """Largest penetration of the last evaluation over the smaller body's size (-)."""
-        cs = self.last_contacts
-        depth = np.asarray(getattr(cs, "depth", np.zeros(0)), float)
-        if depth.size == 0:
-            return 0.0
-        size = np.concatenate([self._ell, np.full(self.walls.n, np.inf)])
-        a = np.asarray(cs.body_a, np.int64)
-        bb = np.asarray(cs.body_b, np.int64)
-        return float(np.max(depth / np.minimum(size[a], size[bb])))
+        raise InstabilityError(msg, time=self.time, reason=tried[-1],
+                               step=self.step_count) from None
 
     def advance(self, n_steps: int, callback: Callable[["DemSystem", EnergySample], None] | None = None
                 ) -> EnergySample | None:
@@ -652,3 +624,39 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
                             f"(tolerance {tol:.3g} J)")
         if abs(e.balance_error) > tol:
             raise _Unstable(f"energy balance error {e.balance_error:.4g} J exceeds {tol:.3g} J")
+
+
+def instability_text(system: DemSystem, tried: list[str]) -> str:
+    """The message of a deck step the guards gave up on: what was ``tried`` (the sub-step
+    counts), and a diagnosis (failed contact problems, deep penetrations) or advice."""
+    t = system.time
+    depth = max_relative_depth(system.last_contacts, system._ell, system.walls.n)
+    cause = []
+    if system.failed_in_step:
+        cause.append(f"{system.failed_in_step} contact problem(s) (LCP) failed in this step")
+    if depth > 0.1:
+        cause.append(f"contacts penetrate up to {depth:.2g} of the particle size (the normal "
+                     f"penalty is too soft for this load or impact speed)")
+    if system.forced_substeps is not None:
+        advice = "the sub-steps are forced: let the solver choose them"
+    elif len(tried) > 1:
+        advice = (f"repeating it with up to {2 ** (len(tried) - 1)}x the sub-steps did not "
+                  f"help" + (": " + "; ".join(cause) if cause else ""))
+    else:
+        advice = "; ".join(cause) if cause else "reduce the time step"
+    return (f"integration unstable in the deck step starting at t = {t:.6g} s (deck dt "
+            f"{system.dt:.4g} s, estimated critical step {system.dt_critical:.4g} s, safety "
+            f"{system.safety}); tried {' / '.join(tried)}. Rolled back to the last good state "
+            f"(t = {t:.6g} s): {advice}")
+
+
+def max_relative_depth(cs: Any, ell: np.ndarray, n_walls: int) -> float:
+    """Largest penetration of the contacts ``cs`` (a ContactSet, or None) over the smaller
+    body's size (-): the particles' sizes ell (N,) m, walls of no size."""
+    depth = np.asarray(getattr(cs, "depth", np.zeros(0)), float)
+    if depth.size == 0:
+        return 0.0
+    size = np.concatenate([ell, np.full(n_walls, np.inf)])
+    a = np.asarray(cs.body_a, np.int64)
+    b = np.asarray(cs.body_b, np.int64)
+    return float(np.max(depth / np.minimum(size[a], size[b])))
