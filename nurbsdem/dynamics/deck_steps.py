@@ -343,6 +343,22 @@ def _balance(bc, ev, x, v, q, L, ledger) -> float:
     return balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger)[1]
 
 
+@internal(inline="always")
+def _count_deck_step(counters, refine_decay: int, ev) -> int:
+    """After an accepted deck step: a calm one more (the stability control's refinement
+    halves after ``refine_decay`` of them) and the contacts' counts of the last evaluation;
+    returns its active contacts."""
+    counters[CALM] += 1
+    if counters[REFINE] > 1 and counters[CALM] >= refine_decay:
+        counters[REFINE] //= 2
+        counters[CALM] = 0
+    active = ev.a.shape[0]
+    counters[ACTIVE_SUM] += active
+    counters[ACTIVE_MAX] = max(counters[ACTIVE_MAX], active)
+    counters[DEGENERATED_SUM] += ev.degenerated
+    return active
+
+
 @internal
 def _kept(j: int, x, q, v, L, wall_d, ev):
     """What the loop keeps of deck step j's end for the ParaView and results output: the body
@@ -496,14 +512,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             balance0 = balance
             counters[ACC_REFINE], counters[ACC_CALM] = after_accepted(growth, budget, acc,
                                                                       counters[ACC_CALM])
-        counters[CALM] += 1
-        if counters[REFINE] > 1 and counters[CALM] >= cc.refine_decay:
-            counters[REFINE] //= 2
-            counters[CALM] = 0
-        active = ev.a.shape[0]
-        counters[ACTIVE_SUM] += active
-        counters[ACTIVE_MAX] = max(counters[ACTIVE_MAX], active)
-        counters[DEGENERATED_SUM] += ev.degenerated
+        active = _count_deck_step(counters, cc.refine_decay, ev)
         if sample_at[j]:
             record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
                        ev.monitored, active, ev.degenerated, wall_d, ev.force, ev.torque,
