@@ -146,27 +146,18 @@ class MeshKind:
                          idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(front (N,), back (N,)): the depth (m, 0: none) by which each sphere of ``idx``
         (centres x (N,3), radii r (N,)) crosses the wall at rest from a side it acts on (the
-        contact law's deepest contact), and from behind a one-sided mesh (a contact of the
-        same mesh made two-sided whose centre is behind the triangle that holds it)."""
-        front, back = np.zeros(len(x)), np.zeros(len(x))
+        contact law's deepest contact), and from behind a one-sided mesh
+        (:func:`_crossings`)."""
         if not len(idx):
-            return front, back
-        rf, _, owner = self._rest_rows(g, x, r, idx)
-        np.maximum.at(front, owner, -rf[:, F_SD])
-        if not g.two_sided:
-            rf, ri, owner = self._rest_rows(replace(g, two_sided=True), x, r, idx)
-            behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], g.normals[ri[:, I_PB]]) > 0
-            np.maximum.at(back, owner[behind], -rf[behind, F_SD])
-        return front, back
+            return np.zeros(len(x)), np.zeros(len(x))
+        return _crossings(g, len(x), lambda mesh: self._rest_rows(mesh, x, r, idx))
 
     @staticmethod
     def particle_crossings(g: MeshWall, shapes, x: np.ndarray,
                            rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(front (N,), back (N,)) as :meth:`sphere_crossings` for NURBS particles (``shapes``
         (N,), centroids x (N,3) m, rotations rot (N,3,3)) against the wall at rest: the
-        compiled contact rows of all of them in one call, the deepest of each; behind a
-        one-sided mesh, those of the two-sided mesh whose normal points along the triangle's
-        front."""
+        compiled contact rows of all of them in one call (:func:`_crossings`)."""
         from .detect import ContactTable
         kinds: dict = {}                 # each distinct shape once, in the order first met
         for s in shapes:
@@ -175,18 +166,13 @@ class MeshKind:
         table = ContactTable([s for _, s in kinds.values()])
         pos = np.array([x[k] - rot[k] @ np.asarray(s.centroid, float)
                         for k, s in enumerate(shapes)])
-        rows = 4 * MAX_PER_WALL        # the deepest is what counts
         idx = np.arange(len(shapes), dtype=np.int64)
-        front, back = np.zeros(len(x)), np.zeros(len(x))
-        rf, _, owner, _ = mesh_rows(table, g, idx, body_shape, pos, rot, np.eye(3),
-                                    np.zeros(3), rows)
-        np.maximum.at(front, owner, -rf[:, F_SD])
-        if not g.two_sided:
-            rf, ri, owner, _ = mesh_rows(table, replace(g, two_sided=True), idx, body_shape,
-                                         pos, rot, np.eye(3), np.zeros(3), rows)
-            behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], g.normals[ri[:, I_PB]]) > 0
-            np.maximum.at(back, owner[behind], -rf[behind, F_SD])
-        return front, back
+
+        def rows(mesh):
+            rf, ri, owner, _ = mesh_rows(table, mesh, idx, body_shape, pos, rot, np.eye(3),
+                                         np.zeros(3), 4 * MAX_PER_WALL)   # the deepest counts
+            return rf, ri, owner
+        return _crossings(g, len(x), rows)
 
     @staticmethod
     def sphere_travels(g: MeshWall, x: np.ndarray, reach: np.ndarray, R: np.ndarray,
@@ -198,15 +184,6 @@ class MeshKind:
         centres = np.ascontiguousarray((x - t) @ R)          # Rᵀ (x − t), row by row
         return sweep_entries(centres, reach, np.ascontiguousarray(R.T @ d), g.vertices,
                              g.faces, g.normals, bool(g.two_sided))
-
-    @staticmethod
-    def sphere_row(g: MeshWall, x: np.ndarray, r: float, R: np.ndarray, t: np.ndarray):
-        """The contact row (NF,) of least signed distance of the sphere (centre x (3,) m,
-        radius r m) with the wall at (R, t) (:func:`~nurbsdem.contact.mesh_wall.
-        sphere_contacts`); None without one."""
-        from .mesh_wall import sphere_contacts
-        rows_f, _ = sphere_contacts(g, x, r, R, t)
-        return rows_f[int(np.argmin(rows_f[:, F_SD]))] if len(rows_f) else None
 
     @staticmethod
     def particle_row(g: MeshWall, table, pos: np.ndarray, Rb: np.ndarray, R: np.ndarray,
@@ -227,6 +204,21 @@ class MeshKind:
     def row_work(g: MeshWall):
         """The workspace :meth:`particle_row` reuses across calls."""
         return make_workspace(g)
+
+
+def _crossings(g: MeshWall, n: int, rows_of) -> tuple[np.ndarray, np.ndarray]:
+    """(front (n,), back (n,)) depths (m) of n particles crossing mesh ``g`` at rest from the
+    rows ``rows_of(mesh)`` = (rows_f, rows_i, owner) of their contacts with a mesh: the
+    deepest of each against ``g``, and, behind a one-sided mesh, the deepest of the contacts
+    with the same mesh made two-sided whose normal points along the triangle's front."""
+    front, back = np.zeros(n), np.zeros(n)
+    rf, _, owner = rows_of(g)
+    np.maximum.at(front, owner, -rf[:, F_SD])
+    if not g.two_sided:
+        rf, ri, owner = rows_of(replace(g, two_sided=True))
+        behind = np.einsum("ij,ij->i", rf[:, F_N:F_N + 3], g.normals[ri[:, I_PB]]) > 0
+        np.maximum.at(back, owner[behind], -rf[behind, F_SD])
+    return front, back
 
 
 #: the mesh wall kind

@@ -77,7 +77,8 @@ class WallKind(Protocol):
 
     def sphere_row(self, g, x: np.ndarray, r: float, R: np.ndarray, t: np.ndarray):
         """The contact row (NF,) of least signed distance of one sphere with the wall at
-        (R, t); None without one."""
+        (R, t); None without one.  Asked only of a kind whose :meth:`sphere_travels` has no
+        closed form (the mesh has one and no ``sphere_row``)."""
 
     def particle_row(self, g, table, pos: np.ndarray, Rb: np.ndarray, R: np.ndarray,
                      t: np.ndarray, reach: float, where: str, work=None):
