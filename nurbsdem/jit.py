@@ -374,6 +374,32 @@ def _plain_shape_mismatch_errors() -> None:
 _plain_shape_mismatch_errors()
 
 
+def _kernels_typed_without_literals() -> None:
+    """Make a call from compiled code to one of the package's kernels compile the kernel for
+    its arguments' plain types, as numba does for its own functions: a constant argument
+    (``0``, ``True``, a module constant such as ``MAX_PER_WALL``) is typed as its value
+    (``Literal[int](0)``), and numba compiled the called kernel, with all it inlines, for
+    that value as well as for the plain type another caller (or the same loop's counter, once
+    it changes) passes.  Each constant was one more compilation of the kernel in every
+    process of a first run; the kernels compute the same with either type."""
+    from numba.core.types import functions
+
+    get_call_type = functions.Dispatcher.get_call_type
+    if getattr(get_call_type, "_plain_types", False):
+        return
+
+    def typed(self, context, args, kws):
+        if self.dispatcher.py_func.__module__.startswith(__package__ + "."):
+            args = tuple(types.unliteral(a) for a in args)
+            kws = {k: types.unliteral(v) for k, v in kws.items()}
+        return get_call_type(self, context, args, kws)
+    typed._plain_types = True
+    functions.Dispatcher.get_call_type = typed
+
+
+_kernels_typed_without_literals()
+
+
 def _reload_pointer(module: str, name: str, argtypes: tuple) -> None:
     """Fill the slot of kernel ``name`` of ``module`` for ``argtypes``: run by numba before it
     links a cached caller's machine code."""
