@@ -33,13 +33,14 @@ from ..jit import PointerKernel, internal
 from .curved_walls import wall_contact_key, wall_pose_at, world_box
 from .kinds import MAX_PER_WALL, MESH_WALL
 from .lcp import F_N, F_PA, F_PB, F_SD, I_ACTIVE, NF, NI
-from .mesh_particle_compiled import make_mesh_particle_work, particle_mesh_rows_ptr
-from .mesh_topology import pack_topology
-from .mesh_wall import LIST_ROOM, NO_LIST, MeshWall, mesh_rows_listed
+from .mesh_particle_compiled import particle_mesh_rows_ptr
+from .mesh_wall import mesh_rows_listed
+from .packing import joined
 from .surface_kind import _surface_rows_of
 from .surface_particle_compiled import (CONTACT, NOT_CONVERGED, NOT_UNIQUE,
                                         particle_surface_rows_ptr)
-from .wall_skin import due_spheres, pose_travel, wall_reach
+from .wall_kinds import WALL_KINDS
+from .wall_skin import due_spheres, pose_travel
 
 #: the packed walls (W curved walls, N particles): n, first (the first curved wall's index
 #: among the system's W_all walls), nb = N + W_all, radius (N,) the spheres' radii; per wall
@@ -79,135 +80,54 @@ CurvedWork = namedtuple("CurvedWork", "stamp tris cand_q cand_d cand_f keys mark
                         "particle_work")
 
 
-def _offsets(sizes) -> np.ndarray:
-    return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-
-
-def _joined(parts, empty_shape, dtype=float) -> np.ndarray:
-    return (np.ascontiguousarray(np.concatenate(parts), dtype) if parts
-            else np.zeros(empty_shape, dtype))
-
-
 def pack_curved(provider, n_all_walls: int, table) -> tuple:
     """(:data:`CurvedConst`, :data:`CurvedWork`) of the walls of ``provider`` (a
     :class:`~nurbsdem.contact.curved_walls.CurvedWallContacts`; None: no walls) in a system
     of ``n_all_walls`` walls whose particles' shapes are those of ``table`` (the scene's
-    :class:`~nurbsdem.contact.detect.ContactTable`); the poses are those the walls hold now."""
+    :class:`~nurbsdem.contact.detect.ContactTable`); the poses are those the walls hold now.
+    The walls' poses, boxes and the particles are packed here; each kind packs its own
+    geometry and workspaces (:meth:`~nurbsdem.contact.wall_kinds.WallKind.packed`)."""
     walls = [] if provider is None else provider.walls
     radius = (np.zeros(0) if provider is None else np.ascontiguousarray(provider.radii, float))
-    n = len(radius)
-    meshes = [w.geometry for w in walls if isinstance(w.geometry, MeshWall)]
-    surfs = [w.geometry for w in walls if not isinstance(w.geometry, MeshWall)]
-    msizes = [(len(g.vertices), len(g.faces), len(g.cell_start), len(g.cell_tris))
-              if isinstance(g, MeshWall) else (0, 0, 0, 0) for g in (w.geometry for w in walls)]
-    ssizes = [(0, 0) if isinstance(g, MeshWall) else (len(g.dom), len(g.seed_x))
-              for g in (w.geometry for w in walls)]
-    knots, pw, koff, poff = [], [], [], []
-    k0 = p0 = 0
-    for g in surfs:
-        koff.append(g.koff + k0)
-        poff.append(g.poff + p0)
-        knots.append(g.knots)
-        pw.append(g.pw)
-        k0 += len(g.knots)
-        p0 += len(g.pw)
-    W = len(walls)
+    n, W = len(radius), len(walls)
     geo = [w.geometry for w in walls]
-
-    def mesh_value(get, dtype=float):          # per wall: the mesh's figure, 0 for a surface
-        return np.array([get(g) if isinstance(g, MeshWall) else 0 for g in geo], dtype)
-
-    def surface_value(get):                    # per wall: the surface's figure, 0 for a mesh
-        return np.array([0.0 if isinstance(g, MeshWall) else get(g) for g in geo], float)
-    cc = CurvedConst(
-        W, n_all_walls - W, n + n_all_walls, radius,
-        np.array([w.kind for w in walls], np.int64),
-        _joined([w.pose.omega for w in walls], (0, 3)).reshape(W, 3),
-        _joined([w.pose.center for w in walls], (0, 3)).reshape(W, 3),
-        np.array([w.pose.t0 for w in walls], float),
-        _joined([w.pose.R0 for w in walls], (0, 3)).reshape(W, 3, 3),
-        _joined([w.pose.shift0 for w in walls], (0, 3)).reshape(W, 3),
-        _joined([w.corners for w in walls], (0, 3)).reshape(W, 8, 3),
-        _offsets([s[0] for s in msizes]), _offsets([s[1] for s in msizes]),
-        _offsets([s[2] for s in msizes]), _offsets([s[3] for s in msizes]),
-        _joined([g.vertices for g in meshes], (0, 3)),
-        _joined([g.faces for g in meshes], (0, 3), np.int64),
-        _joined([g.normals for g in meshes], (0, 3)),
-        mesh_value(lambda g: g.two_sided, np.bool_), mesh_value(lambda g: g.size),
-        _joined([g.grid_origin if isinstance(g, MeshWall) else np.zeros(3) for g in geo],
-                (0, 3)).reshape(W, 3),
-        mesh_value(lambda g: g.grid_cell),
-        _joined([g.grid_dims if isinstance(g, MeshWall) else np.zeros(3, np.int64)
-                 for g in geo], (0, 3), np.int64).reshape(W, 3),
-        _joined([g.cell_start for g in meshes], (0,), np.int64),
-        _joined([g.cell_tris for g in meshes], (0,), np.int64),
-        _joined([g.tri_cells for g in meshes], (0, 6), np.int64),
-        *_topologies(geo, provider is not None and bool(provider.nurbs.any())),
-        _offsets([s[0] for s in ssizes]), _offsets([s[1] for s in ssizes]),
-        _joined([g.deg for g in surfs], (0, 2), np.int64),
-        _joined([g.ncp for g in surfs], (0, 2), np.int64),
-        _joined(koff, (0, 2), np.int64), _joined(knots, (0,)), _joined(pw, (0, 4)),
-        _joined(poff, (0,), np.int64), _joined([g.dom for g in surfs], (0, 4)),
-        _joined([g.periodic for g in surfs], (0, 2), np.bool_),
-        _joined([g.seed_x for g in surfs], (0, 3)),
-        _joined([g.seed_p for g in surfs], (0,), np.int64),
-        _joined([g.seed_uv for g in surfs], (0, 2)),
-        surface_value(lambda g: g.spacing), surface_value(lambda g: g.size),
-        *_particles(provider, n), table.tab, table.info, table.centroid, table.radius,
-        table.seeds)
-    T = len(cc.faces)
+    nurbs = provider is not None and bool(provider.nurbs.any())
+    const = dict(
+        n_walls=W, first=n_all_walls - W, nb=n + n_all_walls, radius=radius,
+        kind=np.array([w.kind for w in walls], np.int64),
+        omega=joined([w.pose.omega for w in walls], (0, 3)).reshape(W, 3),
+        center=joined([w.pose.center for w in walls], (0, 3)).reshape(W, 3),
+        t0=np.array([w.pose.t0 for w in walls], float),
+        R0=joined([w.pose.R0 for w in walls], (0, 3)).reshape(W, 3, 3),
+        shift0=joined([w.pose.shift0 for w in walls], (0, 3)).reshape(W, 3),
+        corners=joined([w.corners for w in walls], (0, 3)).reshape(W, 8, 3),
+        **_particles(provider, n), ptab=table.tab, pinfo=table.info, pcen=table.centroid,
+        prad=table.radius, pseeds=table.seeds)
+    for kind in WALL_KINDS:
+        const.update(kind.packed(geo, nurbs))
     room = W * n * MAX_PER_WALL
-    extent, centre = np.zeros(W), np.zeros((W, 3))
-    for k, g in enumerate(geo):
-        if not isinstance(g, MeshWall):
-            centre[k], extent[k] = wall_reach(g.seed_x, g.spacing)
-    M = len(meshes)
-    work = CurvedWork(np.full(T, -1, np.int64), np.empty(T, np.int64), np.empty((T, 3)),
-                      np.empty(T), np.empty(T, np.int64), np.zeros(T, np.int64),
-                      np.zeros(1, np.int64), np.zeros((M, n, 5)),
-                      np.full((M, n), NO_LIST, np.int64), np.zeros((M, n, LIST_ROOM), np.int64),
-                      np.zeros((M, n, LIST_ROOM)),
-                      np.full((W, n), -1.0), np.zeros((W, n, 3)), np.zeros((W, n)),
-                      np.zeros(W), np.zeros((W, 3, 3)), np.zeros((W, 3)),
-                      np.zeros(W, np.bool_), extent, centre, np.zeros(room, np.int64),
-                      np.zeros(room, np.int64), np.zeros((room, 3)), np.zeros((room, 3)),
-                      np.zeros((room, 3)), np.zeros(room), np.zeros(room, np.int64),
-                      np.zeros(1, np.int64),
-                      make_mesh_particle_work(max([0] + [len(g.faces) for g in meshes]),
-                                              int(np.diff(cc.mfo).max(initial=0))))
-    return cc, work
+    work = dict(mark=np.zeros(1, np.int64), out_a=np.zeros(room, np.int64),
+                out_b=np.zeros(room, np.int64), out_pa=np.zeros((room, 3)),
+                out_pb=np.zeros((room, 3)), out_normal=np.zeros((room, 3)),
+                out_depth=np.zeros(room), out_key=np.zeros(room, np.int64),
+                count=np.zeros(1, np.int64))
+    for kind in WALL_KINDS:
+        work.update(kind.packed_work(geo, n, const))
+    return CurvedConst(**const), CurvedWork(**work)
 
 
-def _topologies(geo: list, nurbs: bool) -> tuple:
-    """(mfo, mlo, mto (W+1,) offsets per wall, feat, feat_tris, tri_feat_range, tri_feat) of
-    the mesh walls' features among the walls' geometries ``geo``
-    (:func:`~nurbsdem.contact.mesh_topology.pack_topology`) when NURBS particles
-    meet them (``nurbs``), else none (every triangle without features); a surface wall has
-    none."""
-    def one(g):
-        if nurbs and isinstance(g, MeshWall):
-            return pack_topology(g)
-        T = len(g.faces) if isinstance(g, MeshWall) else 0
-        return (np.zeros((0, 4), np.int64), np.zeros(0, np.int64), np.zeros((T, 2), np.int64),
-                np.zeros(0, np.int64))
-    tops = [one(g) for g in geo]
-    return (_offsets([len(t[0]) for t in tops]), _offsets([len(t[1]) for t in tops]),
-            _offsets([len(t[3]) for t in tops]), _joined([t[0] for t in tops], (0, 4), np.int64),
-            _joined([t[1] for t in tops], (0,), np.int64),
-            _joined([t[2] for t in tops], (0, 2), np.int64),
-            _joined([t[3] for t in tops], (0,), np.int64))
-
-
-def _particles(provider, n: int) -> tuple:
-    """(reach, sphere, nurbs, body_shape, n_nurbs) of the provider's n particles (zeros: no
-    provider)."""
+def _particles(provider, n: int) -> dict:
+    """reach, sphere, nurbs, body_shape and n_nurbs of :data:`CurvedConst` for the provider's
+    n particles (empty: no provider)."""
     if provider is None:
-        return np.zeros(0), np.zeros(0, np.bool_), np.zeros(0, np.bool_), np.zeros(0, np.int64), 0
+        return dict(reach=np.zeros(0), sphere=np.zeros(0, np.bool_), nurbs=np.zeros(0, np.bool_),
+                    body_shape=np.zeros(0, np.int64), n_nurbs=0)
     shape = (np.zeros(n, np.int64) if provider.body_shape is None
              else np.ascontiguousarray(provider.body_shape, np.int64))
-    return (np.ascontiguousarray(provider.reach, float),
-            np.ascontiguousarray(provider.spheres, np.bool_),
-            np.ascontiguousarray(provider.nurbs, np.bool_), shape, int(provider.nurbs.sum()))
+    return dict(reach=np.ascontiguousarray(provider.reach, float),
+                sphere=np.ascontiguousarray(provider.spheres, np.bool_),
+                nurbs=np.ascontiguousarray(provider.nurbs, np.bool_), body_shape=shape,
+                n_nurbs=int(provider.nurbs.sum()))
 
 
 @internal

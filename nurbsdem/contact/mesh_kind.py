@@ -20,8 +20,11 @@ from numba import njit
 
 from .kinds import MAX_PER_WALL, MESH_WALL
 from .lcp import F_N, F_SD, I_PB, NF, NI
-from .mesh_particle_compiled import mesh_rows, mesh_work
-from .mesh_wall import MeshWall, make_lists, make_workspace, mesh_rows_listed, sphere_mesh_rows
+from .mesh_particle_compiled import make_mesh_particle_work, mesh_rows, mesh_work
+from .mesh_topology import pack_topology
+from .mesh_wall import (LIST_ROOM, NO_LIST, MeshWall, make_lists, make_workspace,
+                        mesh_rows_listed, sphere_mesh_rows)
+from .packing import joined, offsets
 
 
 @njit(cache=True)
@@ -204,6 +207,76 @@ class MeshKind:
     def row_work(g: MeshWall):
         """The workspace :meth:`particle_row` reuses across calls."""
         return make_workspace(g)
+
+    @staticmethod
+    def packed(geometries: list, nurbs: bool) -> dict:
+        """The mesh walls' fields of the compiled deck steps' packed walls
+        (:data:`~nurbsdem.contact.curved_compiled.CurvedConst`) among the curved walls'
+        ``geometries`` (a wall of another kind has an empty slice and zeros): offsets,
+        joined vertices, faces, normals and triangle grids, per-wall figures, and with
+        ``nurbs`` (NURBS particles meet the walls) the features of each mesh
+        (:func:`~nurbsdem.contact.mesh_topology.pack_topology`)."""
+        W = len(geometries)
+        mine = [g if isinstance(g, MeshWall) else None for g in geometries]
+        meshes = [g for g in mine if g is not None]
+
+        def sizes(get):
+            return offsets([0 if g is None else get(g) for g in mine])
+
+        def value(get, dtype=float):
+            return np.array([0 if g is None else get(g) for g in mine], dtype)
+        tops = [_topology(g, nurbs) for g in mine]
+        return dict(
+            vo=sizes(lambda g: len(g.vertices)), fo=sizes(lambda g: len(g.faces)),
+            co=sizes(lambda g: len(g.cell_start)), to=sizes(lambda g: len(g.cell_tris)),
+            vertices=joined([g.vertices for g in meshes], (0, 3)),
+            faces=joined([g.faces for g in meshes], (0, 3), np.int64),
+            normals=joined([g.normals for g in meshes], (0, 3)),
+            two_sided=value(lambda g: g.two_sided, np.bool_), msize=value(lambda g: g.size),
+            grid_origin=joined([np.zeros(3) if g is None else g.grid_origin for g in mine],
+                               (0, 3)).reshape(W, 3),
+            grid_cell=value(lambda g: g.grid_cell),
+            grid_dims=joined([np.zeros(3, np.int64) if g is None else g.grid_dims
+                              for g in mine], (0, 3), np.int64).reshape(W, 3),
+            cell_start=joined([g.cell_start for g in meshes], (0,), np.int64),
+            cell_tris=joined([g.cell_tris for g in meshes], (0,), np.int64),
+            tri_cells=joined([g.tri_cells for g in meshes], (0, 6), np.int64),
+            mfo=offsets([len(t[0]) for t in tops]), mlo=offsets([len(t[1]) for t in tops]),
+            mto=offsets([len(t[3]) for t in tops]),
+            feat=joined([t[0] for t in tops], (0, 4), np.int64),
+            feat_tris=joined([t[1] for t in tops], (0,), np.int64),
+            tri_feat_range=joined([t[2] for t in tops], (0, 2), np.int64),
+            tri_feat=joined([t[3] for t in tops], (0,), np.int64))
+
+    @staticmethod
+    def packed_work(geometries: list, n: int, const: dict) -> dict:
+        """The mesh walls' fields of the compiled deck steps' workspaces
+        (:data:`~nurbsdem.contact.curved_compiled.CurvedWork`) for n particles: the spheres'
+        kernel workspaces over all meshes' triangles, their kept lists per mesh
+        (:func:`~nurbsdem.contact.mesh_wall.make_lists`) and the NURBS particles' workspace
+        for the largest mesh (``const``: the packed fields, :meth:`packed`'s among them)."""
+        meshes = [g for g in geometries if isinstance(g, MeshWall)]
+        T, M = len(const["faces"]), len(meshes)
+        return dict(
+            stamp=np.full(T, -1, np.int64), tris=np.empty(T, np.int64), cand_q=np.empty((T, 3)),
+            cand_d=np.empty(T), cand_f=np.empty(T, np.int64), keys=np.zeros(T, np.int64),
+            near_p=np.zeros((M, n, 5)), near_n=np.full((M, n), NO_LIST, np.int64),
+            near_t=np.zeros((M, n, LIST_ROOM), np.int64), near_d=np.zeros((M, n, LIST_ROOM)),
+            particle_work=make_mesh_particle_work(
+                max([0] + [len(g.faces) for g in meshes]),
+                int(np.diff(const["mfo"]).max(initial=0))))
+
+
+def _topology(g: MeshWall | None, nurbs: bool) -> tuple:
+    """(feat, feat_tris, tri_feat_range, tri_feat) of mesh ``g``
+    (:func:`~nurbsdem.contact.mesh_topology.pack_topology`) when NURBS particles meet it
+    (``nurbs``), else none (every triangle without features); none for a wall of another
+    kind (None)."""
+    if nurbs and g is not None:
+        return pack_topology(g)
+    T = 0 if g is None else len(g.faces)
+    return (np.zeros((0, 4), np.int64), np.zeros(0, np.int64), np.zeros((T, 2), np.int64),
+            np.zeros(0, np.int64))
 
 
 def _crossings(g: MeshWall, n: int, rows_of) -> tuple[np.ndarray, np.ndarray]:

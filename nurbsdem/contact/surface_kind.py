@@ -24,7 +24,8 @@ from .surface_particle import (particle_surface_row, particle_surface_row_refere
                                surface_rows)
 from .surface_particle_compiled import CONTACT, NOT_CONVERGED, NOT_UNIQUE
 from .surface_wall import SurfaceWall, sphere_contact, sphere_surface_row
-from .wall_skin import WallSkin
+from .packing import joined, offsets
+from .wall_skin import WallSkin, wall_reach
 
 
 @njit(cache=True)
@@ -187,6 +188,54 @@ class SurfaceKind:
     def row_work(g: SurfaceWall) -> None:
         """:meth:`particle_row` needs no workspace."""
         return None
+
+    @staticmethod
+    def packed(geometries: list, nurbs: bool) -> dict:
+        """The surface walls' fields of the compiled deck steps' packed walls
+        (:data:`~nurbsdem.contact.curved_compiled.CurvedConst`) among the curved walls'
+        ``geometries`` (a wall of another kind has an empty slice and zeros): offsets into
+        the joined patch pool (each surface's knot and power-form offsets shifted into it)
+        and samples, and per-wall spacing and size.  ``nurbs`` changes nothing here."""
+        mine = [g if isinstance(g, SurfaceWall) else None for g in geometries]
+        surfs = [g for g in mine if g is not None]
+        koff, poff = [], []
+        k0 = p0 = 0
+        for g in surfs:
+            koff.append(g.koff + k0)
+            poff.append(g.poff + p0)
+            k0 += len(g.knots)
+            p0 += len(g.pw)
+
+        def value(get):
+            return np.array([0.0 if g is None else get(g) for g in mine], float)
+        return dict(
+            po=offsets([0 if g is None else len(g.dom) for g in mine]),
+            so=offsets([0 if g is None else len(g.seed_x) for g in mine]),
+            deg=joined([g.deg for g in surfs], (0, 2), np.int64),
+            ncp=joined([g.ncp for g in surfs], (0, 2), np.int64),
+            koff=joined(koff, (0, 2), np.int64), knots=joined([g.knots for g in surfs], (0,)),
+            pw=joined([g.pw for g in surfs], (0, 4)), poff=joined(poff, (0,), np.int64),
+            dom=joined([g.dom for g in surfs], (0, 4)),
+            periodic=joined([g.periodic for g in surfs], (0, 2), np.bool_),
+            seed_x=joined([g.seed_x for g in surfs], (0, 3)),
+            seed_p=joined([g.seed_p for g in surfs], (0,), np.int64),
+            seed_uv=joined([g.seed_uv for g in surfs], (0, 2)),
+            spacing=value(lambda g: g.spacing), ssize=value(lambda g: g.size))
+
+    @staticmethod
+    def packed_work(geometries: list, n: int, const: dict) -> dict:
+        """The surface walls' fields of the compiled deck steps' workspaces
+        (:data:`~nurbsdem.contact.curved_compiled.CurvedWork`) for n particles: the spheres'
+        gap certificates per wall (:mod:`nurbsdem.contact.wall_skin`), none granted yet,
+        and each surface's extent and centre (``const`` is not needed)."""
+        W = len(geometries)
+        extent, centre = np.zeros(W), np.zeros((W, 3))
+        for k, g in enumerate(geometries):
+            if isinstance(g, SurfaceWall):
+                centre[k], extent[k] = wall_reach(g.seed_x, g.spacing)
+        return dict(gap=np.full((W, n), -1.0), x0=np.zeros((W, n, 3)), odo0=np.zeros((W, n)),
+                    odo=np.zeros(W), prev_R=np.zeros((W, 3, 3)), prev_t=np.zeros((W, 3)),
+                    posed=np.zeros(W, np.bool_), extent=extent, centre=centre)
 
 
 #: the surface wall kind

@@ -7,7 +7,8 @@ A curved wall kind is one object of its own module (:data:`~nurbsdem.contact.mes
 (:mod:`nurbsdem.wall_checks`) and ``MoveWall ToContact`` (:mod:`nurbsdem.curved_to_contact`)
 ask the wall's kind (:func:`kind_of`) and hold no branch per kind.  The compiled deck steps
 hold the kinds' kernels side by side in :mod:`nurbsdem.contact.curved_compiled` (numba
-dispatches on the kind's code there), and a deck names a kind by its ``Walls`` entry
+dispatches on the kind's code there; each kind packs its own arrays for them), and a deck
+names a kind by its ``Walls`` entry
 (:mod:`nurbsdem.io.deck_curved`).  Lengths in metres; a pose (R, t) places a wall:
 ``x_world = R x_wall + t``.
 """
@@ -88,6 +89,18 @@ class WallKind(Protocol):
 
     def row_work(self, g) -> Any:
         """A workspace :meth:`particle_row` reuses across calls (None: none)."""
+
+    def packed(self, geometries: list, nurbs: bool) -> dict:
+        """The kind's fields of the compiled deck steps' packed walls
+        (:data:`~nurbsdem.contact.curved_compiled.CurvedConst`), for the curved walls'
+        ``geometries`` in the provider's order (every kind's: a wall of another kind has an
+        empty slice of the joined arrays and zeros in the per-wall ones); ``nurbs``: NURBS
+        particles meet the walls."""
+
+    def packed_work(self, geometries: list, n: int, const: dict) -> dict:
+        """The kind's fields of the compiled deck steps' workspaces
+        (:data:`~nurbsdem.contact.curved_compiled.CurvedWork`) for n particles (``const``:
+        every kind's :meth:`packed` fields)."""
 
 
 #: the curved wall kinds
