@@ -63,9 +63,12 @@ def _mesh_floor(folder, deck):
 
 @needs_mpi
 @pytest.mark.parametrize("implicit, mesh", [
-    # the suite's time: the implicit and mesh-floor runs hold the explicit run's scene
+    # the suite's time: one run holds the implicit dashpots and the mesh floor together;
+    # each alone is in the slow suite
     pytest.param(False, False, id="explicit", marks=pytest.mark.slow),
-    pytest.param(True, False, id="implicit"), pytest.param(False, True, id="mesh floor")])
+    pytest.param(True, False, id="implicit", marks=pytest.mark.slow),
+    pytest.param(False, True, id="mesh floor", marks=pytest.mark.slow),
+    pytest.param(True, True, id="implicit on a mesh floor")])
 def test_the_periodic_shear_box_on_two_ranks(tmp_path, implicit, mesh):
     deck = _deck(tmp_path, implicit)
     if mesh:

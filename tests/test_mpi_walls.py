@@ -6,7 +6,8 @@ merge them in the serial order (the spheres' contacts with a wall before the NUR
 particles', :func:`nurbsdem.contact.curved_walls.serial_order`), so results.h5, every monitor
 (the walls' loads among them) and the checkpoint equal the serial run's exactly: with the
 linear law, with rolling resistance, with Hertz–Mindlin and with ``Damping Implicit`` (whose
-dashpot solve over the gathered network sees the drum's spin as the serial run does).
+dashpot solve over the gathered network sees the drum's spin as the serial run does), each
+alone and the last three together.
 """
 from __future__ import annotations
 
@@ -46,15 +47,18 @@ LAWS = {"linear": {},
 
 
 def _deck(folder, law: str = "linear"):
+    """The drum deck with the laws named in ``law`` (keys of :data:`LAWS`, space-separated,
+    applied in that order)."""
     text = _drum_deck(folder).replace(
         "  Shape 1 Sphere Radius 0.006", "  Shape 1 Ellipsoid SemiAxes 0.008 0.0065 0.005"
     ).replace("Step 1 Dynamic Duration 0.08", "Step 1 Dynamic Duration 0.04").replace(
         "Center 0 0 0 Duration 0.08", "Center 0 0 0 Duration 0.03").replace(
         "Step 3 Dynamic Duration 0.02", "Step 3 Dynamic Duration 0.01").replace(
         "NormalDamping 2", "NormalDamping 6")
-    for old, new in LAWS[law].items():
-        assert old in text, old
-        text = text.replace(old, new)
+    for name in law.split():
+        for old, new in LAWS[name].items():
+            assert old in text, old
+            text = text.replace(old, new)
     head, rest = text.split("Particles\n")
     deck = folder / "drum.inp"
     deck.write_text(head + PARTICLES + rest[rest.index("Walls"):])
@@ -74,9 +78,10 @@ def test_the_serial_order_puts_a_walls_spheres_before_its_nurbs_particles():
 
 
 @needs_mpi
-# the suite's time: the other laws' runs hold the linear law's scene
-@pytest.mark.parametrize("law", [pytest.param("linear", marks=pytest.mark.slow)]
-                         + [law for law in LAWS if law != "linear"])
+# the suite's time: one run holds Hertz–Mindlin, rolling resistance and the implicit
+# dashpots together; each law alone is in the slow suite
+@pytest.mark.parametrize("law", [pytest.param(law, marks=pytest.mark.slow) for law in LAWS]
+                         + ["hertz rolling implicit"])
 def test_a_turning_drum_with_a_mesh_baffle_on_two_ranks(tmp_path, law):
     deck = _deck(tmp_path, law)
     _run([BIN / "nurbsdem", "solve", deck, "--output", tmp_path / "serial"])
