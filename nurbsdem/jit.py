@@ -376,12 +376,13 @@ _plain_shape_mismatch_errors()
 
 def _kernels_typed_without_literals() -> None:
     """Make a call from compiled code to one of the package's kernels compile the kernel for
-    its arguments' plain types, as numba does for its own functions: a constant argument
-    (``0``, ``True``, a module constant such as ``MAX_PER_WALL``) is typed as its value
-    (``Literal[int](0)``), and numba compiled the called kernel, with all it inlines, for
-    that value as well as for the plain type another caller (or the same loop's counter, once
-    it changes) passes.  Each constant was one more compilation of the kernel in every
-    process of a first run; the kernels compute the same with either type."""
+    its arguments' plain types, as numba does for its own functions.  numba types a constant
+    argument (``0``, ``True``, a module constant such as ``MAX_PER_WALL``) as its value
+    (``Literal[int](0)``) and would compile the called kernel, with all it inlines, for that
+    value as well as for the plain type that another caller (or the same loop's counter, once
+    it changes) passes: one more compilation per constant in every first run.  The kernels
+    compute the same with either type; kernels outside the package are left as numba types
+    them."""
     from numba.core.types import functions
 
     get_call_type = functions.Dispatcher.get_call_type

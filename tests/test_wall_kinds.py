@@ -40,3 +40,25 @@ def test_a_walls_geometry_names_its_kind():
         kind_of(v)
     with pytest.raises(KeyError):
         kind_named("cone")
+
+
+def test_the_kinds_pack_disjoint_fields_that_complete_the_compiled_walls():
+    """Each kind packs its own fields of the compiled deck steps' walls and workspaces: no
+    field twice, and with the fields ``pack_curved`` packs itself (poses, boxes, particles,
+    outputs) exactly those of CurvedConst and CurvedWork; a field packed twice raises."""
+    from nurbsdem.contact import curved_compiled as cc
+    common_const = {"n_walls", "first", "nb", "radius", "kind", "omega", "center", "t0", "R0",
+                    "shift0", "corners", "reach", "sphere", "nurbs", "body_shape", "n_nurbs",
+                    "ptab", "pinfo", "pcen", "prad", "pseeds"}
+    common_work = {"mark", "out_a", "out_b", "out_pa", "out_pb", "out_normal", "out_depth",
+                   "out_key", "count"}
+    const = {k: None for k in common_const}
+    for kind in WALL_KINDS:
+        cc._add_fields(const, kind.packed([], False), kind.name)
+    assert set(const) == set(cc.CurvedConst._fields)
+    work = {k: None for k in common_work}
+    for kind in WALL_KINDS:
+        cc._add_fields(work, kind.packed_work([], 0, const), kind.name)
+    assert set(work) == set(cc.CurvedWork._fields)
+    with pytest.raises(ValueError, match="mesh wall kind packs fields already packed"):
+        cc._add_fields(const, {"faces": None}, "mesh")

@@ -104,7 +104,7 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
         **_particles(provider, n), ptab=table.tab, pinfo=table.info, pcen=table.centroid,
         prad=table.radius, pseeds=table.seeds)
     for kind in WALL_KINDS:
-        const.update(kind.packed(geo, nurbs))
+        _add_fields(const, kind.packed(geo, nurbs), kind.name)
     room = W * n * MAX_PER_WALL
     work = dict(mark=np.zeros(1, np.int64), out_a=np.zeros(room, np.int64),
                 out_b=np.zeros(room, np.int64), out_pa=np.zeros((room, 3)),
@@ -112,8 +112,17 @@ def pack_curved(provider, n_all_walls: int, table) -> tuple:
                 out_depth=np.zeros(room), out_key=np.zeros(room, np.int64),
                 count=np.zeros(1, np.int64))
     for kind in WALL_KINDS:
-        work.update(kind.packed_work(geo, n, const))
+        _add_fields(work, kind.packed_work(geo, n, const), kind.name)
     return CurvedConst(**const), CurvedWork(**work)
+
+
+def _add_fields(fields: dict, part: dict, kind: str) -> None:
+    """``part`` (a kind's packed fields) added to ``fields``; a field packed twice is a bug
+    of the kind's packing, not a value to overwrite."""
+    twice = fields.keys() & part.keys()
+    if twice:
+        raise ValueError(f"the {kind} wall kind packs fields already packed: {sorted(twice)}")
+    fields.update(part)
 
 
 def _particles(provider, n: int) -> dict:
