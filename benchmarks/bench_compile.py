@@ -10,6 +10,11 @@ on the machine than the wall time), their difference (the compilation), the cach
 of the kernel and everything it calls) and whether the two runs wrote the same monitor files
 byte for byte (compiled code from the cache must give the same bits).
 
+Run it with nothing else on the machine: the solver's threads wait for each other actively, so
+beside a second process with threads of its own the second run of the quick deck took about ten
+times as long (two instances side by side on 2 cores), while the first runs, which compile on
+one thread, took a third longer.
+
 ``--warmup``: also ``nurbsdem warmup`` into an empty cache, then the first deck from it.
 ``--suite``: also the test suite (``pytest -q -x``) with an empty cache, then again.
 ``--compiles``: also each kernel's compile time in the first run of the first deck
