@@ -24,7 +24,7 @@ from .mesh_particle_compiled import make_mesh_particle_work, mesh_rows, mesh_wor
 from .mesh_topology import pack_topology
 from .mesh_wall import (LIST_ROOM, NO_LIST, MeshWall, make_lists, make_workspace,
                         mesh_rows_listed, sphere_mesh_rows)
-from .packing import joined, offsets
+from .packing import joined, offsets, own, per_wall
 
 
 @njit(cache=True)
@@ -217,14 +217,11 @@ class MeshKind:
         ``nurbs`` (NURBS particles meet the walls) the features of each mesh
         (:func:`~nurbsdem.contact.mesh_topology.pack_topology`)."""
         W = len(geometries)
-        mine = [g if isinstance(g, MeshWall) else None for g in geometries]
+        mine = own(geometries, MeshWall)
         meshes = [g for g in mine if g is not None]
 
         def sizes(get):
-            return offsets([0 if g is None else get(g) for g in mine])
-
-        def value(get, dtype=float):
-            return np.array([0 if g is None else get(g) for g in mine], dtype)
+            return offsets(per_wall(mine, get, np.int64))
         tops = [_topology(g, nurbs) for g in mine]
         return dict(
             vo=sizes(lambda g: len(g.vertices)), fo=sizes(lambda g: len(g.faces)),
@@ -232,10 +229,11 @@ class MeshKind:
             vertices=joined([g.vertices for g in meshes], (0, 3)),
             faces=joined([g.faces for g in meshes], (0, 3), np.int64),
             normals=joined([g.normals for g in meshes], (0, 3)),
-            two_sided=value(lambda g: g.two_sided, np.bool_), msize=value(lambda g: g.size),
+            two_sided=per_wall(mine, lambda g: g.two_sided, np.bool_),
+            msize=per_wall(mine, lambda g: g.size),
             grid_origin=joined([np.zeros(3) if g is None else g.grid_origin for g in mine],
                                (0, 3)).reshape(W, 3),
-            grid_cell=value(lambda g: g.grid_cell),
+            grid_cell=per_wall(mine, lambda g: g.grid_cell),
             grid_dims=joined([np.zeros(3, np.int64) if g is None else g.grid_dims
                               for g in mine], (0, 3), np.int64).reshape(W, 3),
             cell_start=joined([g.cell_start for g in meshes], (0,), np.int64),

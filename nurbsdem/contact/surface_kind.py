@@ -24,7 +24,7 @@ from .surface_particle import (particle_surface_row, particle_surface_row_refere
                                surface_rows)
 from .surface_particle_compiled import CONTACT, NOT_CONVERGED, NOT_UNIQUE
 from .surface_wall import SurfaceWall, sphere_contact, sphere_surface_row
-from .packing import joined, offsets
+from .packing import joined, offsets, own, per_wall
 from .wall_skin import WallSkin, wall_reach
 
 
@@ -196,7 +196,7 @@ class SurfaceKind:
         ``geometries`` (a wall of another kind has an empty slice and zeros): offsets into
         the joined patch pool (each surface's knot and power-form offsets shifted into it)
         and samples, and per-wall spacing and size.  ``nurbs`` changes nothing here."""
-        mine = [g if isinstance(g, SurfaceWall) else None for g in geometries]
+        mine = own(geometries, SurfaceWall)
         surfs = [g for g in mine if g is not None]
         koff, poff = [], []
         k0 = p0 = 0
@@ -205,12 +205,9 @@ class SurfaceKind:
             poff.append(g.poff + p0)
             k0 += len(g.knots)
             p0 += len(g.pw)
-
-        def value(get):
-            return np.array([0.0 if g is None else get(g) for g in mine], float)
         return dict(
-            po=offsets([0 if g is None else len(g.dom) for g in mine]),
-            so=offsets([0 if g is None else len(g.seed_x) for g in mine]),
+            po=offsets(per_wall(mine, lambda g: len(g.dom), np.int64)),
+            so=offsets(per_wall(mine, lambda g: len(g.seed_x), np.int64)),
             deg=joined([g.deg for g in surfs], (0, 2), np.int64),
             ncp=joined([g.ncp for g in surfs], (0, 2), np.int64),
             koff=joined(koff, (0, 2), np.int64), knots=joined([g.knots for g in surfs], (0,)),
@@ -220,7 +217,7 @@ class SurfaceKind:
             seed_x=joined([g.seed_x for g in surfs], (0, 3)),
             seed_p=joined([g.seed_p for g in surfs], (0,), np.int64),
             seed_uv=joined([g.seed_uv for g in surfs], (0, 2)),
-            spacing=value(lambda g: g.spacing), ssize=value(lambda g: g.size))
+            spacing=per_wall(mine, lambda g: g.spacing), ssize=per_wall(mine, lambda g: g.size))
 
     @staticmethod
     def packed_work(geometries: list, n: int, const: dict) -> dict:
