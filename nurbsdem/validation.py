@@ -62,14 +62,23 @@ def _pose(shape: "Shape", centroid_world: np.ndarray, R: np.ndarray) -> tuple[np
     return np.asarray(centroid_world, float) - R @ np.asarray(shape.centroid, float), R
 
 
+def _world_point(shape: "Shape", centroid_world, R, point_file: np.ndarray) -> np.ndarray:
+    """Where ``point_file`` (m, the shape's file frame) lies in the world (m) for a body of
+    ``shape`` with its centroid at ``centroid_world`` and file-to-world rotation ``R``."""
+    position, R = _pose(shape, centroid_world, R)
+    return position + R @ np.asarray(point_file, float)
+
+
 def pair_penetration(shape_a: "Shape", pos_a, R_a, shape_b: "Shape", pos_b, R_b) -> float:
     """Penetration depth (m) of two bodies: > 0 overlap, <= 0 separated or touching.
 
     pos_*: centroids in the world (m); R_*: (3, 3) file-to-world rotations. Bounding
-    spheres first; coincident centroids give ``inf``; otherwise the exact LCP, and the
-    surface-sample test of :func:`nurbsdem.geometry.overlap.bodies_overlap` when the LCP fails.
+    spheres first; coincident centroids give ``inf``; two exact spheres by their centres'
+    distance (a deck of spheres needs no LCP, so it does not compile one); otherwise the
+    exact LCP, and the surface-sample test of
+    :func:`nurbsdem.geometry.overlap.bodies_overlap` when the LCP fails.
     """
-    from .contact import detect
+    from .contact import detect, table_of
     from .geometry.overlap import bodies_overlap
 
     ra, rb = float(shape_a.bounding_radius), float(shape_b.bounding_radius)
@@ -78,6 +87,11 @@ def pair_penetration(shape_a: "Shape", pos_a, R_a, shape_b: "Shape", pos_b, R_b)
         return -(d - ra - rb)
     if d < COINCIDENT_FRACTION * min(ra, rb):
         return math.inf
+    sphere_a, sphere_b = table_of(shape_a).spheres[0], table_of(shape_b).spheres[0]
+    if sphere_a is not None and sphere_b is not None:
+        gap = np.linalg.norm(_world_point(shape_a, pos_a, R_a, sphere_a[0])
+                             - _world_point(shape_b, pos_b, R_b, sphere_b[0]))
+        return sphere_a[1] + sphere_b[1] - float(gap)
     res = detect(shape_a, _pose(shape_a, pos_a, R_a), shape_b, _pose(shape_b, pos_b, R_b))
     if res.failed or not math.isfinite(res.signed_distance):
         return math.inf if bodies_overlap(shape_a, pos_a, R_a, shape_b, pos_b, R_b) else 0.0

@@ -440,3 +440,25 @@ Steps
     out.position[1, 1] += 4e-6                                        # a copy 5 µm deep
     with pytest.raises(InputError, match="penetrates wall 'y_max' by 5"):
         check_bodies_against_walls(model, out, index=[1, 2], reference=[0, 0])
+
+
+def test_two_exact_spheres_overlap_by_their_centres_distance_without_an_lcp(monkeypatch):
+    """The overlap check of two exact spheres is the closed form r_a + r_b - |c_a - c_b|,
+    equal to the exact LCP's depth, and runs no LCP (a deck of spheres compiles none)."""
+    import nurbsdem.contact as contact
+    from nurbsdem.geometry.rotation import quat_to_matrix
+    from nurbsdem.validation import pair_penetration
+
+    a, b = gen.sphere(0.02), gen.sphere(0.03)
+    R_a = quat_to_matrix(np.array([0.8, 0.36, 0.0, 0.48]))
+    R_b = quat_to_matrix(np.array([0.6, 0.0, 0.8, 0.0]))
+    pos_a, pos_b = np.array([0.01, 0.02, 0.03]), np.array([0.01, 0.02 + 0.045, 0.03 + 0.002])
+    closed = 0.05 - float(np.hypot(0.045, 0.002))
+    exact = contact.detect(a, (pos_a - R_a @ a.centroid, R_a), b, (pos_b - R_b @ b.centroid, R_b))
+    assert not exact.failed and -exact.signed_distance == pytest.approx(closed, abs=1e-9)
+
+    def no_lcp(*args, **kwargs):
+        raise AssertionError("an LCP was run for two exact spheres")
+    monkeypatch.setattr(contact, "detect", no_lcp)
+    assert pair_penetration(a, pos_a, R_a, b, pos_b, R_b) == pytest.approx(closed, abs=1e-15)
+    assert contact.detect is no_lcp
