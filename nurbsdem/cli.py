@@ -561,6 +561,8 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     rank = _launched_rank()
     if not quiet and rank == 0:
         _tell_first_compilation()
+    from .first_run import prepare_first_solve
+    prepare_first_solve(sim)
     if restart is not None and Path(restart).parent.is_dir() and rank == 0:
         from .io.writers import clean_output_directory
         clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries

@@ -43,6 +43,7 @@ import logging
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -123,6 +124,11 @@ class Solver:
             _share_cores(self.comm)
             quiet = quiet or self.rank > 0      # one progress line: rank 0's
         self.compiled_steps = bool(compiled_steps)
+        #: while :attr:`compiled_steps` is off, an optional test, asked before each chunk of
+        #: deck steps, of whether the compiled loop may be taken now (``nurbsdem solve``'s
+        #: first run: the loop's compilation in the background is done); True turns
+        #: compiled_steps on for the rest of the run (the same results, bit for bit)
+        self.compiled_when: Callable[[], bool] | None = None
         self.background_output = bool(background_output)
         if output is not None:
             model.output.directory = Path(output)
@@ -384,6 +390,7 @@ class Solver:
                 left = min(left, self.flow.steps_to_segment_end(self.step_progress, dt))
             n, monitors_due, states_due = steps_to_event(sysm, self.model.output, left,
                                                          ck_every)
+            self._take_the_compiled_loop_when_ready(sysm)
             try:
                 done = sysm.steps(n, monitors_due, states_due)
             except InstabilityError:
@@ -408,6 +415,13 @@ class Solver:
                     self.progress.finish()
                     raise self._interrupted(writers)
             self.progress.update(self.time - step_t0, dt, sysm.substeps, cs.active)
+
+    def _take_the_compiled_loop_when_ready(self, sysm: DemSystem) -> None:
+        """Turn :attr:`compiled_steps` on (this system's and the later ones') once
+        :attr:`compiled_when` says so."""
+        if self.compiled_when is not None and not self.compiled_steps and self.compiled_when():
+            self.compiled_when = None
+            self.compiled_steps = sysm.compiled_steps = True
 
     def _checkpoint_unstable(self, writers: OutputWriters) -> None:
         """After an unstable deck step (:class:`InstabilityError`): the output of the deck

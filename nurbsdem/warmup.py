@@ -98,10 +98,43 @@ def _run_deck(compiled_steps: bool, output: bool,
         sim.run()
 
 
+def _spheres_deck(folder: Path) -> Path:
+    """A small deck in ``folder``: two exact spheres in a box of flat walls with a lid,
+    ``Damping Implicit`` with ``Accuracy`` as the paper example.  Its kernels are those of
+    every scene on the Python driver but the LCP's, which exact spheres never solve: the
+    dispatch, the neighbour list, the contact laws and the step's parts take arguments of
+    the same types for every scene."""
+    text = f"""Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700
+Shapes
+  Shape 1 Sphere Radius 0.02
+Particles
+  Particle 1 Shape 1 Material 1 Position 0.06 0.06 0.03
+  Particle 2 Shape 1 Material 1 Position 0.06 0.06 0.075
+Walls
+  Box 1 Min 0 0 0 Max 0.25 0.25 0.40
+  Wall 6 Name lid Point 0.125 0.125 0.40 Normal 0 0 -1 Size 0.25 0.25
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.004 TimeStep 1e-3 Damping Implicit Accuracy 3e-5 Safety 0.7
+Output
+  Directory {folder / 'results'}
+  VTK Every 1.0 Resolution 4
+  Monitors Every 0.001
+"""
+    (folder / "spheres.inp").write_text(text)
+    return folder / "spheres.inp"
+
+
 def _contacts() -> None:
-    """The contact kernels as the Python path calls them (its steps, no output): the LCP
-    batches, walls, spheres, the neighbour list, the contact laws."""
-    _run_deck(compiled_steps=False, output=False)
+    """The contact kernels as the Python driver calls them (its steps, no output): the
+    dispatch, the neighbour list, the contact laws, the step's parts, on a deck of exact
+    spheres (:func:`_spheres_deck`), so that it compiles no LCP and runs beside the LCP's
+    stages."""
+    _run_deck(compiled_steps=False, output=False, write_deck=_spheres_deck)
 
 
 def _pairs() -> tuple:
@@ -270,11 +303,16 @@ class Stage:
 #: the stages of :func:`warm_up` (weights: their shares of a cold compilation, rounded)
 STAGES = (
     Stage("LCP batches", _lcp_batches, 0.18),
-    Stage("wall contacts", _wall_batches, 0.08),
+    Stage("wall contacts", _wall_batches, 0.03),
     Stage("ParaView output", _output, 0.03),
-    Stage("contact detection", _contacts, 0.33, after=("LCP batches", "wall contacts")),
-    Stage("time loop", _loop, 0.38, after=("contact detection", "ParaView output")),
+    Stage("contact detection", _contacts, 0.36),
+    Stage("time loop", _loop, 0.40,
+          after=("LCP batches", "wall contacts", "contact detection", "ParaView output")),
 )
+#: the stages a first solve compiles before it starts (:func:`first_run_stages`)
+FIRST_RUN_STAGES = ("LCP batches", "wall contacts", "ParaView output", "contact detection")
+#: the stages only a scene with bodies other than exact spheres needs (the LCP's)
+LCP_STAGES = ("LCP batches", "wall contacts")
 
 
 #: :data:`STAGES` and the kernels of mesh and surface walls (``nurbsdem warmup --all``; the
@@ -285,6 +323,76 @@ ALL_STAGES = STAGES[:-1] + (
     Stage("time loop", _loop_and_curved_walls, 0.41,
           after=("contact detection", "ParaView output", "mesh and surface walls")),
 )
+
+
+def first_run_stages(needs_lcp: bool) -> tuple[Stage, ...]:
+    """The stages of :data:`FIRST_RUN_STAGES` a first solve compiles in parallel processes
+    before it starts, without those of the LCP (:data:`LCP_STAGES`) unless ``needs_lcp``
+    (a scene of exact spheres solves none).  None comes after another, so on two cores the
+    LCP's and the Python driver's kernels compile side by side; the compiled time loop,
+    which calls them all, compiles afterwards in the background
+    (:func:`compile_loop_in_background`) while the first run goes on the Python driver."""
+    names = [n for n in FIRST_RUN_STAGES if needs_lcp or n not in LCP_STAGES]
+    return tuple(s for s in STAGES if s.name in names)
+
+
+#: the file in the compiled loop's cache folder that holds the process id of a background
+#: compilation of the loop (:func:`compile_loop_in_background`) while it runs
+LOOP_PID_FILE = "nurbsdem-loop-compiling.pid"
+
+
+def _loop_pid_file() -> Path | None:
+    from .cachecheck import PACKAGE, cache_folder
+    folder = cache_folder(PACKAGE / "dynamics")
+    return None if folder is None else folder / LOOP_PID_FILE
+
+
+def loop_compiling_in_background() -> bool:
+    """Whether a background compilation of the time loop is running (its process alive)."""
+    path = _loop_pid_file()
+    try:
+        pid = int(path.read_text()) if path is not None else 0
+        if pid > 0:
+            os.kill(pid, 0)
+            return True
+    except (OSError, ValueError):
+        pass
+    return False
+
+
+def compile_loop_in_background() -> int | None:
+    """Start the time loop's stage (:func:`_loop`) in a process of its own session, which
+    outlives the solve that starts it, at the lowest CPU priority, with its output discarded;
+    returns its process id (None: one runs already, or the cache folder is not writable).
+    The next solve loads the loop from numba's cache; one that starts before it is done runs
+    on the Python driver too (the same results)."""
+    import subprocess
+    path = _loop_pid_file()
+    if path is None or loop_compiling_in_background():
+        return None
+    code = f"from nurbsdem.warmup import _loop_in_background as run; run({str(path)!r})"
+    try:
+        proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True)
+        path.write_text(str(proc.pid))
+    except OSError:
+        return None
+    return proc.pid
+
+
+def _loop_in_background(pid_file: str, niceness: int = 19) -> None:
+    """The process :func:`compile_loop_in_background` starts: the time loop's stage at the
+    lowest CPU priority (``niceness`` added; the solve that started it runs beside it);
+    ``pid_file`` is removed at the end."""
+    try:
+        os.nice(niceness)
+        _loop()
+    finally:
+        try:
+            Path(pid_file).unlink()
+        except OSError:
+            pass
 
 
 def _run_stage(run: Callable[[], None]) -> float:
@@ -298,7 +406,7 @@ def warm_up(jobs: int | None = None, on_done: Callable[[str, float], None] | Non
             stages: tuple[Stage, ...] = STAGES) -> dict[str, float]:
     """Compile the kernels of ``stages`` into numba's cache, each stage in a fresh process
     once the stages it comes ``after`` are done, up to ``jobs`` at a time (default: the
-    usable cores).  ``on_done(name, seconds)`` after each stage.  Returns stage name ->
+    usable cores), the heaviest of those ready first (the pool starts them in that order).  ``on_done(name, seconds)`` after each stage.  Returns stage name ->
     seconds, in the order they finished."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, wait
@@ -313,7 +421,8 @@ def warm_up(jobs: int | None = None, on_done: Callable[[str, float], None] | Non
                              max_tasks_per_child=1) as pool:
         running = {}
         while pending or running:
-            for stage in [s for s in pending if all(a in done for a in s.after)]:
+            ready = [s for s in pending if all(a in done for a in s.after)]
+            for stage in sorted(ready, key=lambda s: -s.weight):     # the longest first
                 pending.remove(stage)
                 running[pool.submit(_run_stage, stage.run)] = stage.name
             if not running:
