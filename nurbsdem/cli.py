@@ -561,13 +561,13 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     rank = _launched_rank()
     if not quiet and rank == 0:
         _tell_first_compilation()
-    from .first_run import prepare_first_solve
-    prepare_first_solve(sim)
     if restart is not None and Path(restart).parent.is_dir() and rank == 0:
         from .io.writers import clean_output_directory
         clean_output_directory(Path(restart).parent)   # undo a killed run; stale temporaries
     if restart is not None and not Path(restart).is_file():
         fail(f"{restart}: no such checkpoint file")
+    from .first_run import prepare_first_solve
+    prepare_first_solve(sim)     # a cold cache: compile in parallel, loop in the background
     from .warmup import reporting_compiles
     with reporting_compiles(not quiet and rank == 0):      # names each kernel it compiles
         summary = _stopping_all_ranks(sim.run)   # the Python API's code path: Simulation -> Solver
