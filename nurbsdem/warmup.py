@@ -46,6 +46,31 @@ ENTRY_SHARES = {"listed.scene_list": 0.12, "listed.solve_due": 0.42,
                 "deflate._blocks": 0.02}
 
 
+def _box_deck_text(folder: Path, shapes: str, particles: str, vtk_every: float) -> str:
+    """The text of a small deck of the warm-up: the ``Shapes`` and ``Particles`` lines
+    given, in a 0.25 m box of flat walls with a lid, the paper's linear law,
+    ``Damping Implicit`` with ``Accuracy`` as the paper example, four deck steps, results
+    in ``folder``/results with VTU output every ``vtk_every`` s."""
+    return f"""Environment
+  Gravity 0 0 -9.81
+Materials
+  Material 1 Density 2700
+Shapes
+{shapes}Particles
+{particles}Walls
+  Box 1 Min 0 0 0 Max 0.25 0.25 0.40
+  Wall 6 Name lid Point 0.125 0.125 0.40 Normal 0 0 -1 Size 0.25 0.25
+Contact
+  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
+Steps
+  Step 1 Dynamic Duration 0.004 TimeStep 1e-3 Damping Implicit Accuracy 3e-5 Safety 0.7
+Output
+  Directory {folder / 'results'}
+  VTK Every {vtk_every} Resolution 4
+  Monitors Every 0.001
+"""
+
+
 def _deck(folder: Path, output: bool) -> Path:
     """A small deck in ``folder``: two of the paper's particles, an exact sphere and a box of
     flat walls, one lid (the kinds of pair a deck has: NURBS-NURBS, NURBS-wall, sphere-NURBS,
@@ -55,30 +80,13 @@ def _deck(folder: Path, output: bool) -> Path:
     from .shapes import paper_particle
     for kind in "AB":
         save_shape(folder / f"{kind}.yaml", paper_particle(kind), name=kind)
-    text = f"""Environment
-  Gravity 0 0 -9.81
-Materials
-  Material 1 Density 2700
-Shapes
-  Shape 1 File A.yaml
+    text = _box_deck_text(folder, """  Shape 1 File A.yaml
   Shape 2 File B.yaml
   Shape 3 Sphere Radius 0.02
-Particles
-  Particle 1 Shape 1 Material 1 Position 0.06 0.06 0.05
+""", """  Particle 1 Shape 1 Material 1 Position 0.06 0.06 0.05
   Particle 2 Shape 2 Material 1 Position 0.06 0.06 0.115
   Particle 3 Shape 3 Material 1 Position 0.17 0.17 0.03
-Walls
-  Box 1 Min 0 0 0 Max 0.25 0.25 0.40
-  Wall 6 Name lid Point 0.125 0.125 0.40 Normal 0 0 -1 Size 0.25 0.25
-Contact
-  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
-Steps
-  Step 1 Dynamic Duration 0.004 TimeStep 1e-3 Damping Implicit Accuracy 3e-5 Safety 0.7
-Output
-  Directory {folder / 'results'}
-  VTK Every {0.002 if output else 1.0} Resolution 4
-  Monitors Every 0.001
-"""
+""", 0.002 if output else 1.0)
     (folder / "warmup.inp").write_text(text)
     return folder / "warmup.inp"
 
@@ -104,27 +112,9 @@ def _spheres_deck(folder: Path) -> Path:
     every scene on the Python driver but the LCP's, which exact spheres never solve: the
     dispatch, the neighbour list, the contact laws and the step's parts take arguments of
     the same types for every scene."""
-    text = f"""Environment
-  Gravity 0 0 -9.81
-Materials
-  Material 1 Density 2700
-Shapes
-  Shape 1 Sphere Radius 0.02
-Particles
-  Particle 1 Shape 1 Material 1 Position 0.06 0.06 0.03
+    text = _box_deck_text(folder, "  Shape 1 Sphere Radius 0.02\n", """  Particle 1 Shape 1 Material 1 Position 0.06 0.06 0.03
   Particle 2 Shape 1 Material 1 Position 0.06 0.06 0.075
-Walls
-  Box 1 Min 0 0 0 Max 0.25 0.25 0.40
-  Wall 6 Name lid Point 0.125 0.125 0.40 Normal 0 0 -1 Size 0.25 0.25
-Contact
-  Interface 1 NormalPenalty 1e5 TangentialPenalty 1e4 NormalDamping 1e2 TangentialDamping 0 Friction 0.5
-Steps
-  Step 1 Dynamic Duration 0.004 TimeStep 1e-3 Damping Implicit Accuracy 3e-5 Safety 0.7
-Output
-  Directory {folder / 'results'}
-  VTK Every 1.0 Resolution 4
-  Monitors Every 0.001
-"""
+""", 1.0)
     (folder / "spheres.inp").write_text(text)
     return folder / "spheres.inp"
 
