@@ -4,8 +4,8 @@ test suite.
 Each deck (default: the quick paper example and the two-sphere deck) is solved twice in fresh
 processes with an empty numba cache of its own (``NUMBA_CACHE_DIR`` in a temporary folder):
 the first run compiles the kernels it needs (``nurbsdem.first_run``: in parallel processes,
-then it runs on the Python driver while the compiled loop compiles in the background), the
-second, once that background compilation has ended, loads them.  Printed per deck: both
+then it runs on the Python driver; the compiled loop compiles in the background, after the
+run where it is short), the second, once that background compilation has ended, loads them.  Printed per deck: both
 wall times and CPU times (the processes' user + system time: less sensitive to other work
 on the machine than the wall time), their difference (the compilation), the cached libraries
 (files, MB), the kernels cached in more than one specialisation (each a second compilation

@@ -567,10 +567,14 @@ def solve(deck: str, output: str | None, restart: str | None, quiet: bool, verbo
     if restart is not None and not Path(restart).is_file():
         fail(f"{restart}: no such checkpoint file")
     from .first_run import prepare_first_solve
-    prepare_first_solve(sim)     # a cold cache: compile in parallel, loop in the background
+    loop = prepare_first_solve(sim)   # a cold cache: compile in parallel, loop in the background
     from .warmup import reporting_compiles
-    with reporting_compiles(not quiet and rank == 0):      # names each kernel it compiles
-        summary = _stopping_all_ranks(sim.run)   # the Python API's code path: Simulation -> Solver
+    try:
+        with reporting_compiles(not quiet and rank == 0):      # names each kernel it compiles
+            summary = _stopping_all_ranks(sim.run)   # the Python API's path: Simulation -> Solver
+    finally:
+        if loop is not None:
+            loop.finish()
     if not quiet and rank == 0:
         click.echo(summary.text())
         click.echo(f"results in {sim.solver.outdir}")

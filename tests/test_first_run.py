@@ -48,13 +48,14 @@ def test_a_run_that_takes_the_compiled_loop_midway_gives_the_same_results(tmp_pa
 
 def _first_solve(monkeypatch, deck: Path, cached: list[bool]) -> tuple[Simulation, list]:
     """:func:`first_run.prepare_first_solve` of ``deck`` with nothing compiled or started:
-    the stages it asks for are returned; ``cached`` pops the answers of ``compiles_first``."""
+    the stages it asks for and the background compilations it starts (as the string
+    "loop") are returned; ``cached`` pops the answers of ``compiles_first``."""
     asked = []
     monkeypatch.setattr(first_run, "compiles_first", lambda: cached.pop(0))
     monkeypatch.setattr(warmup, "_usable_cores", lambda: 2)
-    monkeypatch.setattr(warmup, "loop_compiling_in_background", lambda: False)
+    monkeypatch.setattr(warmup, "loop_compiling_in_background", lambda: "loop" in asked)
     monkeypatch.setattr(warmup, "warm_up", lambda stages, on_done: asked.extend(stages))
-    monkeypatch.setattr(warmup, "compile_loop_in_background", lambda: 4321)
+    monkeypatch.setattr(warmup, "compile_loop_in_background", lambda: asked.append("loop") or 4321)
     sim = Simulation.from_deck(deck, quiet=True)
     first_run.prepare_first_solve(sim)
     return sim, asked
@@ -68,13 +69,20 @@ def test_a_first_solve_compiles_the_stages_its_deck_needs_then_steps_on_the_pyth
         assert [s.name for s in asked] == list(warmup.FIRST_RUN_STAGES)
         assert all(not set(s.after) & set(warmup.FIRST_RUN_STAGES) for s in asked)
         assert not sim.solver.compiled_steps
-        assert numba.get_num_threads() == 1                 # a core left to the background
-        numba.set_num_threads(threads)
+        assert numba.get_num_threads() == threads           # no background compilation yet
         spheres = warmup._spheres_deck(tmp_path)
         sim, asked = _first_solve(monkeypatch, spheres, [True])
         assert {s.name for s in asked} == {"ParaView output", "contact detection"}
         when = sim.solver.compiled_when
-        assert not when()                                   # asked again within a second
+        assert not when() and "loop" not in asked           # asked again within a second
+        when.checked = -1e9
+        when.t_start -= 10.0                                # 10 s for a tenth of the run:
+        sim.solver.time = when.sim_start + 0.1 * (when.sim_end - when.sim_start)   # 90 s left
+        assert not when() and asked[-1] == "loop"
+        assert numba.get_num_threads() == 1                 # a core left to the background
+        when.checked = -1e9
+        assert not when()                                   # still compiling
+        asked.remove("loop")                                # its process ended
         when.checked = -1e9
         cached = [False]
         monkeypatch.setattr(first_run, "compiles_first", lambda: cached.pop(0))
@@ -83,6 +91,26 @@ def test_a_first_solve_compiles_the_stages_its_deck_needs_then_steps_on_the_pyth
         numba.set_num_threads(threads)
     sim, asked = _first_solve(monkeypatch, spheres, [False])     # the loop is cached
     assert sim.solver.compiled_steps and sim.solver.compiled_when is None and not asked
+
+
+def test_a_short_first_run_keeps_every_core_and_compiles_the_loop_after_it(tmp_path,
+                                                                            monkeypatch):
+    """A first run that ends sooner than the loop would compile never shares its cores; the
+    loop's background compilation starts once, after the run."""
+    threads = numba.get_num_threads()
+    sim, asked = _first_solve(monkeypatch, warmup._spheres_deck(tmp_path), [True])
+    loop = sim.solver.compiled_when
+    loop.checked = -1e9
+    loop.t_start -= 10.0                                    # 10 s for half the run: 10 s left
+    sim.solver.time = loop.sim_start + 0.5 * (loop.sim_end - loop.sim_start)
+    assert not loop() and "loop" not in asked and numba.get_num_threads() == threads
+    loop.t_start = time.monotonic()
+    sim.run()
+    assert "loop" not in asked and not sim.solver.compiled_steps
+    loop.finish()
+    assert asked.count("loop") == 1 and numba.get_num_threads() == threads
+    loop.finish()
+    assert asked.count("loop") == 1
 
 
 def test_one_background_compilation_at_a_time(tmp_path, monkeypatch):
