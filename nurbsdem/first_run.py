@@ -82,7 +82,8 @@ class LoopInBackground:
     """The compiled loop's background compilation during and after a first run on the Python
     driver (:attr:`nurbsdem.solver.Solver.compiled_when`, asked before each chunk of deck
     steps).  At most once a second it estimates the run's wall time left from the simulated
-    time done (``solver.time`` of ``solver.model.total_time``); when that exceeds
+    time done since its first call (``solver.time`` of ``solver.model.total_time``; a
+    restart's run starts at its checkpoint's time); when that exceeds
     :data:`WORTH_THE_LOOP_S` it starts the compilation
     (:func:`nurbsdem.warmup.compile_loop_in_background`) and runs the kernels on one thread
     fewer than the usable cores, since the threads of a parallel batch wait for each other
@@ -97,7 +98,7 @@ class LoopInBackground:
         self.solver = solver
         self.threads = numba.get_num_threads()
         self.t_start = time.monotonic()
-        self.sim_start = float(solver.time)
+        self.sim_start: float | None = None       # the simulated time at the first call
         self.sim_end = float(solver.model.total_time)
         self.checked = self.t_start
         self.started = False
@@ -106,6 +107,8 @@ class LoopInBackground:
             self._share_the_cores()
 
     def __call__(self) -> bool:
+        if self.sim_start is None:      # before the first chunk of deck steps
+            self.sim_start, self.t_start = float(self.solver.time), time.monotonic()
         if self.failed or time.monotonic() - self.checked < 1.0:
             return False
         self.checked = time.monotonic()
@@ -126,10 +129,10 @@ class LoopInBackground:
 
     def seconds_left(self) -> float:
         """The run's wall time left (s), estimated from the simulated time done in the wall
-        time since the start; 0 before :data:`ESTIMATE_AFTER_S`, infinite when no simulated
+        time since the first call; 0 before :data:`ESTIMATE_AFTER_S`, infinite when no simulated
         time is done after it."""
         elapsed = time.monotonic() - self.t_start
-        if elapsed < ESTIMATE_AFTER_S:
+        if self.sim_start is None or elapsed < ESTIMATE_AFTER_S:
             return 0.0
         done = float(self.solver.time) - self.sim_start
         if done <= 0.0:

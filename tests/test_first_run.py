@@ -100,6 +100,7 @@ def test_a_short_first_run_keeps_every_core_and_compiles_the_loop_after_it(tmp_p
     threads = numba.get_num_threads()
     sim, asked = _first_solve(monkeypatch, warmup._spheres_deck(tmp_path), [True])
     loop = sim.solver.compiled_when
+    assert not loop()                                       # the run's start
     loop.checked = -1e9
     loop.t_start -= 10.0                                    # 10 s for half the run: 10 s left
     sim.solver.time = loop.sim_start + 0.5 * (loop.sim_end - loop.sim_start)
