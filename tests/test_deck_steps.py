@@ -67,7 +67,7 @@ def test_compiled_nurbs_steps_equal_the_python_path(tmp_path, monkeypatch, name,
 
     def estimating(*args):
         result = loop(*args)
-        estimates.append(int(args[21][deck_steps.NETWORK_ESTIMATES]))   # counters
+        estimates.append(int(args[20][deck_steps.NETWORK_ESTIMATES]))   # counters
         return result
     monkeypatch.setattr(deck_steps, "run_deck_steps", estimating)
 

@@ -12,7 +12,7 @@ import pytest
 from nurbsdem.dynamics.exact_sum import (SPECIAL, exact_add, exact_add_rows, exact_value,
                                          exact_zeros)
 from nurbsdem.dynamics.forces import N_TERMS, T_WALL_A, T_WALL_B
-from nurbsdem.dynamics.step import EXACT_WALLS, book_kick
+from nurbsdem.dynamics.step import EXACT_WALLS, book_kick, ledger_of, wall_work_of
 
 
 def _summed(values) -> float:
@@ -81,7 +81,7 @@ def test_two_ranks_booking_their_counted_contacts_give_one_ranks_ledger_to_the_b
 
     def booked(counted):
         exact = exact_zeros(EXACT_WALLS + W)
-        book_kick(terms, a, b, n, counted, np.zeros(5), np.zeros(W), exact)
+        book_kick(terms, a, b, n, counted, exact)
         return exact
 
     one = booked(np.zeros(0, np.bool_))
@@ -90,9 +90,7 @@ def test_two_ranks_booking_their_counted_contacts_give_one_ranks_ledger_to_the_b
     for share in (booked(mine), booked(~mine)):
         exact_add_rows(total, share)
     assert total.tobytes() == one.tobytes()
-    ledger, wall_work = np.zeros(5), np.zeros(W)
-    book_kick(terms, a, b, n, np.zeros(0, np.bool_), ledger, wall_work,
-              exact_zeros(EXACT_WALLS + W))
+    ledger, wall_work = ledger_of(one, 0.0), wall_work_of(one)
     assert ledger[0] == pytest.approx(-terms[:, 0].sum(), rel=1e-12)
     walls = b >= n
     assert ledger[3] == pytest.approx(terms[walls, T_WALL_B].sum(), rel=1e-12)

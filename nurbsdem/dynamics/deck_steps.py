@@ -82,7 +82,7 @@ from .periodic_steps import (apply_wrap, has_images, image_contact_part_ptr,
                              pair_images, periodic_const, periodic_list_ptr, shift_rows,
                              solve_images_ptr, stored_images, wrapped)
 from .step import (all_kinematics, contact_part_kernel, contact_part_ptr, interfaces_defined,
-                   kick_part_ptr, spun_contacts, step_start_ptr)
+                   kick_part_ptr, ledger_of, spun_contacts, step_start_ptr, wall_work_of)
 from .rigid import body_poses, omega_world
 from .stepcontrol import (ALTERNATION_STEPS, FALL_HYSTERESIS, HEAVY_SUBSTEPS,
                           NETWORK_BOUND_SLACK, NETWORK_RECHECK_STEPS, REFINE_DECAY_STEPS,
@@ -271,8 +271,9 @@ def _finite(x, v, q, L, force) -> bool:
 
 @internal
 def _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak: np.ndarray) -> tuple[bool, float]:
-    """DemSystem._check_energy (the same energy_terms), then the peak of kinetic + elastic
-    energy is raised.  Returns (passed, the balance error in J, which the accuracy control
+    """DemSystem._check_energy (the same energy_terms, the ledger's array (5,) J
+    :func:`~nurbsdem.dynamics.step.ledger_of`), then the peak of kinetic + elastic energy is
+    raised.  Returns (passed, the balance error in J, which the accuracy control
     takes too)."""
     mech, balance, moving = balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel,
                                           ledger)
@@ -338,9 +339,11 @@ def _step_control(bc, cc, ev, x, v, q, omega, wall_u, substeps: int, counters,
 
 
 @internal
-def _balance(bc, ev, x, v, q, L, ledger) -> float:
-    """The energy-balance error (J) of the present state (DemSystem._balance)."""
-    return balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger)[1]
+def _balance(bc, ev, x, v, q, L, exact, initial: float) -> float:
+    """The energy-balance error (J) of the present state (DemSystem._balance) with the
+    ledger's exact sums ``exact`` and the initial mechanical energy ``initial`` (J)."""
+    return balance_terms(bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel,
+                         ledger_of(exact, initial))[1]
 
 
 @internal(inline="always")
@@ -387,7 +390,7 @@ _step_control_ptr = PointerKernel(_step_control, "deck_step_control").call
 
 @njit(cache=True, nogil=True)   # output writers run meanwhile (a worker thread)
 def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, wall_d, wall_u,
-                   walls_d, walls_u, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
+                   walls_d, walls_u, exact, initial, alt_prev_v, alt_prev_L,
                    alt_count, counters, peak, acc_growth, estimate, sample_at, rows, state_at,
                    times, curved, cwork, spin, turns):
     """Up to n_deck deck steps of ``substeps`` × ``counters[ACC_REFINE]`` internal steps each
@@ -405,8 +408,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     :data:`~nurbsdem.contact.curved_compiled.CurvedConst`; ``cwork``: their workspaces; spin
     (W,6): each wall's angular velocity, rad/s, and centre, m; ``turns``: the poses and spin
     of the walls a table turns at those times, :mod:`~nurbsdem.dynamics.curved_turns`).
-    Body state (x, v, q, L), ledger (5,) J, wall_work (W,) J with their exact accumulators
-    ``exact`` (:data:`~nurbsdem.dynamics.forces.EXACT_WALLS`), the period-2 watch arrays,
+    Body state (x, v, q, L), the exact accumulators ``exact`` of the ledger and the walls'
+    work (:data:`~nurbsdem.dynamics.forces.EXACT_WALLS`; ``initial``: the initial
+    mechanical energy, J, :func:`~nurbsdem.dynamics.step.ledger_of`), the period-2 watch arrays,
     counters (int64, STEP_COUNT …), peak (1,) J,
     acc_growth (1,) J (DemSystem.acc_last_growth) and the time-step control's ``estimate``
     (DT_BOUND …, s) are updated in place.  With the accuracy
@@ -421,14 +425,14 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
     omega = omega_world(q, L, bc.inv_I)      # of the present state, kept up to date below
     accuracy = cc.accuracy > 0.0
     # the balance error at the start of the deck step (then carried from its end)
-    balance0 = _balance(bc, ev, x, v, q, L, ledger) if accuracy else 0.0
+    balance0 = _balance(bc, ev, x, v, q, L, exact, initial) if accuracy else 0.0
     states = [_kept(np.int64(0), x, q, v, L, wall_d, ev) for _ in range(0)]   # typed by items
     every = np.zeros(0, np.bool_)   # one rank books the work of every contact
     status, done = DONE, n_deck     # one exit: the code of each return is large
     for j in range(n_deck):
         if accuracy:
-            sn = _snapshot(x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
-                           alt_count, pl, ev, wall_d, wall_u, peak)
+            sn = _snapshot(x, v, q, L, exact, alt_prev_v, alt_prev_L, alt_count, pl, ev,
+                           wall_d, wall_u, peak)
         for k in range(n_run):
             t = j * n_run + k
             d_new, u_new = walls_d[t], walls_u[t]
@@ -436,17 +440,15 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c0 = cycles()
             if has_images(ev.image):    # contacts with periodic images (.periodic_steps)
                 omega, worst, run = image_step_start_ptr(bc, ev, x, v, q, L, wall_d, u_mean, h,
-                                                         ledger, wall_work, exact, alt_prev_v,
-                                                         alt_prev_L, alt_count,
-                                                         cc.watch_period2)
+                                                         exact, alt_prev_v, alt_prev_L,
+                                                         alt_count, cc.watch_period2)
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
                 omega, worst, run = step_start_ptr(
                     bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, ev.force,
-                    ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, kick_w, h, ledger,
-                    wall_work, exact, every, alt_prev_v, alt_prev_L, alt_count,
-                    cc.watch_period2)
+                    ev.torque, x, v, q, L, omega, kick_b, kick_d, kick_u, kick_w, h, exact,
+                    every, alt_prev_v, alt_prev_L, alt_count, cc.watch_period2)
             if worst >= 0 and run >= ALTERNATION_STEPS:
                 status = GUARD
                 break
@@ -456,8 +458,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c2 = cycles()
             pl, reach, due, failed, moved = _search(sc, pl, x.copy(), R, pos,  # the flat walls
                                                     wall_d[:sc.flat_walls].copy(), counters)
-            if failed or not apply_wrap(x, moved, bc.mass, bc.gravity, ledger, wall_work,
-                                                  exact):
+            if failed or not apply_wrap(x, moved, bc.mass, bc.gravity, initial, exact):
                 status = GUARD
                 break
             counters[EVALS] += 1
@@ -473,13 +474,13 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             c4 = cycles()
             if has_images(ev.image):
                 omega = image_kick_part_ptr(bc, ev, x, v, q, L, wall_d, u_mean, 0.5 * h,
-                                            ledger, wall_work, exact)
+                                            exact)
             else:
                 kick_b, kick_d, kick_u, kick_w = _kick_walls(curved.n_walls, spin, ev,
                                                              x.shape[0], wall_d, u_mean)
                 omega = kick_part_ptr(bc, ev.a, ev.b, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet,
                                       ev.force, ev.torque, x, v, q, L, omega, kick_b, kick_d,
-                                      kick_u, kick_w, 0.5 * h, ledger, wall_work, exact, every)
+                                      kick_u, kick_w, 0.5 * h, exact, every)
             counters[INTEGRATION_CYCLES] += (c1 - c0) + (cycles() - c4)
             counters[FORCES_CYCLES] += (c2 - c1) + (c4 - c3) - (counters[DASHPOT_CYCLES] - dashpots)
             if not _finite(x, v, q, L, ev.force):
@@ -489,7 +490,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             done = j
             break
         counters[STEP_COUNT] += 1
-        ok, balance = _energy_ok(bc, cc, ev, x, v, q, L, ledger, peak)
+        ok, balance = _energy_ok(bc, cc, ev, x, v, q, L, ledger_of(exact, initial), peak)
         if not ok:
             status, done = GUARD, j
             break
@@ -498,8 +499,7 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
             growth = abs(balance - balance0)
             budget = accuracy_budget(cc.accuracy, sn.peak, cc.scale_floor)
             if repeat_for_accuracy(growth, budget, acc, n_run, cc.max_substeps, acc_growth[0]):
-                _restore(sn, x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L,
-                         alt_count, peak)
+                _restore(sn, x, v, q, L, exact, alt_prev_v, alt_prev_L, alt_count, peak)
                 counters[STEP_COUNT] -= 1
                 counters[ACC_REFINE] = 2 * acc
                 counters[ACC_CALM] = 0
@@ -514,9 +514,9 @@ def run_deck_steps(n_deck: int, substeps: int, sc, bc, cc, pl, ev, x, v, q, L, w
                                                                       counters[ACC_CALM])
         active = _count_deck_step(counters, cc.refine_decay, ev)
         if sample_at[j]:
-            record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel, ledger,
-                       ev.monitored, active, ev.degenerated, wall_d, ev.force, ev.torque,
-                       wall_work)
+            record_row(rows[j], bc.mass, x, v, q, L, bc.inv_I, bc.gravity, ev.eel,
+                       ledger_of(exact, initial), ev.monitored, active, ev.degenerated, wall_d,
+                       ev.force, ev.torque, wall_work_of(exact))
         if state_at[j]:
             states.append(_kept(j, x.copy(), q.copy(), v.copy(), L.copy(), wall_d.copy(), ev))
         c0 = cycles()
@@ -670,12 +670,12 @@ class DeckSteps:
         walls_d, walls_u, times = self._wall_tables(0, 1)
         counters = np.zeros(N_COUNTERS, np.int64)
         counters[ACC_REFINE] = 1            # the loop divides the deck step by the count
-        self._loop(0, max(int(s.substeps), 1), walls_d, walls_u, s.ledger.to_array(), counters,
+        self._loop(0, max(int(s.substeps), 1), walls_d, walls_u, counters,
                    np.array([s._peak]), np.array([s.acc_last_growth]), self._estimate(),
                    np.zeros(0, np.bool_), np.zeros((0, row_width(s.walls.n))),
                    np.zeros(0, np.bool_), times)
 
-    def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, ledger, counters, peak,
+    def _loop(self, n_deck: int, substeps: int, walls_d, walls_u, counters, peak,
               acc_growth, estimate, sample_at, rows, state_at, times):
         """:func:`run_deck_steps` on the system's state (the one call of the loop, so that
         :meth:`load` and :meth:`run` pass the same argument types), with the contact part of
@@ -685,8 +685,9 @@ class DeckSteps:
         contact_part_kernel.redirect(s._kernels.contact_part)
         return run_deck_steps(
             n_deck, substeps, self.sc, self.bc, self._control(), self._pair_list(),
-            self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u, ledger,
-            s.wall_work, s.exact_ledger, s.alt_prev_v, s.alt_prev_L, s.alt_count, counters, peak,
+            self._evaluation(), b.x, b.v, b.q, b.L, s.wall_d, s.wall_u, walls_d, walls_u,
+            s.exact_ledger, float(s.initial_mechanical), s.alt_prev_v, s.alt_prev_L, s.alt_count,
+            counters, peak,
             acc_growth, estimate, sample_at, rows, state_at, times, self.curved, self.cwork,
             self.spin, table_turns(self.provider, self.curved, self.spin, times))
 
@@ -704,19 +705,18 @@ class DeckSteps:
         peak = np.array([s._peak])
         acc_growth = np.array([s.acc_last_growth])
         estimate = self._estimate()
-        ledger = s.ledger.to_array()
         sample_at = np.ascontiguousarray(sample_at[:n_deck], np.bool_)
         state_at = (np.zeros(n_deck, np.bool_) if state_at is None
                     else np.ascontiguousarray(state_at[:n_deck], np.bool_))
         rows = np.zeros((n_deck, row_width(s.walls.n)))
         status, done, pl, ev, wall_d, wall_u, states = self._loop(
-            n_deck, s.substeps, walls_d, walls_u, ledger, counters, peak, acc_growth, estimate,
+            n_deck, s.substeps, walls_d, walls_u, counters, peak, acc_growth, estimate,
             sample_at, rows, state_at, times)
         if status == GUARD:
             return status, done, counters, rows, []
         if s.wall_spin is not None and s.wall_spin is not self.spin:
             s.wall_spin[:] = self.spin          # a table's spin at the last evaluation
-        self._store(pl, ev, wall_d, wall_u, ledger, counters, peak)
+        self._store(pl, ev, wall_d, wall_u, counters, peak)
         s.acc_last_growth = float(acc_growth[0])
         s.dt_bound, s.dt_network, s.dt_critical = (float(e) for e in estimate[:RATES_BOUND])
         s.network_estimates += int(counters[NETWORK_ESTIMATES])
@@ -726,10 +726,9 @@ class DeckSteps:
                             int(estimate[RATES_BODY]))
         return status, done, counters, rows, states
 
-    def _store(self, pl, ev, wall_d, wall_u, ledger, counters, peak) -> None:
+    def _store(self, pl, ev, wall_d, wall_u, counters, peak) -> None:
         """Write the loop's results back into the system and the scene."""
         from ..contact.scene import _PairState
-        from .energy import EnergyLedger
         s, sc = self.system, self.scene
         sc.pairs = _PairState(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f, pl.rows_i,
                               pl.budget, np.zeros(pl.a.shape[0], bool))
@@ -752,7 +751,6 @@ class DeckSteps:
         s.hist_keys, s.hist_springs = ev.hist_keys, ev.hist_springs
         s.force, s.torque, s.last_slip_work = ev.force, ev.torque, ev.slip
         s.wall_d, s.wall_u = wall_d, wall_u
-        s.ledger = EnergyLedger.from_array(ledger)
         s.step_count, s.refine, s.calm_steps = (int(counters[i]) for i in (STEP_COUNT, REFINE, CALM))
         s.acc_refine, s.acc_calm = int(counters[ACC_REFINE]), int(counters[ACC_CALM])
         s.accuracy_repeats += int(counters[ACC_REPEATS])

@@ -15,7 +15,7 @@ mantissa M (M < 2^53, read from its bits) times 2^e with e ≥ :data:`LOW_EXP` (
 included), so every term is an integer multiple of the lowest bit.  Each term adds less than
 2^LIMB_BITS to at most three limbs; :func:`exact_normalize` carries the limbs back into
 [0, 2^LIMB_BITS) and must run before 2^31 terms have gone into one accumulator (the bookings
-read, and so normalise, after every call).  The canonical (normalised) form is unique for
+normalise after every call, :func:`exact_normalize_all`).  The canonical (normalised) form is unique for
 each value, so its reading (:func:`exact_value`: the three leading limbs summed in floating
 point, within about one unit in the last place of the exact sum) is the same bits for the
 same exact sum.
@@ -111,6 +111,15 @@ def exact_normalize(acc: np.ndarray, row: int) -> None:
         carry = t >> LIMB_BITS           # floor division: t - carry 2^LIMB_BITS in [0, 2^32)
         acc[row, i] = t - (carry << LIMB_BITS)
     acc[row, N_LIMBS - 1] += carry
+
+
+@kernel
+def exact_normalize_all(acc: np.ndarray) -> None:
+    """Every accumulator of acc (R, WIDTH) in its canonical form (:func:`exact_normalize`):
+    after each booking, so that no limb nears overflow and the stored accumulators are the
+    same bits whatever the order and the split of the terms booked."""
+    for r in range(acc.shape[0]):
+        exact_normalize(acc, r)
 
 
 @kernel(inline="always")

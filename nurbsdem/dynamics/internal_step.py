@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import InputError
 from ..jit import seconds_per_cycle
 from .contact_state import ContactState
-from .energy import EnergyLedger, EnergySample
+from .energy import EnergySample
 from .images import ImageBodies
 from .integrator import state_is_finite
 from .periodic_steps import wrap_work
@@ -189,7 +189,7 @@ class InternalSteps:
         jump = wrap_work(b.mass, np.ascontiguousarray(shift, float),
                          np.ascontiguousarray(self.gravity, float))
         b.x -= shift
-        if self.ledger.initial_mechanical != self.ledger.initial_mechanical:   # NaN
+        if self.initial_mechanical != self.initial_mechanical:   # NaN
             self.initial_wrap_work += jump
         elif self.domain is None or self.domain.books():   # every rank takes the same wrap
             self._book(L_EXTERNAL, np.array([jump]))
@@ -215,9 +215,7 @@ class InternalSteps:
     def _book(self, row: int, amounts: np.ndarray) -> None:
         """Book the amounts (J) exactly in the ledger's accumulator ``row``
         (:func:`~nurbsdem.dynamics.step.book_terms`)."""
-        ledger = self.ledger.to_array()
-        book_terms(self.exact_ledger, row, amounts, ledger, self.wall_work)
-        self.ledger = EnergyLedger.from_array(ledger)
+        book_terms(self.exact_ledger, row, amounts)
 
     def _counted(self) -> np.ndarray:
         """The stored contacts whose kicks' work this rank books (:meth:`Domain.counted
@@ -254,40 +252,34 @@ class InternalSteps:
         d_new, _ = self.walls.kinematics(t_new)
         u_mean = (d_new - self.wall_d) / h
         t0 = time.perf_counter()
-        ledger = self.ledger.to_array()
         im = self._images()
         if im is not None:
-            worst, run = self._step_start_images(im, u_mean, h, ledger)
+            worst, run = self._step_start_images(im, u_mean, h)
         else:
             _, worst, run = step_start(
                 *self._kick_arguments(), b.x, b.v, b.q, b.L, omega_world(b.q, b.L, self._inv_I),
-                *self._kick_walls(u_mean), h, ledger, self.wall_work, self.exact_ledger,
-                self._counted(), self.alt_prev_v, self.alt_prev_L, self.alt_count,
-                self.watch_period2)
-        self.ledger = EnergyLedger.from_array(ledger)
+                *self._kick_walls(u_mean), h, self.exact_ledger, self._counted(),
+                self.alt_prev_v, self.alt_prev_L, self.alt_count, self.watch_period2)
         self._watch_alternation(int(worst), int(run), h)
         t1 = time.perf_counter()
         self._evaluate(t_new, h)
         t2 = time.perf_counter()
-        ledger = self.ledger.to_array()
         im = self._images()
         if im is not None:
             v, L = im.particles(b.v), im.particles(b.L)
             kick_part(*self._kick_arguments(im), im.positions(b.x), v, im.particles(b.q), L,
                       omega_world(im.particles(b.q), L, im.particles(self._inv_I)), im.b,
                       self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)),
-                      0.5 * h, ledger, self.wall_work, self.exact_ledger, self._counted())
+                      0.5 * h, self.exact_ledger, self._counted())
             b.v[:], b.L[:] = v[:b.n], L[:b.n]
         else:
             kick_part(*self._kick_arguments(), b.x, b.v, b.q, b.L,
                       omega_world(b.q, b.L, self._inv_I),   # ghosts may be re-synced
-                      *self._kick_walls(u_mean), 0.5 * h, ledger, self.wall_work,
-                      self.exact_ledger, self._counted())
-        self.ledger = EnergyLedger.from_array(ledger)
+                      *self._kick_walls(u_mean), 0.5 * h, self.exact_ledger, self._counted())
         self.split["integration"] += (t1 - t0) + (time.perf_counter() - t2)
 
-    def _step_start_images(self, im: "ImageBodies", u_mean: np.ndarray, h: float,
-                           ledger: np.ndarray) -> tuple[int, int]:
+    def _step_start_images(self, im: "ImageBodies", u_mean: np.ndarray,
+                           h: float) -> tuple[int, int]:
         """:func:`~nurbsdem.dynamics.step.step_start` with the stored contacts' image bodies
         (walls that do not turn): the particles and their images kicked, watched and
         drifted together, the particles' rows kept.  Returns (worst, run) as step_start
@@ -300,8 +292,7 @@ class InternalSteps:
         _, worst, run = step_start(
             *self._kick_arguments(im), x, v, q, L, omega_world(q, L, im.particles(self._inv_I)),
             im.b, self.wall_d, np.ascontiguousarray(u_mean), np.zeros((self.walls.n, 3)), h,
-            ledger, self.wall_work, self.exact_ledger, self._counted(), pv, pL, count,
-            self.watch_period2)
+            self.exact_ledger, self._counted(), pv, pL, count, self.watch_period2)
         b.x[:], b.v[:], b.q[:], b.L[:] = x[:n], v[:n], q[:n], L[:n]
         self.alt_prev_v[:], self.alt_prev_L[:], self.alt_count[:] = pv[:n], pL[:n], count[:n]
         worst = int(worst)

@@ -76,37 +76,34 @@ INTEGRATION_CYCLES, FORCES_CYCLES = 21, 22
 N_COUNTERS = 23
 
 
-#: what a deck step rolled back by the accuracy control restores: the body state, ledger,
-#: wall work, their exact accumulators, the period-2 watch, the pair list (its rows copied:
+#: what a deck step rolled back by the accuracy control restores: the body state, the
+#: ledger's and the walls' exact accumulators, the period-2 watch, the pair list (its rows copied:
 #: the loop updates them in place), the last evaluation, the walls' kinematics and the energy
 #: peak (the angular velocities follow from q, L when the next call starts)
-Snapshot = namedtuple("Snapshot", "x v q L ledger wall_work exact alt_prev_v alt_prev_L "
+Snapshot = namedtuple("Snapshot", "x v q L exact alt_prev_v alt_prev_L "
                       "alt_count pl ev wall_d wall_u peak")
 
 
 @internal
-def _snapshot(x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L, alt_count, pl,
+def _snapshot(x, v, q, L, exact, alt_prev_v, alt_prev_L, alt_count, pl,
               ev, wall_d, wall_u, peak):
     """The state at the start of a deck step (copies of what the loop changes in place)."""
     pl_copy = PairList(pl.a, pl.b, pl.keys, pl.mask_a, pl.mask_b, pl.rows_f.copy(),
                        pl.rows_i.copy(), pl.budget.copy(), pl.odo, pl.built_x, pl.built_R,
                        pl.built_wall, pl.built_pos, pl.prev_pos, pl.prev_R, pl.prev_wall,
                        pl.prev_x, pl.shift)
-    return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), ledger.copy(),
-                    wall_work.copy(), exact.copy(), alt_prev_v.copy(), alt_prev_L.copy(),
+    return Snapshot(x.copy(), v.copy(), q.copy(), L.copy(), exact.copy(),
+                    alt_prev_v.copy(), alt_prev_L.copy(),
                     alt_count.copy(), pl_copy, ev, wall_d, wall_u, peak[0])
 
 
 @internal
-def _restore(sn, x, v, q, L, ledger, wall_work, exact, alt_prev_v, alt_prev_L, alt_count,
-             peak):
+def _restore(sn, x, v, q, L, exact, alt_prev_v, alt_prev_L, alt_count, peak):
     """Write a :class:`Snapshot` back into the arrays the caller holds."""
     x[:] = sn.x
     v[:] = sn.v
     q[:] = sn.q
     L[:] = sn.L
-    ledger[:] = sn.ledger
-    wall_work[:] = sn.wall_work
     exact[:] = sn.exact
     alt_prev_v[:] = sn.alt_prev_v
     alt_prev_L[:] = sn.alt_prev_L

@@ -33,7 +33,7 @@ from ..jit import PointerKernel, internal
 from .images import fold_images as _fold, image_particles as _particles, \
     image_positions as _positions, image_rows as _bodies
 from .rigid import omega_world
-from .step import (BodyConst, L_EXTERNAL, L_INITIAL, book_terms, contact_part_kernel,
+from .step import (BodyConst, L_EXTERNAL, book_terms, contact_part_kernel,
                    contact_part_ptr, kick_part_ptr, step_start_ptr)
 
 #: a periodic cell as the compiled loop takes it: ``on`` (False: no cell, the other fields
@@ -93,21 +93,21 @@ def wrap_work(mass: np.ndarray, d: np.ndarray, gravity: np.ndarray) -> float:
 
 @internal
 def apply_wrap(x: np.ndarray, d: np.ndarray, mass: np.ndarray, gravity: np.ndarray,
-               ledger: np.ndarray, wall_work: np.ndarray, exact: np.ndarray) -> bool:
+               initial: float, exact: np.ndarray) -> bool:
     """The build's wrap d (N,3) m applied to the centroids x in place and its jump booked as
-    external work in the ledger's accumulators ``exact`` and read into the ledger (5,) J and
-    wall_work (W,) J (:func:`~nurbsdem.dynamics.step.book_terms`,
-    ``InternalSteps._apply_wrap``).  False (nothing
-    changed) before the initial mechanical energy is taken: the Python driver books it."""
+    external work in the ledger's accumulators ``exact``
+    (:func:`~nurbsdem.dynamics.step.book_terms`, ``InternalSteps._apply_wrap``).  False
+    (nothing changed) before the initial mechanical energy ``initial`` (J) is taken (NaN):
+    the Python driver books it."""
     if d.shape[0] == 0 or not np.any(d != 0.0):
         return True
-    if ledger[L_INITIAL] != ledger[L_INITIAL]:
+    if initial != initial:
         return False
     jump = wrap_work(mass, d, gravity)
     for i in range(x.shape[0]):
         for k in range(3):
             x[i, k] -= d[i, k]
-    book_terms(exact, L_EXTERNAL, np.array([jump]), ledger, wall_work)
+    book_terms(exact, L_EXTERNAL, np.array([jump]))
     return True
 
 
@@ -360,7 +360,7 @@ def image_contact_part(bc, implicit, a, b, pa, pb, nrm, dep, key, radius, hist_k
 
 
 @internal
-def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, exact,
+def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, exact,
                      alt_prev_v, alt_prev_L, alt_count, watch):
     """:func:`~nurbsdem.dynamics.step.step_start` with the stored contacts' image bodies
     (walls that do not turn): the particles and their images kicked, watched and drifted
@@ -377,7 +377,7 @@ def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, e
     omega, worst, run = step_start_ptr(
         bc_e, ev.a, b_ext, ev.point, ev.ftot, ev.fdn, ev.fdt, ev.fet, _bodies(ev.force, own, n),
         _bodies(ev.torque, own, n), x_e, v_e, q_e, L_e, omega_world(q_e, L_e, bc_e.inv_I), b_ext,
-        wall_d, u_mean, np.zeros((wall_d.shape[0], 3)), h, ledger, wall_work, exact,
+        wall_d, u_mean, np.zeros((wall_d.shape[0], 3)), h, exact,
         np.zeros(0, np.bool_), pv, pL, count, watch)
     x[:] = x_e[:n]
     v[:] = v_e[:n]
@@ -392,7 +392,7 @@ def image_step_start(bc, ev, x, v, q, L, wall_d, u_mean, h, ledger, wall_work, e
 
 
 @internal
-def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work, exact):
+def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, exact):
     """:func:`~nurbsdem.dynamics.step.kick_part` of length hk (s) with the stored contacts'
     image bodies, the particles' velocities and momenta written back.  Returns ω (N,3)
     rad/s after the kick."""
@@ -404,7 +404,7 @@ def image_kick_part(bc, ev, x, v, q, L, wall_d, u_mean, hk, ledger, wall_work, e
                           _bodies(ev.force, own, n), _bodies(ev.torque, own, n),
                           _positions(x, own, offset), v_e, q_e, L_e,
                           omega_world(q_e, L_e, bc_e.inv_I), b_ext, wall_d, u_mean,
-                          np.zeros((wall_d.shape[0], 3)), hk, ledger, wall_work, exact,
+                          np.zeros((wall_d.shape[0], 3)), hk, exact,
                           np.zeros(0, np.bool_))
     v[:] = v_e[:n]
     L[:] = L_e[:n]

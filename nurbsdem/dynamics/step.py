@@ -17,8 +17,10 @@ momenta, paper §2.3; the rotation is the exact free rotation of
 
 Both drivers call these parts with the same arrays, so a run gives the same bits whichever
 drives it (tested).  Units: SI; global body indices particles 0..N-1, walls N..N+W-1; the
-energy ledger is the array of :meth:`~nurbsdem.dynamics.energy.EnergyLedger.to_array`, read
-from its exact sums (:data:`EXACT_WALLS`, :mod:`.exact_sum`) after every booking.
+parts book the energy ledger's entries and the walls' work in their exact sums only
+(:data:`EXACT_WALLS`, :mod:`.exact_sum`): the ledger's array
+(:meth:`~nurbsdem.dynamics.energy.EnergyLedger.to_array`) and the walls' work are read from
+them where they are needed (:func:`ledger_of`, :func:`wall_work_of`).
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ from numba import njit
 
 from ..geometry.rotation import quats_to_matrices
 from ..jit import PointerKernel, cycles
-from .exact_sum import exact_add, exact_value
+from .exact_sum import exact_add, exact_normalize_all, exact_value
 from .forces import EXACT_WALLS, add_kick_work, contact_loads, match_history
 from .implicit import dashpots_of_evaluation
 from .integrator import drift, kick_from
@@ -48,39 +50,50 @@ L_DISS_N, L_DISS_T, L_SPRING, L_EXTERNAL, L_INITIAL = range(5)
 
 
 @njit(cache=True)
-def book_kick(terms, a, b, n_particles, counted, ledger, wall_work, exact) -> None:
+def book_kick(terms, a, b, n_particles, counted, exact) -> None:
     """Book a half kick's work terms (K, N_TERMS) of the contacts ``counted`` (K,) bool (empty:
     all) exactly in the accumulators ``exact``
-    (:func:`~nurbsdem.dynamics.forces.add_kick_work`), and read them into the ledger (5,) J
-    and the walls' work (W,) J."""
+    (:func:`~nurbsdem.dynamics.forces.add_kick_work`), normalised after."""
     if a.shape[0] == 0:
         return
     add_kick_work(terms, a, b, n_particles, counted, exact)
-    read_ledger(exact, ledger, wall_work)
+    exact_normalize_all(exact)
 
 
 @njit(cache=True)
-def read_ledger(exact, ledger, wall_work) -> None:
-    """The ledger's entries L_DISS_N … L_EXTERNAL (J) and the walls' work (W,) J from their
-    exact accumulators (:data:`EXACT_WALLS`)."""
+def ledger_of(exact, initial: float):
+    """The ledger's array (5,) J: the entries L_DISS_N … L_EXTERNAL read from their exact
+    accumulators (:data:`EXACT_WALLS`), then the initial mechanical energy ``initial`` (J;
+    NaN before it is taken)."""
+    ledger = np.empty(5)
     for k in range(EXACT_WALLS):
         ledger[k] = exact_value(exact, k)
-    for w in range(wall_work.shape[0]):
-        wall_work[w] = exact_value(exact, EXACT_WALLS + w)
+    ledger[L_INITIAL] = initial
+    return ledger
 
 
 @njit(cache=True)
-def book_terms(exact, row, amounts, ledger, wall_work) -> None:
-    """Book the amounts (n,) J exactly in accumulator ``row`` and read the ledger
-    (:func:`read_ledger`)."""
+def wall_work_of(exact):
+    """The walls' work (W,) J read from their exact accumulators (the rows after
+    :data:`EXACT_WALLS`)."""
+    work = np.empty(exact.shape[0] - EXACT_WALLS)
+    for w in range(work.shape[0]):
+        work[w] = exact_value(exact, EXACT_WALLS + w)
+    return work
+
+
+@njit(cache=True)
+def book_terms(exact, row, amounts) -> None:
+    """Book the amounts (n,) J exactly in accumulator ``row`` (the accumulators normalised
+    after)."""
     for k in range(amounts.shape[0]):
         exact_add(exact, row, amounts[k])
-    read_ledger(exact, ledger, wall_work)
+    exact_normalize_all(exact)
 
 
 @njit(cache=True)
 def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
-              wall_d, u_mean, wall_w, hk, ledger, wall_work, exact, counted):
+              wall_d, u_mean, wall_w, hk, exact, counted):
     """Half kick of length hk (s) from the loads force, torque (B,3) of the contacts a, b
     (their per-contact arrays: point, total, damping and tangential elastic forces (K,3)),
     from the angular velocities omega (N,3) rad/s of the state before it.  body_b (K,): the
@@ -88,19 +101,18 @@ def kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, o
     wall index of their own, moving at wall_d, u_mean (m, m/s) of that index and turning at
     wall_w (rad/s), :func:`spun_contacts`).  The work of the contacts ``counted`` (K,) bool
     (empty: all; several MPI ranks: each its own, :meth:`Domain.counted
-    <nurbsdem.parallel.domain.Domain.counted>`) is booked exactly in ``exact`` and read into
-    ledger and wall_work (:func:`book_kick`).  Returns the angular velocities after the
-    kick."""
+    <nurbsdem.parallel.domain.Domain.counted>`) is booked exactly in ``exact``
+    (:func:`book_kick`).  Returns the angular velocities after the kick."""
     terms, omega_after = kick_from(omega, v, L, x, q, bc.inv_I, bc.inv_mass, force, torque, hk,
                                    a, body_b, point, wall_d, u_mean, wall_w, ftot, fdn, fdt,
                                    fet)
-    book_kick(terms, a, b, x.shape[0], counted, ledger, wall_work, exact)
+    book_kick(terms, a, b, x.shape[0], counted, exact)
     return omega_after
 
 
 @njit(cache=True)
 def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega, body_b,
-               wall_d, u_mean, wall_w, h, ledger, wall_work, exact, counted, alt_prev_v,
+               wall_d, u_mean, wall_w, h, exact, counted, alt_prev_v,
                alt_prev_L, alt_count, watch):
     """Parts 1 of the internal step (module docstring): the half kick (:func:`kick_part`), the
     period-2 watch (with ``watch``) and the drift by h (s).  Returns (the angular velocities
@@ -108,8 +120,7 @@ def step_start(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, 
     length: the caller's guard fires at
     :data:`~nurbsdem.dynamics.stepcontrol.ALTERNATION_STEPS`)."""
     omega = kick_part(bc, a, b, point, ftot, fdn, fdt, fet, force, torque, x, v, q, L, omega,
-                      body_b, wall_d, u_mean, wall_w, 0.5 * h, ledger, wall_work, exact,
-                      counted)
+                      body_b, wall_d, u_mean, wall_w, 0.5 * h, exact, counted)
     worst, run = -1, 0
     if watch and x.shape[0]:
         worst = alternation_update(v, L, alt_prev_v, alt_prev_L, alt_count, bc.alt_floor_x,

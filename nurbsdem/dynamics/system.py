@@ -76,7 +76,7 @@ from ..errors import InputError, NurbsdemError
 from ..jit import launch_threads
 from .accuracy import accuracy_budget, after_accepted, repeat_for_accuracy
 from .contact_state import no_contacts
-from .energy import EnergyLedger, EnergySample, balance_terms
+from .energy import EnergySample, balance_terms
 from .forces import InterfaceTable
 from .laws.engine import engine_kernels
 from .monitor import MonitorSample
@@ -85,7 +85,7 @@ from .deck_steps import (ACTIVE_MAX, ACTIVE_SUM, CONTROL, DEGENERATED_SUM, GUARD
                          DeckSteps)
 from .internal_step import ContactProvider, InternalSteps, Kinematics, _Unstable
 from .exact_sum import exact_zeros
-from .step import EXACT_WALLS, L_SPRING, BodyConst
+from .step import EXACT_WALLS, L_SPRING, BodyConst, ledger_of
 from .stepcontrol import REFINE_DECAY_STEPS
 from .substep_control import ModeLimit, SubstepControl
 from .rolling import NSPRING, widened
@@ -122,7 +122,7 @@ SPLIT_PARTS = ("integration", "contact forces", "implicit dashpots", "time-step 
 
 #: the arrays of the state besides the bodies' x, q, v, L that the compiled deck steps change
 #: in place (:func:`~nurbsdem.dynamics.deck_steps.run_deck_steps`)
-_LOOP_IN_PLACE = ("wall_work", "exact_ledger", "alt_count", "alt_prev_v", "alt_prev_L")
+_LOOP_IN_PLACE = ("exact_ledger", "alt_count", "alt_prev_v", "alt_prev_L")
 
 
 @dataclass(frozen=True)
@@ -364,11 +364,12 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         if self.initial_history is not None:   # springs carried over from a previous step
             self.hist_keys = np.array(self.initial_history[0], dtype=np.int64)
             self.hist_springs = widened(self.initial_history[1])
-        self.wall_work = np.zeros(self.walls.n)
-        self.ledger = EnergyLedger()
-        #: the exact sums behind the ledger's entries and the walls' work (:mod:`.exact_sum`,
-        #: rows as :data:`~nurbsdem.dynamics.forces.EXACT_WALLS` says): their bits depend on
-        #: neither the order of the terms nor the MPI ranks' shares
+        #: the mechanical energy (J) at the start of the run, NaN until it is taken below
+        self.initial_mechanical = float("nan")
+        #: the ledger's entries and the walls' work as exact sums (:mod:`.exact_sum`, rows as
+        #: :data:`~nurbsdem.dynamics.forces.EXACT_WALLS` says), their only store (``ledger``
+        #: and ``wall_work`` read them): their bits depend on neither the order of the terms
+        #: nor the MPI ranks' shares
         self.exact_ledger = exact_zeros(EXACT_WALLS + self.walls.n)
         #: the last evaluation's contacts (:mod:`.contact_state`); none before the first
         self.contacts = no_contacts()
@@ -386,7 +387,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
             eel = self.contacts.eel
             self._book(L_SPRING, np.ascontiguousarray(eel[:, 1], float))
         e = self.energy()
-        self.ledger.initial_mechanical = e.mechanical
+        self.initial_mechanical = e.mechanical
         self._peak = e.kinetic + e.elastic
 
     # ------------------------------------------------------------------ stepping
@@ -458,7 +459,7 @@ class DemSystem(SubstepControl, InternalSteps, SystemState):
         b = self.bodies
         return float(balance_terms(b.mass, b.x, b.v, b.q, b.L, self._inv_I, self.gravity,
                                    np.ascontiguousarray(self.contacts.eel, float).reshape(-1, 2),
-                                   self.ledger.to_array())[1])
+                                   ledger_of(self.exact_ledger, self.initial_mechanical))[1])
 
     def _repeat_for_accuracy(self, balance0: float, n_sub: int, acc: int) -> float | None:
         """The accuracy control after a deck step that passed the guards

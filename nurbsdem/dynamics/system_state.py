@@ -18,11 +18,12 @@ from .laws import needs_contact_radius, rolls
 from .monitor import MonitorSample, StateSample, contact_output_of, energy_sample
 from .rigid import body_poses, omega_world
 from .rolling import widened
-from .step import EXACT_WALLS
+from .step import EXACT_WALLS, L_INITIAL, ledger_of, wall_work_of
 
 #: the system's arrays a checkpoint holds besides the body state, the contacts
-#: (:func:`~nurbsdem.dynamics.contact_state.checkpoint_arrays`) and the ledger
-_STATE_KEYS = ("force", "torque", "hist_keys", "hist_springs", "wall_d", "wall_u", "wall_work",
+#: (:func:`~nurbsdem.dynamics.contact_state.checkpoint_arrays`) and the ledger (its array and
+#: the walls' work are written as read from ``exact_ledger``, for a reader of the file)
+_STATE_KEYS = ("force", "torque", "hist_keys", "hist_springs", "wall_d", "wall_u",
                "exact_ledger", "alt_count", "alt_prev_v", "alt_prev_L")
 
 
@@ -44,7 +45,7 @@ class SystemState:
                              int(getattr(cs, "active", 0) or 0),
                              int(getattr(cs, "degenerated_count", 0) or 0),
                              int(getattr(cs, "failed", 0) or 0), self.wall_displacement,
-                             self.wall_reaction, self.wall_torque, self.wall_work.copy(),
+                             self.wall_reaction, self.wall_torque, self.wall_work,
                              hertz)
 
     def body_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -130,6 +131,18 @@ class SystemState:
         """(W,3) current wall displacements (m)."""
         return self.wall_d.copy()
 
+    @property
+    def ledger(self) -> EnergyLedger:
+        """The energy ledger (J): its entries read from their exact sums (``exact_ledger``,
+        :func:`~nurbsdem.dynamics.step.ledger_of`) and the initial mechanical energy."""
+        return EnergyLedger.from_array(ledger_of(self.exact_ledger, self.initial_mechanical))
+
+    @property
+    def wall_work(self) -> np.ndarray:
+        """(W,) the work (J) each wall did on the particles, read from its exact sum
+        (:func:`~nurbsdem.dynamics.step.wall_work_of`)."""
+        return wall_work_of(self.exact_ledger)
+
     def get_state(self) -> dict[str, np.ndarray]:
         """Complete dynamic state as a dict of numpy arrays (copies; np.savez-friendly): body
         state, last loads, tangential histories, last contact data, energy ledger, counters.
@@ -139,7 +152,7 @@ class SystemState:
         st.update(checkpoint_arrays(self.contacts))
         b = self.bodies
         st.update(x=b.x.copy(), q=b.q.copy(), v=b.v.copy(), L=b.L.copy(),
-                  ledger=self.ledger.to_array(),
+                  ledger=self.ledger.to_array(), wall_work=self.wall_work,
                   counters=np.array([self.step_count, self.substeps, self.refine,
                                      self.calm_steps, self.acc_refine, self.acc_calm],
                                     dtype=np.int64),
@@ -159,10 +172,10 @@ class SystemState:
                 setattr(self, k, np.array(st[k], copy=True))
         self.contacts = from_checkpoint(st, self.contacts)
         self.hist_springs = widened(self.hist_springs)   # a checkpoint without rolling springs
-        self.ledger = EnergyLedger.from_array(st["ledger"])
+        self.initial_mechanical = float(st["ledger"][L_INITIAL])
         if "exact_ledger" not in st:      # a checkpoint without the exact sums: its values
             self.exact_ledger = exact_of(np.concatenate([st["ledger"][:EXACT_WALLS],
-                                                         self.wall_work]))
+                                                         st["wall_work"]]))
         self.step_count = int(st["counters"][0])
         if st["counters"].shape[0] >= 4:
             self.substeps, self.refine, self.calm_steps = (int(c) for c in st["counters"][1:4])

@@ -77,13 +77,12 @@ import numpy as np
 
 from ..contact.contactset import ContactSet
 from ..dynamics.contact_state import ContactState
-from ..dynamics.energy import EnergyLedger
 from ..dynamics.exact_sum import SPECIAL, exact_add_rows
 from ..dynamics.forces import match_history, wall_loads
 from ..dynamics.images import ImageBodies
 from ..dynamics.rigid import omega_world
 from ..dynamics.rolling import NSPRING
-from ..dynamics.step import all_kinematics, read_ledger
+from ..dynamics.step import all_kinematics
 from ..geometry.rotation import quats_to_matrices
 from .cut import WORK_IMBALANCE, ContactWork, decompose, imbalance
 
@@ -463,16 +462,13 @@ class Domain:
 
     def _add_ledger_shares(self, shares: list[np.ndarray]) -> None:
         """The serial ledger: the accumulators at the deck step's start plus every rank's share,
-        added exactly (:func:`~nurbsdem.dynamics.exact_sum.exact_add_rows`), and read."""
+        added exactly (:func:`~nurbsdem.dynamics.exact_sum.exact_add_rows`)."""
         s = self.system
         start = s.exact_ledger if self._exact_start is None else self._exact_start
         exact = start.copy()
         for share in shares:
             exact_add_rows(exact, share)
         s.exact_ledger = exact
-        ledger = s.ledger.to_array()
-        read_ledger(exact, ledger, s.wall_work)
-        s.ledger = EnergyLedger.from_array(ledger)
         self._exact_start = None
 
     # ------------------------------------------------------------------ deck ends
