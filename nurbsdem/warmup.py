@@ -127,55 +127,70 @@ def _contacts() -> None:
     _run_deck(compiled_steps=False, output=False, write_deck=_spheres_deck)
 
 
-def _pairs() -> tuple:
-    """A contact table of the paper's particles A and B and :data:`N_PAIRS` poses of the pair
-    (B above A), for the batch kernels (the poses matter to the results, not to the code)."""
-    import numpy as np
-    from .contact.detect import ContactTable
-    from .shapes import paper_particle_shape
-    table = ContactTable([paper_particle_shape("A"), paper_particle_shape("B")])
-    pos = np.zeros((N_PAIRS, 3))
-    pos[:, 2] = np.linspace(0.05, 0.08, N_PAIRS)
-    rot = np.tile(np.eye(3), (N_PAIRS, 1, 1))
-    return table, pos, rot
-
-
 #: pairs of the batches: enough for the parallel batch kernel
 #: (:data:`nurbsdem.contact.detect.PARALLEL_MIN_PAIRS`)
 N_PAIRS = 40
 
 
-def _lcp_batches() -> None:
+def _pairs(n: int = N_PAIRS, spheres: bool = False) -> tuple:
+    """A contact table of the paper's particles A and B (``spheres``: of two exact spheres,
+    whose table leaves the LCP's kernels uncompiled, :func:`~nurbsdem.jit.fill_lazy_kernels`;
+    the table's arrays have the same types) and n poses of the pair (B above A), for the
+    batch kernels (the poses matter to the results, not to the code)."""
+    import numpy as np
+    from .contact.detect import ContactTable
+    from .shapes import paper_particle_shape, sphere
+    table = ContactTable([sphere(0.02), sphere(0.02)] if spheres else
+                         [paper_particle_shape("A"), paper_particle_shape("B")])
+    pos = np.zeros((n, 3))
+    pos[:, 2] = np.linspace(0.05, 0.08, n)
+    rot = np.tile(np.eye(3), (n, 1, 1))
+    return table, pos, rot
+
+
+def _lcp_batches(n: int = N_PAIRS, spheres: bool = False) -> None:
     """The parallel LCP batch kernel and the kernels it calls, with arguments of the types
-    the scene's dispatch passes (:func:`nurbsdem.contact.detect.solve_rows`)."""
+    the scene's dispatch passes (:func:`nurbsdem.contact.detect.solve_rows`), for n pairs of
+    :func:`_pairs`."""
     import numba
     import numpy as np
     from .contact.detect import _batch_kernel
     from .contact.lcp import NF, NI
-    t, pos, rot = _pairs()
-    k = np.arange(N_PAIRS, dtype=np.int64)
-    no_mask = np.zeros((N_PAIRS, 0), np.bool_)
+    t, pos, rot = _pairs(n, spheres)
+    k = np.arange(n, dtype=np.int64)
+    no_mask = np.zeros((n, 0), np.bool_)
     _batch_kernel(t.tab, t.info, t.centroid, t.radius, t.seeds, t.nonconvexity,
-                  np.concatenate((np.zeros(N_PAIRS, np.int64), np.ones(N_PAIRS, np.int64))),
-                  np.concatenate((np.zeros((N_PAIRS, 3)), pos)), np.concatenate((rot, rot)),
-                  k, N_PAIRS + k, k, no_mask, no_mask, np.zeros((N_PAIRS, NF)),
-                  np.zeros((N_PAIRS, NI), np.int64), numba.get_num_threads())
+                  np.concatenate((np.zeros(n, np.int64), np.ones(n, np.int64))),
+                  np.concatenate((np.zeros((n, 3)), pos)), np.concatenate((rot, rot)),
+                  k, n + k, k, no_mask, no_mask, np.zeros((n, NF)),
+                  np.zeros((n, NI), np.int64), numba.get_num_threads())
 
 
-def _wall_batches() -> None:
+def _wall_batches(n: int = N_PAIRS, spheres: bool = False) -> None:
     """The parallel body-against-flat-wall kernel and the kernels it calls, with arguments of
-    the types the scene's dispatch passes (:func:`nurbsdem.contact.flat_wall.solve_wall_rows`)."""
+    the types the scene's dispatch passes (:func:`nurbsdem.contact.flat_wall.solve_wall_rows`),
+    for n bodies of :func:`_pairs`."""
     import numba
     import numpy as np
     from .contact.lcp import NF, NI
     from .contact.flat_wall import _wall_batch_kernel
-    t, pos, rot = _pairs()
-    k = np.arange(N_PAIRS, dtype=np.int64)
-    rows = lambda *row: np.tile(np.array(row, float), (N_PAIRS, 1))   # noqa: E731
-    _wall_batch_kernel(t.tab, t.info, t.centroid, t.radius, t.seeds, np.zeros(N_PAIRS, np.int64),
+    t, pos, rot = _pairs(n, spheres)
+    k = np.arange(n, dtype=np.int64)
+    rows = lambda *row: np.tile(np.array(row, float), (n, 1))   # noqa: E731
+    _wall_batch_kernel(t.tab, t.info, t.centroid, t.radius, t.seeds, np.zeros(n, np.int64),
                        pos, rot, k, k, 0, k, rows(-0.2, -0.2, 0.0), rows(0.4, 0.0, 0.0),
-                       rows(0.0, 0.4, 0.0), rows(0.0, 1.0, 0.0, 1.0), np.zeros((N_PAIRS, NF)),
-                       np.zeros((N_PAIRS, NI), np.int64), numba.get_num_threads())
+                       rows(0.0, 0.4, 0.0), rows(0.0, 1.0, 0.0, 1.0), np.zeros((n, NF)),
+                       np.zeros((n, NI), np.int64), numba.get_num_threads())
+
+
+def _batch_shells() -> None:
+    """The two batch kernels (:func:`_lcp_batches`, :func:`_wall_batches`) without the LCP
+    they call through lazy pointers (:class:`~nurbsdem.jit.PointerKernel`), for no pair of two
+    exact spheres: the scene's dispatch compiles them for every scene, one of exact spheres
+    too, so this stage takes them off the contact detection's path, and the LCP's stages
+    compile the LCP alone."""
+    _lcp_batches(0, spheres=True)
+    _wall_batches(0, spheres=True)
 
 
 def _output() -> None:
@@ -292,15 +307,17 @@ class Stage:
 
 #: the stages of :func:`warm_up` (weights: their shares of a cold compilation, rounded)
 STAGES = (
-    Stage("LCP batches", _lcp_batches, 0.18),
-    Stage("wall contacts", _wall_batches, 0.03),
+    Stage("batch kernels", _batch_shells, 0.03),
+    Stage("LCP batches", _lcp_batches, 0.15, after=("batch kernels",)),
+    Stage("wall contacts", _wall_batches, 0.03, after=("batch kernels",)),
     Stage("ParaView output", _output, 0.03),
     Stage("contact detection", _contacts, 0.36),
     Stage("time loop", _loop, 0.40,
           after=("LCP batches", "wall contacts", "contact detection", "ParaView output")),
 )
 #: the stages a first solve compiles before it starts (:func:`first_run_stages`)
-FIRST_RUN_STAGES = ("LCP batches", "wall contacts", "ParaView output", "contact detection")
+FIRST_RUN_STAGES = ("batch kernels", "LCP batches", "wall contacts", "ParaView output",
+                    "contact detection")
 #: the stages only a scene with bodies other than exact spheres needs (the LCP's)
 LCP_STAGES = ("LCP batches", "wall contacts")
 
@@ -318,8 +335,10 @@ ALL_STAGES = STAGES[:-1] + (
 def first_run_stages(needs_lcp: bool) -> tuple[Stage, ...]:
     """The stages of :data:`FIRST_RUN_STAGES` a first solve compiles in parallel processes
     before it starts, without those of the LCP (:data:`LCP_STAGES`) unless ``needs_lcp``
-    (a scene of exact spheres solves none).  None comes after another, so on two cores the
-    LCP's and the Python driver's kernels compile side by side; the compiled time loop,
+    (a scene of exact spheres solves none).  On two cores the Python driver's kernels
+    (:func:`_contacts`) compile on one, the others side by side with them on the other: the
+    batch kernels first, which the contact detection loads from the cache when it reaches
+    them, then the LCP's, which come after them; the compiled time loop,
     which calls them all, compiles afterwards in the background
     (:func:`compile_loop_in_background`) while the first run goes on the Python driver."""
     names = [n for n in FIRST_RUN_STAGES if needs_lcp or n not in LCP_STAGES]
