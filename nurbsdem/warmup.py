@@ -16,6 +16,7 @@ Units: SI; the small scenes' sizes in metres.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -123,8 +124,52 @@ def _contacts() -> None:
     """The contact kernels as the Python driver calls them (its steps, no output): the
     dispatch, the neighbour list, the contact laws, the step's parts, on a deck of exact
     spheres (:func:`_spheres_deck`), so that it compiles no LCP and runs beside the LCP's
-    stages."""
+    stages; the contact forces load from the cache where :func:`_forces` has compiled them
+    by the time this stage reaches them."""
     _run_deck(compiled_steps=False, output=False, write_deck=_spheres_deck)
+
+
+class _Evaluated(Exception):
+    """Ends the run of :func:`_forces` at its first evaluation (:func:`_evaluation_only`)."""
+
+
+@contextlib.contextmanager
+def _evaluation_only():
+    """While open, every scene's evaluation (:class:`~nurbsdem.contact.scene.SceneContacts`)
+    answers with the contacts of its empty neighbour list, of the types a real evaluation
+    gives, without building the list or solving a pair; and a step ends with
+    :class:`_Evaluated` after its first evaluation, where it loads its compiled parts
+    (:meth:`~nurbsdem.dynamics.system.DemSystem.load_compiled`)."""
+    import numpy as np
+    from .contact.scene import SceneContacts
+    from .dynamics.system import DemSystem
+    evaluate, load = SceneContacts.__call__, DemSystem.load_compiled
+
+    def no_contacts(self, kin):
+        self.last = self.contact_set(np.zeros(0), monitored=0)
+        return self.last
+
+    def evaluated(self):
+        raise _Evaluated
+    SceneContacts.__call__, DemSystem.load_compiled = no_contacts, evaluated
+    try:
+        yield
+    finally:
+        SceneContacts.__call__, DemSystem.load_compiled = evaluate, load
+
+
+def _forces() -> None:
+    """The first evaluation of the deck of :func:`_contacts` with no contact detection
+    (:func:`_evaluation_only`): the contact forces and the implicit dashpots
+    (:func:`~nurbsdem.dynamics.step.contact_part`), which an evaluation calls with arguments
+    of the same types with or without contacts.  It runs beside :func:`_contacts`, which
+    compiles the neighbour list and the dispatch meanwhile, then loads these kernels and
+    compiles the step's parts: the Python driver's kernels in two halves on two cores."""
+    with _evaluation_only():
+        try:
+            _contacts()
+        except _Evaluated:
+            pass
 
 
 #: pairs of the batches: enough for the parallel batch kernel
@@ -309,15 +354,17 @@ class Stage:
 STAGES = (
     Stage("batch kernels", _batch_shells, 0.03),
     Stage("LCP batches", _lcp_batches, 0.15, after=("batch kernels",)),
-    Stage("wall contacts", _wall_batches, 0.03, after=("batch kernels",)),
+    Stage("wall contacts", _wall_batches, 0.04, after=("batch kernels",)),
     Stage("ParaView output", _output, 0.03),
-    Stage("contact detection", _contacts, 0.36),
-    Stage("time loop", _loop, 0.40,
-          after=("LCP batches", "wall contacts", "contact detection", "ParaView output")),
+    Stage("contact forces", _forces, 0.19),
+    Stage("contact detection", _contacts, 0.24),
+    Stage("time loop", _loop, 0.34,
+          after=("LCP batches", "wall contacts", "contact forces", "contact detection",
+                 "ParaView output")),
 )
 #: the stages a first solve compiles before it starts (:func:`first_run_stages`)
 FIRST_RUN_STAGES = ("batch kernels", "LCP batches", "wall contacts", "ParaView output",
-                    "contact detection")
+                    "contact forces", "contact detection")
 #: the stages only a scene with bodies other than exact spheres needs (the LCP's)
 LCP_STAGES = ("LCP batches", "wall contacts")
 
@@ -328,7 +375,8 @@ LCP_STAGES = ("LCP batches", "wall contacts")
 ALL_STAGES = STAGES[:-1] + (
     Stage("mesh and surface walls", _walls, 0.22, after=("LCP batches", "wall contacts")),
     Stage("time loop", _loop_and_curved_walls, 0.41,
-          after=("contact detection", "ParaView output", "mesh and surface walls")),
+          after=("contact forces", "contact detection", "ParaView output",
+                 "mesh and surface walls")),
 )
 
 
@@ -336,11 +384,11 @@ def first_run_stages(needs_lcp: bool) -> tuple[Stage, ...]:
     """The stages of :data:`FIRST_RUN_STAGES` a first solve compiles in parallel processes
     before it starts, without those of the LCP (:data:`LCP_STAGES`) unless ``needs_lcp``
     (a scene of exact spheres solves none).  On two cores the Python driver's kernels
-    (:func:`_contacts`) compile on one, the others side by side with them on the other: the
-    batch kernels first, which the contact detection loads from the cache when it reaches
-    them, then the LCP's, which come after them; the compiled time loop,
-    which calls them all, compiles afterwards in the background
-    (:func:`compile_loop_in_background`) while the first run goes on the Python driver."""
+    compile in two halves side by side: the contact detection and the step's parts
+    (:func:`_contacts`) on one, the contact forces (:func:`_forces`) on the other, which then
+    compiles the batch kernels and the LCP's; the compiled time loop, which calls them all,
+    compiles afterwards in the background (:func:`compile_loop_in_background`) while the
+    first run goes on the Python driver."""
     names = [n for n in FIRST_RUN_STAGES if needs_lcp or n not in LCP_STAGES]
     return tuple(s for s in STAGES if s.name in names)
 
@@ -415,28 +463,24 @@ def warm_up(jobs: int | None = None, on_done: Callable[[str, float], None] | Non
             stages: tuple[Stage, ...] = STAGES) -> dict[str, float]:
     """Compile the kernels of ``stages`` into numba's cache, each stage in a fresh process
     once the stages it comes ``after`` are done, up to ``jobs`` at a time (default: the
-    usable cores), the heaviest of those ready first (the pool starts them in that order).  ``on_done(name, seconds)`` after each stage.  Returns stage name ->
-    seconds, in the order they finished."""
+    usable cores): whenever a process is free, the ready stage that leads the longest chain
+    of work (:func:`_priorities`) starts.  ``on_done(name, seconds)`` after each stage.
+    Returns stage name -> seconds, in the order they finished."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, wait
-    names = {s.name for s in stages}
-    for s in stages:
-        if not set(s.after) <= names:
-            raise ValueError(f"stage {s.name!r} comes after unknown stages {s.after}")
+    priority = _priorities(stages)
+    workers = max(1, jobs or _usable_cores())
     done: dict[str, float] = {}
     pending = list(stages)
     ctx = multiprocessing.get_context("spawn")     # numba's threads do not survive a fork
-    with ProcessPoolExecutor(max_workers=max(1, jobs or _usable_cores()), mp_context=ctx,
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                              max_tasks_per_child=1) as pool:
         running = {}
         while pending or running:
             ready = [s for s in pending if all(a in done for a in s.after)]
-            for stage in sorted(ready, key=lambda s: -s.weight):     # the longest first
+            for stage in sorted(ready, key=lambda s: -priority[s.name])[:workers - len(running)]:
                 pending.remove(stage)
                 running[pool.submit(_run_stage, stage.run)] = stage.name
-            if not running:
-                raise ValueError("the stages' order has a cycle: "
-                                 + ", ".join(s.name for s in pending))
             finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
             for future in finished:
                 name = running.pop(future)
@@ -444,6 +488,28 @@ def warm_up(jobs: int | None = None, on_done: Callable[[str, float], None] | Non
                 if on_done is not None:
                     on_done(name, done[name])
     return done
+
+
+def _priorities(stages: tuple[Stage, ...]) -> dict[str, float]:
+    """Each stage's weight plus the largest priority of the stages that come after it: the
+    work of the longest chain it starts (a stage others wait for starts before an equal one
+    that nobody waits for).  Raises ValueError for a stage after an unknown one or a cycle."""
+    names = {s.name: s for s in stages}
+    for s in stages:
+        if not set(s.after) <= set(names):
+            raise ValueError(f"stage {s.name!r} comes after unknown stages {s.after}")
+    priority: dict[str, float] = {}
+
+    def of(name: str, seen: tuple[str, ...]) -> float:
+        if name in seen:
+            raise ValueError("the stages' order has a cycle: " + ", ".join(seen))
+        if name not in priority:
+            later = [of(s.name, seen + (name,)) for s in stages if name in s.after]
+            priority[name] = names[name].weight + max(later, default=0.0)
+        return priority[name]
+    for s in stages:
+        of(s.name, ())
+    return priority
 
 
 def _usable_cores() -> int:

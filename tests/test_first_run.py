@@ -73,7 +73,7 @@ def test_a_first_solve_compiles_the_stages_its_deck_needs_then_steps_on_the_pyth
         spheres = warmup._spheres_deck(tmp_path)
         sim, asked = _first_solve(monkeypatch, spheres, [True])
         assert {s.name for s in asked} == {"batch kernels", "ParaView output",
-                                           "contact detection"}
+                                           "contact forces", "contact detection"}
         when = sim.solver.compiled_when
         assert not when() and "loop" not in asked           # asked again within a second
         when.checked = -1e9

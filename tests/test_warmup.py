@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import io
+import json
 import os
 import subprocess
 import sys
@@ -44,6 +45,20 @@ def test_stages_run_in_their_order_in_worker_processes(tmp_path):
     assert all(t >= 0.0 for t in times.values())
 
 
+def test_a_free_process_starts_the_ready_stage_that_leads_the_longest_chain(tmp_path):
+    """With one process: x (which z comes after) starts before y of the same weight, and z
+    (heavier) before y once x is done; a stage nobody waits for does not take the process
+    first because it is listed first."""
+    log = str(tmp_path / "log")
+    stages = (warmup.Stage("y", functools.partial(_note, log, "y"), 1.0),
+              warmup.Stage("x", functools.partial(_note, log, "x"), 1.0),
+              warmup.Stage("z", functools.partial(_note, log, "z"), 2.0, after=("x",)))
+    seen = []
+    warmup.warm_up(jobs=1, on_done=lambda name, s: seen.append(name), stages=stages)
+    assert seen == ["x", "z", "y"]
+    assert warmup._priorities(stages) == {"x": 3.0, "y": 1.0, "z": 2.0}
+
+
 def test_stages_in_a_cycle_or_after_unknown_ones_are_refused():
     run = functools.partial(time.sleep, 0)
     with pytest.raises(ValueError, match="unknown"):
@@ -51,6 +66,39 @@ def test_stages_in_a_cycle_or_after_unknown_ones_are_refused():
     with pytest.raises(ValueError, match="cycle"):
         warmup.warm_up(stages=(warmup.Stage("a", run, 1.0, after=("b",)),
                                warmup.Stage("b", run, 1.0, after=("a",))))
+
+
+#: a stage of :mod:`nurbsdem.warmup` (argv[1]) run in a fresh process, then the signatures of
+#: the package's kernels called from Python (compiled or loaded from the cache), as JSON
+_KERNELS_OF_A_STAGE = """
+import json, sys
+from numba.core.dispatcher import Dispatcher
+from nurbsdem import warmup
+getattr(warmup, sys.argv[1])()
+seen = {}
+for name, module in list(sys.modules.items()):
+    if name.startswith("nurbsdem"):
+        for obj in list(vars(module).values()):
+            if isinstance(obj, Dispatcher) and obj.signatures:
+                f = obj.py_func
+                seen[f.__module__ + "." + f.__qualname__] = sorted(map(str, obj.signatures))
+print(json.dumps(seen))
+"""
+
+
+def test_the_contact_forces_stage_compiles_kernels_the_contact_detection_then_loads():
+    """The stage that evaluates without contact detection compiles the contact forces for
+    the argument types the real run's evaluation passes, and nothing that run does not
+    call: the contact detection's stage then loads them from the cache."""
+    def kernels(stage: str) -> dict:
+        out = subprocess.run([sys.executable, "-c", _KERNELS_OF_A_STAGE, stage],
+                             capture_output=True, text=True, timeout=900, check=True)
+        return json.loads(out.stdout.splitlines()[-1])
+    forces, contacts = kernels("_forces"), kernels("_contacts")
+    entry = "nurbsdem.dynamics.step.contact_part"
+    assert entry in forces and "nurbsdem.dynamics.step.step_start" not in forces
+    assert "nurbsdem.contact.listed.scene_list" not in forces
+    assert {k: contacts.get(k) for k in forces} == forces
 
 
 def test_the_warmup_deck_is_valid(tmp_path):
